@@ -1,0 +1,749 @@
+"""Quaternions and rotation conversions on NumPy arrays (layer 1: math).
+
+Conventions (spec/conventions.md, binding):
+
+* A quaternion is stored as ``(w, x, y, z)`` in the last axis (real part first).
+* Products are Hamilton products, ``quat_mul(q, r) = q ⊗ r``.
+* Rotations are active: a unit quaternion ``q`` maps a vector ``v`` to ``q ⊗ (0, v) ⊗ q*``; the matrix of
+  ``q ⊗ r`` is ``R(q) R(r)`` (column vectors, right-handed frames).
+* Euler ``order`` is a 3-letter string (``"zyx"``, ``"zxy"``, ``"zxz"``...; upper case accepted);
+  ``angles[..., i]`` is the angle in radians about axis ``order[i]`` and the rotation is
+  ``R_order[0](angles[..., 0]) · R_order[1](angles[..., 1]) · R_order[2](angles[..., 2])`` (intrinsic reading).
+  A BVH channel list ``Zrotation Xrotation Yrotation`` is order ``"zxy"``; the dual-quaternion paper's
+  Eq. 5 is order ``"zyx"``.
+* Arrays broadcast over leading axes. float64 is the reference dtype; float32 (and other floating) inputs keep
+  their dtype; integer inputs become float64.
+* Public functions validate the trailing shape and finiteness and raise ``ValueError`` naming the argument and
+  the expected and actual shapes. Private helpers (``_name``) do not check.
+
+Shape legend: ``...`` any leading (batch) axes, T time (axis 0 for :func:`quat_fix`), K number of rotations.
+
+Each function names the section of spec/math.md that states it.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "quat_identity", "quat_mul", "quat_conj", "quat_inv", "quat_norm", "quat_normalize", "quat_rotate",
+    "quat_dot", "quat_angle", "quat_exp", "quat_log", "quat_slerp", "quat_canonical", "quat_fix",
+    "quat_from_axis_angle", "axis_angle_from_quat",
+    "quat_from_euler", "euler_from_quat", "matrix_from_euler", "euler_from_matrix",
+    "matrix_from_quat", "quat_from_matrix", "ortho6d_from_matrix", "matrix_from_ortho6d",
+    "quat_xyzw_from_wxyz", "quat_wxyz_from_xyzw",
+    "EULER_ORDERS", "TAIT_BRYAN_ORDERS", "PROPER_EULER_ORDERS",
+]
+
+TAIT_BRYAN_ORDERS = ("xyz", "xzy", "yxz", "yzx", "zxy", "zyx")
+PROPER_EULER_ORDERS = ("xyx", "xzx", "yxy", "yzy", "zxz", "zyz")
+EULER_ORDERS = TAIT_BRYAN_ORDERS + PROPER_EULER_ORDERS
+
+_AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# validation helpers (shared with refimpl.dualquat)
+# ----------------------------------------------------------------------------------------------------------------
+
+def _as_float(x, name: str, tail: tuple, finite: bool = True) -> np.ndarray:
+    """Return ``x`` as a floating ndarray whose trailing axes are ``tail``; raise ValueError otherwise.
+
+    Integer and boolean arrays become float64; floating arrays keep their dtype; anything else is rejected.
+    """
+    a = np.asarray(x)
+    if a.dtype.kind in "biu":
+        a = a.astype(np.float64)
+    elif a.dtype.kind != "f":
+        raise ValueError(f"{name}: expected a real floating array, got dtype {a.dtype}")
+    n = len(tail)
+    if a.ndim < n or tuple(a.shape[a.ndim - n:]) != tuple(tail):
+        want = "(..., " + ", ".join(str(t) for t in tail) + ")"
+        raise ValueError(f"{name}: expected shape {want}, got {a.shape}")
+    if finite and not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or inf (shape {a.shape})")
+    return a
+
+
+def _check_nonzero(norm: np.ndarray, name: str, what: str = "quaternion") -> None:
+    """Raise ValueError if any entry of ``norm`` is zero (an undefined normalisation)."""
+    if np.any(norm == 0):
+        idx = tuple(int(i) for i in np.argwhere(norm == 0)[0])
+        raise ValueError(f"{name}: zero {what} at index {idx} (norm 0); the operation is undefined there")
+
+
+def _parse_order(order) -> str:
+    """Validate an Euler order string and return it in lower case."""
+    if not isinstance(order, str):
+        raise ValueError(f"order: expected a 3-letter string such as 'zyx', got {order!r}")
+    o = order.lower()
+    if len(o) != 3 or any(c not in _AXIS_INDEX for c in o) or o[0] == o[1] or o[1] == o[2]:
+        raise ValueError(f"order: expected one of {', '.join(EULER_ORDERS)} (any case), got {order!r}")
+    return o
+
+
+def _eps(dtype) -> float:
+    return float(np.finfo(dtype).eps)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# algebra
+# ----------------------------------------------------------------------------------------------------------------
+
+def quat_identity(shape=(), dtype=np.float64) -> np.ndarray:
+    """Identity quaternions ``(1, 0, 0, 0)`` of shape ``shape + (4,)`` (spec/math.md §1.1)."""
+    shape = (shape,) if np.isscalar(shape) else tuple(shape)
+    q = np.zeros(shape + (4,), dtype=dtype)
+    q[..., 0] = 1
+    return q
+
+
+def _quat_mul(q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    w1, x1, y1, z1 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    w2, x2, y2, z2 = r[..., 0], r[..., 1], r[..., 2], r[..., 3]
+    return np.stack([
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ], axis=-1)  # (..., 4)
+
+
+def _quat_mul_naive(q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Slow loop version of :func:`quat_mul` (same-shape inputs), through the basis-product table i² = −1, ij = k."""
+    # table[a][b] = (sign, index) of e_a e_b for the basis (1, i, j, k)
+    table = [[(1, 0), (1, 1), (1, 2), (1, 3)],
+             [(1, 1), (-1, 0), (1, 3), (-1, 2)],
+             [(1, 2), (-1, 3), (-1, 0), (1, 1)],
+             [(1, 3), (1, 2), (-1, 1), (-1, 0)]]
+    qf = q.reshape(-1, 4)
+    rf = r.reshape(-1, 4)
+    out = np.zeros_like(qf)
+    for n in range(qf.shape[0]):
+        for a in range(4):
+            for b in range(4):
+                s, c = table[a][b]
+                out[n, c] += s * qf[n, a] * rf[n, b]
+    return out.reshape(q.shape)
+
+
+def quat_mul(q, r) -> np.ndarray:
+    """Hamilton product ``q ⊗ r`` (spec/math.md §1.2).
+
+    Parameters
+    ----------
+    q, r : array_like, (..., 4)
+        Quaternions ``(w, x, y, z)``; leading axes broadcast.
+
+    Returns
+    -------
+    ndarray, (..., 4)
+        ``w = w1w2 − x1x2 − y1y2 − z1z2``, ``x = w1x2 + x1w2 + y1z2 − z1y2``,
+        ``y = w1y2 − x1z2 + y1w2 + z1x2``, ``z = w1z2 + x1y2 − y1x2 + z1w2``.
+    """
+    q = _as_float(q, "q", (4,))
+    r = _as_float(r, "r", (4,))
+    return _quat_mul(q, r)
+
+
+def _quat_conj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1, -1, -1, -1], dtype=q.dtype)
+
+
+def quat_conj(q) -> np.ndarray:
+    """Conjugate ``q* = (w, −x, −y, −z)`` (spec/math.md §1.3). Equals the inverse for a unit quaternion."""
+    return _quat_conj(_as_float(q, "q", (4,)))
+
+
+def _quat_norm(q: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.sum(q * q, axis=-1))  # (...)
+
+
+def quat_norm(q) -> np.ndarray:
+    """Euclidean norm ``|q| = sqrt(w² + x² + y² + z²)``, shape ``(...)`` (spec/math.md §1.3)."""
+    return _quat_norm(_as_float(q, "q", (4,)))
+
+
+def quat_inv(q) -> np.ndarray:
+    """Inverse ``q⁻¹ = q* / |q|²`` of a non-zero quaternion (spec/math.md §1.3).
+
+    Raises
+    ------
+    ValueError
+        If some quaternion is exactly zero.
+    """
+    q = _as_float(q, "q", (4,))
+    scale = np.max(np.abs(q), axis=-1, keepdims=True)  # (..., 1); scaling avoids under/overflow of |q|²
+    _check_nonzero(scale[..., 0], "q")
+    qs = q / scale
+    return _quat_conj(qs) / (np.sum(qs * qs, axis=-1, keepdims=True) * scale)
+
+
+def _quat_normalize(q: np.ndarray) -> np.ndarray:
+    return q / _quat_norm(q)[..., None]
+
+
+def quat_normalize(q, eps: float = 0.0) -> np.ndarray:
+    """Unit quaternion ``q / |q|`` (spec/math.md §1.4).
+
+    The norm is computed after scaling by ``max |q_i|``, so tiny (even subnormal) and huge inputs normalise
+    correctly.
+
+    Parameters
+    ----------
+    q : array_like, (..., 4)
+    eps : float
+        Quaternions with ``|q| <= eps`` are rejected. The default 0 rejects exactly-zero quaternions only.
+
+    Raises
+    ------
+    ValueError
+        If some ``|q| <= eps`` (the direction of a zero quaternion is undefined; no identity is substituted).
+    """
+    q = _as_float(q, "q", (4,))
+    scale = np.max(np.abs(q), axis=-1, keepdims=True)  # (..., 1)
+    bad = scale[..., 0] == 0
+    if eps > 0:
+        bad |= _quat_norm(q) <= eps
+    if np.any(bad):
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"q: quaternion with norm <= {eps} at index {idx}; normalisation is undefined")
+    qs = q / scale  # max |component| = 1: no under/overflow in the norm
+    return qs / _quat_norm(qs)[..., None]
+
+
+def _quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    w = q[..., :1]  # (..., 1)
+    u = q[..., 1:]  # (..., 3)
+    uv = np.cross(u, v)
+    uuv = np.cross(u, uv)
+    return v + 2 * (w * uv + uuv)  # (..., 3)
+
+
+def quat_rotate(q, v) -> np.ndarray:
+    """Rotate vectors: ``vec(q ⊗ (0, v) ⊗ q*) = v + 2 (w (u × v) + u × (u × v))``, ``u = (x, y, z)`` (spec/math.md §1.5).
+
+    Parameters
+    ----------
+    q : array_like, (..., 4)
+        Unit quaternions (not normalised here, as QuaterNet's ``qrot``; for non-unit ``q`` the result is the
+        formula above, which is not a rotation).
+    v : array_like, (..., 3)
+        Vectors; leading axes broadcast with ``q``.
+
+    Returns
+    -------
+    ndarray, (..., 3)
+    """
+    q = _as_float(q, "q", (4,))
+    v = _as_float(v, "v", (3,))
+    lead = np.broadcast_shapes(q.shape[:-1], v.shape[:-1])
+    return _quat_rotate(np.broadcast_to(q, lead + (4,)), np.broadcast_to(v, lead + (3,)))
+
+
+def quat_dot(q, r) -> np.ndarray:
+    """Four-dimensional dot product ``⟨q, r⟩ = w1w2 + x1x2 + y1y2 + z1z2``, shape ``(...)`` (spec/math.md §1.6)."""
+    q = _as_float(q, "q", (4,))
+    r = _as_float(r, "r", (4,))
+    return np.sum(q * r, axis=-1)
+
+
+def quat_angle(q, r=None) -> np.ndarray:
+    """Geodesic angle in ``[0, π]`` of the rotation ``q`` (or of ``q* ⊗ r`` when ``r`` is given) (spec/math.md §1.6).
+
+    ``θ = 2 atan2(|vec(p)|, |w(p)|)`` with ``p = q`` or ``p = q* ⊗ r``: invariant to the sign of either input,
+    to their scale, and accurate for small and near-π angles (no ``acos``).
+
+    Returns
+    -------
+    ndarray, (...)
+    """
+    q = _as_float(q, "q", (4,))
+    if r is not None:
+        r = _as_float(r, "r", (4,))
+        q = _quat_mul(_quat_conj(q), r)
+    return 2 * np.arctan2(np.sqrt(np.sum(q[..., 1:] ** 2, axis=-1)), np.abs(q[..., 0]))
+
+
+def _sin_over_x(x: np.ndarray) -> np.ndarray:
+    """``sin(x)/x`` with its Taylor series ``1 − x²/6 + x⁴/120`` for small ``|x|``."""
+    small = np.abs(x) < 1e-3
+    xs = np.where(small, 1, x)
+    x2 = x * x
+    return np.where(small, 1 - x2 / 6 + x2 * x2 / 120, np.sin(xs) / xs)
+
+
+def quat_exp(q) -> np.ndarray:
+    """Quaternion exponential ``exp(w, u) = e^w (cos|u|, sin|u| u/|u|)`` (spec/math.md §1.7).
+
+    Stable at ``|u| = 0`` (Taylor series of ``sin|u|/|u|``). For a pure quaternion ``(0, u)`` the result is the
+    unit quaternion of the rotation by angle ``2|u|`` about ``u``.
+
+    Parameters
+    ----------
+    q : array_like, (..., 4)
+
+    Returns
+    -------
+    ndarray, (..., 4)
+    """
+    q = _as_float(q, "q", (4,))
+    u = q[..., 1:]
+    a = np.sqrt(np.sum(u * u, axis=-1))  # (...)
+    ew = np.exp(q[..., 0])
+    return np.concatenate([(ew * np.cos(a))[..., None], (ew * _sin_over_x(a))[..., None] * u], axis=-1)
+
+
+def _atan_ratio(s: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``atan2(s, w) / s`` for ``s >= 0``; the series ``(1/w)(1 − r²/3 + r⁴/5)``, ``r = s/w``, when ``0 <= s <= 1e-4 w``.
+
+    For ``w < 0`` the direct quotient is used (``≈ π/s``, large but exact); ``s = 0, w < 0`` gives inf·0 issues,
+    so callers handle that case (the negative real axis) themselves.
+    """
+    small = (w > 0) & (s <= 1e-4 * w)
+    ss = np.where(small | (s == 0), 1, s)
+    ws = np.where(small, w, 1)
+    r2 = (np.where(small, s, 0) / ws) ** 2
+    return np.where(small, (1 - r2 / 3 + r2 * r2 / 5) / ws, np.arctan2(ss, w) / ss)
+
+
+def quat_log(q) -> np.ndarray:
+    """Quaternion logarithm ``log q = (log|q|, atan2(|u|, w) u/|u|)`` (spec/math.md §1.7).
+
+    Stable for ``|u| → 0`` (series of ``atan2(s, w)/s``). For a negative real quaternion (``u = 0``, ``w < 0``)
+    the axis is undefined; we return the x axis: ``(log|w|, π, 0, 0)``.
+
+    Raises
+    ------
+    ValueError
+        If some quaternion is zero (``log 0`` is undefined).
+    """
+    q = _as_float(q, "q", (4,))
+    n = _quat_norm(q)
+    _check_nonzero(n, "q")
+    w = q[..., 0]
+    u = q[..., 1:]
+    s = np.sqrt(np.sum(u * u, axis=-1))
+    neg_real = (s == 0) & (w < 0)
+    f = np.where(neg_real, 0, _atan_ratio(s, w))
+    vec = f[..., None] * u
+    vec[..., 0] = np.where(neg_real, np.pi, vec[..., 0])
+    return np.concatenate([np.log(n)[..., None], vec], axis=-1)
+
+
+def quat_canonical(q) -> np.ndarray:
+    """The representative of ``±q`` whose first non-zero component is positive (spec/math.md §1.8).
+
+    So ``w >= 0``; when ``w = 0`` the sign is fixed by x, then y, then z. Unique for every non-zero ``q``.
+    """
+    return _quat_canonical(_as_float(q, "q", (4,)))
+
+
+def _quat_canonical(q: np.ndarray) -> np.ndarray:
+    first = np.argmax(q != 0, axis=-1)  # index of the first non-zero component (0 if all zero)
+    lead = np.take_along_axis(q, first[..., None], axis=-1)  # (..., 1)
+    return np.where(lead < 0, -q, q)
+
+
+def _quat_fix(q: np.ndarray) -> np.ndarray:
+    dots = np.sum(q[1:] * q[:-1], axis=-1)  # (T-1, ...)
+    flips = np.cumsum(dots < 0, axis=0) % 2  # (T-1, ...)
+    out = q.copy()
+    out[1:][flips.astype(bool)] *= -1
+    return out
+
+
+def _quat_fix_naive(q: np.ndarray) -> np.ndarray:
+    """Slow loop version of :func:`quat_fix` for ``(T, 4)``: running parity of negative input dot products."""
+    out = q.copy()
+    flip = False
+    for t in range(1, q.shape[0]):
+        flip ^= bool(np.dot(q[t], q[t - 1]) < 0)
+        if flip:
+            out[t] = -q[t]
+    return out
+
+
+def quat_fix(q) -> np.ndarray:
+    """Antipodal continuity over time, axis 0 (QuaterNet's ``qfix``) (spec/math.md §1.8).
+
+    Frame 0 is kept; frame ``t`` is negated when it lies in the other hemisphere than the (already corrected)
+    frame ``t−1``: with ``d_t = ⟨q_t, q_{t−1}⟩`` on the input, frame ``t`` is flipped when the number of
+    ``d_s < 0`` for ``s <= t`` is odd. Afterwards every consecutive dot product is ``>= 0`` and each quaternion
+    represents the same rotation. Returns a copy.
+
+    Parameters
+    ----------
+    q : array_like, (T, ..., 4)
+        T >= 1 frames; any further axes (e.g. joints) are independent tracks.
+    """
+    q = _as_float(q, "q", (4,))
+    if q.ndim < 2:
+        raise ValueError(f"q: expected shape (T, ..., 4) with a time axis, got {q.shape}")
+    return _quat_fix(q)
+
+
+def _hemisphere_sign(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """``±1`` of shape ``(..., 1)`` making ``q0* ⊗ (±q1)`` canonical (first non-zero component > 0).
+
+    Away from ties this is ``sign⟨q0, q1⟩`` (the w of ``q0* ⊗ q1`` is ``⟨q0, q1⟩``); when ``⟨q0, q1⟩ = 0`` the
+    x, y, z of the relative rotation break the tie, so the choice does not depend on the stored sign of ``q1``.
+    """
+    rel = _quat_mul(_quat_conj(q0), q1)
+    first = np.argmax(rel != 0, axis=-1)
+    lead = np.take_along_axis(rel, first[..., None], axis=-1)  # (..., 1)
+    return np.where(lead < 0, -1, 1).astype(rel.dtype)
+
+
+def quat_slerp(q0, q1, t) -> np.ndarray:
+    """Spherical linear interpolation along the shortest arc (spec/math.md §1.9).
+
+    ``q1`` is negated where ``⟨q0, q1⟩ < 0`` (ties ``⟨q0, q1⟩ = 0``, rotations exactly 180° apart, are broken
+    by making the relative rotation ``q0* ⊗ q1`` canonical, see :func:`quat_canonical`, so the result never
+    depends on the stored sign of ``q1``); with ``Ω = 2 atan2(|q0 − q1|, |q0 + q1|)`` (the 4-D angle, in
+    ``[0, π/2]`` after the flip) the result is ``(sin((1−t)Ω) q0 + sin(tΩ) q1) / sin Ω``, with the Taylor
+    series of the coefficients for ``Ω → 0`` (so equal inputs give ``q0``). Antipodal inputs (the same rotation)
+    interpolate to that rotation. ``slerp(−q0, q1, t) = −slerp(q0, q1, t)`` and ``slerp(q0, −q1, t) =
+    slerp(q0, q1, t)``.
+
+    Parameters
+    ----------
+    q0, q1 : array_like, (..., 4)
+        Unit quaternions (not normalised here).
+    t : array_like, broadcastable to the leading shape ``(...)``
+        Interpolation parameter; 0 gives ``q0``, 1 gives ``q1`` (up to sign); values outside [0, 1] extrapolate.
+
+    Returns
+    -------
+    ndarray, (..., 4)
+    """
+    q0 = _as_float(q0, "q0", (4,))
+    q1 = _as_float(q1, "q1", (4,))
+    t = _as_float(t, "t", ()).astype(np.result_type(q0, q1), copy=False)  # t does not change the dtype
+    q1 = _hemisphere_sign(q0, q1) * q1
+    omega = 2 * np.arctan2(_quat_norm(q0 - q1), _quat_norm(q0 + q1))  # (...)
+    omega, t = np.broadcast_arrays(omega, t)
+    c0 = _sin_over_x((1 - t) * omega) * (1 - t) / _sin_over_x(omega)
+    c1 = _sin_over_x(t * omega) * t / _sin_over_x(omega)
+    return c0[..., None] * q0 + c1[..., None] * q1
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# axis-angle (exponential map)
+# ----------------------------------------------------------------------------------------------------------------
+
+def quat_from_axis_angle(v) -> np.ndarray:
+    """Unit quaternion of the rotation vector ``v = θ n`` (exponential map) (spec/math.md §2.1).
+
+    ``q = (cos(θ/2), sin(θ/2)/θ · v)``; ``sin(θ/2)/θ`` uses its Taylor series ``½ − θ²/48 + θ⁴/3840`` near 0,
+    so ``v = 0`` gives the identity. ``θ = 2π`` gives ``(−1, 0, 0, 0)`` (the identity rotation); no sign is
+    canonicalised.
+
+    Parameters
+    ----------
+    v : array_like, (..., 3)
+
+    Returns
+    -------
+    ndarray, (..., 4)
+    """
+    v = _as_float(v, "v", (3,))
+    theta = np.sqrt(np.sum(v * v, axis=-1))  # (...)
+    half = 0.5 * theta
+    return np.concatenate([np.cos(half)[..., None], (0.5 * _sin_over_x(half))[..., None] * v], axis=-1)
+
+
+def axis_angle_from_quat(q) -> np.ndarray:
+    """Rotation vector ``θ n`` with ``θ ∈ [0, π]`` of a non-zero quaternion (logarithm map) (spec/math.md §2.1).
+
+    ``v = 2 atan2(|u|, w) u/|u|`` after replacing ``q`` by :func:`quat_canonical` ``(q)`` (so ``w >= 0`` and ``q``,
+    ``−q`` give the same vector), with the series of ``atan2(s, w)/s`` for small ``|u|``. Scale-invariant: ``q``
+    need not be unit. At exactly ``θ = π`` (``w = 0``) the canonical sign makes the first non-zero component of
+    ``v`` positive.
+
+    Raises
+    ------
+    ValueError
+        If some quaternion is zero.
+    """
+    q = _as_float(q, "q", (4,))
+    _check_nonzero(_quat_norm(q), "q")
+    q = _quat_canonical(q)
+    u = q[..., 1:]
+    s = np.sqrt(np.sum(u * u, axis=-1))
+    return (2 * _atan_ratio(s, q[..., 0]))[..., None] * u
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Euler angles
+# ----------------------------------------------------------------------------------------------------------------
+
+def _quat_elementary(axis: int, angle: np.ndarray) -> np.ndarray:
+    q = np.zeros(angle.shape + (4,), dtype=angle.dtype)
+    q[..., 0] = np.cos(0.5 * angle)
+    q[..., 1 + axis] = np.sin(0.5 * angle)
+    return q
+
+
+def quat_from_euler(angles, order: str) -> np.ndarray:
+    """Quaternion ``q_{order[0]}(a0) ⊗ q_{order[1]}(a1) ⊗ q_{order[2]}(a2)`` (spec/math.md §3.1; paper Eq. 4-5).
+
+    ``q_x(a) = (cos a/2, sin a/2, 0, 0)`` and likewise for y, z. No sign is canonicalised.
+
+    Parameters
+    ----------
+    angles : array_like, (..., 3)
+        Radians; ``angles[..., i]`` is the angle about axis ``order[i]``.
+    order : str
+        One of the 12 orders (Tait-Bryan ``xyz``... or proper ``zxz``...), any case.
+
+    Returns
+    -------
+    ndarray, (..., 4)
+    """
+    o = _parse_order(order)
+    a = _as_float(angles, "angles", (3,))
+    q = _quat_elementary(_AXIS_INDEX[o[0]], a[..., 0])
+    q = _quat_mul(q, _quat_elementary(_AXIS_INDEX[o[1]], a[..., 1]))
+    return _quat_mul(q, _quat_elementary(_AXIS_INDEX[o[2]], a[..., 2]))
+
+
+def _wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Wrap to ``[−π, π)``."""
+    return np.mod(a + np.pi, 2 * np.pi) - np.pi
+
+
+def _euler_from_quat(q: np.ndarray, o: str) -> np.ndarray:
+    i, j = _AXIS_INDEX[o[0]], _AXIS_INDEX[o[1]]
+    proper = o[0] == o[2]
+    k = 3 - i - j
+    sign = 1 if (j - i) % 3 == 1 else -1  # e_i e_j = sign · e_k
+    w, qi, qj, qk = q[..., 0], q[..., 1 + i], q[..., 1 + j], sign * q[..., 1 + k]
+    tol = math.sqrt(_eps(q.dtype)) * _quat_norm(q)
+    if proper:
+        # q = (c cosσ, [i] c sinσ, [j] s cosδ, [k] sign·s sinδ), c = cos(b/2), s = sin(b/2), σ=(a+g)/2, δ=(a−g)/2
+        m_sum, m_dif = np.hypot(w, qi), np.hypot(qj, qk)
+        ang_sum, ang_dif = np.arctan2(qi, w), np.arctan2(qk, qj)
+        beta = 2 * np.arctan2(m_dif, m_sum)  # [0, π]
+    else:
+        # P = (w + qj, qi + qk) = (c + s)(cos, sin)(φ_P), M = (w − qj, qi − qk) = (c − s)(cos, sin)(φ_M)
+        # sign +1: φ_P = σ, φ_M = δ; sign −1: φ_P = δ, φ_M = σ
+        m_p, m_m = np.hypot(w + qj, qi + qk), np.hypot(w - qj, qi - qk)
+        ang_p, ang_m = np.arctan2(qi + qk, w + qj), np.arctan2(qi - qk, w - qj)
+        beta = 2 * np.arctan2(m_p, m_m) - 0.5 * np.pi  # [−π/2, π/2]
+        if sign > 0:
+            m_sum, m_dif, ang_sum, ang_dif = m_p, m_m, ang_p, ang_m
+        else:
+            m_sum, m_dif, ang_sum, ang_dif = m_m, m_p, ang_m, ang_p
+    alpha = ang_sum + ang_dif
+    gamma = ang_sum - ang_dif
+    # gimbal lock: only a0 ± a2 is defined; convention a2 = 0
+    lock_dif = m_dif <= tol  # δ undefined → a0 = 2σ
+    lock_sum = (m_sum <= tol) & ~lock_dif  # σ undefined → a0 = 2δ
+    alpha = np.where(lock_dif, 2 * ang_sum, np.where(lock_sum, 2 * ang_dif, alpha))
+    gamma = np.where(lock_dif | lock_sum, 0, gamma)
+    return np.stack([_wrap_angle(alpha), beta, _wrap_angle(gamma)], axis=-1)
+
+
+def euler_from_quat(q, order: str) -> np.ndarray:
+    """Euler angles (radians) in ``order`` of a non-zero quaternion (spec/math.md §3.2; paper Eq. 7 for ``zyx``).
+
+    Direct quaternion method (no matrix): ``angles[..., i]`` is the angle about ``order[i]`` and
+    ``quat_from_euler(angles, order) = ±q/|q|``. Ranges: first and last angle in ``[−π, π)``; middle angle in
+    ``[−π/2, π/2]`` (Tait-Bryan) or ``[0, π]`` (proper). Gimbal lock (middle angle at a range end, detected when
+    the relevant half-angle pair has magnitude ``<= sqrt(eps)|q|``): only the sum or difference of the outer
+    angles is defined and we set the LAST angle to 0.
+
+    Note: unlike QuaterNet's ``qeuler``, which always returns ``(x, y, z)``, the angles come in ``order``.
+
+    Raises
+    ------
+    ValueError
+        For a bad order or a zero quaternion.
+    """
+    o = _parse_order(order)
+    q = _as_float(q, "q", (4,))
+    _check_nonzero(_quat_norm(q), "q")
+    return _euler_from_quat(q, o)
+
+
+def matrix_from_euler(angles, order: str) -> np.ndarray:
+    """Rotation matrix ``R_{order[0]}(a0) R_{order[1]}(a1) R_{order[2]}(a2)``, ``(..., 3, 3)`` (spec/math.md §3.3)."""
+    return _matrix_from_quat(quat_from_euler(angles, order))
+
+
+def euler_from_matrix(m, order: str) -> np.ndarray:
+    """Euler angles in ``order`` of rotation matrices ``(..., 3, 3)``, via :func:`quat_from_matrix` (spec/math.md §3.3)."""
+    o = _parse_order(order)
+    return _euler_from_quat(quat_from_matrix(m), o)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# matrices and 6-D
+# ----------------------------------------------------------------------------------------------------------------
+
+def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    s = 2 / np.sum(q * q, axis=-1)
+    xx, yy, zz = s * x * x, s * y * y, s * z * z
+    xy, xz, yz = s * x * y, s * x * z, s * y * z
+    wx, wy, wz = s * w * x, s * w * y, s * w * z
+    m = np.stack([
+        1 - (yy + zz), xy - wz, xz + wy,
+        xy + wz, 1 - (xx + zz), yz - wx,
+        xz - wy, yz + wx, 1 - (xx + yy),
+    ], axis=-1)
+    return m.reshape(q.shape[:-1] + (3, 3))
+
+
+def matrix_from_quat(q) -> np.ndarray:
+    """Rotation matrix of a non-zero quaternion (of ``q/|q|``), ``(..., 3, 3)`` (spec/math.md §4.1).
+
+    ``R = I + 2/|q|² [[−(y²+z²), xy − wz, xz + wy], [xy + wz, −(x²+z²), yz − wx], [xz − wy, yz + wx, −(x²+y²)]]``
+    so that ``R v = quat_rotate(q, v)`` for unit ``q``.
+
+    Raises
+    ------
+    ValueError
+        If some quaternion is zero.
+    """
+    q = _as_float(q, "q", (4,))
+    _check_nonzero(_quat_norm(q), "q")
+    return _matrix_from_quat(q)
+
+
+def _orthonormality_tol(dtype) -> float:
+    return 1e-6 if np.dtype(dtype).itemsize >= 8 else 1e-3
+
+
+def _check_rotation_matrix(m: np.ndarray, name: str) -> None:
+    """Raise ValueError unless ``m`` is orthonormal with det +1 (to the dtype's tolerance)."""
+    tol = _orthonormality_tol(m.dtype)
+    mtm = np.swapaxes(m, -1, -2) @ m
+    err = np.abs(mtm - np.eye(3, dtype=m.dtype))
+    if np.any(err > tol):
+        idx = np.unravel_index(int(np.argmax(err)), err.shape)[:-2]
+        raise ValueError(f"{name}: not orthonormal at index {tuple(int(i) for i in idx)} "
+                         f"(max |MᵀM − I| = {float(np.max(err)):.3g} > {tol}); expected rotation matrices (..., 3, 3)")
+    det = np.linalg.det(m) if m.size else np.ones(m.shape[:-2])
+    if np.any(det <= 0):
+        idx = tuple(int(i) for i in np.argwhere(det <= 0)[0])
+        raise ValueError(f"{name}: determinant <= 0 at index {idx} (a reflection, not a rotation)")
+
+
+def _quat_from_matrix(m: np.ndarray) -> np.ndarray:
+    m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
+    m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
+    m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
+    tr = m00 + m11 + m22
+    # the four columns of 4 q qᵀ (scaled by 4w, 4x, 4y, 4z respectively)
+    cand = np.stack([
+        np.stack([1 + tr, m21 - m12, m02 - m20, m10 - m01], axis=-1),
+        np.stack([m21 - m12, 1 + m00 - m11 - m22, m01 + m10, m02 + m20], axis=-1),
+        np.stack([m02 - m20, m01 + m10, 1 - m00 + m11 - m22, m12 + m21], axis=-1),
+        np.stack([m10 - m01, m02 + m20, m12 + m21, 1 - m00 - m11 + m22], axis=-1),
+    ], axis=-2)  # (..., 4, 4)
+    best = np.argmax(np.stack([tr, m00, m11, m22], axis=-1), axis=-1)  # (...)
+    q = np.take_along_axis(cand, best[..., None, None], axis=-2)[..., 0, :]  # (..., 4)
+    q = q / _quat_norm(q)[..., None]
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+def _quat_from_matrix_naive(m: np.ndarray) -> np.ndarray:
+    """Slow scalar version of :func:`quat_from_matrix` (Shepperd's four branches written out)."""
+    flat = m.reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4), dtype=m.dtype)
+    for n, r in enumerate(flat):
+        tr = r[0, 0] + r[1, 1] + r[2, 2]
+        k = int(np.argmax([tr, r[0, 0], r[1, 1], r[2, 2]]))
+        if k == 0:
+            w = math.sqrt(1 + tr) / 2
+            q = [w, (r[2, 1] - r[1, 2]) / (4 * w), (r[0, 2] - r[2, 0]) / (4 * w), (r[1, 0] - r[0, 1]) / (4 * w)]
+        elif k == 1:
+            x = math.sqrt(1 + r[0, 0] - r[1, 1] - r[2, 2]) / 2
+            q = [(r[2, 1] - r[1, 2]) / (4 * x), x, (r[0, 1] + r[1, 0]) / (4 * x), (r[0, 2] + r[2, 0]) / (4 * x)]
+        elif k == 2:
+            y = math.sqrt(1 - r[0, 0] + r[1, 1] - r[2, 2]) / 2
+            q = [(r[0, 2] - r[2, 0]) / (4 * y), (r[0, 1] + r[1, 0]) / (4 * y), y, (r[1, 2] + r[2, 1]) / (4 * y)]
+        else:
+            z = math.sqrt(1 - r[0, 0] - r[1, 1] + r[2, 2]) / 2
+            q = [(r[1, 0] - r[0, 1]) / (4 * z), (r[0, 2] + r[2, 0]) / (4 * z), (r[1, 2] + r[2, 1]) / (4 * z), z]
+        q = np.array(q) / np.linalg.norm(q)
+        out[n] = -q if q[0] < 0 else q
+    return out.reshape(m.shape[:-2] + (4,))
+
+
+def quat_from_matrix(m) -> np.ndarray:
+    """Unit quaternion with ``w >= 0`` of rotation matrices ``(..., 3, 3)`` (spec/math.md §4.2).
+
+    Shepperd's method in Markley's form: of the four columns of ``4 q qᵀ`` (computable from ``R``), take the one
+    with the largest diagonal entry (``1 + tr R`` or ``1 + 2R_ii − tr R``) and normalise it. Accurate for every
+    rotation, including 180° rotations (where ``w = 0``).
+
+    Raises
+    ------
+    ValueError
+        If ``m`` is not ``(..., 3, 3)``, not finite, not orthonormal (``max |MᵀM − I|`` above 1e-6 for float64,
+        1e-3 for float32) or has det <= 0.
+    """
+    m = _as_float(m, "m", (3, 3))
+    _check_rotation_matrix(m, "m")
+    return _quat_from_matrix(m)
+
+
+def ortho6d_from_matrix(m) -> np.ndarray:
+    """6-D rotation representation (Zhou et al. 2019): the first two COLUMNS of ``R`` (spec/math.md §4.3).
+
+    Layout: ``(R00, R10, R20, R01, R11, R21)`` = column 0 then column 1. ``m`` is not checked for
+    orthonormality (the map is defined for any matrix).
+
+    Returns
+    -------
+    ndarray, (..., 6)
+    """
+    m = _as_float(m, "m", (3, 3))
+    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
+
+
+def matrix_from_ortho6d(x) -> np.ndarray:
+    """Rotation matrix from 6 numbers by Gram-Schmidt (Zhou et al. 2019) (spec/math.md §4.3).
+
+    With ``a1 = x[..., 0:3]``, ``a2 = x[..., 3:6]``: ``b1 = a1/|a1|``, ``b2 = (a2 − ⟨b1, a2⟩ b1)/|…|``,
+    ``b3 = b1 × b2``; ``R = [b1 b2 b3]`` (columns). ``matrix_from_ortho6d(ortho6d_from_matrix(R)) = R``.
+
+    Raises
+    ------
+    ValueError
+        If ``a1`` is zero or ``a2`` is parallel to ``a1`` (relative residual ``<= eps``).
+    """
+    x = _as_float(x, "x", (6,))
+    a1, a2 = x[..., :3], x[..., 3:]
+    n1 = np.sqrt(np.sum(a1 * a1, axis=-1))
+    _check_nonzero(n1, "x", "first column x[..., 0:3]")
+    b1 = a1 / n1[..., None]
+    r = a2 - np.sum(b1 * a2, axis=-1, keepdims=True) * b1
+    n2 = np.sqrt(np.sum(r * r, axis=-1))
+    bad = n2 <= _eps(x.dtype) * np.sqrt(np.sum(a2 * a2, axis=-1))
+    if np.any(bad):
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"x: second column parallel to the first (or zero) at index {idx}; Gram-Schmidt is undefined")
+    b2 = r / n2[..., None]
+    b3 = np.cross(b1, b2)
+    return np.stack([b1, b2, b3], axis=-1)  # (..., 3, 3), columns b1 b2 b3
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# layout converters
+# ----------------------------------------------------------------------------------------------------------------
+
+def quat_xyzw_from_wxyz(q) -> np.ndarray:
+    """``(w, x, y, z) → (x, y, z, w)`` (scalar-last, as scipy and ROS) (spec/conventions.md)."""
+    q = _as_float(q, "q", (4,))
+    return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
+
+
+def quat_wxyz_from_xyzw(q) -> np.ndarray:
+    """``(x, y, z, w) → (w, x, y, z)`` (spec/conventions.md)."""
+    q = _as_float(q, "q", (4,))
+    return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
