@@ -1,0 +1,634 @@
+"""BVH (Biovision hierarchy) reading and writing (spec/data.md §2).
+
+Reading
+-------
+* ``HIERARCHY`` with one ``ROOT``, nested ``JOINT`` and ``End Site`` blocks, then ``MOTION``, ``Frames: N``,
+  ``Frame Time: dt`` and N lines of numbers. Line endings LF, CRLF, CR or mixed; tabs or spaces; keywords
+  and channel names are case-insensitive; a joint name is the rest of its line.
+* Channels: any order per joint, any subset of ``Xposition Yposition Zposition Xrotation Yrotation
+  Zrotation`` (each at most once). Rotations are in degrees and compose in the listed order,
+  ``R = R_c0 · R_c1 · R_c2`` (so ``Zrotation Xrotation Yrotation`` is Euler order ``"zxy"``); missing rotation
+  axes are 0.
+* Root position = ROOT ``OFFSET`` + position channels (missing ones 0).
+* Position channels on a non-root joint: the joint's translation is ``OFFSET + channels``. A ``Motion`` has
+  one offset per joint, so when the channel values are constant over the file (within 1e-9 relative) they are
+  folded into the offset; otherwise ``ValueError`` unless ``nonroot_translation="mean"`` (fold the mean and
+  drop the variation, which is lossy).
+* End Sites become joints with identity rotation, named ``<parent>_end`` and listed in
+  ``Skeleton.end_sites``; a JOINT without CHANNELS gets identity rotation too.
+* The quaternions of every joint are made continuous over time (``quat_fix``).
+* ``frame_time`` overrides the declared ``Frame Time`` (the CMU salsa files declare 120 fps but are 60 fps).
+* Malformed input raises ``ValueError("<file>:<line>: <problem>")``. The numbers are parsed in one NumPy call
+  on the motion block; nothing is allocated from the declared frame count before the data has been counted.
+
+Writing
+-------
+``write_bvh`` emits the standard syntax (tab indentation, ``End Site`` blocks, ROOT with 6 channels
+``Xposition Yposition Zposition`` + rotations, other joints 3 rotation channels, End Sites none) in the
+per-joint Euler orders requested, numbers in fixed-point with ``precision`` decimals, written atomically
+(temporary file, fsync, ``os.replace``).
+
+Shape legend: T frames, J joints, C channels per frame.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+import tempfile
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from refimpl.motion import Motion
+from refimpl.quat import euler_from_quat, quat_fix, quat_from_euler
+from refimpl.skeleton import Skeleton
+
+__all__ = ["BvhHeader", "read_bvh", "read_bvh_header", "write_bvh"]
+
+_CHANNEL_NAMES = {f"{a}{kind}".lower(): f"{a.upper()}{kind}" for a in "xyz" for kind in ("position", "rotation")}
+_FRAMES_RE = re.compile(r"^\s*frames\s*:\s*(\S*)\s*$", re.IGNORECASE)
+_FRAME_TIME_RE = re.compile(r"^\s*frame\s+time\s*:\s*(\S*)\s*$", re.IGNORECASE)
+
+
+@dataclasses.dataclass(frozen=True)
+class BvhHeader:
+    """What a BVH file declares before its numbers.
+
+    Attributes
+    ----------
+    skeleton : Skeleton
+        Joints in file (depth-first) order, End Sites included.
+    channels : tuple of tuple of str
+        Per joint, the channel names in file order (canonical spelling ``"Xposition"``, ``"Zrotation"``...);
+        ``()`` for End Sites and joints without channels.
+    num_frames : int
+        The declared ``Frames:`` count.
+    frame_time : float
+        The declared ``Frame Time:`` in seconds.
+    """
+
+    skeleton: Skeleton
+    channels: tuple
+    num_frames: int
+    frame_time: float
+
+    @property
+    def num_channels(self) -> int:
+        """Numbers per frame line."""
+        return sum(len(c) for c in self.channels)
+
+    @property
+    def rotation_orders(self) -> tuple:
+        """Per joint, the Euler order of its rotation channels (``"zxy"``; ``""`` when it has none).
+
+        Pass it to :func:`write_bvh` to keep a file's channel layout.
+        """
+        return tuple("".join(c[0].lower() for c in ch if c.endswith("rotation")) for ch in self.channels)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# reading
+# ---------------------------------------------------------------------------------------------------------
+
+class _Tokens:
+    """Whitespace tokens of the hierarchy lines, each with its 1-based line number."""
+
+    def __init__(self, lines: list[str], where: str):
+        self.where = where
+        self.items: list[tuple[str, int, int]] = []  # (token, line number, position within its line)
+        self.lines = lines
+        for n, line in enumerate(lines, start=1):
+            for k, tok in enumerate(line.split()):
+                self.items.append((tok, n, k))
+        self.pos = 0
+
+    def error(self, line: int, msg: str) -> ValueError:
+        return ValueError(f"{self.where}:{line}: {msg}")
+
+    def last_line(self) -> int:
+        return self.items[-1][1] if self.items else 1
+
+    def peek(self) -> tuple[str, int] | None:
+        if self.pos >= len(self.items):
+            return None
+        tok, line, _ = self.items[self.pos]
+        return tok, line
+
+    def next(self, expected: str) -> tuple[str, int]:
+        if self.pos >= len(self.items):
+            raise self.error(self.last_line(), f"unexpected end of file, expected {expected} "
+                                               "(truncated hierarchy)")
+        tok, line, _ = self.items[self.pos]
+        self.pos += 1
+        return tok, line
+
+    def rest_of_line(self) -> tuple[str, int]:
+        """Join the remaining tokens of the current line (a joint name); a trailing ``{`` is left unread."""
+        if self.pos >= len(self.items):
+            raise self.error(self.last_line(), "unexpected end of file, expected a joint name")
+        line = self.items[self.pos][1]
+        if self.items[self.pos - 1][1] != line:  # name must be on the keyword's line
+            raise self.error(self.items[self.pos - 1][1], "missing joint name after ROOT/JOINT")
+        toks = []
+        while self.pos < len(self.items) and self.items[self.pos][1] == line and self.items[self.pos][0] != "{":
+            toks.append(self.items[self.pos][0])
+            self.pos += 1
+        if not toks:
+            raise self.error(line, "missing joint name after ROOT/JOINT")
+        return " ".join(toks), line
+
+
+def _parse_float(tok: str, line: int, what: str, toks: _Tokens) -> float:
+    try:
+        v = float(tok)
+    except ValueError:
+        raise toks.error(line, f"{what}: expected a number, got {tok!r}") from None
+    if not math.isfinite(v):
+        raise toks.error(line, f"{what}: expected a finite number, got {tok!r}")
+    return v
+
+
+def _parse_hierarchy(toks: _Tokens):
+    """Parse ``HIERARCHY ROOT ...`` up to (and including) the closing brace of the ROOT block.
+
+    Returns parents, offsets, names, channels, end-site flags, in depth-first order.
+    """
+    tok = toks.next("HIERARCHY")
+    if tok[0].upper() != "HIERARCHY":
+        raise toks.error(tok[1], f"expected HIERARCHY, got {tok[0]!r}")
+    tok = toks.next("ROOT")
+    if tok[0].upper() != "ROOT":
+        raise toks.error(tok[1], f"expected ROOT, got {tok[0]!r}")
+    parents: list[int] = []
+    offsets: list[tuple] = []
+    names: list[str] = []
+    channels: list[tuple] = []
+    end_flags: list[bool] = []
+    # stack of (joint index, is_end_site, has_offset, line of its opening keyword)
+    stack: list[list] = []
+
+    def open_node(parent: int, end_site: bool, name: str, line: int):
+        brace = toks.next("'{'")
+        if brace[0] != "{":
+            raise toks.error(brace[1], f"expected '{{' after {'End Site' if end_site else name!r}, got {brace[0]!r}")
+        parents.append(parent)
+        offsets.append((0.0, 0.0, 0.0))
+        names.append(name)
+        channels.append(())
+        end_flags.append(end_site)
+        stack.append([len(names) - 1, end_site, False, line])
+
+    name, line = toks.rest_of_line()
+    open_node(-1, False, name, line)
+    while stack:
+        node = stack[-1]
+        j, is_end = node[0], node[1]
+        tok, line = toks.next("OFFSET, CHANNELS, JOINT, End Site or '}'")
+        key = tok.upper()
+        if key == "OFFSET":
+            if node[2]:
+                raise toks.error(line, f"second OFFSET for {names[j]!r}")
+            vals = [_parse_float(toks.next("an OFFSET number")[0], line, "OFFSET", toks) for _ in range(3)]
+            offsets[j] = tuple(vals)
+            node[2] = True
+        elif key == "CHANNELS":
+            if is_end:
+                raise toks.error(line, "an End Site cannot have CHANNELS")
+            if channels[j]:
+                raise toks.error(line, f"second CHANNELS for {names[j]!r}")
+            if len(names) - 1 > j:  # data columns follow the CHANNELS lines, which must precede the children
+                raise toks.error(line, f"CHANNELS for {names[j]!r} after its first child")
+            ntok, _ = toks.next("the channel count")
+            try:
+                n = int(ntok)
+            except ValueError:
+                raise toks.error(line, f"CHANNELS: expected a channel count, got {ntok!r}") from None
+            if not 0 <= n <= 6:
+                raise toks.error(line, f"CHANNELS: expected between 0 and 6 channels, got {n}")
+            chans = []
+            for k in range(n):
+                ctok, cline = toks.next(f"channel {k + 1} of {n}")
+                canon = _CHANNEL_NAMES.get(ctok.lower())
+                if canon is None:
+                    where_found = "" if cline == line else f" on line {cline}"
+                    raise toks.error(line, f"CHANNELS {n} for {names[j]!r}: expected {n} channel names "
+                                           f"(Xposition ... Zrotation), found {ctok!r}{where_found} after {k}")
+                chans.append(canon)
+            if len(set(chans)) != len(chans):
+                raise toks.error(line, f"CHANNELS for {names[j]!r} repeats a channel: {' '.join(chans)}")
+            if n and any(t[1] == line for t in toks.items[toks.pos:toks.pos + 1]):
+                extra = toks.items[toks.pos][0]
+                raise toks.error(line, f"CHANNELS {n} for {names[j]!r} lists more than {n} channel names "
+                                       f"(found {extra!r})")
+            channels[j] = tuple(chans)
+        elif key == "JOINT":
+            if is_end:
+                raise toks.error(line, "an End Site cannot have children")
+            if not node[2]:
+                raise toks.error(line, f"missing OFFSET for {names[j]!r} before its first child")
+            name, nline = toks.rest_of_line()
+            open_node(j, False, name, nline)
+        elif key == "END":
+            site, sline = toks.next("'Site'")
+            if site.upper() != "SITE":
+                raise toks.error(sline, f"expected 'End Site', got 'End {site}'")
+            if is_end:
+                raise toks.error(line, "an End Site cannot have children")
+            if not node[2]:
+                raise toks.error(line, f"missing OFFSET for {names[j]!r} before its End Site")
+            open_node(j, True, f"{names[j]}_end", line)
+        elif key == "}":
+            if not node[2]:
+                what = f"the End Site of {names[parents[j]]!r}" if is_end else repr(names[j])
+                raise toks.error(line, f"missing OFFSET for {what}")
+            stack.pop()
+        elif key == "MOTION":
+            raise toks.error(line, f"MOTION before the hierarchy is closed ({len(stack)} '}}' missing: "
+                                   "truncated hierarchy)")
+        else:
+            raise toks.error(line, f"unexpected {tok!r} in the block of {names[j]!r}")
+    return parents, offsets, names, channels, end_flags
+
+
+def _unique_names(names: list[str], end_flags: list[bool]) -> list[str]:
+    """Make generated End Site names unique (a file joint may already be called ``X_end``)."""
+    taken = {n for n, e in zip(names, end_flags) if not e}
+    out = []
+    for n, e in zip(names, end_flags):
+        if e:
+            base, k, cand = n, 1, n
+            while cand in taken:
+                k += 1
+                cand = f"{base}{k}"
+            taken.add(cand)
+            n = cand
+        out.append(n)
+    return out
+
+
+def _read_text(path) -> str:
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise ValueError(f"path: cannot read {os.fspath(path)!r}: {exc}") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{os.fspath(path)}: not a UTF-8/ASCII text file ({exc})") from None
+    return text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+def _split_sections(text: str, where: str):
+    """Return (all lines, index of the ``MOTION`` line or None)."""
+    lines = text.split("\n")
+    motion_at = None
+    for i, line in enumerate(lines):
+        s = line.strip()
+        if s.upper() == "MOTION":
+            motion_at = i
+            break
+    return lines, motion_at
+
+
+def _parse_header(text: str, where: str):
+    lines, motion_at = _split_sections(text, where)
+    # the MOTION line is part of the token stream so that a hierarchy cut short before it is reported there
+    toks = _Tokens(lines if motion_at is None else lines[:motion_at + 1], where)
+    if not toks.items:
+        raise ValueError(f"{where}:1: empty file (expected HIERARCHY)")
+    parents, offsets, names, channels, end_flags = _parse_hierarchy(toks)
+    nxt = toks.peek()
+    if nxt is None:
+        raise ValueError(f"{where}:{len(lines)}: missing MOTION section after the hierarchy")
+    if nxt[0].upper() != "MOTION":
+        if nxt[0].upper() == "ROOT":
+            raise toks.error(nxt[1], "a second ROOT: files with several skeletons are not supported")
+        raise toks.error(nxt[1], f"unexpected {nxt[0]!r} after the hierarchy (expected MOTION)")
+    names = _unique_names(names, end_flags)
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ValueError(f"{where}: duplicate joint names {dup}")
+    # Frames: and Frame Time: on the next non-empty lines
+    i = motion_at + 1
+    values = []
+    for label, regex in (("Frames:", _FRAMES_RE), ("Frame Time:", _FRAME_TIME_RE)):
+        while i < len(lines) and not lines[i].strip():
+            i += 1
+        if i >= len(lines):
+            raise ValueError(f"{where}:{len(lines)}: unexpected end of file, expected '{label} ...'")
+        m = regex.match(lines[i])
+        if m is None:
+            raise ValueError(f"{where}:{i + 1}: expected '{label} <value>', got {lines[i].strip()!r}")
+        values.append((m.group(1), i + 1))
+        i += 1
+    (ftok, fline), (ttok, tline) = values
+    if not re.fullmatch(r"\+?\d+", ftok):
+        raise ValueError(f"{where}:{fline}: Frames: expected a non-negative integer, got {ftok!r}")
+    num_frames = int(ftok)
+    try:
+        frame_time = float(ttok)
+    except ValueError:
+        raise ValueError(f"{where}:{tline}: Frame Time: expected a number of seconds, got {ttok!r}") from None
+    if not (math.isfinite(frame_time) and frame_time > 0):
+        raise ValueError(f"{where}:{tline}: Frame Time: expected a positive finite number, got {ttok!r}")
+    skel = Skeleton(parents, np.array(offsets, dtype=np.float64), names=names,
+                    end_sites=[j for j, e in enumerate(end_flags) if e])
+    header = BvhHeader(skeleton=skel, channels=tuple(channels), num_frames=num_frames, frame_time=frame_time)
+    return header, lines, i  # i = index of the first data line
+
+
+def read_bvh_header(path) -> BvhHeader:
+    """Parse the hierarchy and the ``MOTION`` header of a BVH file (not its numbers).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    BvhHeader
+
+    Raises
+    ------
+    ValueError
+        ``"<file>:<line>: <problem>"`` for a malformed hierarchy or motion header.
+    """
+    where = os.fspath(path)
+    header, _, _ = _parse_header(_read_text(path), where)
+    return header
+
+
+def _locate_bad_row(lines: list[str], first: int, num_channels: int, where: str) -> ValueError:
+    """Slow path, only after the fast parse failed: find the first bad data line and describe it."""
+    row = 0
+    for i in range(first, len(lines)):
+        toks = lines[i].split()
+        if not toks:
+            continue
+        row += 1
+        for t in toks:
+            try:
+                v = float(t)
+            except ValueError:
+                return ValueError(f"{where}:{i + 1}: frame {row}: non-numeric value {t!r}")
+            if not math.isfinite(v):
+                return ValueError(f"{where}:{i + 1}: frame {row}: non-finite value {t!r}")
+        if len(toks) != num_channels:
+            return ValueError(f"{where}:{i + 1}: frame {row}: expected {num_channels} numbers "
+                              f"(the channels of the hierarchy), got {len(toks)}")
+    return ValueError(f"{where}: malformed motion data")
+
+
+def _parse_motion(header: BvhHeader, lines: list[str], first: int, where: str) -> np.ndarray:
+    """Numbers of the motion block as ``(T, C)`` float64, checked against the header."""
+    data_lines = [ln for ln in lines[first:] if ln.strip()]
+    c = header.num_channels
+    if len(data_lines) != header.num_frames:
+        last = len(lines)
+        while last > first and not lines[last - 1].strip():
+            last -= 1
+        raise ValueError(f"{where}:{last}: Frames: declares {header.num_frames} frames but the file has "
+                         f"{len(data_lines)} frame lines")
+    if c == 0:
+        return np.zeros((len(data_lines), 0))
+    try:
+        flat = np.array(" ".join(data_lines).split(), dtype=np.float64)   # one call for the whole block
+    except ValueError:
+        raise _locate_bad_row(lines, first, c, where) from None
+    if flat.size != len(data_lines) * c or not np.all(np.isfinite(flat)):
+        raise _locate_bad_row(lines, first, c, where)
+    return flat.reshape(len(data_lines), c)                                # (T, C)
+
+
+def read_bvh(path, frame_time: float | None = None, name: str | None = None,
+             nonroot_translation: str = "error") -> Motion:
+    """Read a BVH file into a :class:`~refimpl.motion.Motion`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    frame_time : float, optional
+        Seconds per frame; overrides the declared ``Frame Time`` (use ``1/60`` for the CMU salsa files).
+    name : str, optional
+        Motion name; default the file stem.
+    nonroot_translation : {"error", "mean"}
+        What to do with position channels of non-root joints whose values vary over time (constant ones are
+        always folded into the offset).
+
+    Returns
+    -------
+    Motion
+        Rotations ``(T, J, 4)`` float64 (End Sites identity, continuous over time), root positions
+        ``(T, 3)`` = ROOT OFFSET + position channels.
+
+    Raises
+    ------
+    ValueError
+        ``"<file>:<line>: <problem>"`` for malformed files (truncated hierarchy, bad channel lists, missing
+        MOTION, bad Frames / Frame Time, fewer or more numbers than declared, non-numeric or non-finite values).
+    """
+    if nonroot_translation not in ("error", "mean"):
+        raise ValueError(f"nonroot_translation: expected 'error' or 'mean', got {nonroot_translation!r}")
+    if frame_time is not None:
+        try:
+            ok = math.isfinite(float(frame_time)) and float(frame_time) > 0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ValueError(f"frame_time: expected a positive finite number of seconds, got {frame_time!r}")
+    where = os.fspath(path)
+    header, lines, first = _parse_header(_read_text(path), where)
+    data = _parse_motion(header, lines, first, where)                     # (T, C)
+    skel = header.skeleton
+    num_frames, num_joints = data.shape[0], skel.num_joints
+
+    # column index of each channel
+    col = 0
+    rot_cols: dict[str, list[tuple[int, list[int]]]] = {}   # padded order -> [(joint, 3 columns or -1)]
+    pos_cols: list[tuple[int, list[int]]] = []
+    for j, chans in enumerate(header.channels):
+        rcols: dict[str, int] = {}
+        pcols = [-1, -1, -1]
+        for ch in chans:
+            axis = ch[0].lower()
+            if ch.endswith("rotation"):
+                rcols[axis] = col
+            else:
+                pcols["xyz".index(axis)] = col
+            col += 1
+        if rcols:
+            order = "".join(rcols) + "".join(a for a in "xyz" if a not in rcols)   # missing axes last, angle 0
+            rot_cols.setdefault(order, []).append((j, [rcols.get(a, -1) for a in order]))
+        if any(c >= 0 for c in pcols):
+            pos_cols.append((j, pcols))
+
+    padded = np.concatenate([data, np.zeros((num_frames, 1))], axis=1)     # column -1 reads 0
+    rotations = np.zeros((num_frames, num_joints, 4))
+    rotations[..., 0] = 1.0
+    for order, items in rot_cols.items():
+        joints = [j for j, _ in items]
+        cols = np.array([c for _, c in items])                             # (n, 3)
+        angles = np.deg2rad(padded[:, cols])                               # (T, n, 3)
+        rotations[:, joints, :] = quat_from_euler(angles, order)
+    if num_frames:
+        rotations = quat_fix(rotations)
+
+    offsets = skel.offsets.copy()
+    root_positions = np.broadcast_to(offsets[0], (num_frames, 3)).copy()
+    for j, pcols in pos_cols:
+        values = padded[:, pcols]                                          # (T, 3)
+        if j == 0:
+            root_positions += values
+            continue
+        if num_frames == 0:
+            continue
+        spread = float(np.max(np.ptp(values, axis=0)))
+        if spread > 1e-9 * max(1.0, float(np.max(np.abs(values)))) and nonroot_translation == "error":
+            raise ValueError(f"{where}: joint {skel.names[j]!r} has position channels that vary over time "
+                             f"(spread {spread:.3g}); a Motion keeps one offset per joint. Pass "
+                             "nonroot_translation='mean' to fold their mean into the offset")
+        offsets[j] = offsets[j] + values.mean(axis=0)
+    if pos_cols and any(j != 0 for j, _ in pos_cols):
+        skel = Skeleton(skel.parents, offsets, names=skel.names, end_sites=skel.end_sites,
+                        joints_left=skel.joints_left, joints_right=skel.joints_right)
+    return Motion(skeleton=skel, rotations=rotations, root_positions=root_positions,
+                  frame_time=header.frame_time if frame_time is None else float(frame_time),
+                  name=Path(where).stem if name is None else name)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# writing
+# ---------------------------------------------------------------------------------------------------------
+
+def _atomic_write_text(path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically: temporary file in the same folder, fsync, ``os.replace``."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix="." + os.path.basename(path) + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    try:  # make the rename durable (best effort; not available on every platform)
+        dfd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError:
+        pass
+
+
+def _resolve_orders(order, skel: Skeleton) -> list[str]:
+    ends = set(skel.end_sites)
+    if isinstance(order, str):
+        orders = [order] * skel.num_joints
+    else:
+        orders = list(order)
+        if len(orders) != skel.num_joints:
+            raise ValueError(f"order: expected one Euler order per joint ({skel.num_joints}), got {len(orders)}")
+    out = []
+    for j, o in enumerate(orders):
+        if j in ends:
+            out.append("")
+            continue
+        if not isinstance(o, str) or len(o) != 3 or sorted(o.lower()) != ["x", "y", "z"]:
+            raise ValueError(f"order: joint {j} ({skel.names[j]!r}) needs a permutation of 'xyz' "
+                             f"(Tait-Bryan, as BVH channels), got {o!r}")
+        out.append(o.lower())
+    return out
+
+
+def _fmt(v, precision: int) -> str:
+    return f"{v:.{precision}f}"
+
+
+def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precision: int = 6) -> None:
+    """Write a motion as a BVH file (atomically).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    motion : Motion
+    order : str or sequence of str
+        Euler order of the rotation channels: one order for every joint, or one per joint (End Site entries
+        are ignored; ``BvhHeader.rotation_orders`` keeps a file's layout). ``"zyx"`` writes the channels
+        ``Zrotation Yrotation Xrotation`` (CMU files).
+    precision : int
+        Decimals of every number (fixed point), 1..17.
+
+    Notes
+    -----
+    Joints are written depth-first (children in increasing index order), the only order BVH has: a skeleton
+    whose index order is not depth-first reads back permuted (same tree, same names); End Sites read back as
+    ``<parent>_end``. The ROOT gets ``OFFSET = skeleton.offsets[0]`` and position channels
+    ``root_positions − offsets[0]``;
+    End Sites become ``End Site`` blocks (their rotation is not written); a leaf that is not an End Site is
+    written as a JOINT without children. Joint names must not contain whitespace.
+    """
+    if not isinstance(motion, Motion):
+        raise ValueError(f"motion: expected a Motion, got {type(motion).__name__}")
+    if isinstance(precision, bool) or not isinstance(precision, (int, np.integer)) or not 1 <= precision <= 17:
+        raise ValueError(f"precision: expected an int in 1..17, got {precision!r}")
+    skel = motion.skeleton
+    orders = _resolve_orders(order, skel)
+    for n in skel.names:
+        if any(ch.isspace() for ch in n) or n in ("{", "}"):
+            raise ValueError(f"motion.skeleton.names: BVH joint names cannot contain whitespace, got {n!r}")
+    ends = set(skel.end_sites)
+    p = int(precision)
+
+    out = ["HIERARCHY"]
+    written: list[int] = []  # joints with channels in the order their CHANNELS lines appear (depth-first)
+
+    def offset_line(j: int, depth: int) -> str:
+        return "\t" * depth + "OFFSET " + " ".join(_fmt(float(v), p) for v in skel.offsets[j])
+
+    def emit(j: int, depth: int) -> None:
+        ind = "\t" * depth
+        if j in ends:
+            out.extend([ind + "End Site", ind + "{", offset_line(j, depth + 1), ind + "}"])
+            return
+        out.append(ind + ("ROOT " if j == 0 else "JOINT ") + skel.names[j])
+        out.append(ind + "{")
+        out.append(offset_line(j, depth + 1))
+        written.append(j)
+        rot = " ".join(f"{a.upper()}rotation" for a in orders[j])
+        if j == 0:
+            out.append(ind + "\tCHANNELS 6 Xposition Yposition Zposition " + rot)
+        else:
+            out.append(ind + "\tCHANNELS 3 " + rot)
+        for c in skel.children[j]:
+            emit(c, depth + 1)
+        out.append(ind + "}")
+
+    emit(0, 0)
+    num_frames = motion.num_frames
+    out.append("MOTION")
+    out.append(f"Frames: {num_frames}")
+    out.append(f"Frame Time: {motion.frame_time:.10g}")
+
+    rot = motion.rotations.astype(np.float64)
+    blocks = [motion.root_positions.astype(np.float64) - skel.offsets[0]]  # (T, 3)
+    by_order: dict[str, list[int]] = {}
+    for j in range(skel.num_joints):
+        if j not in ends:
+            by_order.setdefault(orders[j], []).append(j)
+    angles = np.zeros((num_frames, skel.num_joints, 3))
+    for o, joints in by_order.items():
+        angles[:, joints, :] = np.rad2deg(euler_from_quat(rot[:, joints, :], o))
+    blocks.append(angles[:, written, :].reshape(num_frames, -1))         # (T, 3 J'), file order
+    data = np.concatenate(blocks, axis=1)                                  # (T, C)
+    data = np.where(np.abs(data) < 0.5 * 10.0 ** -p, 0.0, data)            # no "-0.000000"
+    row_fmt = " ".join([f"%.{p}f"] * data.shape[1])
+    out.extend(row_fmt % tuple(row) for row in data.tolist())
+    _atomic_write_text(path, "\n".join(out) + "\n")
