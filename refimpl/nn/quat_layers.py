@@ -1,0 +1,451 @@
+"""Differentiable quaternion and dual-quaternion layers: forward/backward pairs without parameters.
+
+Every layer is a pure function pair ``y, cache = name_forward(...)`` / ``dx = name_backward(dy, cache)``
+(a tuple of gradients when there are several inputs), see ``spec/architecture.md``. The operations:
+
+* ``quat_normalize``      q / max(|q|, eps)  (PyTorch ``F.normalize`` semantics, QuaterNet's output layer)
+* ``quat_mul``            Hamilton product a ⊗ b
+* ``qmul_velocity``       normalize(Δq ⊗ q_in): QuaterNet's velocity ("QMul") block, network delta on the LEFT
+* ``dq_normalize``        dual-quaternion normalisation, Andreou et al. Eq. 13
+* ``euler_from_quat``     QuaterNet's quaternion → Euler conversion (``qeuler``) for the six orders
+
+Conventions: quaternions ``(w, x, y, z)``, Hamilton product, dual quaternions ``(q_r | q_d)`` (8 numbers). All
+arrays broadcast over leading axes; the last axis holds the object. Layers work on ``(..., 4)`` / ``(..., 8)``
+arrays: a model output ``(B, T, 4·J)`` is reshaped to ``(B, T, J, 4)`` (a view) before the layer.
+float32 inputs stay float32.
+
+Specified in ``spec/losses.md`` §2; tested in ``tests/test_nn_quat_layers.py``.
+
+Shape legend: B batch, T time, J joints; ``...`` any leading axes.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "EULER_ORDERS",
+    "quat_normalize_forward", "quat_normalize_backward",
+    "quat_mul_forward", "quat_mul_backward",
+    "qmul_velocity_forward", "qmul_velocity_backward",
+    "dq_normalize_forward", "dq_normalize_backward",
+    "euler_from_quat_forward", "euler_from_quat_backward",
+]
+
+#: The Euler orders understood by :func:`euler_from_quat_forward` (QuaterNet's ``qeuler``).
+EULER_ORDERS = ("xyz", "yzx", "zxy", "xzy", "yxz", "zyx")
+
+
+# --------------------------------------------------------------------------------------------------
+# validation (public boundaries only)
+
+def _as_float_array(x, name: str, last: int | tuple[int, ...] | None = None, min_ndim: int = 1) -> np.ndarray:
+    """Return ``x`` as a floating ndarray (integers become float64); raise ValueError on bad shape or non-finite."""
+    a = np.asarray(x)
+    if a.dtype == object or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise ValueError(f"{name}: expected a real floating array, got dtype {a.dtype}")
+    if not np.issubdtype(a.dtype, np.floating):
+        a = a.astype(np.float64)
+    if a.ndim < min_ndim:
+        raise ValueError(f"{name}: expected at least {min_ndim} dimension(s), got shape {a.shape}")
+    if last is not None:
+        lasts = (last,) if isinstance(last, int) else tuple(last)
+        if a.shape[-1] not in lasts:
+            want = " or ".join(f"(..., {n})" for n in lasts)
+            raise ValueError(f"{name}: expected shape {want}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    return a
+
+
+def _check_eps(eps: float, name: str = "eps") -> float:
+    eps = float(eps)
+    if not (np.isfinite(eps) and eps > 0.0):
+        raise ValueError(f"{name}: expected a finite value > 0, got {eps!r}")
+    return eps
+
+
+def _check_grad(dy, like_shape: tuple, name: str = "dy") -> np.ndarray:
+    a = np.asarray(dy)
+    if a.shape != tuple(like_shape):
+        raise ValueError(f"{name}: expected shape {tuple(like_shape)}, got {a.shape}")
+    return a
+
+
+# --------------------------------------------------------------------------------------------------
+# internal kernels (no checks)
+
+def _unbroadcast(g: np.ndarray, shape: tuple) -> np.ndarray:
+    """Sum ``g`` over the axes that broadcasting added or stretched, so that it has ``shape``."""
+    if g.shape == tuple(shape):
+        return g
+    lead = g.ndim - len(shape)
+    if lead > 0:
+        g = g.sum(axis=tuple(range(lead)))
+    axes = tuple(i for i, n in enumerate(shape) if n == 1 and g.shape[i] != 1)
+    if axes:
+        g = g.sum(axis=axes, keepdims=True)
+    return g
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a ⊗ b`` of ``(..., 4)`` arrays (broadcasting)."""
+    a0, a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    b0, b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), dtype=np.result_type(a, b))
+    out[..., 0] = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
+    out[..., 1] = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
+    out[..., 2] = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
+    out[..., 3] = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
+    return out
+
+
+def _quat_conj(q: np.ndarray) -> np.ndarray:
+    """Quaternion conjugate ``(w, -x, -y, -z)``."""
+    out = -q
+    out[..., 0] = q[..., 0]
+    return out
+
+
+def _quat_mul_backward(dy: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradients of ``y = a ⊗ b``: ``da = dy ⊗ b*``, ``db = a* ⊗ dy`` (summed back to the input shapes)."""
+    da = _quat_mul(dy, _quat_conj(b))
+    db = _quat_mul(_quat_conj(a), dy)
+    return _unbroadcast(da, a.shape), _unbroadcast(db, b.shape)
+
+
+def _norm_last(x: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last axis, keepdims, without overflow/underflow (scaled by the largest entry)."""
+    s = np.max(np.abs(x), axis=-1, keepdims=True)
+    safe = np.where(s > 0, s, 1)
+    return s * np.sqrt(np.sum((x / safe) ** 2, axis=-1, keepdims=True))
+
+
+def _normalize(q: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(q / max(|q|, eps), |q|)``, norm keepdims."""
+    n = _norm_last(q)
+    return q / np.maximum(n, eps), n
+
+
+def _normalize_backward(dy: np.ndarray, y: np.ndarray, n: np.ndarray, eps: float) -> np.ndarray:
+    """Gradient of ``y = q / max(|q|, eps)``: ``(dy - y <y, dy>) / |q|`` where ``|q| >= eps``, else ``dy / eps``."""
+    radial = np.where(n >= eps, np.sum(y * dy, axis=-1, keepdims=True), 0)  # no radial part under the clamp
+    return (dy - y * radial) / np.maximum(n, eps)
+
+
+# --------------------------------------------------------------------------------------------------
+# quaternion normalisation
+
+def quat_normalize_forward(q, eps: float = 1e-12):
+    """Normalise quaternions: ``y = q / max(|q|, eps)`` (PyTorch ``F.normalize``; QuaterNet's output layer).
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        Quaternions ``(w, x, y, z)`` (any norm, zero allowed). For a network output ``(B, T, 4·J)`` pass the
+        view ``(B, T, J, 4)``.
+    eps : float
+        Lower bound of the divisor (default 1e-12 as PyTorch).
+
+    Returns
+    -------
+    y : ndarray, shape (..., 4)
+        Unit quaternions (``q / eps`` when ``|q| < eps``; the zero quaternion maps to zero).
+    cache : tuple
+    """
+    q = _as_float_array(q, "q", 4)
+    eps = _check_eps(eps)
+    y, n = _normalize(q, eps)  # (..., 4), (..., 1)
+    return y, (y, n, eps)
+
+
+def quat_normalize_backward(dy, cache):
+    """Gradient of :func:`quat_normalize_forward`.
+
+    ``dq = (dy - y <y, dy>) / |q|`` where ``|q| >= eps`` (the tangential part of ``dy``), ``dq = dy / eps``
+    where the clamp is active.
+
+    Returns
+    -------
+    dq : ndarray, shape (..., 4)
+    """
+    y, n, eps = cache
+    dy = _check_grad(dy, y.shape)
+    return _normalize_backward(dy, y, n, eps)
+
+
+# --------------------------------------------------------------------------------------------------
+# Hamilton product
+
+def quat_mul_forward(a, b):
+    """Hamilton product ``y = a ⊗ b`` (broadcasting over leading axes).
+
+    ``w = a0 b0 - a1 b1 - a2 b2 - a3 b3``, ``x = a0 b1 + a1 b0 + a2 b3 - a3 b2``,
+    ``y = a0 b2 - a1 b3 + a2 b0 + a3 b1``, ``z = a0 b3 + a1 b2 - a2 b1 + a3 b0``.
+
+    Parameters
+    ----------
+    a, b : ndarray, shape (..., 4)
+        Quaternions ``(w, x, y, z)``; leading axes broadcast.
+
+    Returns
+    -------
+    y : ndarray, shape broadcast(a, b)
+    cache : tuple
+    """
+    a = _as_float_array(a, "a", 4)
+    b = _as_float_array(b, "b", 4)
+    try:
+        np.broadcast_shapes(a.shape, b.shape)
+    except ValueError:
+        raise ValueError(f"a and b: shapes {a.shape} and {b.shape} do not broadcast") from None
+    return _quat_mul(a, b), (a, b)
+
+
+def quat_mul_backward(dy, cache):
+    """Gradients of :func:`quat_mul_forward`: ``da = dy ⊗ b*``, ``db = a* ⊗ dy``.
+
+    (The product is bilinear; right multiplication by ``b`` has the matrix ``R(b)`` with ``R(b)ᵀ = R(b*)``,
+    left multiplication by ``a`` has ``L(a)ᵀ = L(a*)``.) Gradients are summed over broadcast axes.
+
+    Returns
+    -------
+    da : ndarray, shape of ``a``
+    db : ndarray, shape of ``b``
+    """
+    a, b = cache
+    dy = _check_grad(dy, np.broadcast_shapes(a.shape, b.shape))
+    return _quat_mul_backward(dy, a, b)
+
+
+# --------------------------------------------------------------------------------------------------
+# QuaterNet velocity block
+
+def qmul_velocity_forward(delta, q_in, eps: float = 1e-12):
+    """QuaterNet's velocity mode: ``y = normalize(Δq ⊗ q_in)``, the network's delta on the LEFT.
+
+    Parameters
+    ----------
+    delta : ndarray, shape (..., 4)
+        Raw (un-normalised) network output per joint, ``Δq``.
+    q_in : ndarray, shape (..., 4)
+        The input quaternion of the same step and joint (ground truth under teacher forcing, otherwise the
+        fed-back prediction).
+    eps : float
+        Normalisation clamp, as :func:`quat_normalize_forward`.
+
+    Returns
+    -------
+    y : ndarray, shape (..., 4)
+        Unit quaternions.
+    cache : tuple
+    """
+    delta = _as_float_array(delta, "delta", 4)
+    q_in = _as_float_array(q_in, "q_in", 4)
+    if delta.shape != q_in.shape:
+        raise ValueError(f"q_in: expected shape {delta.shape} (the shape of delta), got {q_in.shape}")
+    eps = _check_eps(eps)
+    p = _quat_mul(delta, q_in)  # (..., 4)
+    y, n = _normalize(p, eps)
+    return y, (delta, q_in, y, n, eps)
+
+
+def qmul_velocity_backward(dy, cache):
+    """Gradients of :func:`qmul_velocity_forward` into both inputs.
+
+    Returns
+    -------
+    ddelta : ndarray, shape (..., 4)
+    dq_in : ndarray, shape (..., 4)
+    """
+    delta, q_in, y, n, eps = cache
+    dy = _check_grad(dy, y.shape)
+    dp = _normalize_backward(dy, y, n, eps)
+    return _quat_mul_backward(dp, delta, q_in)
+
+
+# --------------------------------------------------------------------------------------------------
+# dual-quaternion normalisation (Eq. 13)
+
+def dq_normalize_forward(dq, eps: float = 1e-12):
+    """Normalise dual quaternions (Andreou et al. Eq. 13).
+
+    With ``n = max(|q_r|, eps)`` and ``r̂ = q_r / n``::
+
+        q̂_r = q_r / n
+        q̂_d = q_d / n - r̂ <q_r, q_d> / n²  =  (q_d - r̂ <r̂, q_d>) / n
+
+    i.e. the dual part loses its component along the real part and is divided by the real norm, so that
+    ``|q̂_r| = 1`` and ``<q̂_r, q̂_d> = 0`` (the unit conditions, Eq. 3) whenever ``|q_r| >= eps``.
+
+    Parameters
+    ----------
+    dq : ndarray, shape (..., 8)
+        Dual quaternions ``(q_r | q_d)``, each part ``(w, x, y, z)``.
+    eps : float
+        Lower bound of the real-part norm (the paper has none; the reference code divides by ``|q_r|``).
+
+    Returns
+    -------
+    y : ndarray, shape (..., 8)
+    cache : tuple
+    """
+    dq = _as_float_array(dq, "dq", 8)
+    eps = _check_eps(eps)
+    r, d = dq[..., :4], dq[..., 4:]
+    n = _norm_last(r)  # (..., 1)
+    nc = np.maximum(n, eps)
+    rh = r / nc  # (..., 4)
+    a = np.sum(rh * d, axis=-1, keepdims=True)  # <r̂, q_d>
+    dh = (d - rh * a) / nc
+    y = np.concatenate([rh, dh], axis=-1)
+    return y, (d, rh, dh, a, n, eps)
+
+
+def dq_normalize_backward(dy, cache):
+    """Gradient of :func:`dq_normalize_forward`.
+
+    With ``g_r``, ``g_d`` the halves of ``dy`` and ``P = I - r̂ r̂ᵀ``::
+
+        dq_d = P g_d / n
+        g_r̂  = g_r - (a g_d + q_d <r̂, g_d>) / n           (a = <r̂, q_d>)
+        g_n  = -<g_d, q̂_d> / n
+        dq_r = (g_r̂ - r̂ <r̂, g_r̂>) / n + g_n r̂             where |q_r| >= eps
+        dq_r = g_r̂ / eps                                     where the clamp is active (n = eps constant)
+
+    Returns
+    -------
+    ddq : ndarray, shape (..., 8)
+    """
+    d, rh, dh, a, n, eps = cache
+    dy = _check_grad(dy, rh.shape[:-1] + (8,))
+    gr, gd = dy[..., :4], dy[..., 4:]
+    big = n >= eps
+    nc = np.maximum(n, eps)
+    rgd = np.sum(rh * gd, axis=-1, keepdims=True)
+    dd = (gd - rh * rgd) / nc
+    g_rh = gr - (a * gd + d * rgd) / nc
+    g_n = -np.sum(gd * dh, axis=-1, keepdims=True) / nc
+    radial = np.sum(rh * g_rh, axis=-1, keepdims=True)
+    dr = (g_rh - rh * np.where(big, radial, 0)) / nc + rh * np.where(big, g_n, 0)  # n = eps const under the clamp
+    return np.concatenate([dr, dd], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------------
+# quaternion -> Euler angles (QuaterNet qeuler)
+
+# For each order and each output angle (x, y, z): ("atan2", num, den) or ("asin", num), where
+# num = (s1, i1, j1, s2, i2, j2) means 2 (s1 q_i1 q_j1 + s2 q_i2 q_j2) and den = (k1, k2) means
+# 1 - 2 (q_k1² + q_k2²). Quaternion components q0..q3 = w, x, y, z.
+_EULER_TABLE = {
+    "xyz": (("atan2", (1, 0, 1, -1, 2, 3), (1, 2)), ("asin", (1, 1, 3, 1, 0, 2)),
+            ("atan2", (1, 0, 3, -1, 1, 2), (2, 3))),
+    "yzx": (("atan2", (1, 0, 1, -1, 2, 3), (1, 3)), ("atan2", (1, 0, 2, -1, 1, 3), (2, 3)),
+            ("asin", (1, 1, 2, 1, 0, 3))),
+    "zxy": (("asin", (1, 0, 1, 1, 2, 3)), ("atan2", (1, 0, 2, -1, 1, 3), (1, 2)),
+            ("atan2", (1, 0, 3, -1, 1, 2), (1, 3))),
+    "xzy": (("atan2", (1, 0, 1, 1, 2, 3), (1, 3)), ("atan2", (1, 0, 2, 1, 1, 3), (2, 3)),
+            ("asin", (1, 0, 3, -1, 1, 2))),
+    "yxz": (("asin", (1, 0, 1, -1, 2, 3)), ("atan2", (1, 1, 3, 1, 0, 2), (1, 2)),
+            ("atan2", (1, 1, 2, 1, 0, 3), (1, 3))),
+    "zyx": (("atan2", (1, 0, 1, 1, 2, 3), (1, 2)), ("asin", (1, 0, 2, -1, 1, 3)),
+            ("atan2", (1, 0, 3, 1, 1, 2), (2, 3))),
+}
+
+
+def _euler_num(q, num):
+    s1, i1, j1, s2, i2, j2 = num
+    return 2.0 * (s1 * q[..., i1] * q[..., j1] + s2 * q[..., i2] * q[..., j2])
+
+
+def _euler_den(q, den):
+    k1, k2 = den
+    return 1.0 - 2.0 * (q[..., k1] ** 2 + q[..., k2] ** 2)
+
+
+def _euler_from_quat(q: np.ndarray, order: str, eps: float) -> np.ndarray:
+    out = np.empty(q.shape[:-1] + (3,), dtype=q.dtype)
+    for axis, entry in enumerate(_EULER_TABLE[order]):
+        if entry[0] == "atan2":
+            out[..., axis] = np.arctan2(_euler_num(q, entry[1]), _euler_den(q, entry[2]))
+        else:
+            out[..., axis] = np.arcsin(np.clip(_euler_num(q, entry[1]), -1.0 + eps, 1.0 - eps))
+    return out
+
+
+def euler_from_quat_forward(q, order: str = "zyx", eps: float = 0.0):
+    """Euler angles ``(x, y, z)`` from quaternions, exactly as QuaterNet's ``qeuler(q, order, epsilon)``.
+
+    The order string gives the multiplication order from left to right (``'zyx'``: ``q = q_z ⊗ q_y ⊗ q_x``,
+    ``R = Rz Ry Rx``). Two angles come from ``atan2``, one from ``asin`` of an argument clipped to
+    ``[-1 + eps, 1 - eps]``; e.g. for ``'zyx'``::
+
+        x = atan2(2 (q0 q1 + q2 q3), 1 - 2 (q1² + q2²))
+        y = asin(clip(2 (q0 q2 - q1 q3), -1 + eps, 1 - eps))
+        z = atan2(2 (q0 q3 + q1 q2), 1 - 2 (q2² + q3²))
+
+    The formulas assume unit quaternions and are invariant to ``q → -q``. QuaterNet uses ``eps = 1e-6`` in its
+    short-term training loss and ``eps = 0`` elsewhere.
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        Unit quaternions ``(w, x, y, z)``.
+    order : str
+        One of :data:`EULER_ORDERS`.
+    eps : float
+        Clip margin of the ``asin`` argument, ``0 <= eps < 1``.
+
+    Returns
+    -------
+    angles : ndarray, shape (..., 3)
+        Radians, always ordered ``(x, y, z)`` whatever the order.
+    cache : tuple
+    """
+    q = _as_float_array(q, "q", 4)
+    if order not in _EULER_TABLE:
+        raise ValueError(f"order: expected one of {EULER_ORDERS}, got {order!r}")
+    eps = float(eps)
+    if not (0.0 <= eps < 1.0):
+        raise ValueError(f"eps: expected 0 <= eps < 1, got {eps!r}")
+    return _euler_from_quat(q, order, eps), (q, order, eps)
+
+
+def euler_from_quat_backward(dangles, cache):
+    """Gradient of :func:`euler_from_quat_forward` with respect to the quaternions.
+
+    ``d atan2(a, b) = (b da - a db) / (a² + b²)`` (0 where ``a² + b² = 0``, the gimbal-lock points);
+    ``d asin(c) = dc / sqrt(1 - c²)`` passed through the clip where ``-1 + eps <= arg <= 1 - eps`` (as PyTorch's
+    ``clamp``) and 0 where ``1 - c² = 0`` (only possible with ``eps = 0``), so the gradient is always finite.
+
+    Returns
+    -------
+    dq : ndarray, shape (..., 4)
+    """
+    q, order, eps = cache
+    g = _check_grad(dangles, q.shape[:-1] + (3,), "dangles")
+    dq = np.zeros(q.shape, dtype=np.result_type(q, g))
+    for axis, entry in enumerate(_EULER_TABLE[order]):
+        ga = g[..., axis]
+        s1, i1, j1, s2, i2, j2 = entry[1]
+        a = _euler_num(q, entry[1])
+        if entry[0] == "atan2":
+            b = _euler_den(q, entry[2])
+            r2 = a * a + b * b
+            ok = r2 > 0
+            inv = np.where(ok, 1.0 / np.where(ok, r2, 1.0), 0.0)
+            ga_num = ga * b * inv  # dL/da
+            ga_den = -ga * a * inv  # dL/db
+            k1, k2 = entry[2]
+            dq[..., k1] += -4.0 * q[..., k1] * ga_den
+            dq[..., k2] += -4.0 * q[..., k2] * ga_den
+        else:
+            c = np.clip(a, -1.0 + eps, 1.0 - eps)
+            inside = (a >= -1.0 + eps) & (a <= 1.0 - eps)
+            s = 1.0 - c * c
+            ok = inside & (s > 0)
+            ga_num = np.where(ok, ga / np.sqrt(np.where(ok, s, 1.0)), 0.0)
+        dq[..., i1] += 2.0 * s1 * q[..., j1] * ga_num
+        dq[..., j1] += 2.0 * s1 * q[..., i1] * ga_num
+        dq[..., i2] += 2.0 * s2 * q[..., j2] * ga_num
+        dq[..., j2] += 2.0 * s2 * q[..., i2] * ga_num
+    return dq
