@@ -1,0 +1,336 @@
+"""Benchmark: onnxruntime latency of the exported models next to the NumPy forward, and the int8 accuracy cost.
+
+What is measured (spec/deploy.md §9), all float32 unless stated, one process, interleaved rounds (every variant
+timed once per round, so that machine load hits all of them alike; medians and minima over rounds are reported):
+
+* GRU 2×1000 step (QuaterNet size: input 128, 2 layers, hidden 1000) through the GRU builder (``deploy.gru``,
+  fused ONNX ``GRU`` nodes and the primitive form) at batch 1 and 32, against ``refimpl.nn.gru.gru_step_forward``.
+  Targets: ≤ 0.55 ms at batch 1, ≤ 2.0 ms at batch 32.
+* QTG (default sizes): one step at batch 1 and 32 (step model vs ``refimpl.models.qtg.step``); a whole 30-frame
+  transition at batch 1 and 32: the rollout model in every form (``unrolled``, ``loop``, ``scan``; the compact
+  deployment variant with float32, int8 and int4 weights) against ``rollout_inference`` (the lean NumPy path) and
+  ``rollout_forward`` (the training path); the in-graph rollout against a host loop over the step model
+  (init + 30 ``run`` calls). Paper: 0.33 ms per transition (Core i7-8700).
+* Accuracy of every rollout form against the float64 NumPy model on real CMU/salsa transition windows (the
+  embedded sample, test split) and on random contexts: max/mean absolute error in the network's pose space,
+  joint-rotation angle error (degrees) and forward-kinematics joint-position error (cm), next to the model's
+  own error against the ground truth. Parameters: ``--checkpoint`` (a QTG checkpoint), else a model trained for
+  ``--train-steps`` steps on the sample (0: the random initialisation).
+
+NumPy's BLAS is limited to the same number of threads as onnxruntime's intra-op pool (threadpoolctl). PyTorch is
+timed only when installed (it is not on the development VM). Settings recorded in the JSON:
+onnxruntime version and session options, BLAS libraries (threadpoolctl), BLAS environment variables, load
+average before and after. Nothing asserts on time. A table is printed and JSON written atomically to
+``benchmarks/results/bench_onnx.json``.
+
+    python benchmarks/bench_onnx.py [--threads 1] [--rounds 9] [--train-steps 300] [--checkpoint PATH] [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import onnxruntime as ort  # noqa: E402
+
+from deploy.graph import GraphBuilder  # noqa: E402
+from deploy.gru import gru_step  # noqa: E402
+from deploy.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step  # noqa: E402
+from deploy.qtg_compact import export_qtg_rollout_compact  # noqa: E402
+from deploy.runtime import make_session  # noqa: E402
+from deploy.validate import validate_model  # noqa: E402
+from refimpl.models.qtg import (QTGConfig, init_params, init_state, prepare_inference, rollout_forward,  # noqa: E402
+                                rollout_inference, step)
+from refimpl.nn.gru import gru_init, gru_step_forward  # noqa: E402
+from refimpl.quat import quat_normalize  # noqa: E402
+from refimpl.transitions import denormalize_poses, split_pose  # noqa: E402
+
+try:
+    from threadpoolctl import threadpool_info, threadpool_limits
+except ImportError:  # optional
+    threadpool_info = threadpool_limits = None
+try:
+    import torch  # noqa: F401
+    HAVE_TORCH = True
+except ImportError:
+    HAVE_TORCH = False
+
+
+# ------------------------------------------------------------------------------------------------- timing
+def _time(fns: dict, rounds: int, min_time: float) -> dict:
+    """Interleaved timing: per round, each callable runs ``reps`` times (≈ ``min_time`` s); ms per call."""
+    reps = {}
+    for k, fn in fns.items():
+        fn()
+        t0 = time.perf_counter()
+        fn()
+        reps[k] = max(1, int(min_time / max(time.perf_counter() - t0, 1e-6)))
+    per = {k: [] for k in fns}
+    for _ in range(rounds):
+        for k, fn in fns.items():
+            t0 = time.perf_counter()
+            for _ in range(reps[k]):
+                fn()
+            per[k].append((time.perf_counter() - t0) / reps[k] * 1e3)
+    return {k: {"median_ms": statistics.median(v), "min_ms": min(v)} for k, v in per.items()}
+
+
+def _env(threads: int) -> dict:
+    blas = []
+    if threadpool_info is not None:
+        blas = [{k: v for k, v in i.items() if k in ("internal_api", "version", "num_threads", "architecture")}
+                for i in threadpool_info()]
+    return {"python": platform.python_version(), "numpy": np.__version__, "onnxruntime": ort.__version__,
+            "platform": platform.platform(), "cpu_count": os.cpu_count(), "blas": blas,
+            "blas_env": {k: os.environ.get(k) for k in ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE",
+                                                        "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")},
+            "numpy_blas_threads": threads if threadpool_limits is not None else "as configured",
+            "ort_session": {"intra_op_num_threads": threads, "inter_op_num_threads": 1,
+                            "execution_mode": "sequential", "graph_optimization": "all",
+                            "session.intra_op.allow_spinning": "0"},
+            "torch": "installed" if HAVE_TORCH else "not installed (not timed)"}
+
+
+# ---------------------------------------------------------------------------------------------------- GRU
+def bench_gru(threads: int, rounds: int, min_time: float) -> dict:
+    """GRU 2x1000 step: ORT fused / primitive at ``threads`` and at 2 threads (the targets' setting), NumPy."""
+    I, H, L = 128, 1000, 2
+    rng = np.random.default_rng(0)
+    params = gru_init(rng, I, H, L, "gru", dtype=np.float32)
+    sessions = {}
+    for prim in (False, True):
+        g = GraphBuilder("gru_step", primitive=prim)
+        x, h = g.input("x", ["B", I]), g.input("h", [L, "B", H])
+        y, h_new = gru_step(g, x, h, params, "gru", name="gru", num_layers=L)
+        g.output(h_new, "h_new", [L, "B", H])
+        m = g.model()
+        validate_model(m)
+        for n in sorted({threads, 2}):
+            key = f"ort_{'primitive' if prim else 'fused'}_{n}thr"
+            sessions[key] = make_session(m, intra_op_threads=n)
+    out = {}
+    for B in (1, 32):
+        xv = rng.standard_normal((B, I)).astype(np.float32)
+        hv = rng.standard_normal((L, B, H)).astype(np.float32)
+        fns = {k: (lambda s=s: s.run(None, {"x": xv, "h": hv})) for k, s in sessions.items()}
+        fns["numpy"] = lambda: gru_step_forward(xv, hv, params, "gru", num_layers=L)
+        out[f"batch{B}"] = _time(fns, rounds, min_time)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------- QTG
+def _qtg_sessions(params, cfg, threads):
+    kw = dict(intra_op_threads=threads)
+    models = {"rollout_unrolled": export_qtg_rollout(params, cfg, mode="unrolled"),
+              "rollout_unrolled_primitive": export_qtg_rollout(params, cfg, mode="unrolled", primitive=True),
+              "rollout_loop": export_qtg_rollout(params, cfg, mode="loop"),
+              "rollout_scan": export_qtg_rollout(params, cfg, mode="scan"),
+              "compact_float32": export_qtg_rollout_compact(params, cfg, weights="float32"),
+              "compact_int8": export_qtg_rollout_compact(params, cfg, weights="int8"),
+              "compact_int4": export_qtg_rollout_compact(params, cfg, weights="int4")}
+    info = {}
+    for k, m in models.items():
+        validate_model(m)
+        info[k] = {"nodes": len(m.graph.node), "bytes": len(m.SerializeToString())}
+    sessions = {k: make_session(m, **kw) for k, m in models.items()}
+    sessions["init"] = make_session(export_qtg_init(params, cfg), **kw)
+    sessions["step"] = make_session(export_qtg_step(params, cfg), **kw)
+    sessions["step_primitive"] = make_session(export_qtg_step(params, cfg, primitive=True), **kw)
+    return sessions, info
+
+
+def _host_loop(init, stp, past, target, T):
+    lp, pose, hid, tl = init.run(None, {"past": past, "target": target})
+    poses = []
+    for _ in range(T):
+        pose, lp, hid = stp.run(None, {"pose": pose, "latent_prev": lp, "hidden": hid, "target_latent": tl})
+        poses.append(pose)
+    return np.stack(poses, axis=1)
+
+
+def bench_qtg(params32, cfg, sessions, rounds, min_time) -> dict:
+    rng = np.random.default_rng(1)
+    lean = prepare_inference(params32, cfg)
+    T = cfg.transition_length
+    out = {}
+    for B in (1, 32):
+        past = rng.standard_normal((B, 2, cfg.pose_size)).astype(np.float32)
+        target = rng.standard_normal((B, 2, cfg.pose_size)).astype(np.float32)
+        state, tl = init_state(params32, past, target, cfg)
+        sf = {"pose": state.pose, "latent_prev": state.latent_prev, "hidden": state.hidden, "target_latent": tl}
+        out[f"step_batch{B}"] = _time({"ort_step": lambda: sessions["step"].run(None, sf),
+                                       "ort_step_primitive": lambda: sessions["step_primitive"].run(None, sf),
+                                       "numpy_step": lambda: step(params32, state, tl, cfg)}, rounds, min_time)
+        feeds = {"past": past, "target": target}
+        fns = {f"ort_{k}": (lambda s=sessions[k]: s.run(None, feeds))
+               for k in sessions if k.startswith(("rollout", "compact"))}
+        fns["ort_host_loop_step"] = lambda: _host_loop(sessions["init"], sessions["step"], past, target, T)
+        fns["numpy_rollout_inference"] = lambda: rollout_inference(lean, past, target)
+        fns["numpy_rollout_forward"] = lambda: rollout_forward(params32, past, target, config=cfg)
+        out[f"rollout_batch{B}"] = _time(fns, rounds, min_time)
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- accuracy
+def _errors(pred, ref, truth, stats, skeletons, skel_index) -> dict:
+    """Errors of ``pred`` vs ``ref`` (and of ``ref`` vs ``truth``) in pose space, rotation angle and FK cm."""
+    res = {"pose_max_abs": float(np.abs(pred - ref).max()), "pose_mean_abs": float(np.abs(pred - ref).mean())}
+
+    def angles(a, b):
+        qa, qb = quat_normalize(split_pose(a)[1]), quat_normalize(split_pose(b)[1])
+        dot = np.clip(np.abs(np.sum(qa * qb, axis=-1)), 0.0, 1.0)
+        return np.degrees(2 * np.arccos(dot))
+
+    ang = angles(pred, ref)
+    res.update(angle_max_deg=float(ang.max()), angle_mean_deg=float(ang.mean()))
+    if stats is not None and skeletons is not None:
+        def fk(poses):
+            raw = denormalize_poses(poses, *stats)
+            root, q = split_pose(raw)
+            out = np.empty(q.shape[:-1] + (3,))
+            for k, sk in enumerate(skeletons):
+                sel = skel_index == k
+                if np.any(sel):
+                    out[sel] = sk.forward_kinematics(quat_normalize(q[sel]), root[sel])
+            return out
+
+        d = np.linalg.norm(fk(pred) - fk(ref), axis=-1)
+        res.update(fk_max_cm=float(d.max()), fk_mean_cm=float(d.mean()))
+        if truth is not None:
+            e = np.linalg.norm(fk(ref) - fk(truth), axis=-1)
+            res["model_vs_truth_fk_mean_cm"] = float(e.mean())
+    return res
+
+
+def accuracy(params64, cfg, sessions, data) -> dict:
+    out = {}
+    contexts = {}
+    if data is not None:
+        past, trans, target = data.context(normalized=True)
+        contexts["cmu_sample_test"] = (past, target, trans, (data.root_mean, data.root_std), data.skeletons,
+                                       data.skeleton_index)
+    rng = np.random.default_rng(2)
+    contexts["random"] = (rng.standard_normal((16, 2, cfg.pose_size)), rng.standard_normal((16, 2, cfg.pose_size)),
+                          None, None, None, None)
+    for name, (past, target, truth, stats, skels, sidx) in contexts.items():
+        ref, _ = rollout_forward(params64, past, target, config=cfg)
+        feeds = {"past": past.astype(np.float32), "target": target.astype(np.float32)}
+        res = {}
+        for k, s in sessions.items():
+            if k.startswith(("rollout", "compact")):
+                pred = s.run(None, feeds)[0].astype(np.float64)
+                res[k] = _errors(pred, ref, truth, stats, skels, sidx)
+        host = _host_loop(sessions["init"], sessions["step"], feeds["past"], feeds["target"], cfg.transition_length)
+        res["host_loop_step"] = _errors(host.astype(np.float64), ref, truth, stats, skels, sidx)
+        out[name] = {"windows": int(past.shape[0]), "errors_vs_numpy_float64": res}
+    return out
+
+
+def _model_params(args, cfg):
+    """``(params float64, description, test data or None)``."""
+    data = None
+    try:
+        from refimpl.transitions import build_transition_datasets, sample_sources
+        train, data = build_transition_datasets(*sample_sources(), stride=5, test_stride=10)
+    except Exception as exc:  # the sample is part of the package; keep the benchmark running regardless
+        print(f"note: no sample data ({exc}); accuracy on random contexts only", file=sys.stderr)
+        train = None
+    if args.checkpoint:
+        from deploy.cli import load_qtg_checkpoint
+        params, ck_cfg, _ = load_qtg_checkpoint(args.checkpoint)
+        if ck_cfg != cfg:
+            raise SystemExit("--checkpoint: only the default QTGConfig is benchmarked")
+        return {k: np.asarray(v, np.float64) for k, v in params.items()}, f"checkpoint {args.checkpoint}", data
+    if args.train_steps > 0 and train is not None:
+        from refimpl.train import train_qtg
+        with tempfile.TemporaryDirectory() as d:
+            res = train_qtg(train, args.train_steps, config=cfg, dtype=np.float32, progress=None,
+                            checkpoint_path=str(Path(d) / "ck.npz"), checkpoint_every=10 ** 9)
+        desc = f"trained {args.train_steps} steps on the embedded sample (final loss {res.losses[-1]:.4g})"
+        return {k: np.asarray(v, np.float64) for k, v in res.params.items()}, desc, data
+    return init_params(cfg, np.random.default_rng(0)), "random initialisation (seed 0)", data
+
+
+# ------------------------------------------------------------------------------------------------- report
+def _table(result) -> str:
+    lines = []
+    g = result["gru_2x1000_step"]
+    lines.append("GRU 2x1000 step (input 128)       batch 1 ms   batch 32 ms   (targets 0.55 / 2.0)")
+    for k in g["batch1"]:
+        lines.append(f"  {k:30s} {g['batch1'][k]['median_ms']:10.3f} {g['batch32'][k]['median_ms']:12.3f}")
+    q = result["qtg"]
+    for B in (1, 32):
+        st = q[f"step_batch{B}"]
+        lines.append(f"QTG step, batch {B}: ort {st['ort_step']['median_ms']:.3f} ms (primitive GRU "
+                     f"{st['ort_step_primitive']['median_ms']:.3f}), numpy {st['numpy_step']['median_ms']:.3f} ms "
+                     f"(numpy/ort {st['numpy_step']['median_ms'] / st['ort_step']['median_ms']:.2f}x)")
+        ro = q[f"rollout_batch{B}"]
+        base = ro["numpy_rollout_inference"]["median_ms"]
+        lines.append(f"QTG 30-frame transition, batch {B}       median ms    min ms   numpy_lean/this")
+        for k, v in ro.items():
+            lines.append(f"  {k:34s} {v['median_ms']:9.3f} {v['min_ms']:9.3f} {base / v['median_ms']:9.2f}")
+    acc = result["accuracy"]
+    for name, a in acc.items():
+        lines.append(f"accuracy vs float64 NumPy ({name}, {a['windows']} windows): max|d| pose, mean angle deg, "
+                     f"mean FK cm")
+        for k, e in a["errors_vs_numpy_float64"].items():
+            fk = f"{e['fk_mean_cm']:.4f}" if "fk_mean_cm" in e else "-"
+            lines.append(f"  {k:22s} {e['pose_max_abs']:.2e}  {e['angle_mean_deg']:.2e}  {fk}")
+        first = next(iter(a["errors_vs_numpy_float64"].values()))
+        if "model_vs_truth_fk_mean_cm" in first:
+            lines.append(f"  (the float64 model itself vs the ground truth: {first['model_vs_truth_fk_mean_cm']:.2f} cm)")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--threads", type=int, default=1, help="onnxruntime intra-op threads")
+    ap.add_argument("--rounds", type=int, default=9)
+    ap.add_argument("--min-time", type=float, default=0.1, help="seconds per variant per round")
+    ap.add_argument("--train-steps", type=int, default=300)
+    ap.add_argument("--checkpoint", default=None)
+    ap.add_argument("--quick", action="store_true", help="3 rounds, short rounds, no training")
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_onnx.json"))
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.rounds, args.min_time, args.train_steps = 3, 0.03, 0
+    load_before = os.getloadavg()
+    if threadpool_limits is not None:                  # NumPy's BLAS gets as many threads as onnxruntime
+        threadpool_limits(limits=args.threads)
+    cfg = QTGConfig()
+    params64, desc, data = _model_params(args, cfg)
+    params32 = {k: v.astype(np.float32) for k, v in params64.items()}
+    sessions, info = _qtg_sessions(params32, cfg, args.threads)
+    result = {"environment": _env(args.threads), "load_average_before": load_before, "model": desc,
+              "gru_2x1000_step": bench_gru(args.threads, args.rounds, args.min_time),
+              "qtg": bench_qtg(params32, cfg, sessions, args.rounds, args.min_time),
+              "qtg_models": info,
+              "accuracy": accuracy(params64, cfg, sessions, data),
+              "load_average_after": os.getloadavg()}
+    print(_table(result))
+    print(f"load average before {load_before}, after {result['load_average_after']}; model: {desc}")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".bench_onnx-", suffix=".tmp", dir=str(out.parent))
+    with os.fdopen(fd, "w") as f:
+        json.dump(result, f, indent=2)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, out)
+    print(f"wrote {out}")
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,183 @@
+"""ONNX builders for the multi-layer (optionally bidirectional) GRU of ``refimpl/nn/gru.py`` (PyTorch ``nn.GRU``).
+
+Equations (PyTorch, gate blocks ``r|z|n`` in ``weight_ih_l{k}`` ``(3H, I)``, ``weight_hh_l{k}`` ``(3H, H)``)::
+
+    r = σ(x W_irᵀ + b_ir + h W_hrᵀ + b_hr)
+    z = σ(x W_izᵀ + b_iz + h W_hzᵀ + b_hz)
+    n = tanh(x W_inᵀ + b_in + r ⊙ (h W_hnᵀ + b_hn))
+    h' = (1 − z) ⊙ n + z ⊙ h
+
+The ONNX ``GRU`` operator computes the same with ``linear_before_reset = 1`` (the reset gate multiplies
+``h W_hnᵀ + b_hn``), gates in the order ``z|r|h`` and the six bias blocks ``[Wb_z, Wb_r, Wb_h, Rb_z, Rb_r, Rb_h]``
+kept apart (``spec/deploy.md`` §2.3). Layer ``k`` of a stack reads the top output of layer ``k − 1``; a
+bidirectional layer feeds ``[forward | backward]`` ``(T, B, 2H)`` upwards.
+
+Fused form (default for float32): one ``GRU`` node per layer, transposes at the batch-first boundary.
+Primitive form (``g.primitive``, float64): ``MatMul`` of all input projections, then a ``Scan`` over time whose
+body is the cell above written with ``MatMul``/``Split``/``Sigmoid``/``Tanh``.
+
+Shape legend: B batch, T time, I input features, H hidden, L layers, D directions.
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from deploy.graph import GraphBuilder
+from deploy.recurrent import (GRU_PERM, _check_layer_shapes, _concat_layers, _input_projection,
+                              _merge_directions, _onnx_layer_weights, _primitive_layer_weights,
+                              _scan_recurrence, _split_layers, _squeeze0, _time_major, _unsqueeze0)
+
+__all__ = ["gru", "gru_step", "gru_onnx_weights"]
+
+
+def gru_onnx_weights(params: Mapping[str, np.ndarray], prefix: str, layer: int = 0,
+                     bidirectional: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ONNX ``W (D, 3H, I)``, ``R (D, 3H, H)``, ``B (D, 6H)`` of GRU layer ``layer`` (gates z|r|h).
+
+    Missing biases count as zeros. The reverse direction reads the ``*_reverse`` parameters.
+    """
+    w, r, b, _ = _onnx_layer_weights(params, prefix, layer, 2 if bidirectional else 1, GRU_PERM)
+    return w, r, b
+
+
+def gru(g: GraphBuilder, x: str, h0: str, params: Mapping[str, np.ndarray], prefix: str, *, name: str,
+        num_layers: int = 1, bidirectional: bool = False, wname: str | None = None) -> tuple[str, str]:
+    """Append a GRU over a whole sequence.
+
+    Parameters
+    ----------
+    g : GraphBuilder
+    x : str
+        Input ``(B, T, I)``, batch-first.
+    h0 : str
+        Initial state ``(L·D, B, H)`` (PyTorch layout; layer-major, forward direction first). Use
+        :func:`deploy.recurrent.tiled_state` for a learned state, a graph input otherwise.
+    params : dict
+        ``{prefix}.weight_ih_l{k}[_reverse]`` ``(3H, I_k)``, ``weight_hh_l{k}`` ``(3H, H)``, ``bias_ih_l{k}``,
+        ``bias_hh_l{k}`` ``(3H,)``, gate blocks ``r|z|n``.
+    name : str
+        Graph path (``"enc.gru"``): initializers ``{name}.l{k}.W`` etc.
+    wname : str, optional
+        Path of the initializers (default ``name``), shared between calls with the same ``wname``.
+    num_layers, bidirectional
+        As ``nn.GRU``.
+
+    Returns
+    -------
+    y : str
+        ``(B, T, D·H)``: top layer's outputs, forward direction first.
+    h_n : str
+        ``(L·D, B, H)``: final state of every layer and direction.
+    """
+    dirs = 2 if bidirectional else 1
+    seq = _time_major(g, x, f"{name}.x_tm")                              # (T, B, I)
+    h0s = _split_layers(g, h0, num_layers, dirs, f"{name}.h0")           # L × (D, B, H)
+    hns = []
+    for k in range(num_layers):
+        _check_layer_shapes(params, prefix, k, 3, dirs)
+        lname, wl = f"{name}.l{k}", f"{wname or name}.l{k}"
+        if g.primitive:
+            seq, hn = _primitive_layer(g, seq, h0s[k], params, prefix, k, dirs, lname, wl)
+        else:
+            w, r, b, hidden = _onnx_layer_weights(params, prefix, k, dirs, GRU_PERM)
+            y, hn = g.node("GRU", [seq, g.weight(f"{wl}.W", w), g.weight(f"{wl}.R", r),
+                                   g.weight(f"{wl}.B", b), "", h0s[k]],
+                           lname, outputs=("Y", "Y_h"), hidden_size=hidden, linear_before_reset=1,
+                           direction="bidirectional" if bidirectional else "forward")  # (T, D, B, H), (D, B, H)
+            seq = _merge_directions(g, y, dirs, f"{lname}.y")           # (T, B, D·H)
+        hns.append(hn)
+    y = _time_major(g, seq, f"{name}.y")                                 # (B, T, D·H)
+    return y, _concat_layers(g, hns, f"{name}.h_n")                     # (L·D, B, H)
+
+
+def gru_step(g: GraphBuilder, x_t: str, h: str, params: Mapping[str, np.ndarray], prefix: str, *, name: str,
+             num_layers: int = 1, wname: str | None = None) -> tuple[str, str]:
+    """Append one GRU time step (unidirectional stack, as ``refimpl.nn.gru.gru_step_forward``).
+
+    Parameters
+    ----------
+    x_t : str
+        Input ``(B, I)``.
+    h : str
+        State ``(L, B, H)``.
+    wname : str, optional
+        Path of the initializers (default ``name``).
+
+    Returns
+    -------
+    y : str
+        ``(B, H)``: top layer's new state.
+    h_new : str
+        ``(L, B, H)``.
+    """
+    hs = _split_layers(g, h, num_layers, 1, f"{name}.h")                 # L × (1, B, H)
+    hn = []
+    if g.primitive:
+        inp = x_t                                                        # (B, I)
+        for k in range(num_layers):
+            _check_layer_shapes(params, prefix, k, 3, 1)
+            lname, wl = f"{name}.l{k}", f"{wname or name}.l{k}"
+            w_ih, w_hh, b_ih, b_hh = _primitive_layer_weights(params, prefix, k, False)
+            xp = _input_projection(g, inp, w_ih, b_ih, lname, wl)           # (B, 3H)
+            wh, bh = g.weight(f"{wl}.Wh", w_hh.T), g.weight(f"{wl}.bh", b_hh)
+            h_k = _squeeze0(g, hs[k], f"{lname}.h")                      # (B, H)
+            inp = _gru_cell(g, xp, h_k, wh, bh, w_hh.shape[1], f"{lname}.cell")  # (B, H)
+            hn.append(_unsqueeze0(g, inp, f"{lname}.h_new"))             # (1, B, H)
+        return inp, _concat_layers(g, hn, f"{name}.h_new")
+    inp = g.node("Unsqueeze", [x_t, g.ints([0])], f"{name}.x_seq")       # (1, B, I)
+    for k in range(num_layers):
+        _check_layer_shapes(params, prefix, k, 3, 1)
+        lname, wl = f"{name}.l{k}", f"{wname or name}.l{k}"
+        w, r, b, hidden = _onnx_layer_weights(params, prefix, k, 1, GRU_PERM)
+        (_, inp) = g.node("GRU", [inp, g.weight(f"{wl}.W", w), g.weight(f"{wl}.R", r),
+                                  g.weight(f"{wl}.B", b), "", hs[k]],
+                          lname, outputs=("", "Y_h"), hidden_size=hidden, linear_before_reset=1)  # (1, B, H)
+        hn.append(inp)
+    y = _squeeze0(g, inp, f"{name}.y")                                   # (B, H)
+    return y, _concat_layers(g, hn, f"{name}.h_new")                    # (L, B, H)
+
+
+# --------------------------------------------------------------------------------------- primitive form
+def _gru_cell(g: GraphBuilder, xp: str, h: str, wh: str, bh: str, hidden: int, name: str) -> str:
+    """One GRU cell from primitives; ``xp = x W_iᵀ + b_i`` ``(B, 3H)`` (blocks r|z|n), ``h`` ``(B, H)``."""
+    hw = g.node("MatMul", [h, wh], f"{name}.hw")                         # (B, 3H)
+    hp = g.node("Add", [hw, bh], f"{name}.hp")                           # (B, 3H)
+    sizes = g.ints([2 * hidden, hidden])
+    x_rz, x_n = g.node("Split", [xp, sizes], f"{name}.xs", axis=-1, outputs=("rz", "n"))  # (B, 2H), (B, H)
+    h_rz, h_n = g.node("Split", [hp, sizes], f"{name}.hs", axis=-1, outputs=("rz", "n"))  # (B, 2H), (B, H)
+    rz = g.node("Sigmoid", [g.node("Add", [x_rz, h_rz], f"{name}.rz_pre")], f"{name}.rz")  # (B, 2H)
+    r, z = g.node("Split", [rz, g.ints([hidden, hidden])], f"{name}.gates", axis=-1, outputs=("r", "z"))
+    n = g.node("Tanh", [g.node("Add", [x_n, g.node("Mul", [r, h_n], f"{name}.rhn")], f"{name}.n_pre")],
+               f"{name}.n")                                              # (B, H)
+    one_minus_z = g.node("Sub", [g.scalar(1.0), z], f"{name}.1mz")        # (B, H)
+    a = g.node("Mul", [one_minus_z, n], f"{name}.a")                     # (B, H)
+    c = g.node("Mul", [z, h], f"{name}.c")                               # (B, H)
+    return g.node("Add", [a, c], f"{name}.h_new")                        # (B, H)
+
+
+def _primitive_layer(g, seq, h0_layer, params, prefix, layer, dirs, lname, wl):
+    """One layer (both directions) in primitive form: ``seq`` ``(T, B, I)`` → ``(T, B, D·H)``, ``(D, B, H)``."""
+    ys, hs = [], []
+    h0_dirs = [h0_layer] if dirs == 1 else list(
+        g.node("Split", [h0_layer, g.ints([1, 1])], f"{lname}.h0", axis=0, outputs=("f", "b")))
+    for d in range(dirs):
+        dname, wd = f"{lname}.d{d}", f"{wl}.d{d}"
+        w_ih, w_hh, b_ih, b_hh = _primitive_layer_weights(params, prefix, layer, d == 1)
+        hidden = w_hh.shape[1]
+        xp = _input_projection(g, seq, w_ih, b_ih, dname, wd)                # (T, B, 3H)
+        wh, bh = g.weight(f"{wd}.Wh", w_hh.T), g.weight(f"{wd}.bh", b_hh)
+        h_init = _squeeze0(g, h0_dirs[d], f"{dname}.h_init")             # (B, H)
+
+        def cell(body, x_t, states, wh=wh, bh=bh, hidden=hidden, dname=dname):
+            h_new = _gru_cell(body, x_t, states[0], wh, bh, hidden, f"{dname}.body.cell")
+            return [h_new], h_new
+
+        (h_last,), y = _scan_recurrence(g, xp, [h_init], cell, name=f"{dname}.scan", reverse=d == 1,
+                                        state_shapes=[["B", hidden]], xp_width=3 * hidden)
+        ys.append(y)                                                     # (T, B, H)
+        hs.append(_unsqueeze0(g, h_last, f"{dname}.h_n"))               # (1, B, H)
+    y = ys[0] if dirs == 1 else g.node("Concat", ys, f"{lname}.y", axis=-1)     # (T, B, D·H)
+    hn = hs[0] if dirs == 1 else g.node("Concat", hs, f"{lname}.h_n", axis=0)   # (D, B, H)
+    return y, hn

@@ -1,0 +1,258 @@
+"""Running exported models with onnxruntime: validated loading, metadata, a step loop and a rollout.
+
+Session settings (``spec/deploy.md`` §7): CPU execution provider; ``intra_op_num_threads`` configurable (default 1:
+batch-1 steps are latency-bound and a second thread mostly adds synchronisation); ``inter_op_num_threads = 1``
+with sequential execution; ``session.intra_op.allow_spinning = "0"`` so that several sessions (init, step,
+rollout) driven alternately do not fight over the cores with spinning worker threads; full graph
+optimisation.
+
+Every model is validated before use (``deploy.validate.validate_model``: checker, strict shape inference, IR
+version) and its metadata decoded with ``json.loads`` (never executed).
+
+Shape legend: B batch, T frames, P pose size, Z latent size, H hidden size, L layers.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import onnx
+
+from deploy.metadata import read_metadata
+
+__all__ = ["make_session_options", "make_session", "DeployedModel", "load_model", "QTGRuntime"]
+
+_NP_FROM_ORT = {"tensor(float)": np.float32, "tensor(double)": np.float64, "tensor(int64)": np.int64,
+                "tensor(bool)": np.bool_}
+
+
+def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all"):
+    """``onnxruntime.SessionOptions`` with the project's settings (module docstring).
+
+    Parameters
+    ----------
+    intra_op_threads : int
+        Threads inside one operator (``>= 1``).
+    optimization : {"all", "extended", "basic", "disabled"}
+        Graph optimisation level.
+    """
+    import onnxruntime as ort
+
+    if not isinstance(intra_op_threads, (int, np.integer)) or intra_op_threads < 1:
+        raise ValueError(f"intra_op_threads: expected a positive integer, got {intra_op_threads!r}")
+    levels = {"all": ort.GraphOptimizationLevel.ORT_ENABLE_ALL,
+              "extended": ort.GraphOptimizationLevel.ORT_ENABLE_EXTENDED,
+              "basic": ort.GraphOptimizationLevel.ORT_ENABLE_BASIC,
+              "disabled": ort.GraphOptimizationLevel.ORT_DISABLE_ALL}
+    if optimization not in levels:
+        raise ValueError(f"optimization: expected one of {sorted(levels)}, got {optimization!r}")
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = int(intra_op_threads)
+    so.inter_op_num_threads = 1
+    so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    so.graph_optimization_level = levels[optimization]
+    so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    so.add_session_config_entry("session.inter_op.allow_spinning", "0")
+    so.log_severity_level = 3
+    return so
+
+
+def make_session(model: onnx.ModelProto | bytes | str | os.PathLike, *, intra_op_threads: int = 1,
+                 optimization: str = "all"):
+    """An ``onnxruntime.InferenceSession`` on the CPU provider with :func:`make_session_options` (no validation).
+
+    Raises
+    ------
+    ValueError
+        When onnxruntime refuses the model (unsupported opset or operator, malformed file, ...).
+    """
+    import onnxruntime as ort
+
+    if isinstance(model, onnx.ModelProto):
+        model = model.SerializeToString()
+    elif isinstance(model, os.PathLike):
+        model = os.fspath(model)
+    options = make_session_options(intra_op_threads, optimization=optimization)
+    try:
+        return ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime raises its own Fail/InvalidGraph/NotImplemented classes
+        raise ValueError(f"model: onnxruntime refused it: {exc}") from exc
+
+
+def _load_proto(model) -> onnx.ModelProto:
+    if isinstance(model, onnx.ModelProto):
+        return model
+    if isinstance(model, bytes):
+        try:
+            return onnx.load_model_from_string(model)
+        except Exception as exc:
+            raise ValueError(f"model: the bytes are not a readable ONNX model ({type(exc).__name__})") from exc
+    path = Path(model)
+    if not path.is_file():
+        raise ValueError(f"model: no such file {str(path)!r}")
+    try:
+        return onnx.load(str(path))
+    except Exception as exc:  # onnx raises DecodeError and others on garbage
+        raise ValueError(f"model: {str(path)!r} is not a readable ONNX model ({type(exc).__name__})") from exc
+
+
+_METADATA_TYPES = {"model": dict, "io": dict, "representation": dict, "normalization": (dict, type(None)),
+                   "skeleton": (dict, type(None)), "exporter": dict, "frame_rate": (int, float), "format": str,
+                   "source_paper": str}
+
+
+def _check_metadata_types(meta: dict) -> None:
+    """The keys this package writes must have the documented JSON types (``deploy/metadata.py``); a model that
+    carries any of them (``format``, ``exporter``, ...) must carry all of them — ``metadata_props`` are serialized
+    last, so a file cut at an entry boundary would otherwise load with keys silently missing."""
+    for key, types in _METADATA_TYPES.items():
+        if key in meta and (not isinstance(meta[key], types) or isinstance(meta[key], bool)):
+            raise ValueError(f"metadata[{key!r}]: expected a JSON {getattr(types, '__name__', 'object or null')}, "
+                             f"got {type(meta[key]).__name__}")
+    present = [k for k in _METADATA_TYPES if k in meta]
+    if present and len(present) != len(_METADATA_TYPES):
+        missing = [k for k in _METADATA_TYPES if k not in meta]
+        raise ValueError(f"metadata: keys {missing} are missing (truncated file?); a refimpl.deploy model has "
+                         f"{sorted(_METADATA_TYPES)}")
+
+
+class DeployedModel:
+    """An exported model loaded for inference: validated proto, decoded metadata, onnxruntime session.
+
+    Attributes
+    ----------
+    metadata : dict
+        ``metadata_props`` decoded with ``json.loads`` (``deploy/metadata.py`` lists the keys).
+    inputs, outputs : list of (name, shape, dtype)
+        Declared graph inputs/outputs; ``shape`` entries are ints or symbolic names.
+    """
+
+    def __init__(self, model, *, intra_op_threads: int = 1, validate: bool = True):
+        from deploy.validate import validate_model
+
+        proto = _load_proto(model)
+        if validate:
+            validate_model(proto)
+        self.metadata = read_metadata(proto)
+        _check_metadata_types(self.metadata)
+        self.session = make_session(proto, intra_op_threads=intra_op_threads)
+        self.inputs = [(i.name, list(i.shape), _NP_FROM_ORT.get(i.type, None)) for i in self.session.get_inputs()]
+        self.outputs = [(o.name, list(o.shape), _NP_FROM_ORT.get(o.type, None))
+                        for o in self.session.get_outputs()]
+
+    @property
+    def role(self) -> str | None:
+        """``metadata["model"]["role"]`` (``init``, ``step``, ``rollout``) when present, else ``None``."""
+        model = self.metadata.get("model")
+        role = model.get("role") if isinstance(model, dict) else None
+        return role if isinstance(role, str) else None
+
+    def run(self, feeds: Mapping[str, np.ndarray] | None = None, **kw) -> dict[str, np.ndarray]:
+        """Run once; inputs by name (``feeds`` dict and/or keywords), outputs as a dict by name.
+
+        Inputs are converted to the declared dtype (float64 → float32 for a float32 model) after checking the
+        names, ranks, fixed dimensions and finiteness.
+
+        Raises
+        ------
+        ValueError
+            Missing or unknown input name, wrong rank or fixed dimension, non-finite values.
+        """
+        given = dict(feeds or {})
+        given.update(kw)
+        names = [n for n, _, _ in self.inputs]
+        unknown = sorted(set(given) - set(names))
+        missing = [n for n in names if n not in given]
+        if unknown or missing:
+            raise ValueError(f"feeds: expected inputs {names}; missing {missing}, unknown {unknown}")
+        ready = {}
+        for name, shape, dtype in self.inputs:
+            a = np.asarray(given[name])
+            if a.ndim != len(shape) or any(isinstance(d, int) and d != s for d, s in zip(shape, a.shape)):
+                raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
+            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+                raise ValueError(f"{name}: contains NaN or infinite values")
+            ready[name] = np.ascontiguousarray(a, dtype=dtype) if dtype is not None else a
+        outs = self.session.run(None, ready)
+        return {name: out for (name, _, _), out in zip(self.outputs, outs)}
+
+
+def load_model(path, *, intra_op_threads: int = 1, validate: bool = True) -> DeployedModel:
+    """Load ``path`` (or a ModelProto / bytes) as a :class:`DeployedModel` (validated unless ``validate=False``)."""
+    return DeployedModel(path, intra_op_threads=intra_op_threads, validate=validate)
+
+
+class QTGRuntime:
+    """QTG inference from exported ``init``/``step``/``rollout`` models (any subset), as a game loop would use them.
+
+    Parameters
+    ----------
+    init, step, rollout : path, ModelProto, DeployedModel or None
+        The exported models (``deploy.qtg``). ``transition`` needs ``rollout`` or both ``init`` and ``step``.
+    intra_op_threads : int
+    """
+
+    def __init__(self, init=None, step=None, rollout=None, *, intra_op_threads: int = 1):
+        def load(m):
+            if m is None or isinstance(m, DeployedModel):
+                return m
+            return load_model(m, intra_op_threads=intra_op_threads)
+
+        self.init_model, self.step_model, self.rollout_model = load(init), load(step), load(rollout)
+        for m, role in ((self.init_model, "init"), (self.step_model, "step"), (self.rollout_model, "rollout")):
+            if m is not None and m.role != role:
+                raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
+
+    @classmethod
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QTGRuntime":
+        """Load ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx`` from ``directory`` (those present)."""
+        d = Path(directory)
+        files = {k: d / f"qtg_{k}.onnx" for k in ("init", "step", "rollout")}
+        found = {k: (p if p.is_file() else None) for k, p in files.items()}
+        if not any(found.values()):
+            raise ValueError(f"directory: no qtg_init/step/rollout.onnx in {str(d)!r}")
+        return cls(**found, intra_op_threads=intra_op_threads)
+
+    def start(self, past, target) -> dict[str, np.ndarray]:
+        """Run ``init``: the state ``{"pose", "latent_prev", "hidden", "target_latent"}`` for :meth:`step`."""
+        if self.init_model is None:
+            raise ValueError("start: no init model loaded")
+        out = self.init_model.run(past=past, target=target)
+        return {"pose": out["pose"], "latent_prev": out["latent_prev"], "hidden": out["hidden"],
+                "target_latent": out["target_latent"]}
+
+    def step(self, state: Mapping[str, np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Run ``step`` once: ``(pose_next (B, P), next state)``."""
+        if self.step_model is None:
+            raise ValueError("step: no step model loaded")
+        out = self.step_model.run(pose=state["pose"], latent_prev=state["latent_prev"], hidden=state["hidden"],
+                                  target_latent=state["target_latent"])
+        new = {"pose": out["pose_next"], "latent_prev": out["latent_prev_next"], "hidden": out["hidden_next"],
+               "target_latent": state["target_latent"]}
+        return out["pose_next"], new
+
+    def transition(self, past, target, T: int | None = None, *, use_rollout: bool = True) -> np.ndarray:
+        """A whole transition ``(B, T, P)``: one rollout call, or ``init`` + ``T`` step calls (host loop).
+
+        ``T`` defaults to the rollout model's length (or the config's ``transition_length``); the rollout model
+        is used only when its baked-in length equals ``T``.
+        """
+        meta = (self.rollout_model or self.step_model or self.init_model).metadata.get("model", {})
+        default_T = meta.get("transition_length") or meta.get("config", {}).get("transition_length")
+        T = default_T if T is None else T
+        if not isinstance(T, (int, np.integer)) or T < 1:
+            raise ValueError(f"T: expected a positive integer, got {T!r}")
+        if use_rollout and self.rollout_model is not None:
+            rT = self.rollout_model.metadata.get("model", {}).get("transition_length")
+            if rT == T:
+                return self.rollout_model.run(past=past, target=target)["poses"]
+        if self.init_model is None or self.step_model is None:
+            raise ValueError(f"transition: T={T} needs a rollout model of that length or init + step models")
+        state = self.start(past, target)
+        poses = []
+        for _ in range(int(T)):
+            pose, state = self.step(state)
+            poses.append(pose)
+        return np.stack(poses, axis=1)                                   # (B, T, P)
