@@ -1,0 +1,294 @@
+"""``refimpl demo``: the whole tour on the embedded CMU sample, in a few minutes on 2 cores (spec/cli.md §demo).
+
+Steps (each prints what it did and where the files are):
+
+1. data      — 22-joint transition windows (2 past + T = 30 + 2 target poses at 30 fps) from the sample in
+               ``refimpl/data/sample``, split by file / by time into training and held-out windows;
+2. train     — QTG with the paper's loss and optimiser (MAE, Adam β = (0.5, 0.9)) but a smaller network
+               and a larger learning rate, so that it trains in minutes (:data:`DEMO_CONFIG`);
+3. evaluate  — QTG vs inertialisation vs interpolation on the held-out windows, the paper's metric
+               (mean joint-position error per joint per frame, cm) as a table and a per-frame curve;
+4. export    — ONNX ``init``/``step``/``rollout`` models (``deploy``; skipped with a message without it);
+5. verify    — onnxruntime against NumPy on held-out context poses (max abs difference);
+6. generate  — a held-out transition (with its ground truth) and a walk-to-run transition between two
+               held-out clips, with NumPy and with onnxruntime, written as BVH;
+7. render    — PNG strip (ground truth vs QTG), GIFs, the loss curve and the per-frame error curve
+               (matplotlib; skipped with a message without it).
+
+Deterministic for a given ``seed`` (one BLAS thread; the trainer's Generator drives initialisation and
+batches). ``quick=True`` uses a tiny network and a few dozen steps: a smoke test of every step (< 60 s), not
+a trained model.
+
+Shape legend: N windows, T transition frames, J joints, P pose size.
+"""
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from refimpl.cli import (
+    SAMPLE_DIR, blas_threads, evaluate_model, export_onnx, load_trained, make_transition, onnx_method,
+    print_results, render_transition, train_model, verify_onnx, with_end_sites, write_results, MODELS)
+
+__all__ = ["run_demo", "DemoResult", "DEMO_CONFIG", "DEMO_STEPS", "DEMO_BATCH", "DEMO_LR", "QUICK_CONFIG", "QUICK_STEPS"]
+
+#: Network of the full demo (QTGConfig fields; the paper-sized default is 256/128/256 with 0.64 M parameters).
+DEMO_CONFIG = dict(encoder_sizes=(128, 64), gru_hidden=128, decoder_sizes=(128,))
+#: Training of the full demo: steps, batch, learning rate (the paper: 1000 epochs at 1e-4).
+DEMO_STEPS = 3000
+DEMO_BATCH = 32
+DEMO_LR = 1e-3
+#: The quick smoke test.
+QUICK_CONFIG = dict(encoder_sizes=(32, 16), gru_hidden=32, decoder_sizes=(32,))
+QUICK_STEPS = 40
+
+_T = 30
+
+
+@dataclasses.dataclass
+class DemoResult:
+    """What :func:`run_demo` produced.
+
+    Attributes
+    ----------
+    out_dir : Path
+    files : dict name -> Path
+        Every file written (checkpoint, logs, tables, ONNX models, BVH files, pictures).
+    results : dict
+        :func:`refimpl.metrics.evaluate_methods` output on the held-out windows.
+    verify : dict or None
+        :func:`refimpl.cli.verify_onnx` output (None when ONNX was skipped).
+    skipped : list of str
+        Steps skipped, with the reason.
+    elapsed_s : float
+    """
+
+    out_dir: Path
+    files: dict
+    results: dict
+    verify: dict | None
+    skipped: list
+    elapsed_s: float
+
+
+def _missing(module: str) -> str | None:
+    """The reason ``module`` cannot be imported, or None when it can."""
+    try:
+        __import__(module)
+    except ImportError as exc:
+        return str(exc)
+    return None
+
+
+def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: int | None = None,
+             onnx: bool = True, render: bool = True, threads: int = 1,
+             say: Callable[[str], None] | None = None) -> DemoResult:
+    """Run the demo into ``out_dir`` (see the module docstring) and return what it wrote.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Output folder (created; files of an earlier run are replaced, the training starts again).
+    seed : int
+        Seed of the training run.
+    quick : bool
+        Tiny network, :data:`QUICK_STEPS` steps.
+    steps : int, optional
+        Override the number of training steps.
+    onnx, render : bool
+        Do the ONNX steps (export, verify, ONNX generation) / the pictures, when their dependencies are installed.
+    threads : int
+        BLAS threads (1: fastest for this network size, and deterministic).
+    say : callable, optional
+        Receives each report line (default: print to stdout).
+    """
+    say = say or (lambda line: print(line, flush=True))
+    with blas_threads(threads):
+        return _run(Path(out_dir), seed, quick, steps, onnx, render, say)
+
+
+def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
+    from refimpl.transitions import build_transition_datasets, load_source, sample_sources
+
+    t_start = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, Path] = {}
+    skipped: list[str] = []
+    spec = MODELS["qtg"]
+    n_steps = steps if steps is not None else (QUICK_STEPS if quick else DEMO_STEPS)
+    sizes = QUICK_CONFIG if quick else DEMO_CONFIG
+    if onnx and (why := _missing("deploy.qtg") or _missing("onnxruntime")):
+        skipped.append(f"ONNX export / verification / generation: {why} (pip install 'refimpl[deploy]')")
+        onnx = False
+    if render and (why := _missing("matplotlib")):
+        skipped.append(f"pictures: {why} (pip install 'refimpl[render]')")
+        render = False
+
+    # 1. data --------------------------------------------------------------------------------------------
+    t0 = time.perf_counter()
+    say(f"[1/7] data: the embedded CMU sample ({SAMPLE_DIR})")
+    train_src, test_src = sample_sources(SAMPLE_DIR)
+    train_ds, test_ds = build_transition_datasets(train_src, test_src, T=_T, stride=4,
+                                                  test_stride=16 if quick else 4)
+    say(f"      {train_ds.num_windows} training windows from {len(train_src)} sources, {test_ds.num_windows} "
+        f"held-out windows from {len(test_src)} (split by file, and by time inside 01_01 and the salsa takes); "
+        f"2 past + {_T} + 2 target poses at 30 fps, 22 joints, cm ({time.perf_counter() - t0:.1f} s)")
+
+    # 2. train -------------------------------------------------------------------------------------------
+    t0 = time.perf_counter()
+    train_dir = out / "train"
+    for stale in ("checkpoint.npz", "loss.csv", "loss_val.csv"):
+        if (train_dir / stale).is_file():
+            (train_dir / stale).unlink()
+    overrides = [f"{k}={','.join(map(str, v)) if isinstance(v, tuple) else v}" for k, v in sizes.items()]
+    config = spec.make_config(train_ds.poses.shape[-1], _T, overrides)
+    from refimpl.models.qtg import count_parameters
+
+    say(f"[2/7] train: QTG {sizes} ({count_parameters(config):,} parameters), {n_steps} steps of batch "
+        f"{DEMO_BATCH}, MAE loss, Adam lr {DEMO_LR:g} betas (0.5, 0.9), seed {seed}; progress on stderr")
+    result = train_model(spec, config, train_ds, test_ds, train_dir, steps=n_steps, batch_size=DEMO_BATCH,
+                         lr=DEMO_LR, seed=seed, checkpoint_every=max(n_steps, 1),
+                         validate_every=max(1, n_steps // 10), progress_every=max(1, n_steps // 20),
+                         progress=lambda line: print("      " + line, file=sys.stderr, flush=True))
+    files.update(checkpoint=train_dir / "checkpoint.npz", loss_log=train_dir / "loss.csv",
+                 validation_log=train_dir / "loss_val.csv")
+    losses = result.losses
+    say(f"      loss {np.mean(losses[:10]):.4f} -> {np.mean(losses[-10:]):.4f} in {result.elapsed_s:.1f} s "
+        f"({n_steps / max(result.elapsed_s, 1e-9):.1f} steps/s); checkpoint {files['checkpoint']}")
+    model = load_trained(files["checkpoint"])
+
+    # 3. evaluate ----------------------------------------------------------------------------------------
+    t0 = time.perf_counter()
+    say("[3/7] evaluate: QTG vs inertialisation vs interpolation on the held-out windows")
+    results = evaluate_model(model, test_ds)
+    print_results(results, test_ds, model, curve=False)
+    files["eval_json"] = out / "eval.json"
+    files["eval_curve_csv"] = out / "eval_per_frame.csv"
+    write_results(results, 1.0 / test_ds.fps, json_path=files["eval_json"], csv_path=files["eval_curve_csv"])
+    q = results["qtg"]["mean_cm"]
+    best = min((k for k in results if k != "qtg"), key=lambda k: results[k]["mean_cm"])
+    b = results[best]["mean_cm"]
+    verdict = (f"QTG {q:.2f} cm vs best baseline ({best}) {b:.2f} cm: "
+               + (f"{100 * (1 - q / b):.0f} % lower" if q < b else f"NOT better ({100 * (q / b - 1):.0f} % higher)"))
+    say(f"      {verdict}" + ("  [quick mode: a smoke test, not a trained model]" if quick else ""))
+    say(f"      tables {files['eval_json']}, {files['eval_curve_csv']} ({time.perf_counter() - t0:.1f} s)")
+
+    # 4. export / 5. verify ------------------------------------------------------------------------------
+    check = None
+    onnx_dir = out / "onnx"
+    if onnx:
+        t0 = time.perf_counter()
+        written = export_onnx(model, onnx_dir)
+        for role, path in written.items():
+            files[f"onnx_{role}"] = Path(path)
+        say("[4/7] export: " + ", ".join(f"{p.name} ({p.stat().st_size / 1024:.0f} KiB)"
+                                         for p in map(Path, written.values()))
+            + f" in {onnx_dir} ({time.perf_counter() - t0:.1f} s)")
+        past, _, target = test_ds.context()
+        check = verify_onnx(model, onnx_dir, past[:64], target[:64])
+        say(f"[5/7] verify: onnxruntime vs NumPy on {min(64, len(past))} held-out transitions: max |diff| "
+            f"rollout model {check.get('rollout', float('nan')):.2e}, init+step loop "
+            f"{check.get('step_loop', float('nan')):.2e} -> {'OK' if check['ok'] else 'MISMATCH'} "
+            "(tolerance rtol 1e-3, atol 1e-4)")
+        if not check["ok"]:
+            raise RuntimeError("onnxruntime and NumPy disagree beyond the rollout tolerance")
+    else:
+        say("[4/7] export: skipped" + "".join(f" ({r})" for r in skipped if r.startswith("ONNX")))
+        say("[5/7] verify: skipped")
+
+    # 6. generate ----------------------------------------------------------------------------------------
+    from refimpl.bvh import write_bvh
+
+    say("[6/7] generate: transitions written as BVH (22 joints, centimetres, 30 fps)")
+    methods = {"qtg": spec.make_method(model)}
+    if onnx:
+        methods["qtg_onnx"] = onnx_method(onnx_dir)
+    walk = next(s for s in test_src if s.label == "walk")
+    run = next(s for s in test_src if s.label == "run")
+    skel, walk_clips = load_source(walk)
+    _, run_clips = load_source(run)
+    walk_clip = walk_clips[0]
+    s = len(walk_clip[0]) // 2 - _T // 2
+    transitions = {}
+    for name, f in methods.items():
+        tr = make_transition(f, skel, walk_clip, s, walk_clip, s + _T + 1, _T, frame_time=1 / 30, context=10,
+                             same_clip=True, method_name=name, name=f"heldout_{name}")
+        transitions[name] = tr
+        files[f"heldout_{name}_bvh"] = out / f"heldout_{name}.bvh"
+        write_bvh(files[f"heldout_{name}_bvh"], with_end_sites(tr.motion))
+    files["heldout_truth_bvh"] = out / "heldout_truth.bvh"
+    write_bvh(files["heldout_truth_bvh"], with_end_sites(transitions["qtg"].truth))
+    say(f"      held-out window of {Path(walk.path).name} (frames {s - 1}..{s + _T + 2}): mean joint error "
+        + ", ".join(f"{k} {tr.error_cm():.2f} cm" for k, tr in transitions.items())
+        + f"; {files['heldout_qtg_bvh'].name}, {files['heldout_truth_bvh'].name}"
+        + (f", {files['heldout_qtg_onnx_bvh'].name}" if onnx else ""))
+    if onnx:
+        d = np.abs(transitions["qtg"].motion.positions() - transitions["qtg_onnx"].motion.positions()).max()
+        say(f"      NumPy vs onnxruntime transition: max joint-position difference {d:.2e} cm")
+    cross = make_transition(methods["qtg"], skel, walk_clip, s, run_clips[0], len(run_clips[0][0]) // 2, _T,
+                            frame_time=1 / 30, context=15, align="continue", method_name="qtg", name="walk_to_run")
+    files["walk_to_run_bvh"] = out / "walk_to_run.bvh"
+    write_bvh(files["walk_to_run_bvh"], with_end_sites(cross.motion))
+    say(f"      walk -> run between two held-out clips ({Path(walk.path).name} -> {Path(run.path).name}, target "
+        f"placed to continue the walk): {files['walk_to_run_bvh']}")
+
+    # 7. render ------------------------------------------------------------------------------------------
+    if render:
+        from refimpl.render import render_error_curves, render_loss_curve
+
+        t0 = time.perf_counter()
+        files["strip_png"] = out / "heldout_strip.png"
+        files["heldout_gif"] = out / "heldout.gif"
+        files["walk_to_run_gif"] = out / "walk_to_run.gif"
+        files["walk_to_run_png"] = out / "walk_to_run.png"
+        files["loss_png"] = out / "loss.png"
+        files["error_curve_png"] = out / "error_curve.png"
+        say("[7/7] render:")
+        tr = transitions["qtg"]
+        render_transition(tr, png=files["strip_png"], gif=files["heldout_gif"],
+                           title="held-out transition: ground truth (top/left) vs QTG; green = context")
+        render_transition(cross, png=files["walk_to_run_png"], gif=files["walk_to_run_gif"],
+                           title="QTG transition walk -> run; green = context")
+        render_loss_curve(files["loss_png"], _merged_log(train_dir), title="QTG training loss (MAE, normalised)")
+        say(f"wrote {files['loss_png']}")
+        render_error_curves(files["error_curve_png"], {k: v["per_frame_cm"] for k, v in results.items()},
+                            frame_time=1.0 / test_ds.fps,
+                            title=f"held-out error per transition frame ({test_ds.num_windows} windows)")
+        say(f"wrote {files['error_curve_png']}  ({time.perf_counter() - t0:.1f} s)")
+    else:
+        say("[7/7] render: skipped" + "".join(f" ({r})" for r in skipped if r.startswith("pictures")))
+
+    elapsed = time.perf_counter() - t_start
+    say("")
+    say(f"done in {elapsed:.0f} s. {verdict}. Files in {out}/:")
+    for key, path in files.items():
+        if Path(path).is_file():
+            say(f"  {key:22s} {path}")
+    for reason in skipped:
+        say(f"  skipped: {reason}")
+    say("next: `refimpl info " + str(files["checkpoint"]) + "`, `refimpl eval --checkpoint "
+        + str(files["checkpoint"]) + "`, `refimpl render " + str(files["heldout_qtg_bvh"]) + " --compare "
+        + str(files["heldout_truth_bvh"]) + " --out x.gif`")
+    return DemoResult(out_dir=out, files=files, results=results, verify=check, skipped=skipped, elapsed_s=elapsed)
+
+
+def _merged_log(train_dir: Path) -> dict:
+    """Training loss (every step) and held-out MAE (every ``validate_every`` steps) on one step axis."""
+    from refimpl.render import read_loss_log
+
+    log = read_loss_log(train_dir / "loss.csv")
+    data = {"step": log["step"], "train loss": log["loss"]}
+    val_path = train_dir / "loss_val.csv"
+    if val_path.is_file():
+        val = read_loss_log(val_path)
+        held = np.full(len(log["step"]), np.nan)
+        pos = np.searchsorted(log["step"], val["step"])
+        ok = pos < len(held)
+        held[pos[ok]] = val["val_mae"][ok]
+        data["held-out loss"] = held
+    return data

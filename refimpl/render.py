@@ -1,0 +1,543 @@
+"""Pictures of skeletal motion: frame strips, animated GIFs, loss curves and per-frame error curves.
+
+matplotlib is an optional dependency (the ``render`` extra, ``pip install 'refimpl[render]'``). It is imported
+lazily, inside the functions, so that ``import refimpl.render`` always works; a missing matplotlib raises
+``ImportError`` with the install hint. Figures are built with the object-oriented API on the Agg canvas
+(``matplotlib.figure.Figure`` + ``FigureCanvasAgg``): nothing here touches ``pyplot`` or changes the global
+backend, so rendering is headless and safe inside a notebook or a test run.
+
+Conventions
+-----------
+* Positions are world coordinates ``(T, J, 3)`` in the file's units (e.g. ``Motion.positions()``), with the
+  parent index array ``parents`` ``(J,)`` of the skeleton (``-1`` for the root). A bone is drawn from each joint
+  to its parent.
+* ``up="y"`` (default, BVH convention) means the data is Y-up; ``up="z"`` means Z-up. The picture always shows
+  the up axis vertical, with an equal aspect ratio on all three axes and an orthographic camera.
+* Ground truth is drawn in blue, the prediction in red; frames outside ``highlight`` (the context frames of a
+  transition) are drawn in green, as in the QTG paper's Figure 1.
+* Every file is written atomically (temporary file in the same folder, fsync, ``os.replace``).
+
+Shape legend: T frames, J joints, N drawn frames.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import uuid
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["render_strip", "render_gif", "render_loss_curve", "render_error_curves", "read_loss_log"]
+
+_GT_COLOR = "tab:blue"
+_PRED_COLOR = "tab:red"
+_CONTEXT_COLOR = "tab:green"
+_GHOST_COLOR = "0.75"
+_INSTALL_HINT = "rendering needs matplotlib: pip install 'refimpl[render]' (or pip install matplotlib)"
+
+
+# ----------------------------------------------------------------------------------------------------------
+# matplotlib access and atomic files
+
+
+def _figure(width: float, height: float, dpi: float):
+    """A new Agg-backed ``Figure`` (no pyplot, no global backend change)."""
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError as exc:  # pragma: no cover - exercised only without matplotlib
+        raise ImportError(_INSTALL_HINT) from exc
+    fig = Figure(figsize=(width, height), dpi=dpi)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _atomic_target(path: Path) -> Path:
+    """A fresh temporary path in ``path``'s folder with the same suffix (the writer needs the suffix)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # a unique name created by the writer itself, so the file gets the usual permissions (not mkstemp's 0600)
+    return path.with_name(f".{path.stem}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+
+
+def _commit(tmp: Path, path: Path) -> None:
+    """fsync the finished temporary file and move it over ``path``."""
+    with open(tmp, "rb+") as f:
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _save_figure(fig, path: str | os.PathLike) -> Path:
+    """Save ``fig`` as PNG to ``path`` atomically."""
+    path = Path(path)
+    tmp = _atomic_target(path)
+    try:
+        fig.savefig(tmp, format="png", facecolor="white")
+        _commit(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+# ----------------------------------------------------------------------------------------------------------
+# input checks and geometry
+
+
+def _check_positions(positions, name: str, parents=None) -> np.ndarray:
+    """Validate a ``(T, J, 3)`` finite position array (and, given ``parents``, its joint count)."""
+    p = np.asarray(positions, dtype=np.float64)
+    if p.ndim != 3 or p.shape[-1] != 3 or p.shape[0] < 1 or p.shape[1] < 1:
+        raise ValueError(f"{name} must have shape (T, J, 3) with T, J >= 1, got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError(f"{name} contains NaN or inf")
+    if parents is not None and p.shape[1] != len(parents):
+        raise ValueError(f"{name} has {p.shape[1]} joints but parents has {len(parents)} entries")
+    return p
+
+
+def _check_parents(parents) -> np.ndarray:
+    """Validate a parent index array ``(J,)``: ``-1`` or an earlier-or-any valid joint index."""
+    par = np.asarray(parents)
+    if par.ndim != 1 or par.size < 1 or not np.issubdtype(par.dtype, np.integer):
+        raise ValueError(f"parents must be a 1-D integer array (J,), got shape {par.shape} dtype {par.dtype}")
+    if np.any(par < -1) or np.any(par >= par.size) or np.any(par == np.arange(par.size)):
+        raise ValueError(f"parents must hold -1 or another joint's index in [0, {par.size}), got {par.tolist()}")
+    return par.astype(np.int64)
+
+
+def _check_up(up: str) -> str:
+    if up not in ("y", "z"):
+        raise ValueError(f"up must be 'y' or 'z', got {up!r}")
+    return up
+
+
+def _to_plot(p: np.ndarray, up: str) -> np.ndarray:
+    """Data coordinates ``(..., 3)`` → matplotlib 3-D coordinates (Z vertical), a proper rotation.
+
+    Y-up data ``(x, y, z)`` becomes ``(x, -z, y)``: right-handed is kept (x̂ × (−ẑ) = ŷ).
+    """
+    if up == "z":
+        return p
+    return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)  # (..., 3)
+
+
+def _bone_segments(p: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """Bones of one pose as segments ``(J_bones, 2, 3)`` from each non-root joint to its parent."""
+    child = np.flatnonzero(parents >= 0)
+    return np.stack([p[parents[child]], p[child]], axis=1)  # (J_bones, 2, 3)
+
+
+def _half_extent(plot_positions: Sequence[np.ndarray]) -> float:
+    """Half side of the cube that holds every drawn pose centred on its root's horizontal position."""
+    ext = 0.0
+    for q in plot_positions:  # (T, J, 3) each
+        rel = q[..., :2] - q[:, :1, :2]  # (T, J, 2) horizontal offsets from the root
+        ext = max(ext, float(np.max(np.abs(rel))), 0.5 * float(np.ptp(q[..., 2], axis=1).max()))
+    return 1.1 * ext if ext > 0 else 1.0
+
+
+def _grid_segments(centre: np.ndarray, half: float, floor: float) -> np.ndarray:
+    """A 5 × 5 floor grid around ``centre`` at height ``floor``, as segments ``(10, 2, 3)``."""
+    ticks = np.linspace(-half, half, 5)
+    x0, x1, y0, y1 = centre[0] - half, centre[0] + half, centre[1] - half, centre[1] + half
+    along_y = [[(centre[0] + t, y0, floor), (centre[0] + t, y1, floor)] for t in ticks]
+    along_x = [[(x0, centre[1] + t, floor), (x1, centre[1] + t, floor)] for t in ticks]
+    return np.asarray(along_y + along_x, dtype=np.float64)
+
+
+def _setup_axes(ax, half: float, floor: float):
+    """Orthographic, equal-aspect 3-D axes without decoration, plus a floor grid; returns the grid collection."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    ax.set_proj_type("ortho")
+    ax.view_init(elev=12.0, azim=-60.0)
+    ax.set_box_aspect((1.0, 1.0, 1.0), zoom=1.35)
+    ax.computed_zorder = False  # draw in call order: the prediction over the ground-truth ghost
+    ax.set_axis_off()
+    grid = Line3DCollection(_grid_segments(np.zeros(2), half, floor), colors="0.88", linewidths=0.6)
+    ax.add_collection3d(grid)
+    return grid
+
+
+def _centre_axes(ax, grid, centre: np.ndarray, half: float, floor: float, vertical_mid: float) -> None:
+    """Centre the camera box (side ``2 half``) on ``centre`` (horizontal) and move the floor grid with it."""
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_zlim(vertical_mid - half, vertical_mid + half)
+    grid.set_segments(_grid_segments(centre, half, floor))
+
+
+def _pick_frames(num_total: int, frames, num_frames: int) -> np.ndarray:
+    if frames is None:
+        if num_frames < 1:
+            raise ValueError(f"num_frames must be >= 1, got {num_frames}")
+        return np.unique(np.linspace(0, num_total - 1, min(num_frames, num_total)).round().astype(np.int64))
+    idx = np.asarray(frames, dtype=np.int64).reshape(-1)
+    if idx.size == 0 or np.any(idx < 0) or np.any(idx >= num_total):
+        raise ValueError(f"frames must be indices in [0, {num_total}), got {idx.tolist()}")
+    return idx
+
+
+def _check_highlight(highlight, num_total: int):
+    if highlight is None:
+        return 0, num_total
+    start, stop = (int(v) for v in highlight)
+    if not 0 <= start <= stop <= num_total:
+        raise ValueError(f"highlight must be (start, stop) with 0 <= start <= stop <= {num_total}, got {highlight}")
+    return start, stop
+
+
+def _check_numbers(frame_numbers, num_total: int) -> np.ndarray:
+    if frame_numbers is None:
+        return np.arange(num_total)
+    numbers = np.asarray(frame_numbers).reshape(-1)
+    if numbers.shape != (num_total,) or not np.issubdtype(numbers.dtype, np.integer):
+        raise ValueError(f"frame_numbers must be {num_total} integers, got shape {numbers.shape} "
+                         f"dtype {numbers.dtype}")
+    return numbers
+
+
+# ----------------------------------------------------------------------------------------------------------
+# public pictures
+
+
+def render_strip(path: str | os.PathLike, positions, parents, *, prediction=None, frames=None,
+                 num_frames: int = 8, highlight: tuple[int, int] | None = None,
+                 labels: tuple[str, str] = ("ground truth", "prediction"), title: str | None = None,
+                 up: str = "y", frame_time: float | None = None, frame_numbers=None,
+                 panel_size: float = 1.8, dpi: float = 100) -> Path:
+    """Draw several frames of a motion side by side and save them as a PNG strip.
+
+    One row shows ``positions`` (ground truth, blue); with ``prediction`` a second row shows the prediction
+    (red) over a light-grey ghost of the ground truth, frame for frame in the same camera box, so that the
+    difference is visible. Each panel is centred on the ground-truth root's horizontal position of that frame;
+    all panels share one scale (equal aspect, orthographic camera, floor grid at the lowest joint height).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output ``.png`` file (written atomically; folders are created).
+    positions : array_like, shape (T, J, 3)
+        Ground-truth world positions, components (x, y, z) in the file's units.
+    parents : array_like of int, shape (J,)
+        Parent index of each joint, ``-1`` for the root.
+    prediction : array_like, shape (T, J, 3), optional
+        Predicted positions on the same skeleton and frames.
+    frames : sequence of int, optional
+        Frame indices to draw. Default: ``num_frames`` evenly spaced frames from first to last.
+    num_frames : int
+        Number of frames when ``frames`` is not given.
+    highlight : (int, int), optional
+        ``[start, stop)`` of the frames of interest (the generated transition); the other frames are context
+        and are drawn in green.
+    labels : (str, str)
+        Row labels for ground truth and prediction.
+    title : str, optional
+        Figure title.
+    up : {"y", "z"}
+        The data's up axis.
+    frame_time : float, optional
+        Seconds per frame (of the numbering in ``frame_numbers``); when given, panels are labelled with times
+        ``number · frame_time`` as well as frame numbers.
+    frame_numbers : sequence of int, shape (T,), optional
+        The number each of the T frames has in its source (e.g. the file's frame numbers of a selected range);
+        default ``0 … T − 1``. Only the labels use it.
+    panel_size : float
+        Size of one panel in inches.
+    dpi : float
+        Resolution of the PNG.
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    par = _check_parents(parents)
+    gt = _check_positions(positions, "positions", par)  # (T, J, 3)
+    pred = None if prediction is None else _check_positions(prediction, "prediction", par)
+    if pred is not None and pred.shape != gt.shape:
+        raise ValueError(f"prediction must have the shape of positions {gt.shape}, got {pred.shape}")
+    up = _check_up(up)
+    idx = _pick_frames(gt.shape[0], frames, num_frames)  # (N,)
+    start, stop = _check_highlight(highlight, gt.shape[0])
+    numbers = _check_numbers(frame_numbers, gt.shape[0])
+
+    gt_p = _to_plot(gt, up)  # (T, J, 3)
+    pred_p = None if pred is None else _to_plot(pred, up)
+    drawn = [gt_p[idx]] + ([] if pred_p is None else [pred_p[idx]])
+    half = _half_extent(drawn)
+    floor = min(float(q[..., 2].min()) for q in drawn)
+    mid = floor + half * 0.9
+
+    rows = 1 if pred is None else 2
+    fig = _figure(panel_size * len(idx) + 0.3, panel_size * rows + (0.7 if title else 0.45), dpi)
+    for col, t in enumerate(idx):
+        context = not (start <= t < stop)
+        centre = gt_p[t, 0, :2]
+        label = f"frame {numbers[t]}" + (f"\n{numbers[t] * frame_time:.2f} s" if frame_time else "")
+        ax = fig.add_subplot(rows, len(idx), col + 1, projection="3d")
+        _centre_axes(ax, _setup_axes(ax, half, floor), centre, half, floor, mid)
+        _draw_pose(ax, gt_p[t], par, _CONTEXT_COLOR if context else _GT_COLOR, 1.6)
+        ax.set_title(label + (" (context)" if context and highlight is not None else ""), fontsize=7)
+        if pred_p is not None:
+            ax2 = fig.add_subplot(rows, len(idx), len(idx) + col + 1, projection="3d")
+            _centre_axes(ax2, _setup_axes(ax2, half, floor), centre, half, floor, mid)
+            _draw_pose(ax2, gt_p[t], par, _GHOST_COLOR, 1.2)
+            _draw_pose(ax2, pred_p[t], par, _CONTEXT_COLOR if context else _PRED_COLOR, 1.6)
+    fig.text(0.005, 1.0 - 0.5 / rows, labels[0], rotation=90, va="center", color=_GT_COLOR, fontsize=8)
+    if pred_p is not None:
+        fig.text(0.005, 0.25, labels[1], rotation=90, va="center", color=_PRED_COLOR, fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    top = 1.0 - (0.7 if title else 0.45) / (panel_size * rows + (0.7 if title else 0.45))
+    fig.subplots_adjust(left=0.02, right=0.995, bottom=0.0, top=top, wspace=0.0, hspace=0.08)
+    return _save_figure(fig, path)
+
+
+def _draw_pose(ax, pose: np.ndarray, parents: np.ndarray, color: str, width: float) -> None:
+    """Draw one pose ``(J, 3)`` (plot coordinates) as bone segments plus a head dot."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    ax.add_collection3d(Line3DCollection(_bone_segments(pose, parents), colors=color, linewidths=width))
+    ax.scatter(pose[:, 0], pose[:, 1], pose[:, 2], s=1.5, color=color, depthshade=False)
+
+
+def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, fps: float = 30.0,
+               stride: int = 1, highlight: tuple[int, int] | None = None,
+               labels: tuple[str, str] = ("ground truth", "prediction"), title: str | None = None,
+               up: str = "y", frame_numbers=None, panel_size: float = 2.6, dpi: float = 80) -> Path:
+    """Animate a motion (and, side by side, a prediction) and save it as a GIF with Pillow.
+
+    The camera follows the ground-truth root horizontally, with one fixed scale (equal aspect, orthographic).
+    With ``prediction`` the left panel shows the ground truth (blue) and the right panel the prediction (red)
+    over a grey ghost of the ground truth; frames outside ``highlight`` are drawn in green.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output ``.gif`` file (written atomically).
+    positions : array_like, shape (T, J, 3)
+        Ground-truth world positions (x, y, z).
+    parents : array_like of int, shape (J,)
+        Parent index of each joint, ``-1`` for the root.
+    prediction : array_like, shape (T, J, 3), optional
+        Predicted positions on the same frames.
+    fps : float
+        Playback rate of the GIF, before ``stride`` (a stride of 2 halves the GIF's frame rate so that the
+        motion keeps its real speed).
+    stride : int
+        Draw every ``stride``-th frame.
+    highlight, labels, title, up, frame_numbers, panel_size, dpi
+        As in :func:`render_strip`.
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    try:
+        from matplotlib.animation import PillowWriter
+    except ImportError as exc:  # pragma: no cover
+        raise ImportError(_INSTALL_HINT) from exc
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    par = _check_parents(parents)
+    gt = _check_positions(positions, "positions", par)
+    pred = None if prediction is None else _check_positions(prediction, "prediction", par)
+    if pred is not None and pred.shape != gt.shape:
+        raise ValueError(f"prediction must have the shape of positions {gt.shape}, got {pred.shape}")
+    if int(stride) < 1:
+        raise ValueError(f"stride must be >= 1, got {stride}")
+    if not fps > 0:
+        raise ValueError(f"fps must be > 0, got {fps}")
+    up = _check_up(up)
+    start, stop = _check_highlight(highlight, gt.shape[0])
+    numbers = _check_numbers(frame_numbers, gt.shape[0])
+    idx = np.arange(0, gt.shape[0], int(stride))  # (N,)
+
+    gt_p = _to_plot(gt, up)
+    pred_p = None if pred is None else _to_plot(pred, up)
+    drawn = [gt_p] + ([] if pred_p is None else [pred_p])
+    half = _half_extent(drawn)
+    floor = min(float(q[..., 2].min()) for q in drawn)
+    mid = floor + half * 0.9
+
+    cols = 1 if pred is None else 2
+    fig = _figure(panel_size * cols, panel_size + 0.3, dpi)
+    panels = []  # (axes, floor grid, [(collection, source positions, main colour or None for a ghost)])
+    sources = [(gt_p, _GT_COLOR, [])] if pred_p is None else [(gt_p, _GT_COLOR, []), (pred_p, _PRED_COLOR, [gt_p])]
+    for c, (src, color, ghosts) in enumerate(sources):
+        ax = fig.add_subplot(1, cols, c + 1, projection="3d")
+        grid = _setup_axes(ax, half, floor)
+        fig.text((c + 0.5) / cols, 0.93 if title else 0.97, labels[c], ha="center", va="top", fontsize=8,
+                 color=color)
+        layers = []
+        for g in ghosts:
+            coll = Line3DCollection(_bone_segments(g[0], par), colors=_GHOST_COLOR, linewidths=1.2)
+            ax.add_collection3d(coll)
+            layers.append((coll, g, None))
+        coll = Line3DCollection(_bone_segments(src[0], par), colors=color, linewidths=1.8)
+        ax.add_collection3d(coll)
+        layers.append((coll, src, color))
+        panels.append((ax, grid, layers))
+    caption = fig.text(0.5, 0.01, "", ha="center", fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=8)
+    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.04, top=0.9, wspace=0.0)
+
+    path = Path(path)
+    tmp = _atomic_target(path)
+    writer = PillowWriter(fps=max(1.0, fps / int(stride)))
+    try:
+        with writer.saving(fig, str(tmp), dpi):
+            for t in idx:  # one draw per frame: move the artists, then grab
+                context = highlight is not None and not (start <= t < stop)
+                for ax, grid, layers in panels:
+                    _centre_axes(ax, grid, gt_p[t, 0, :2], half, floor, mid)
+                    for coll, src, color in layers:
+                        coll.set_segments(_bone_segments(src[t], par))
+                        if color is not None:
+                            coll.set_color(_CONTEXT_COLOR if context else color)
+                caption.set_text(f"frame {numbers[t]}" + (" (context)" if context else ""))
+                writer.grab_frame(facecolor="white")
+        _commit(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def read_loss_log(csv_path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read a training log CSV (header row, numeric columns) into ``{column: (N,) float64}``.
+
+    Non-numeric or empty cells become NaN, so a column that is only written every few steps (e.g. a
+    validation loss) still lines up with the step column.
+    """
+    path = Path(csv_path)
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        try:
+            header = next(reader)
+        except StopIteration:
+            raise ValueError(f"loss log {path} is empty (expected a header row)") from None
+        rows = [r for r in reader if r]
+    cols: dict[str, np.ndarray] = {}
+    for j, name in enumerate(header):
+        vals = []
+        for r in rows:
+            try:
+                vals.append(float(r[j]) if j < len(r) and r[j] != "" else np.nan)
+            except ValueError:
+                vals.append(np.nan)
+        cols[name.strip()] = np.asarray(vals, dtype=np.float64)
+    return cols
+
+
+def render_loss_curve(path: str | os.PathLike, log, *, x: str | None = None,
+                      columns: Sequence[str] | None = None, logy: bool = True,
+                      title: str | None = "training loss", dpi: float = 100) -> Path:
+    """Plot loss curves from a training log and save them as PNG.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output ``.png`` file.
+    log : str, PathLike or mapping
+        The training CSV log (see :func:`read_loss_log`) or an already read ``{column: (N,) array}``.
+    x : str, optional
+        Column for the horizontal axis. Default: the first of ``step``, ``iteration``, ``epoch`` present,
+        else the row number.
+    columns : sequence of str, optional
+        Columns to plot. Default: every column whose name contains ``loss``.
+    logy : bool
+        Logarithmic vertical axis (used only when every plotted value is positive).
+    title : str, optional
+    dpi : float
+
+    Returns
+    -------
+    Path
+    """
+    data = read_loss_log(log) if isinstance(log, (str, os.PathLike)) else {k: np.asarray(v, dtype=np.float64)
+                                                                         for k, v in log.items()}
+    if x is None:
+        x = next((c for c in ("step", "iteration", "epoch") if c in data), None)
+    if x is not None and x not in data:
+        raise ValueError(f"x column {x!r} not in the log, which has {sorted(data)}")
+    if columns is None:
+        columns = [c for c in data if "loss" in c.lower() and c != x]
+    columns = list(columns)
+    missing = [c for c in columns if c not in data]
+    if not columns or missing:
+        raise ValueError(f"no loss columns to plot (asked {columns}, missing {missing}); log has {sorted(data)}")
+    n = len(data[columns[0]])
+    xs = np.arange(n, dtype=np.float64) if x is None else data[x]
+
+    fig = _figure(6.0, 3.6, dpi)
+    ax = fig.add_subplot(1, 1, 1)
+    positive = True
+    for c in columns:
+        ys = data[c]
+        ok = np.isfinite(ys) & np.isfinite(xs)
+        if not np.any(ok):
+            continue
+        positive &= bool(np.all(ys[ok] > 0))
+        line, = ax.plot(xs[ok], ys[ok], lw=0.8, alpha=0.45 if ok.sum() > 50 else 1.0, label=c)
+        if ok.sum() > 50:  # a moving average over ~2% of the run on top of the raw values
+            w = max(3, int(ok.sum()) // 50)
+            smooth = np.convolve(ys[ok], np.ones(w) / w, mode="valid")
+            ax.plot(xs[ok][w - 1:], smooth, lw=1.6, color=line.get_color(), label=f"{c} (mean of {w})")
+    if logy and positive:
+        ax.set_yscale("log")
+    ax.set_xlabel(x or "log row")
+    ax.set_ylabel("loss")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return _save_figure(fig, path)
+
+
+def render_error_curves(path: str | os.PathLike, curves: Mapping[str, np.ndarray], *,
+                        frame_time: float | None = None, ylabel: str = "mean joint-position error (cm)",
+                        title: str | None = "error per transition frame", dpi: float = 100) -> Path:
+    """Plot one per-frame error curve per method (as the QTG paper's Figure 3) and save it as PNG.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output ``.png`` file.
+    curves : mapping str -> array_like, shape (T,)
+        Error of each method at transition frame ``1 … T`` (e.g. MAE per joint in cm).
+    frame_time : float, optional
+        Seconds per frame; when given the horizontal axis is time in ms, else the frame number.
+    ylabel, title : str
+    dpi : float
+
+    Returns
+    -------
+    Path
+    """
+    if not curves:
+        raise ValueError("curves must hold at least one method")
+    fig = _figure(6.0, 3.6, dpi)
+    ax = fig.add_subplot(1, 1, 1)
+    for name, ys in curves.items():
+        ys = np.asarray(ys, dtype=np.float64)
+        if ys.ndim != 1 or ys.size == 0:
+            raise ValueError(f"curves[{name!r}] must have shape (T,) with T >= 1, got {ys.shape}")
+        frames = np.arange(1, ys.size + 1, dtype=np.float64)
+        xs = frames * frame_time * 1000.0 if frame_time else frames
+        ax.plot(xs, ys, marker="o", ms=2.5, lw=1.4, label=f"{name} (mean {np.nanmean(ys):.2f})")
+    ax.set_xlabel("time into the transition (ms)" if frame_time else "transition frame")
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(bottom=0.0)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return _save_figure(fig, path)
