@@ -1,0 +1,558 @@
+"""Multi-layer LSTM with PyTorch's equations, names and layouts, plus acRNN's skewed stacking (spec/layers.md §5).
+
+Equations (PyTorch ``nn.LSTM``; gate blocks in the order i, f, g, o)::
+
+    i_t = sigmoid(W_ii x_t + b_ii + W_hi h_{t-1} + b_hi)
+    f_t = sigmoid(W_if x_t + b_if + W_hf h_{t-1} + b_hf)
+    g_t = tanh   (W_ig x_t + b_ig + W_hg h_{t-1} + b_hg)
+    o_t = sigmoid(W_io x_t + b_io + W_ho h_{t-1} + b_ho)
+    c_t = f_t * c_{t-1} + i_t * g_t
+    h_t = o_t * tanh(c_t)
+
+Parameters (``k`` = layer)::
+
+    {prefix}.weight_ih_l{k}  (4H, I_k)   rows [W_ii | W_if | W_ig | W_io]; I_0 = I, I_k = H for k > 0
+    {prefix}.weight_hh_l{k}  (4H, H)
+    {prefix}.bias_ih_l{k}    (4H,)
+    {prefix}.bias_hh_l{k}    (4H,)
+
+Stacking. Ordinary (``skewed=False``, PyTorch): layer k reads layer k-1's output of the SAME step,
+``x^k_t = h^{k-1}_t``. Skewed (``skewed=True``, acRNN's published code, reference/dualquat_acrnn_qtg.md §2.1):
+layer k reads layer k-1's output of the PREVIOUS step, ``x^k_t = h^{k-1}_{t-1}``, where ``h^{k-1}_{-1}`` is
+layer k-1's initial state ``h0[k-1]`` (zeros in acRNN). Layer 0 reads ``x_t`` in both. The top layer's new
+state is the output, so with L layers ``y_t`` depends on ``x_0 .. x_{t-L+1}`` only (for t < L-1, on no input).
+
+Shapes: B batch, T time, I input size, H hidden size, L layers. ``x (B, T, I)`` batch-first;
+``h0, c0, h_n, c_n (L, B, H)``; ``y (B, T, H)``. No bidirectional variant (no network here uses one).
+
+Implementation as in :mod:`refimpl.nn.gru`: layer by layer, one GEMM for all input projections of a layer
+(both biases folded in), weights transposed once per call, one GEMM each for ``dW_hh``, ``dW_ih``, ``dx``
+after the BPTT loop. The skew is only a shift of the input sequence: layer k's inputs are
+``[h0[k-1], h^{k-1}_0, ..., h^{k-1}_{T-2}]`` instead of ``[h^{k-1}_0, ..., h^{k-1}_{T-1}]``.
+``_lstm_forward_naive`` / ``_lstm_backward_naive`` (time-outer, per-gate loops, as acRNN's code steps its
+cells) are the test oracles.
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from refimpl.nn.activations import sigmoid
+from refimpl.nn.linear import matmul_wt
+from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
+
+__all__ = ["lstm_forward", "lstm_backward", "lstm_step_forward", "lstm_step_backward", "lstm_init"]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# parameters
+
+
+def _layer_weights(params, prefix, layer, in_size, hidden, dtype):
+    """(W_ih (4H, I_k), W_hh (4H, H), b_ih (4H,), b_hh (4H,)) of one layer, checked."""
+    return (get_param(params, prefix, f"weight_ih_l{layer}", (4 * hidden, in_size), dtype),
+            get_param(params, prefix, f"weight_hh_l{layer}", (4 * hidden, hidden), dtype),
+            get_param(params, prefix, f"bias_ih_l{layer}", (4 * hidden,), dtype),
+            get_param(params, prefix, f"bias_hh_l{layer}", (4 * hidden,), dtype))
+
+
+def _all_weights(params, prefix, num_layers, in_size, hidden, dtype):
+    return [_layer_weights(params, prefix, k, in_size if k == 0 else hidden, hidden, dtype)
+            for k in range(num_layers)]
+
+
+def _check_layers(num_layers: int) -> None:
+    if not (isinstance(num_layers, (int, np.integer)) and num_layers >= 1):
+        raise ValueError(f"num_layers: expected an integer >= 1, got {num_layers!r}")
+
+
+def _check_state(state, name, num_layers, batch, dtype_ref):
+    if not (isinstance(state, (tuple, list)) and len(state) == 2):
+        raise ValueError(f"{name}: expected a tuple (h, c) of two (L, B, H) arrays, got {type(state).__name__}")
+    h = check_float_array(state[0], f"{name}[0] (h)", (num_layers, batch, None))
+    c = check_float_array(state[1], f"{name}[1] (c)", h.shape)
+    check_same_dtype(dtype_ref, "x", {f"{name}[0] (h)": h, f"{name}[1] (c)": c})
+    return h, c
+
+
+def lstm_init(rng: np.random.Generator, input_size: int, hidden_size: int, num_layers: int, prefix: str,
+              dtype=np.float64) -> dict[str, np.ndarray]:
+    """PyTorch-default initialisation of ``nn.LSTM``: every parameter ``~ U(-1/sqrt(H), 1/sqrt(H))``.
+
+    Returns
+    -------
+    dict
+        ``{prefix}.weight_ih_l{k}`` ``(4H, I_k)``, ``weight_hh_l{k}`` ``(4H, H)``, ``bias_ih_l{k}``,
+        ``bias_hh_l{k}`` ``(4H,)``.
+    """
+    _check_layers(num_layers)
+    bound = fan_in_bound(hidden_size)
+    out = {}
+    for k in range(num_layers):
+        in_k = input_size if k == 0 else hidden_size
+        for name, shape in ((f"weight_ih_l{k}", (4 * hidden_size, in_k)),
+                            (f"weight_hh_l{k}", (4 * hidden_size, hidden_size)),
+                            (f"bias_ih_l{k}", (4 * hidden_size,)), (f"bias_hh_l{k}", (4 * hidden_size,))):
+            out[param_name(prefix, name)] = init_uniform(rng, shape, bound, dtype)
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------------
+# one cell step (internal kernels, no checks; outputs written into preallocated arrays)
+
+
+def _cell_forward(gi, h, c, w_hh, whh_t, g, c_new, tc, h_new):
+    """One LSTM step.
+
+    gi (B, 4H): ``W_ih x + b_ih + b_hh``. h, c (B, H): previous state. ``whh_t`` (H, 4H) C-contiguous
+    ``W_hh^T`` or None (then ``w_hh`` is used via :func:`matmul_wt`). Writes g (B, 4H) = activated gates
+    [i | f | g | o], c_new, tc = tanh(c_new), h_new (all (B, H)).
+    """
+    hid = h.shape[1]
+    if whh_t is not None:
+        np.matmul(h, whh_t, out=g)  # (B, 4H)
+    else:
+        matmul_wt(h, w_hh, out=g)
+    g += gi
+    sigmoid(g[:, :2 * hid], out=g[:, :2 * hid])  # i, f
+    np.tanh(g[:, 2 * hid:3 * hid], out=g[:, 2 * hid:3 * hid])  # g
+    sigmoid(g[:, 3 * hid:], out=g[:, 3 * hid:])  # o
+    np.multiply(g[:, hid:2 * hid], c, out=c_new)  # c' = f c + i g
+    np.multiply(g[:, :hid], g[:, 2 * hid:3 * hid], out=tc)
+    c_new += tc
+    np.tanh(c_new, out=tc)
+    np.multiply(g[:, 3 * hid:], tc, out=h_new)  # h' = o tanh(c')
+
+
+def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
+    """Back-propagate one LSTM step.
+
+    dh, dc (B, H): total cotangents of h', c' on entry; overwritten with the cotangents of the previous
+    h, c. c (B, H): previous cell state. Writes dg (B, 4H): cotangents of the gate pre-activations
+    [a_i | a_f | a_g | a_o]. tmp (B, H) is scratch.
+    """
+    hid = c.shape[1]
+    i, f, gg, o = g[:, :hid], g[:, hid:2 * hid], g[:, 2 * hid:3 * hid], g[:, 3 * hid:]
+    di, df, dgg, do = dg[:, :hid], dg[:, hid:2 * hid], dg[:, 2 * hid:3 * hid], dg[:, 3 * hid:]
+    np.subtract(1, o, out=do)  # da_o = dh tanh(c') o (1 - o)
+    do *= o
+    do *= tc
+    do *= dh
+    np.multiply(tc, tc, out=tmp)  # dc += dh o (1 - tanh(c')^2)
+    np.subtract(1, tmp, out=tmp)
+    tmp *= o
+    tmp *= dh
+    dc += tmp
+    np.subtract(1, i, out=di)  # da_i = dc g i (1 - i)
+    di *= i
+    di *= gg
+    di *= dc
+    np.subtract(1, f, out=df)  # da_f = dc c f (1 - f)
+    df *= f
+    df *= c
+    df *= dc
+    np.multiply(gg, gg, out=dgg)  # da_g = dc i (1 - g^2)
+    np.subtract(1, dgg, out=dgg)
+    dgg *= i
+    dgg *= dc
+    dc *= f  # dc_prev = dc f
+    np.matmul(dg, w_hh, out=dh)  # dh_prev = dg W_hh
+
+
+# ----------------------------------------------------------------------------------------------------------
+# one layer over the whole sequence (time-major)
+
+
+def _layer_forward(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
+    """xs (T, B, I). Returns hs, cs (T+1, B, H) (index 0 = initial state), g (T, B, 4H), tc (T, B, H)."""
+    t_len, batch, in_size = xs.shape
+    hid = w_hh.shape[1]
+    gi = matmul_wt(xs.reshape(t_len * batch, in_size), w_ih)  # (T*B, 4H), one GEMM for all steps
+    gi += b_ih + b_hh
+    gi = gi.reshape(t_len, batch, 4 * hid)
+    whh_t = np.ascontiguousarray(w_hh.T)  # (H, 4H), transposed once per call
+    dt = xs.dtype
+    hs = np.empty((t_len + 1, batch, hid), dtype=dt)
+    cs = np.empty((t_len + 1, batch, hid), dtype=dt)
+    hs[0], cs[0] = h0, c0
+    g = np.empty((t_len, batch, 4 * hid), dtype=dt)
+    tc = np.empty((t_len, batch, hid), dtype=dt)
+    for t in range(t_len):
+        _cell_forward(gi[t], hs[t], cs[t], w_hh, whh_t, g[t], cs[t + 1], tc[t], hs[t + 1])
+    return hs, cs, g, tc
+
+
+def _layer_backward(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
+    """BPTT through one layer. dys (T, B, H) cotangents of the outputs h_1..h_T (may be a view); dh_last,
+    dc_last (B, H) or None. Returns dxs (T, B, I), dh0, dc0, dW_ih, dW_hh, db (the same for b_ih and b_hh)."""
+    t_len, batch, in_size = xs.shape
+    hid = w_hh.shape[1]
+    dt = xs.dtype
+    dg = np.empty((t_len, batch, 4 * hid), dtype=dt)
+    dh = np.zeros((batch, hid), dtype=dt) if dh_last is None else np.array(dh_last, dtype=dt)
+    dc = np.zeros((batch, hid), dtype=dt) if dc_last is None else np.array(dc_last, dtype=dt)
+    tmp = np.empty((batch, hid), dtype=dt)
+    for t in range(t_len - 1, -1, -1):
+        dh += dys[t]
+        _cell_backward(dh, dc, cs[t], g[t], tc[t], w_hh, dg[t], tmp)
+    dg2 = dg.reshape(t_len * batch, 4 * hid)  # (T*B, 4H)
+    dw_hh = dg2.T @ hs[:-1].reshape(t_len * batch, hid)  # (4H, H), one GEMM over all steps
+    dw_ih = dg2.T @ xs.reshape(t_len * batch, in_size)  # (4H, I)
+    dxs = (dg2 @ w_ih).reshape(t_len, batch, in_size)  # (T, B, I)
+    return dxs, dh, dc, dw_ih, dw_hh, dg2.sum(axis=0)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# public: sequence
+
+
+def lstm_forward(x: np.ndarray, state: tuple, params: Mapping[str, np.ndarray], prefix: str,
+                 num_layers: int = 1, skewed: bool = False):
+    """Run a multi-layer LSTM over a batch of sequences (PyTorch ``nn.LSTM(..., batch_first=True)``).
+
+    Parameters
+    ----------
+    x : ndarray (B, T, I), float32 or float64, T >= 1
+    state : tuple (h0, c0)
+        Initial states, each ``(L, B, H)``, same dtype as ``x``.
+    params : dict
+        ``{prefix}.weight_ih_l{k}`` etc., see the module docstring.
+    prefix : str
+    num_layers : int
+    skewed : bool
+        acRNN's stacking: layer k reads layer k-1's output of the previous step (module docstring).
+
+    Returns
+    -------
+    y : ndarray (B, T, H)
+        Top-layer outputs ``h^{L-1}_t``.
+    (h_n, c_n) : tuple of ndarray (L, B, H)
+    cache : dict
+        For :func:`lstm_backward`.
+    """
+    _check_layers(num_layers)
+    x = check_float_array(x, "x", (None, None, None))
+    batch, t_len, in_size = x.shape
+    if t_len < 1:
+        raise ValueError(f"x: expected at least one time step (B, T >= 1, I), got {x.shape}")
+    h0, c0 = _check_state(state, "state", num_layers, batch, x)
+    hid = h0.shape[2]
+    weights = _all_weights(params, prefix, num_layers, in_size, hid, x.dtype)
+    xs = np.array(x.transpose(1, 0, 2), order="C")  # (T, B, I), always a copy
+    h_n = np.empty_like(h0)
+    c_n = np.empty_like(c0)
+    layers = []
+    for k in range(num_layers):
+        hs, cs, g, tc = _layer_forward(xs, h0[k], c0[k], *weights[k])
+        layers.append((xs, hs, cs, g, tc))
+        h_n[k], c_n[k] = hs[-1], cs[-1]
+        xs = hs[:-1] if skewed else hs[1:]  # (T, B, H) contiguous views: the next layer's inputs
+    y = np.array(hs[1:].transpose(1, 0, 2), order="C")  # (B, T, H)
+    cache = dict(layers=layers, weights=weights, prefix=prefix, num_layers=num_layers, skewed=skewed,
+                 shape=(batch, t_len, in_size, hid))
+    return y, (h_n, c_n), cache
+
+
+def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
+    """Back-propagation through time for :func:`lstm_forward`.
+
+    Parameters
+    ----------
+    dy : ndarray (B, T, H) or None
+        Cotangent of ``y`` (None: zero).
+    dstate_n : tuple (dh_n, dc_n) or None
+        Cotangents of ``(h_n, c_n)``, each ``(L, B, H)`` or None (zero).
+    cache : dict
+        From :func:`lstm_forward`.
+
+    Returns
+    -------
+    dx : ndarray (B, T, I)
+    (dh0, dc0) : tuple of ndarray (L, B, H)
+    grads : dict
+        Full parameter names -> gradients.
+
+    Notes
+    -----
+    Per step (spec/layers.md §5.2), with ``dh``, ``dc`` the total cotangents of ``h_t``, ``c_t``::
+
+        da_o = dh tanh(c_t) o (1 - o)        dc += dh o (1 - tanh(c_t)^2)
+        da_i = dc g i (1 - i)   da_f = dc c_{t-1} f (1 - f)   da_g = dc i (1 - g^2)
+        dc_{t-1} = dc f         dh_{t-1} = [da_i | da_f | da_g | da_o] W_hh
+        dW_ih += da^T x_t       dW_hh += da^T h_{t-1}        db_ih = db_hh = sum da
+    """
+    layers, weights, prefix = cache["layers"], cache["weights"], cache["prefix"]
+    num_layers, skewed = cache["num_layers"], cache["skewed"]
+    batch, t_len, in_size, hid = cache["shape"]
+    dt = layers[0][0].dtype
+    if dy is None:
+        dys = np.zeros((t_len, batch, hid), dtype=dt)
+    else:
+        dy = check_float_array(dy, "dy", (batch, t_len, hid), finite=False)
+        dys = dy.transpose(1, 0, 2)  # (T, B, H) view
+    dh_n = dc_n = None
+    if dstate_n is not None:
+        if not (isinstance(dstate_n, (tuple, list)) and len(dstate_n) == 2):
+            raise ValueError("dstate_n: expected None or a tuple (dh_n, dc_n)")
+        dh_n, dc_n = dstate_n
+        if dh_n is not None:
+            dh_n = check_float_array(dh_n, "dstate_n[0] (dh_n)", (num_layers, batch, hid), finite=False)
+        if dc_n is not None:
+            dc_n = check_float_array(dc_n, "dstate_n[1] (dc_n)", (num_layers, batch, hid), finite=False)
+    dh0 = np.empty((num_layers, batch, hid), dtype=dt)
+    dc0 = np.empty((num_layers, batch, hid), dtype=dt)
+    grads = {}
+    skew_dh0 = None  # skewed: cotangent of h0[k] through layer k+1's first input
+    for k in range(num_layers - 1, -1, -1):
+        xs, hs, cs, g, tc = layers[k]
+        w_ih, w_hh, _, _ = weights[k]
+        dxs, dh0[k], dc0[k], dw_ih, dw_hh, db = _layer_backward(
+            dys, None if dh_n is None else dh_n[k], None if dc_n is None else dc_n[k],
+            xs, hs, cs, g, tc, w_ih, w_hh)
+        if skew_dh0 is not None:
+            dh0[k] += skew_dh0
+        grads[param_name(prefix, f"weight_ih_l{k}")] = dw_ih
+        grads[param_name(prefix, f"weight_hh_l{k}")] = dw_hh
+        grads[param_name(prefix, f"bias_ih_l{k}")] = db
+        grads[param_name(prefix, f"bias_hh_l{k}")] = db.copy()
+        if skewed and k > 0:
+            # inputs were [h0[k-1], h_0, ..., h_{T-2}] of layer k-1
+            skew_dh0 = dxs[0]
+            dys = np.zeros_like(dxs)
+            dys[:-1] = dxs[1:]
+        else:
+            dys = dxs
+    dx = np.ascontiguousarray(dys.transpose(1, 0, 2))  # (B, T, I)
+    return dx, (dh0, dc0), grads
+
+
+# ----------------------------------------------------------------------------------------------------------
+# public: single step
+
+
+def lstm_step_forward(x_t: np.ndarray, state: tuple, params: Mapping[str, np.ndarray], prefix: str,
+                      num_layers: int = 1, skewed: bool = False):
+    """One time step of the multi-layer LSTM (all layers), for output-feedback loops.
+
+    Parameters
+    ----------
+    x_t : ndarray (B, I)
+    state : tuple (h, c), each (L, B, H)
+        States after the previous step.
+    params, prefix, num_layers, skewed
+        As for :func:`lstm_forward`. With ``skewed`` layer k reads ``h[k-1]`` (the OLD state of the layer
+        below), as acRNN's code does; otherwise the new one.
+
+    Returns
+    -------
+    y : ndarray (B, H)
+        The top layer's new ``h`` (a copy of ``h_new[-1]``).
+    (h_new, c_new) : tuple of ndarray (L, B, H)
+    cache : dict
+        For :func:`lstm_step_backward`.
+
+    Notes
+    -----
+    Repeated over t it gives exactly :func:`lstm_forward` (with the same ``skewed``).
+    """
+    _check_layers(num_layers)
+    x_t = check_float_array(x_t, "x_t", (None, None))
+    batch, in_size = x_t.shape
+    h, c = _check_state(state, "state", num_layers, batch, x_t)
+    hid = h.shape[2]
+    weights = _all_weights(params, prefix, num_layers, in_size, hid, x_t.dtype)
+    x_t, h, c = x_t.copy(), h.copy(), c.copy()  # the cache must not alias the caller's buffers
+    h_new, c_new = np.empty_like(h), np.empty_like(c)
+    layers = []
+    for k in range(num_layers):
+        w_ih, w_hh, b_ih, b_hh = weights[k]
+        inp = x_t if k == 0 else (h[k - 1] if skewed else h_new[k - 1])  # (B, I_k)
+        gi = matmul_wt(inp, w_ih)  # (B, 4H)
+        gi += b_ih
+        gi += b_hh
+        g = np.empty((batch, 4 * hid), dtype=x_t.dtype)
+        tc = np.empty((batch, hid), dtype=x_t.dtype)
+        _cell_forward(gi, h[k], c[k], w_hh, None, g, c_new[k], tc, h_new[k])
+        layers.append((inp, h[k], c[k], g, tc))
+    cache = dict(layers=layers, weights=weights, prefix=prefix, num_layers=num_layers, skewed=skewed,
+                 shape=(batch, in_size, hid))
+    return h_new[-1].copy(), (h_new, c_new), cache
+
+
+def lstm_step_backward(dy: np.ndarray | None, dstate_new, cache, accumulate_into=None):
+    """Back-propagate one :func:`lstm_step_forward`.
+
+    Parameters
+    ----------
+    dy : ndarray (B, H) or None
+        Cotangent of ``y``.
+    dstate_new : tuple (dh_new, dc_new) or None
+        Cotangents of the new states (each ``(L, B, H)`` or None), i.e. what the next step's backward returned.
+    cache : dict
+        From :func:`lstm_step_forward`.
+    accumulate_into : dict, optional
+        Gradient dict to add this step's parameter gradients into, in place (returned as ``grads``).
+
+    Returns
+    -------
+    dx_t : ndarray (B, I)
+    (dh, dc) : tuple of ndarray (L, B, H)
+        Cotangents of the previous states.
+    grads : dict
+    """
+    layers, weights, prefix = cache["layers"], cache["weights"], cache["prefix"]
+    num_layers, skewed = cache["num_layers"], cache["skewed"]
+    batch, in_size, hid = cache["shape"]
+    dt = layers[0][3].dtype
+    if dy is not None:
+        dy = check_float_array(dy, "dy", (batch, hid), finite=False)
+    dh_new = dc_new = None
+    if dstate_new is not None:
+        if not (isinstance(dstate_new, (tuple, list)) and len(dstate_new) == 2):
+            raise ValueError("dstate_new: expected None or a tuple (dh_new, dc_new)")
+        dh_new, dc_new = dstate_new
+        if dh_new is not None:
+            dh_new = check_float_array(dh_new, "dstate_new[0] (dh_new)", (num_layers, batch, hid), finite=False)
+        if dc_new is not None:
+            dc_new = check_float_array(dc_new, "dstate_new[1] (dc_new)", (num_layers, batch, hid), finite=False)
+    grads = {} if accumulate_into is None else accumulate_into
+    dh_prev = np.empty((num_layers, batch, hid), dtype=dt)
+    dc_prev = np.empty((num_layers, batch, hid), dtype=dt)
+    tmp = np.empty((batch, hid), dtype=dt)
+    d_out = dy  # cotangent of this layer's new h from the layer above (ordinary stacking) or from y
+    skew_pending = None  # skewed: cotangent of this layer's OLD h from the layer above
+    d_in = None
+    for k in range(num_layers - 1, -1, -1):
+        inp, h, c, g, tc = layers[k]
+        w_ih, w_hh, _, _ = weights[k]
+        dh, dc = dh_prev[k], dc_prev[k]
+        dh[...] = 0 if dh_new is None else dh_new[k]
+        dc[...] = 0 if dc_new is None else dc_new[k]
+        if d_out is not None:
+            dh += d_out
+        dg = np.empty((batch, 4 * hid), dtype=dt)
+        _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp)
+        if skew_pending is not None:
+            dh += skew_pending
+        db = dg.sum(axis=0)
+        for name, value in ((f"weight_ih_l{k}", dg.T @ inp), (f"weight_hh_l{k}", dg.T @ h),
+                            (f"bias_ih_l{k}", db), (f"bias_hh_l{k}", db.copy())):
+            full = param_name(prefix, name)
+            if full in grads:
+                grads[full] += value
+            else:
+                grads[full] = value
+        d_in = dg @ w_ih  # (B, I_k): cotangent of this layer's input
+        if skewed and k > 0:
+            d_out, skew_pending = None, d_in
+        else:
+            d_out, skew_pending = d_in, None
+    return d_in, (dh_prev, dc_prev), grads
+
+
+# ----------------------------------------------------------------------------------------------------------
+# slow oracles: time-outer loop over all layers (as acRNN's code), per gate, obvious code
+
+
+def _sig(a):
+    return 1.0 / (1.0 + np.exp(-a))
+
+
+def _gates(params, prefix, k, hid):
+    w_ih = params[param_name(prefix, f"weight_ih_l{k}")]
+    w_hh = params[param_name(prefix, f"weight_hh_l{k}")]
+    b = params[param_name(prefix, f"bias_ih_l{k}")] + params[param_name(prefix, f"bias_hh_l{k}")]
+    split = lambda a: [a[j * hid:(j + 1) * hid] for j in range(4)]  # noqa: E731  i, f, g, o
+    return split(w_ih), split(w_hh), split(b)
+
+
+def _lstm_naive_records(x, h0, c0, params, prefix, num_layers, skewed):
+    batch, t_len, _ = x.shape
+    hid = h0.shape[-1]
+    h = [h0[k] for k in range(num_layers)]
+    c = [c0[k] for k in range(num_layers)]
+    recs = []  # recs[t][k]
+    for t in range(t_len):
+        h_old = list(h)
+        step = []
+        for k in range(num_layers):
+            (w_ii, w_if, w_ig, w_io), (w_hi, w_hf, w_hg, w_ho), (b_i, b_f, b_g, b_o) = _gates(params, prefix, k, hid)
+            inp = x[:, t] if k == 0 else (h_old[k - 1] if skewed else h[k - 1])
+            i = _sig(inp @ w_ii.T + h[k] @ w_hi.T + b_i)
+            f = _sig(inp @ w_if.T + h[k] @ w_hf.T + b_f)
+            g = np.tanh(inp @ w_ig.T + h[k] @ w_hg.T + b_g)
+            o = _sig(inp @ w_io.T + h[k] @ w_ho.T + b_o)
+            c_new = f * c[k] + i * g
+            h_new = o * np.tanh(c_new)
+            step.append(dict(x=inp, h_prev=h[k], c_prev=c[k], i=i, f=f, g=g, o=o, c=c_new, h=h_new))
+            h[k], c[k] = h_new, c_new
+        recs.append(step)
+    return recs, h, c
+
+
+def _lstm_forward_naive(x, state, params, prefix, num_layers=1, skewed=False):
+    """Slow oracle for :func:`lstm_forward`: returns ``(y, (h_n, c_n))``."""
+    h0, c0 = state
+    recs, h, c = _lstm_naive_records(x, h0, c0, params, prefix, num_layers, skewed)
+    y = np.stack([recs[t][-1]["h"] for t in range(x.shape[1])], axis=1)
+    return y, (np.stack(h), np.stack(c))
+
+
+def _lstm_backward_naive(dy, dstate_n, x, state, params, prefix, num_layers=1, skewed=False):
+    """Slow oracle for :func:`lstm_backward` (recomputes the forward): returns ``(dx, (dh0, dc0), grads)``.
+
+    Time-outer reverse loop; every cotangent of a state is accumulated in ``dh_acc[t][k]`` /
+    ``dc_acc[t][k]`` (index t+1 = state after step t, index 0 = initial state)."""
+    h0, c0 = state
+    batch, t_len, _ = x.shape
+    hid = h0.shape[-1]
+    recs, _, _ = _lstm_naive_records(x, h0, c0, params, prefix, num_layers, skewed)
+    dh_acc = [[np.zeros((batch, hid)) for _ in range(num_layers)] for _ in range(t_len + 1)]
+    dc_acc = [[np.zeros((batch, hid)) for _ in range(num_layers)] for _ in range(t_len + 1)]
+    if dstate_n is not None:
+        for k in range(num_layers):
+            if dstate_n[0] is not None:
+                dh_acc[t_len][k] += dstate_n[0][k]
+            if dstate_n[1] is not None:
+                dc_acc[t_len][k] += dstate_n[1][k]
+    for t in range(t_len):
+        dh_acc[t + 1][num_layers - 1] += dy[:, t]
+    dx = np.zeros_like(x)
+    gsum = {}
+
+    def add(name, value):
+        gsum[name] = gsum.get(name, 0.0) + value
+
+    for t in range(t_len - 1, -1, -1):
+        for k in range(num_layers - 1, -1, -1):
+            s = recs[t][k]
+            (w_ii, w_if, w_ig, w_io), (w_hi, w_hf, w_hg, w_ho), _ = _gates(params, prefix, k, hid)
+            dh = dh_acc[t + 1][k]
+            dc = dc_acc[t + 1][k] + dh * s["o"] * (1 - np.tanh(s["c"]) ** 2)
+            da_o = dh * np.tanh(s["c"]) * s["o"] * (1 - s["o"])
+            da_i = dc * s["g"] * s["i"] * (1 - s["i"])
+            da_f = dc * s["c_prev"] * s["f"] * (1 - s["f"])
+            da_g = dc * s["i"] * (1 - s["g"] ** 2)
+            for gate, da in (("i", da_i), ("f", da_f), ("g", da_g), ("o", da_o)):
+                add(f"wi{gate}{k}", da.T @ s["x"])
+                add(f"wh{gate}{k}", da.T @ s["h_prev"])
+                add(f"b{gate}{k}", da.sum(0))
+            d_inp = da_i @ w_ii + da_f @ w_if + da_g @ w_ig + da_o @ w_io
+            dh_acc[t][k] += da_i @ w_hi + da_f @ w_hf + da_g @ w_hg + da_o @ w_ho
+            dc_acc[t][k] += dc * s["f"]
+            if k == 0:
+                dx[:, t] += d_inp
+            elif skewed:
+                dh_acc[t][k - 1] += d_inp  # input was the OLD state of layer k-1
+            else:
+                dh_acc[t + 1][k - 1] += d_inp  # input was the new state of layer k-1
+    grads = {}
+    for k in range(num_layers):
+        grads[param_name(prefix, f"weight_ih_l{k}")] = np.concatenate([gsum[f"wi{q}{k}"] for q in "ifgo"])
+        grads[param_name(prefix, f"weight_hh_l{k}")] = np.concatenate([gsum[f"wh{q}{k}"] for q in "ifgo"])
+        grads[param_name(prefix, f"bias_ih_l{k}")] = np.concatenate([gsum[f"b{q}{k}"] for q in "ifgo"])
+        grads[param_name(prefix, f"bias_hh_l{k}")] = grads[param_name(prefix, f"bias_ih_l{k}")].copy()
+    dh0 = np.stack([dh_acc[0][k] for k in range(num_layers)])
+    dc0 = np.stack([dc_acc[0][k] for k in range(num_layers)])
+    return dx, (dh0, dc0), grads
