@@ -13,9 +13,12 @@ File format (a standard NumPy ``.npz``, readable with ``np.load(path, allow_pick
 
 Writing goes to a temporary file in the target directory, which is flushed, fsynced and renamed over the
 target with ``os.replace`` (then the directory is fsynced), so a reader sees the old file or the new one, never
-a partial one; on any failure the temporary file is removed. Reading never unpickles (``allow_pickle=False``;
-object arrays are refused) and turns every sign of damage (bad zip structure, CRC error, truncation, checksum
-mismatch, malformed metadata) into ``ValueError``.
+a partial one; on any failure the temporary file is removed. Reading never unpickles: each ``.npy`` header is
+parsed by NumPy's header reader (``ast.literal_eval``) and only bool/integer/float/complex dtypes are accepted
+(object arrays are refused). Every sign of damage (bad zip structure, CRC error, truncation, encrypted members,
+a header whose shape does not match its data, checksum mismatch, malformed metadata) becomes ``ValueError``;
+memory is bounded by the file size (content declared above 32 × the file size + 8 MiB is refused before
+anything is inflated, and no array is allocated from a declared shape before its data size is checked).
 
 Also: :func:`load_state_dict_npz` for converted PyTorch state dicts (no metadata, no checksum),
 :func:`check_params` to compare a parameter dict with the expected shapes, and :func:`rng_state_to_json` /
@@ -26,8 +29,11 @@ from __future__ import annotations
 import hashlib
 import hmac
 import json
+import math
 import os
 import secrets
+import struct
+import tokenize
 import zipfile
 import zlib
 from typing import Any, Mapping
@@ -44,6 +50,21 @@ _CHECKSUM = "__checksum__"
 _RESERVED = (_META, _CHECKSUM)
 _ALLOWED_KINDS = "biufc"  # bool, signed/unsigned integers, floats, complex
 _BIT_GENERATORS = ("PCG64", "PCG64DXSM", "MT19937", "Philox", "SFC64")
+
+#: Reading bound: the members of an archive may inflate to at most ``_INFLATE_RATIO`` × the file size +
+#: ``_INFLATE_ALLOWANCE`` bytes in total (checked on the sizes the zip directory declares, before anything is
+#: read; zipfile never produces more than a member's declared size). Stored members (what
+#: :func:`save_checkpoint` and ``np.savez`` write) have ratio 1; ``np.savez_compressed`` float weights ~1.1.
+_INFLATE_RATIO = 32
+_INFLATE_ALLOWANCE = 8 * 2**20
+_READ_CHUNK = 2**20
+_ZIP_UNSUPPORTED_FLAGS = 0x1 | 0x20 | 0x40  # encrypted, compressed patched data, strong encryption
+# what NumPy's .npy header parser (ast.literal_eval after a tokenize-based filter) may raise on a bad header
+_NPY_HEADER_ERRORS = (ValueError, SyntaxError, tokenize.TokenError, RecursionError, MemoryError, TypeError,
+                      OverflowError, struct.error)
+# what zipfile / zlib may raise on a damaged archive
+_ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, KeyError, NotImplementedError, RuntimeError,
+               OverflowError, struct.error, ValueError)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -128,21 +149,81 @@ def _write_npz_atomic(path: str, entries: Mapping[str, np.ndarray]) -> None:
     _fsync_dir(directory)
 
 
+def _read_npy_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, where: str) -> np.ndarray:
+    """One ``.npy`` member: NumPy parses the header (``ast.literal_eval``, never pickle); the size the header
+    declares must equal the member's actual data size before anything is allocated; the data is read in
+    chunks straight into the array (the CRC is checked by zipfile at the end)."""
+    with zf.open(info) as f:
+        try:
+            version = np.lib.format.read_magic(f)
+            if version == (1, 0):
+                shape, fortran_order, dtype = np.lib.format.read_array_header_1_0(f)
+            elif version == (2, 0):
+                shape, fortran_order, dtype = np.lib.format.read_array_header_2_0(f)
+            else:
+                raise ValueError(f"unsupported .npy format version {version}")
+        except _NPY_HEADER_ERRORS as e:
+            raise ValueError(f"{where}: malformed .npy header: {type(e).__name__}: {e}") from e
+        if dtype.kind not in _ALLOWED_KINDS or dtype.hasobject or dtype.subdtype is not None:
+            raise ValueError(f"{where}: dtype {dtype} is not stored by this format (bool, integer, float or "
+                             f"complex only; never pickled objects)")
+        if any(n < 0 for n in shape):
+            raise ValueError(f"{where}: negative size in the declared shape {shape}")
+        declared = math.prod(shape) * dtype.itemsize
+        present = info.file_size - f.tell()
+        if declared != present:
+            raise ValueError(f"{where}: the header declares shape {shape} of {dtype} ({declared} bytes) but the "
+                             f"member holds {present} bytes of data")
+        array = np.empty(math.prod(shape), dtype=dtype)
+        buf = memoryview(array.view(np.uint8)) if array.size else memoryview(b"")
+        pos = 0
+        while pos < declared:
+            n = f.readinto(buf[pos:pos + _READ_CHUNK])
+            if not n:
+                raise ValueError(f"{where}: truncated data ({pos} of {declared} bytes)")
+            pos += n
+    return array.reshape(shape[::-1]).T if fortran_order else array.reshape(shape)
+
+
 def _read_npz(path) -> dict[str, np.ndarray]:
-    """Every member of an ``.npz`` as a dict, with any sign of damage raised as ValueError."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if not hasattr(z, "files"):
-                raise ValueError("a single .npy array, not an .npz archive")
-            out = {k: z[k] for k in z.files}
-    except FileNotFoundError:
-        raise
-    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError, NotImplementedError,
-            OverflowError, TypeError) as e:
-        raise ValueError(f"{os.fspath(path)}: unreadable .npz (corrupted, truncated or not an npz): {e}") from e
-    for k, v in out.items():
-        if not isinstance(v, np.ndarray):  # NpzFile returns raw bytes for members that are not .npy files
-            raise ValueError(f"{os.fspath(path)}: member {k!r} is not a .npy array")
+    """Every member of an ``.npz`` as a dict, with any sign of damage raised as ValueError.
+
+    Memory is bounded by the file size: the total size the zip directory declares must be within
+    ``_INFLATE_RATIO`` × file size + ``_INFLATE_ALLOWANCE`` (a zip bomb is refused before inflating), and each
+    ``.npy`` header's shape must match its member's data size before the array is allocated.
+    """
+    where = os.fspath(path)
+    with open(path, "rb") as fh:  # a missing file or a directory: OSError, as it is
+        size = os.fstat(fh.fileno()).st_size
+        try:
+            with zipfile.ZipFile(fh) as zf:
+                infos = zf.infolist()
+                total = sum(i.file_size for i in infos)
+                limit = _INFLATE_RATIO * size + _INFLATE_ALLOWANCE
+                if total > limit:
+                    raise ValueError(f"{where}: the archive declares {total} bytes of content, more than the "
+                                     f"{limit} allowed for a {size}-byte file ({_INFLATE_RATIO} × its size + "
+                                     f"{_INFLATE_ALLOWANCE} bytes): refusing a possible zip bomb")
+                out = {}
+                for info in infos:
+                    name = info.filename
+                    if not name.endswith(".npy"):
+                        raise ValueError(f"{where}: member {name!r} is not a .npy array")
+                    key = name[:-len(".npy")]
+                    if key in out:
+                        raise ValueError(f"{where}: member {name!r} appears twice")
+                    if info.flag_bits & _ZIP_UNSUPPORTED_FLAGS:
+                        raise ValueError(f"{where}: member {name!r} is encrypted or patched "
+                                         f"(zip flags {info.flag_bits:#x}); not a checkpoint")
+                    if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+                        raise ValueError(f"{where}: member {name!r} uses unsupported compression "
+                                         f"{info.compress_type}")
+                    out[key] = _read_npy_member(zf, info, f"{where}: member {name!r}")
+        except (*_ZIP_ERRORS, OSError) as e:  # damage inside the file: ValueError
+            if isinstance(e, ValueError) and str(e).startswith(where):
+                raise  # our own message already names the file
+            raise ValueError(f"{where}: unreadable .npz (corrupted, truncated or not an npz): "
+                             f"{type(e).__name__}: {e}") from e
     return out
 
 
@@ -181,6 +262,17 @@ def save_checkpoint(path, arrays: Mapping[str, np.ndarray], meta: Mapping[str, A
     _write_npz_atomic(os.fspath(path), entries)
 
 
+def _refuse_json_constant(name: str):
+    raise ValueError(f"{name} is not allowed in the metadata (the format has no NaN/inf)")
+
+
+def _finite_json_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text[:40]} overflows to inf (the format has no NaN/inf)")
+    return value
+
+
 def load_checkpoint(path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Read a checkpoint written by :func:`save_checkpoint` and verify its checksum.
 
@@ -192,10 +284,13 @@ def load_checkpoint(path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     Raises
     ------
     ValueError
-        Corrupted, truncated or foreign file: bad zip structure or CRC, missing ``__meta__``/``__checksum__``,
-        checksum mismatch, malformed metadata, or a member that would need pickle.
-    FileNotFoundError
-        No file at ``path``.
+        Corrupted, truncated or foreign file: bad zip structure or CRC, encrypted or oddly compressed members,
+        missing ``__meta__``/``__checksum__``, checksum mismatch, malformed metadata (not UTF-8 JSON, not an
+        object, NaN/inf, nesting too deep), a ``.npy`` header whose shape does not match its data, a dtype
+        other than bool/int/float/complex, or content declared larger than ``32 ×`` the file size + 8 MiB.
+        Memory stays bounded by that size.
+    OSError
+        No file at ``path`` (``FileNotFoundError``), a directory, unreadable.
     """
     entries = _read_npz(path)
     missing = [k for k in _RESERVED if k not in entries]
@@ -208,10 +303,14 @@ def load_checkpoint(path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     if not hmac.compare_digest(stored.tobytes(), _checksum(entries)):
         raise ValueError(f"{os.fspath(path)}: checksum mismatch, the file is corrupted")
     meta_raw = entries.pop(_META)
+    if meta_raw.dtype != np.uint8 or meta_raw.ndim != 1:
+        raise ValueError(f"{os.fspath(path)}: malformed metadata entry (dtype {meta_raw.dtype}, shape "
+                         f"{meta_raw.shape}); expected UTF-8 JSON text as uint8 (n,)")
     try:
-        meta = json.loads(meta_raw.tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, ValueError) as e:
-        raise ValueError(f"{os.fspath(path)}: malformed metadata: {e}") from e
+        meta = json.loads(meta_raw.tobytes().decode("utf-8"), parse_constant=_refuse_json_constant,
+                          parse_float=_finite_json_float)
+    except (ValueError, RecursionError) as e:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
+        raise ValueError(f"{os.fspath(path)}: malformed metadata: {type(e).__name__}: {str(e)[:200]}") from e
     if not isinstance(meta, dict):
         raise ValueError(f"{os.fspath(path)}: malformed metadata: expected a JSON object, got {type(meta).__name__}")
     return entries, meta

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import (_as_float, _atan_ratio, _check_nonzero, _check_rotation_matrix, _hemisphere_sign,
-                          _matrix_from_quat,
+from refimpl.quat import (_as_float, _atan_ratio, _check_rotation_matrix, _hemisphere_sign,
+                          _matrix_from_quat, _prescaled,
                           _quat_conj, _quat_from_matrix, _quat_mul, _quat_norm, _quat_rotate, _sin_over_x)
 
 __all__ = [
@@ -37,6 +37,14 @@ def _split(a: np.ndarray):
 
 def _join(r: np.ndarray, d: np.ndarray) -> np.ndarray:
     return np.concatenate([r, d], axis=-1)
+
+
+def _dq_prescaled(a: np.ndarray, name: str, what: str = "real part") -> np.ndarray:
+    """``a`` times the power of two that :func:`refimpl.quat._prescaled` applies to its real part (where
+    needed), for the functions invariant to a common scale of both parts (``a`` and ``c·a``, ``c > 0``, are the
+    same rigid transform); ValueError naming ``name`` if some real part is zero."""
+    _, e = _prescaled(a[..., :4], name, what)
+    return a if e is None else np.ldexp(a, -e[..., None])
 
 
 def dq_identity(shape=(), dtype=np.float64) -> np.ndarray:
@@ -115,10 +123,12 @@ def dq_inv(a) -> np.ndarray:
     """
     a = _as_float(a, "a", (8,))
     r, d = _split(a)
-    n2 = np.sum(r * r, axis=-1, keepdims=True)
-    _check_nonzero(n2[..., 0], "a", "real part")
-    rinv = _quat_conj(r) / n2
-    return _join(rinv, -_quat_mul(_quat_mul(rinv, d), rinv))
+    rs, e = _prescaled(r, "a", "real part")  # r = 2^e rs where needed: no under/overflow of |r|²
+    rs_inv = _quat_conj(rs) / np.sum(rs * rs, axis=-1, keepdims=True)
+    real, dual = rs_inv, -_quat_mul(_quat_mul(rs_inv, d), rs_inv)
+    if e is not None:  # r⁻¹ = 2^-e rs⁻¹ and r⁻¹ d r⁻¹ = 2^-2e rs⁻¹ d rs⁻¹
+        real, dual = np.ldexp(real, -e[..., None]), np.ldexp(dual, -2 * e[..., None])
+    return _join(real, dual)
 
 
 def dq_norm(a):
@@ -135,9 +145,9 @@ def dq_norm(a):
     """
     a = _as_float(a, "a", (8,))
     r, d = _split(a)
-    n = _quat_norm(r)
-    _check_nonzero(n, "a", "real part")
-    return n, np.sum(r * d, axis=-1) / n
+    rs, e = _prescaled(r, "a", "real part")  # r = 2^e rs where needed, exact
+    ns = _quat_norm(rs)
+    return (ns if e is None else np.ldexp(ns, e)), np.sum(rs * d, axis=-1) / ns
 
 
 def dq_is_unit(a, atol_norm: float | None = None, atol_dot: float | None = None) -> np.ndarray:
@@ -184,8 +194,7 @@ def dq_normalize(a) -> np.ndarray:
         If some real part is exactly zero (no rigid transform; no identity is substituted).
     """
     a = _as_float(a, "a", (8,))
-    _check_nonzero(_quat_norm(a[..., :4]), "a", "real part")
-    return _dq_normalize(a)
+    return _dq_normalize(_dq_prescaled(a, "a"))
 
 
 def _pure(t: np.ndarray) -> np.ndarray:
@@ -239,8 +248,7 @@ def translation_from_dq(a) -> np.ndarray:
         If some real part is zero.
     """
     a = _as_float(a, "a", (8,))
-    _check_nonzero(_quat_norm(a[..., :4]), "a", "real part")
-    return _translation_from_dq(a)
+    return _translation_from_dq(_dq_prescaled(a, "a"))
 
 
 def quat_translation_from_dq(a):
@@ -252,10 +260,8 @@ def quat_translation_from_dq(a):
         Unit rotation quaternion (sign as stored).
     t : ndarray, (..., 3)
     """
-    a = _as_float(a, "a", (8,))
-    n = _quat_norm(a[..., :4])
-    _check_nonzero(n, "a", "real part")
-    return a[..., :4] / n[..., None], _translation_from_dq(a)
+    a = _dq_prescaled(_as_float(a, "a", (8,)), "a")
+    return a[..., :4] / _quat_norm(a[..., :4])[..., None], _translation_from_dq(a)
 
 
 def dq_from_matrix(m) -> np.ndarray:
@@ -284,8 +290,7 @@ def matrix_from_dq(a) -> np.ndarray:
 
     ``R`` is the rotation of ``q_r/|q_r|`` and ``t = translation_from_dq(a)``.
     """
-    a = _as_float(a, "a", (8,))
-    _check_nonzero(_quat_norm(a[..., :4]), "a", "real part")
+    a = _dq_prescaled(_as_float(a, "a", (8,)), "a")
     out = np.zeros(a.shape[:-1] + (4, 4), dtype=a.dtype)
     out[..., :3, :3] = _matrix_from_quat(a[..., :4])
     out[..., :3, 3] = _translation_from_dq(a)
@@ -474,5 +479,4 @@ def dq_blend(weights, dqs) -> np.ndarray:
     pr = np.take_along_axis(dqs[..., :4], pivot[..., None, None], axis=-2)  # (..., 1, 4)
     sign = _hemisphere_sign(pr, dqs[..., :4])[..., 0]  # (..., K)
     acc = np.sum((weights * sign)[..., None] * dqs, axis=-2)  # (..., 8)
-    _check_nonzero(_quat_norm(acc[..., :4]), "weights, dqs", "blended real part")
-    return _dq_normalize(acc)
+    return _dq_normalize(_dq_prescaled(acc, "weights, dqs", "blended real part"))

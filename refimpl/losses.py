@@ -31,6 +31,7 @@ mean Euclidean distance        building block of the three above       :func:`eu
 """
 from __future__ import annotations
 
+import math
 from types import MappingProxyType
 
 import numpy as np
@@ -105,17 +106,57 @@ def _pair(pred, target, last=None, min_ndim: int = 0):
 
 
 def _check_dvalue(dvalue) -> float:
-    d = float(dvalue)
-    if not np.isfinite(d):
+    """The upstream gradient of a scalar loss: a finite real number (Python or NumPy scalar, or a 0-d array)."""
+    if isinstance(dvalue, (int, float)):  # the usual case (np.float64 is a float)
+        d = float(dvalue)
+    else:
+        a = np.asarray(dvalue)
+        if a.ndim != 0 or a.dtype.kind not in "biuf":
+            raise ValueError(f"dvalue: expected a finite real scalar (the loss value's gradient), got "
+                             f"{type(dvalue).__name__} of shape {a.shape} and dtype {a.dtype}")
+        d = float(a)
+    if not math.isfinite(d):
         raise ValueError(f"dvalue: expected a finite number, got {dvalue!r}")
     return d
 
 
 def _mean_abs(a: np.ndarray) -> float:
-    """``mean(|a|)`` without overflow of the sum (divided by the largest entry first)."""
+    """``mean(|a|)`` without overflow of the sum (divided by the largest entry first); ``+inf`` if an entry is
+    ``±inf`` (a term that overflowed: the true mean overflows too, or is at least that large)."""
     a = np.abs(a)
     s = a.max()
-    return 0.0 if s == 0 else float(np.mean(a / s) * s)
+    if s == 0 or not np.isfinite(s):
+        return float(s)
+    return float(np.mean(a / s) * s)
+
+
+def _max_abs(x: np.ndarray) -> float:
+    """``max |x_i|`` over a non-empty array (two fast reductions, no temporary)."""
+    return max(float(x.max()), -float(x.min()))
+
+
+def _pow2_limit(dtype, root: int) -> float:
+    """``2^(maxexp/root)`` of ``dtype``: below it, products of ``root`` such numbers cannot overflow."""
+    return 2.0 ** (np.finfo(dtype).maxexp // root)
+
+
+def _difference(p: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(d, f)`` with ``p − t = f·d``: ``d = p − t`` (``f = 1``) unless that overflows (finite inputs of
+    opposite signs near the float range); then ``d = p/2 − t/2`` (exact halving) and ``f = 2``."""
+    with np.errstate(over="ignore", invalid="ignore"):  # detected here (inf, or inf − inf in the sum)
+        d = p - t
+        if math.isfinite(d.sum()):  # one fast reduction; a sum that overflows merely takes the (exact) 2nd path
+            return d, 1.0
+    return 0.5 * p - 0.5 * t, 2.0
+
+
+def _rows_scaled(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(u, k)`` with ``x = 2^k u`` per object (last axis): ``k >= 0`` is the binary exponent of the largest
+    component where that exceeds 1 (exact power-of-two scaling into ``[0.5, 1)``) and 0 elsewhere, so
+    polynomials of the raw output can be evaluated on ``u`` without overflow and rescaled once at the end.
+    Used only where the direct evaluation could overflow."""
+    k = np.maximum(np.frexp(np.max(np.abs(x), axis=-1))[1], 0)  # (...)
+    return np.ldexp(x, -k[..., None]), k
 
 
 def _norm_and_direction(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -141,22 +182,26 @@ def mse_loss_forward(pred, target):
     Returns
     -------
     value : float
-        ``+inf`` only when the true mean square exceeds the float range (e.g. differences ~1e300).
+        ``+inf`` only when the true mean square exceeds the float range (e.g. differences ~1e300); a difference
+        that itself overflows (``pred = 1.5e308``, ``target = −1.5e308``) gives ``+inf`` and a finite gradient.
     cache : tuple
     """
     p, t = _pair(pred, target)
-    d = p - t
+    d, f = _difference(p, t)  # pred - target = f d
     s = float(np.max(np.abs(d)))
     if s == 0.0:
-        return 0.0, (d,)
-    rms = s * float(np.sqrt(np.mean((d / s) ** 2)))  # root mean square, no overflow of the sum
-    return rms * rms, (d,)
+        return 0.0, (d, f)
+    rms = f * s * float(np.sqrt(np.mean((d / s) ** 2)))  # root mean square, no overflow of the sum
+    return rms * rms, (d, f)
 
 
 def mse_loss_backward(dvalue, cache):
     """Gradient of :func:`mse_loss_forward`: ``dpred = 2 (pred - target) dvalue / N``."""
-    (d,) = cache
-    return (2.0 * _check_dvalue(dvalue) / d.size) * d
+    d, f = cache
+    scale = 2.0 * f * _check_dvalue(dvalue) / d.size
+    if not math.isfinite(scale):  # |dvalue| near the float maximum: keep 0 · inf out of the result
+        return (2.0 * f / d.size) * d * _check_dvalue(dvalue)
+    return scale * d
 
 
 def mae_loss_forward(pred, target):
@@ -172,8 +217,8 @@ def mae_loss_forward(pred, target):
     cache : tuple
     """
     p, t = _pair(pred, target)
-    d = p - t
-    return _mean_abs(d), (np.sign(d),)
+    d, f = _difference(p, t)  # pred - target = f d
+    return f * _mean_abs(d), (np.sign(d),)
 
 
 def mae_loss_backward(dvalue, cache):
@@ -211,8 +256,13 @@ def quat_loss_forward(pred, target):
     cache : tuple
     """
     p, t = _pair(pred, target, (4, 8))
-    e = 1.0 - np.sum(p[..., :4] * t[..., :4], axis=-1)  # (...)
-    return _mean_abs(e), (np.sign(e), t[..., :4], p.shape)
+    pq, tq = p[..., :4], t[..., :4]
+    if _max_abs(pq) * _max_abs(tq) <= _pow2_limit(pq.dtype, 2):  # the usual case: no product can overflow
+        e = 1.0 - np.sum(pq * tq, axis=-1)  # (...)
+    else:  # sum scaled quaternions, rescale once: ±inf where <q, q̃> overflows, never inf − inf
+        (up, kp), (ut, kt) = _rows_scaled(pq), _rows_scaled(tq)
+        e = 1.0 - np.ldexp(np.sum(up * ut, axis=-1), kp + kt)
+    return _mean_abs(e), (np.sign(e), tq, p.shape)
 
 
 def quat_loss_backward(dvalue, cache):
@@ -290,8 +340,9 @@ def euclidean_loss_forward(pred, target):
     cache : tuple
     """
     p, t = _pair(pred, target, None, min_ndim=1)
-    n, direction = _norm_and_direction(p - t)
-    return _mean_abs(n), (direction,)
+    d, f = _difference(p, t)  # pred - target = f d
+    n, direction = _norm_and_direction(d)
+    return f * _mean_abs(n), (direction,)
 
 
 def euclidean_loss_backward(dvalue, cache):
@@ -374,29 +425,38 @@ def dq_reg_loss_forward(raw):
     cache : tuple
     """
     x = _nonempty(_as_float_array(raw, "raw", (4, 8)), "raw")
+    if _max_abs(x) <= _pow2_limit(x.dtype, 8):  # the usual case: 4th powers (and the gradient) cannot overflow
+        terms, a, b = _dq_reg_terms(x, 1)
+        return _mean_abs(terms), (x, None, a, b)
+    u, k = _rows_scaled(x)  # x = 2^k u: a, b of u are 2^-2k times the true ones; terms 2^-4k
+    terms, a, b = _dq_reg_terms(u, np.ldexp(u.dtype.type(1), -2 * k))
+    return _mean_abs(np.ldexp(terms, 4 * k)), (u, k, a, b)
+
+
+def _dq_reg_terms(x: np.ndarray, one):
+    """``(a² + b², a, b)`` with ``a = |q_r|² − one``, ``b = ⟨q_r, q_d⟩`` (``b = None`` for ``(..., 4)``)."""
     r = x[..., :4]
-    a = np.sum(r * r, axis=-1) - 1.0
-    terms = a * a
-    b = None
-    if x.shape[-1] == 8:
-        b = np.sum(r * x[..., 4:], axis=-1)
-        terms = terms + b * b
-    return _mean_abs(terms), (x, a, b)
+    a = np.sum(r * r, axis=-1) - one
+    if x.shape[-1] == 4:
+        return a * a, a, None
+    b = np.sum(r * x[..., 4:], axis=-1)
+    return a * a + b * b, a, b
 
 
 def dq_reg_loss_backward(dvalue, cache):
     """Gradient of :func:`dq_reg_loss_forward`: ``dq_r = (4 a q_r + 2 b q_d) c``, ``dq_d = 2 b q_r c`` with
-    ``a = |q_r|² - 1``, ``b = <q_r, q_d>``, ``c = dvalue / N``."""
-    x, a, b = cache
+    ``a = |q_r|² - 1``, ``b = <q_r, q_d>``, ``c = dvalue / N`` (after an overflow in the forward, evaluated on
+    the scaled output and rescaled by ``2^3k``: ``±inf`` only where the true gradient overflows, never NaN)."""
+    u, k, a, b = cache
     c = _check_dvalue(dvalue) / a.size
-    r = x[..., :4]
-    g = np.empty_like(x)
-    g[..., :4] = (4.0 * c) * a[..., None] * r
+    r = u[..., :4]
+    g = np.empty_like(u)
+    g[..., :4] = 4.0 * a[..., None] * r
     if b is not None:
-        d = x[..., 4:]
-        g[..., :4] += (2.0 * c) * b[..., None] * d
-        g[..., 4:] = (2.0 * c) * b[..., None] * r
-    return g
+        g[..., :4] += 2.0 * b[..., None] * u[..., 4:]
+        g[..., 4:] = 2.0 * b[..., None] * r
+    g *= c  # last, so a zero stays zero (no 0 · inf for huge dvalue)
+    return g if k is None else np.ldexp(g, 3 * k[..., None])
 
 
 def quat_norm_loss_forward(raw):
@@ -414,14 +474,21 @@ def quat_norm_loss_forward(raw):
     cache : tuple
     """
     x = _nonempty(_as_float_array(raw, "raw", 4), "raw")
-    a = np.sum(x * x, axis=-1) - 1.0
-    return _mean_abs(a * a), (x, a)
+    if _max_abs(x) <= _pow2_limit(x.dtype, 8):  # the usual case, as in dq_reg_loss_forward
+        terms, a, _ = _dq_reg_terms(x, 1)
+        return _mean_abs(terms), (x, None, a)
+    u, k = _rows_scaled(x)  # x = 2^k u, as in dq_reg_loss_forward
+    terms, a, _ = _dq_reg_terms(u, np.ldexp(u.dtype.type(1), -2 * k))
+    return _mean_abs(np.ldexp(terms, 4 * k)), (u, k, a)
 
 
 def quat_norm_loss_backward(dvalue, cache):
-    """Gradient of :func:`quat_norm_loss_forward`: ``4 (|q|² - 1) q dvalue / N``."""
-    x, a = cache
-    return (4.0 * _check_dvalue(dvalue) / a.size) * a[..., None] * x
+    """Gradient of :func:`quat_norm_loss_forward`: ``4 (|q|² - 1) q dvalue / N`` (after an overflow in the
+    forward, on the scaled output rescaled by ``2^3k``: ``±inf`` only where the true gradient overflows)."""
+    u, k, a = cache
+    g = 4.0 * a[..., None] * u
+    g *= _check_dvalue(dvalue) / a.size  # last, so a zero stays zero
+    return g if k is None else np.ldexp(g, 3 * k[..., None])
 
 
 # --------------------------------------------------------------------------------------------------
@@ -519,8 +586,8 @@ def fk_position_loss_forward(pred_rotations, pred_translations, target_positions
     root[..., up_axis] = tr[..., 1]
     pos, fk_cache = forward_kinematics_forward(rot, root, offsets, parents)
     pos_value, ecache = euclidean_loss_forward(pos, tpos.astype(pos.dtype, copy=False))
-    do = tr[..., 0] - ttr[..., 0]
-    return pos_value + _mean_abs(do), (fk_cache, ecache, np.sign(do), up_axis, tr.dtype)
+    do, f = _difference(tr[..., 0], ttr[..., 0])  # o - õ = f do
+    return pos_value + f * _mean_abs(do), (fk_cache, ecache, np.sign(do), up_axis, tr.dtype)
 
 
 def fk_position_loss_backward(dvalue, cache):

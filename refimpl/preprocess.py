@@ -186,25 +186,56 @@ def feature_statistics(frames, min_std: float = 1e-4) -> tuple[np.ndarray, np.nd
     return mean, std
 
 
-def normalize_features(frames, mean, std) -> np.ndarray:
-    """``(frames − mean) / std`` with the statistics of :func:`feature_statistics`; dtype of ``frames`` kept."""
+def _feature_args(frames, mean, std) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Validate ``frames (..., F)``, ``mean (F,)``, ``std (F,)``: real numbers, finite, ``std > 0``."""
     x = np.asarray(frames)
-    mean = np.asarray(mean)
-    std = np.asarray(std)
-    if mean.shape != (x.shape[-1],) or std.shape != (x.shape[-1],):
-        raise ValueError(f"mean, std: expected shape ({x.shape[-1]},), got {mean.shape} and {std.shape}")
-    if np.any(std <= 0):
-        raise ValueError("std: expected positive values")
+    if x.dtype.kind not in "biuf":
+        raise ValueError(f"frames: expected a real numeric array, got dtype {x.dtype}")
+    if x.ndim < 1:
+        raise ValueError(f"frames: expected shape (..., F), got {x.shape}")
+    stats = []
+    for name, value in (("mean", mean), ("std", std)):
+        a = np.asarray(value)
+        if a.dtype.kind not in "biuf":
+            raise ValueError(f"{name}: expected a real numeric array, got dtype {a.dtype}")
+        if a.shape != (x.shape[-1],):
+            raise ValueError(f"{name}: expected shape ({x.shape[-1]},) (the last axis of frames {x.shape}), "
+                             f"got {a.shape}")
+        stats.append(a)
+    mean, std = stats
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"frames: contains NaN or inf (shape {x.shape})")
+    if not np.all(np.isfinite(mean)):
+        raise ValueError("mean: contains NaN or inf")
+    if not np.all(np.isfinite(std) & (std > 0)):
+        raise ValueError("std: expected finite positive values (as returned by feature_statistics), got "
+                         f"{std[~(np.isfinite(std) & (std > 0))][:3].tolist()}")
+    return x, mean, std
+
+
+def normalize_features(frames, mean, std) -> np.ndarray:
+    """``(frames − mean) / std`` with the statistics of :func:`feature_statistics`; dtype of ``frames`` kept
+    (integer frames give float64).
+
+    Parameters
+    ----------
+    frames : array_like, shape (..., F)
+        Finite real numbers.
+    mean, std : array_like, shape (F,)
+        Finite; ``std > 0``.
+
+    Raises
+    ------
+    ValueError
+        Non-numeric dtype, wrong shapes, NaN/inf anywhere, or ``std <= 0``.
+    """
+    x, mean, std = _feature_args(frames, mean, std)
     dtype = x.dtype if x.dtype.kind == "f" else np.float64
     return ((x - mean) / std).astype(dtype, copy=False)
 
 
 def denormalize_features(frames, mean, std) -> np.ndarray:
-    """``frames · std + mean``, the inverse of :func:`normalize_features`."""
-    x = np.asarray(frames)
-    mean = np.asarray(mean)
-    std = np.asarray(std)
-    if mean.shape != (x.shape[-1],) or std.shape != (x.shape[-1],):
-        raise ValueError(f"mean, std: expected shape ({x.shape[-1]},), got {mean.shape} and {std.shape}")
+    """``frames · std + mean``, the inverse of :func:`normalize_features` (same arguments and checks)."""
+    x, mean, std = _feature_args(frames, mean, std)
     dtype = x.dtype if x.dtype.kind == "f" else np.float64
     return (x * std + mean).astype(dtype, copy=False)

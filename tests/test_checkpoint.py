@@ -247,3 +247,118 @@ def test_zip_member_names_are_plain(tmp_path):
     with zipfile.ZipFile(tmp_path / "z.npz") as zf:
         assert sorted(zf.namelist()) == ["__checksum__.npy", "__meta__.npy", "a.b.npy"]
         assert all(i.compress_type == zipfile.ZIP_STORED for i in zf.infolist())
+
+
+def test_reader_matches_numpy_on_every_layout(tmp_path):
+    """spec/optim.md §5.4: the bounded reader returns what np.load returns (values, dtype, shape, C/Fortran order)
+    for plain, compressed, Fortran-ordered, big-endian, 0-d, empty, complex and .npy-version-2.0 members."""
+    rng = np.random.default_rng(1)
+    sd = {"w": rng.standard_normal((3, 4)), "f32": rng.standard_normal(5).astype(np.float32),
+          "fortran": np.asfortranarray(rng.standard_normal((2, 3))), "big": np.arange(4, dtype=">f8"),
+          "scalar": np.array(2.5), "empty": np.zeros((0, 3)), "c": np.array([1 + 2j]), "b": np.array([True]),
+          "u8": np.arange(3, dtype=np.uint8), "big_block": np.zeros((300, 400))}
+    np.savez(tmp_path / "plain.npz", **sd)
+    np.savez_compressed(tmp_path / "packed.npz", **sd)
+    for name in ("plain.npz", "packed.npz"):
+        got = load_state_dict_npz(tmp_path / name)
+        with np.load(tmp_path / name, allow_pickle=False) as z:
+            ref = {k: z[k] for k in z.files}
+        assert _same(got, ref) and _same(got, sd)
+        assert got["fortran"].flags.f_contiguous and got["w"].flags.writeable
+    import io
+    buf = io.BytesIO()  # a version-2.0 header (written by NumPy for very long headers)
+    np.lib.format.write_array_header_2_0(buf, np.lib.format.header_data_from_array_1_0(sd["w"]))
+    with zipfile.ZipFile(tmp_path / "v2.npz", "w") as zf:
+        zf.writestr("w.npy", buf.getvalue() + sd["w"].tobytes())
+    assert _same(load_state_dict_npz(tmp_path / "v2.npz"), {"w": sd["w"]})
+
+
+def _zip_members(path, members, compress=False):
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED) as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+
+
+def _npy(header, payload):
+    h = (header if isinstance(header, str) else repr(header)).encode("latin-1")
+    h += b" " * (64 - (10 + len(h) + 1) % 64) + b"\n"
+    return b"\x93NUMPY\x01\x00" + len(h).to_bytes(2, "little") + h + payload
+
+
+@pytest.mark.parametrize("case", ["shape-larger", "shape-smaller", "negative", "unicode", "object", "structured",
+                                  "not-npy", "duplicate", "unterminated", "version-3", "bomb"])
+def test_hostile_members_are_refused_before_allocation(tmp_path, case):
+    """spec/optim.md §5.4, spec/robustness.md §1 (bug B4): a header whose shape does not match the member's data,
+    a dtype other than bool/int/float/complex, a member that is not .npy, duplicates, a cut-off header, an
+    unsupported .npy version and content declared above 32 × the file size + 8 MiB are all ValueError naming
+    the file; nothing is allocated from a declared size."""
+    import tracemalloc
+
+    f8 = {"descr": "<f8", "fortran_order": False}
+    members = {
+        "shape-larger": {"w.npy": _npy(dict(f8, shape=(10**15,)), b"\0" * 64)},
+        "shape-smaller": {"w.npy": _npy(dict(f8, shape=(2,)), b"\0" * 64)},
+        "negative": {"w.npy": _npy(dict(f8, shape=(-8,)), b"\0" * 64)},
+        "unicode": {"w.npy": _npy({"descr": "<U2", "fortran_order": False, "shape": (1,)}, b"\0" * 8)},
+        "object": {"w.npy": _npy({"descr": "|O", "fortran_order": False, "shape": (1,)}, b"\x80\x04N.")},
+        "structured": {"w.npy": _npy({"descr": [("a", "<f8")], "fortran_order": False, "shape": (1,)}, b"\0" * 8)},
+        "not-npy": {"w.txt": b"hello"},
+        "duplicate": {"w.npy": _npy(dict(f8, shape=(1,)), b"\0" * 8)},
+        "unterminated": {"w.npy": _npy("{'descr': '<f8', 'fortran_order': False, 'shape': (3,", b"\0" * 24)},
+        "version-3": {"w.npy": b"\x93NUMPY\x03\x00" + _npy(dict(f8, shape=(1,)), b"\0" * 8)[8:]},
+        "bomb": {"w.npy": _npy(dict(f8, shape=(2 * 2**20,)), b"\0" * (16 * 2**20))},
+    }[case]
+    path = tmp_path / f"{case}.npz"
+    if case == "duplicate":
+        with zipfile.ZipFile(path, "w") as zf:
+            zf.writestr("w.npy", members["w.npy"])
+            with pytest.warns(UserWarning):
+                zf.writestr("w.npy", members["w.npy"])
+    else:
+        _zip_members(path, members, compress=case == "bomb")
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match=case + ".npz") as info:
+            load_state_dict_npz(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 4 * 2**20, peak
+    why = {"shape-larger": "declares shape", "shape-smaller": "declares shape", "negative": "negative",
+           "unicode": "dtype", "object": "dtype", "structured": "dtype", "not-npy": "not a .npy",
+           "duplicate": "twice", "unterminated": "TokenError", "version-3": "version", "bomb": "zip bomb"}[case]
+    assert why in str(info.value), str(info.value)
+
+
+def test_encrypted_flag_and_metadata_rules(tmp_path):
+    """spec/optim.md §5.1 (bug B4): encrypted members, and re-signed metadata with NaN, Infinity, 1e999 or 100000
+    nested brackets are refused with ValueError (the format's metadata is finite JSON)."""
+    path = tmp_path / "e.npz"
+    save_checkpoint(path, _small(), {"a": 1})
+    data = bytearray(path.read_bytes())
+    for sig, at in ((b"PK\x03\x04", 6), (b"PK\x01\x02", 8)):
+        i = data.find(sig)
+        while i >= 0:
+            data[i + at] |= 1
+            i = data.find(sig, i + 4)
+    (tmp_path / "enc.npz").write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="encrypted"):
+        load_checkpoint(tmp_path / "enc.npz")
+    for text in (b'{"loss": NaN}', b'{"loss": Infinity}', b'{"loss": -Infinity}', b'{"loss": 1e999}',
+                 b"[" * 100000 + b"]" * 100000):
+        arrays = dict(_small())
+        arrays["__meta__"] = np.frombuffer(text, dtype=np.uint8).copy()
+        arrays["__checksum__"] = np.frombuffer(ckpt._checksum(arrays), dtype=np.uint8).copy()
+        ckpt._write_npz_atomic(str(tmp_path / "m.npz"), arrays)
+        with pytest.raises(ValueError, match="metadata"):
+            load_checkpoint(tmp_path / "m.npz")
+    assert load_checkpoint(path)[1] == {"a": 1}
+
+
+def test_compressed_zero_tensors_within_the_bound(tmp_path):
+    """spec/optim.md §5.4: np.savez_compressed of a state dict with large all-zero tensors (compressing ~1000:1)
+    still loads while the total stays under 32 × the file size + 8 MiB."""
+    sd = {"w": np.random.default_rng(0).standard_normal((200, 50)), "m": np.zeros((1000, 500))}  # 4 MB of zeros
+    np.savez_compressed(tmp_path / "z.npz", **sd)
+    assert (tmp_path / "z.npz").stat().st_size < 200_000
+    assert _same(load_state_dict_npz(tmp_path / "z.npz"), sd)

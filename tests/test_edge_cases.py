@@ -119,46 +119,109 @@ def test_dq_normalize_near_zero_real_part_with_large_dual():
 
 _SCALE_INVARIANT = {
     # name: (function, input kind) — documented as depending on q/|q| only
-    # (spec/math.md §1.6, §2.1, §3.2, §4.1, §5.5, §5.7)
+    # (spec/math.md §1.6, §2.1, §3.2, §4.1, §4.3, §5.3, §5.5, §5.7, §5.8)
     "quat_angle": (lambda q: Q.quat_angle(q), "q"),
+    "quat_angle[q, r]": (lambda q: Q.quat_angle(q, q[::-1]), "q"),
     "axis_angle_from_quat": (Q.axis_angle_from_quat, "q"),
     "matrix_from_quat": (Q.matrix_from_quat, "q"),
     "euler_from_quat": (lambda q: Q.euler_from_quat(q, "zyx"), "q"),
     "quat_log[vector part]": (lambda q: Q.quat_log(q)[..., 1:], "q"),
+    "quat_normalize": (Q.quat_normalize, "q"),
+    "matrix_from_ortho6d": (lambda q: Q.matrix_from_ortho6d(Q.ortho6d_from_matrix(Q.matrix_from_quat(q))), "6d"),
     "dq_normalize": (DQ.dq_normalize, "dq"),
     "translation_from_dq": (DQ.translation_from_dq, "dq"),
+    "quat_translation_from_dq": (lambda a: np.concatenate(DQ.quat_translation_from_dq(a), axis=-1), "dq"),
     "matrix_from_dq": (DQ.matrix_from_dq, "dq"),
 }
 
 
 def _scale_case(name, scale):
     fn, kind = _SCALE_INVARIANT[name]
-    x = _unit_quats(16) if kind == "q" else _unit_dqs(16)
+    x = _unit_dqs(16) if kind == "dq" else _unit_quats(16)
     expected = fn(x)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        actual = fn(x * scale)
+        if kind == "6d":  # the 6-D input itself is scaled (each column independently invariant)
+            actual = Q.matrix_from_ortho6d(Q.ortho6d_from_matrix(Q.matrix_from_quat(x)) * scale)
+        else:
+            actual = fn(x * scale)
     assert_close(actual, expected, rtol=0, atol=1e-12, name=f"{name}(s·x) vs {name}(x), s={scale:g}")
 
 
 @pytest.mark.parametrize("scale", [1e-100, 1e-50, 1e50, 1e100, 1e150])
 @pytest.mark.parametrize("name", sorted(_SCALE_INVARIANT))
 def test_scale_invariance_moderate(name, scale):
-    """spec/robustness.md §2.1: functions of q/|q| are invariant to scales 1e-100 ... 1e150 (guaranteed range)."""
+    """spec/robustness.md §2.1: functions of q/|q| are invariant to scales 1e-100 ... 1e150."""
     _scale_case(name, scale)
 
 
-_SCALE_BUG = ("refimpl.quat/refimpl.dualquat: the norm is computed as sqrt(sum(q*q)) without pre-scaling, so for "
-              "|q| below ~1e-154 or above ~1e154 it under/overflows: non-zero inputs are refused as 'zero', or "
-              "the result is NaN or a wrong rotation (quat_normalize pre-scales by max|q_i| and is exact)")
-
-
-@pytest.mark.xfail(strict=True, reason=_SCALE_BUG)
-@pytest.mark.parametrize("scale", [1e-200, 1e200])
+@pytest.mark.parametrize("scale", [1e-305, 1e-200, 1e200, 1e300])
 @pytest.mark.parametrize("name", sorted(_SCALE_INVARIANT))
 def test_scale_invariance_extreme(name, scale):
-    """spec/robustness.md §2.1: documented scale invariance over the whole finite range (currently broken)."""
+    """spec/robustness.md §2.1: the scale invariance holds over the whole finite range (public functions rescale
+    by the power of two of the largest component before any sum of squares; fixed bug B1, §7)."""
     _scale_case(name, scale)
+
+
+@pytest.mark.parametrize("scale", [1e-310, 1e-200, 1.0, 1e200, 1e300])
+def test_norms_scale_exactly(scale):
+    """spec/robustness.md §2.1: quat_norm(s·q) = s and dq_norm(s·a) = (s, 0) for unit q, a, without under/overflow
+    while the result is representable (spec/math.md §1.3, §5.4)."""
+    q, a = _unit_quats(16), _unit_dqs(16)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        n = Q.quat_norm(q * scale)
+        real, dual = DQ.dq_norm(a * scale)
+    rtol = 1e-15 if scale >= 1e-300 else 1e-9  # subnormal inputs carry fewer digits
+    assert_close(n / scale, np.ones(16), rtol=0, atol=4 * rtol)
+    assert_close(real / scale, np.ones(16), rtol=0, atol=4 * rtol)
+    assert_close(dual / scale, np.zeros(16), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("scale", [1e-200, 1e200])
+def test_dq_inv_extreme_scales(scale):
+    """spec/robustness.md §2.1: dq_inv(s·a) = dq_inv(a)/s for unit a while representable (spec/math.md §5.3)."""
+    a = _unit_dqs(16)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        inv = DQ.dq_inv(a * scale)
+    assert_close(inv * scale, DQ.dq_conj(a), rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e-200, 1e200, 1e300])
+def test_dq_blend_extreme_weight_scales(scale):
+    """spec/robustness.md §2.1: dq_blend depends on the weights' ratios only, over the whole finite range
+    (spec/math.md §5.12)."""
+    a = _unit_dqs(16).reshape(8, 2, 8)
+    w = np.array([0.3, 0.7])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = DQ.dq_blend(w * scale, a)
+    assert_close(out, DQ.dq_blend(w, a), rtol=0, atol=1e-13)
+
+
+def test_scale_invariance_float32():
+    """spec/robustness.md §2.1: float32 inputs of magnitude 1e-30 and 1e30 stay float32 and give the unit result."""
+    q = _unit_quats(16, dtype=np.float32)
+    for s in (np.float32(1e-30), np.float32(1e30)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            m = Q.matrix_from_quat(q * s)
+            v = Q.axis_angle_from_quat(q * s)
+            lg = Q.quat_log(q * s)
+        assert m.dtype == v.dtype == lg.dtype == np.float32
+        assert_close(m, Q.matrix_from_quat(q), rtol=0, atol=1e-6)
+        assert_close(v, Q.axis_angle_from_quat(q), rtol=0, atol=1e-5)
+        assert_close(lg[..., 0], np.full(16, np.log(float(s)), np.float32), rtol=1e-6, atol=0)
+
+
+def test_quat_log_extreme_norm():
+    """spec/robustness.md §2.1: quat_log(s·q) = (log s, log(q)_vec) for unit q, s from 1e-310 to 1e300."""
+    q = _unit_quats(16)
+    for s in (1e-310, 1e-200, 1e200, 1e300):
+        out = Q.quat_log(q * s)
+        assert_close(out[..., 0], np.full(16, np.log(s)), rtol=1e-12, atol=0)
+        assert_close(out[..., 1:], Q.quat_log(q)[..., 1:], rtol=0, atol=1e-9 if s < 1e-300 else 1e-13)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -517,9 +580,6 @@ def _loss_cases(scale, seed=0):
 
 
 _LOSS_NAMES = [c[0] for c in _loss_cases(1.0)]
-_REG_NAN_BUG = ("refimpl.losses._mean_abs divides by the largest entry; when a term overflows to inf it computes "
-                "inf/inf = NaN, so dq_reg_loss_forward / quat_norm_loss_forward return NaN (not +inf) for raw "
-                "outputs of magnitude >= ~1e77 (their quartic terms overflow), and dq_reg's gradient has NaN")
 
 
 def _run_loss(name, scale):
@@ -541,9 +601,7 @@ def test_losses_denormal_inputs(name):
         assert np.all(np.isfinite(g)), name
 
 
-@pytest.mark.parametrize("name", [n if n not in ("dq_reg", "quat_norm") else
-                                  pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=_REG_NAN_BUG))
-                                  for n in _LOSS_NAMES])
+@pytest.mark.parametrize("name", _LOSS_NAMES)
 def test_losses_large_inputs(name):
     """spec/robustness.md §2.7: inputs of magnitude 1e150: no NaN in value or gradients. The value is finite
     when the exact value is representable (every loss except the quartic regularisers, whose exact value
@@ -556,12 +614,6 @@ def test_losses_large_inputs(name):
         assert not np.any(np.isnan(g)), f"{name}: NaN gradient from finite input"
 
 
-_DIFF_OVERFLOW_BUG = ("refimpl.losses: pred − target overflows to ±inf for finite inputs of opposite sign near "
-                      "1e308; mse/mae/euclidean then return NaN (inf/inf in the scaling) instead of +inf, and "
-                      "euclidean's gradient is NaN")
-
-
-@pytest.mark.xfail(strict=True, reason=_DIFF_OVERFLOW_BUG)
 @pytest.mark.parametrize("name", ["mse", "mae", "euclidean"])
 def test_losses_difference_overflow(name):
     """spec/robustness.md §2.7: finite inputs whose difference overflows give +inf, never NaN."""

@@ -19,7 +19,6 @@ import importlib.util
 import json
 import os
 import sys
-import tokenize
 import tracemalloc
 from pathlib import Path
 
@@ -43,19 +42,11 @@ def _load_fuzz_module():
 F = _load_fuzz_module()
 
 # (reader, exception type or failure name) -> reason; each entry has a strict xfail test in this file.
-KNOWN_FAILURES = {
-    ("checkpoint", "RecursionError"): "test_checkpoint_deeply_nested_metadata",
-    ("checkpoint", "MemoryError"): "test_checkpoint_huge_declared_shape",
-    ("checkpoint", "TokenError"): "test_checkpoint_unterminated_npy_header",
-    ("checkpoint", "RuntimeError"): "test_checkpoint_encrypted_flag",
-    ("onnx", "AcceptedMalformed"): "test_onnx_truncated_metadata_is_refused",
-}
+# None open: the checkpoint bugs B4 (a)-(f) and the ONNX truncated-metadata bug B5 of spec/robustness.md §7
+# were fixed; their tests below now guard the fixes.
+KNOWN_FAILURES: dict[tuple[str, str], str] = {}
 # sub-kinds (strings chosen by the mutators) whose semantic failures are known bugs
-KNOWN_SUBKINDS = {
-    ("checkpoint", "meta-nan"): "test_checkpoint_nan_in_metadata_is_refused",
-    ("checkpoint", "large-shape"): "test_checkpoint_huge_declared_shape",
-    ("checkpoint", "zip-bomb"): "test_checkpoint_zip_bomb_memory",
-}
+KNOWN_SUBKINDS: dict[tuple[str, str], str] = {}
 
 
 class HypothesisDrawer:
@@ -412,10 +403,6 @@ def test_checkpoint_resigned_malformed_is_valueerror(tmp_path, kind):
         load_checkpoint(_resigned(tmp_path, kind))
 
 
-@pytest.mark.xfail(strict=True, raises=RecursionError,
-                   reason="refimpl/checkpoint.py load_checkpoint: json.loads of a deeply nested "
-                          "__meta__ (100000 '[') raises RecursionError, not caught (only "
-                          "UnicodeDecodeError/ValueError are)")
 @pytest.mark.parametrize("kind", ["deep-json-list", "deep-json-dict"])
 def test_checkpoint_deeply_nested_metadata(tmp_path, kind):
     """spec/robustness.md §1: deeply nested JSON metadata (valid checksum) is refused with ValueError."""
@@ -425,11 +412,6 @@ def test_checkpoint_deeply_nested_metadata(tmp_path, kind):
         load_checkpoint(_resigned(tmp_path, kind))
 
 
-@pytest.mark.xfail(strict=True, raises=MemoryError,
-                   reason="refimpl/checkpoint.py load_checkpoint: a member whose .npy header "
-                          "declares shape (10**12,) makes np.load allocate from the declared size: "
-                          "MemoryError escapes (not caught); for (2*10**8,) 1.6 GB is allocated "
-                          "before the EOF error")
 def test_checkpoint_huge_declared_shape(tmp_path):
     """spec/robustness.md §1: a .npy header declaring far more data than the member holds: ValueError, and
     memory stays bounded (nothing allocated from the declared shape)."""
@@ -462,10 +444,6 @@ def test_checkpoint_corrupt_checksum_member(tmp_path):
         load_checkpoint(p)
 
 
-@pytest.mark.xfail(strict=True, raises=tokenize.TokenError,
-                   reason="refimpl/checkpoint.py _read_npz: an unterminated .npy header makes "
-                          "numpy's header filter raise tokenize.TokenError, which _read_npz does "
-                          "not catch (it is not a ValueError)")
 def test_checkpoint_unterminated_npy_header(tmp_path):
     """spec/robustness.md §1: a .npy member with a cut-off header dict is refused with ValueError."""
     from refimpl.checkpoint import load_checkpoint
@@ -478,10 +456,6 @@ def test_checkpoint_unterminated_npy_header(tmp_path):
         load_checkpoint(p)
 
 
-@pytest.mark.xfail(strict=True, raises=RuntimeError,
-                   reason="refimpl/checkpoint.py _read_npz: a zip whose entries have the 'encrypted' flag bit "
-                          "set makes zipfile raise RuntimeError ('password required for extraction'), which is "
-                          "not caught")
 def test_checkpoint_encrypted_flag(tmp_path):
     """spec/robustness.md §1: a zip member flagged as encrypted (one flipped bit) is refused with ValueError."""
     from refimpl.checkpoint import load_checkpoint
@@ -506,9 +480,6 @@ def test_checkpoint_non_npy_member_is_refused(tmp_path):
         load_checkpoint(_resigned(tmp_path, "raw-member"))
 
 
-@pytest.mark.xfail(strict=True, reason="refimpl/checkpoint.py load_checkpoint: the format says the metadata "
-                                       "has no NaN/inf (save refuses them) but json.loads accepts NaN/Infinity "
-                                       "on load")
 def test_checkpoint_nan_in_metadata_is_refused(tmp_path):
     """spec/robustness.md §1: metadata with NaN (not valid JSON, refused on save) is refused on load."""
     from refimpl.checkpoint import load_checkpoint
@@ -517,9 +488,6 @@ def test_checkpoint_nan_in_metadata_is_refused(tmp_path):
         load_checkpoint(_resigned(tmp_path, "meta-nan"))
 
 
-@pytest.mark.xfail(strict=True, reason="refimpl/checkpoint.py load_checkpoint: deflate-compressed members are "
-                                       "inflated without a size limit: a 40 MB member stored in a ~40 kB file "
-                                       "is read (memory not bounded by the file size)")
 def test_checkpoint_zip_bomb_memory(tmp_path):
     """spec/robustness.md §1: memory stays bounded by a multiple of the file size (compressed members)."""
     from refimpl.checkpoint import load_checkpoint
@@ -680,10 +648,6 @@ def test_onnx_metadata_of_wrong_type(tmp_path, value):
     assert m.role is None
 
 
-@pytest.mark.xfail(strict=True, reason="deploy/runtime.py load_model: metadata_props are serialized last, so a "
-                                       ".onnx file truncated at an entry boundary is a valid protobuf; it loads "
-                                       "with the documented metadata keys ('io', 'model', ...) silently missing "
-                                       "(the loader does not require them)")
 def test_onnx_truncated_metadata_is_refused(tmp_path):
     """spec/robustness.md §1, §6: a model file cut inside its metadata is refused (the metadata contract of
     deploy/metadata.py: format, model, io, ... must be present), not loaded with keys missing."""

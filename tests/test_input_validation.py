@@ -233,30 +233,22 @@ def _array_args(kwargs):
     return [k for k, v in kwargs.items() if k not in _NON_ARRAY and isinstance(v, np.ndarray)]
 
 
-_NDIM_BUG = ("refimpl/nn/quat_layers.py _as_float_array: with min_ndim=0 and a last-axis rule, a 0-d input "
-             "reaches a.shape[-1] and raises IndexError instead of ValueError (losses quat/dq_pos/dq_offset)")
-_GRAD_NAN_BUG = ("refimpl/nn/quat_layers.py _check_grad (used by every quaternion/kinematics layer backward) "
-                 "checks the shape of the upstream gradient but not its finiteness: NaN/inf dy propagate")
-_PREPROC_BUG = ("refimpl/preprocess.py normalize_features/denormalize_features: no finiteness or dtype "
-                "validation: NaN/inf in frames, mean or std pass through silently (std=inf gives 0), a string "
-                "array raises numpy's UFuncTypeError, a 0-d frames raises IndexError")
 _KERNEL_BUG = ("refimpl/nn/linear.py matmul_wt and refimpl/nn/activations.py sigmoid are public (__all__) but "
                "unchecked performance kernels: NaN/inf, strings and wrong shapes are not refused with a ValueError "
                "naming the argument (make them private, or validate)")
 _RNN_SIZE_BUG = ("refimpl/nn/gru.py, refimpl/nn/lstm.py: an input x/x_t (or h0/h) with the wrong feature size is "
                  "reported as a wrong parameter shape (\"params['rnn.weight_ih_l0']: expected shape (15, 6), got "
                  "(15, 4)\"): the message names params, not the argument, and not its actual shape")
-_DVALUE_BUG = ("refimpl/losses.py _check_dvalue: float(dvalue) on an array of size > 1 raises TypeError "
-               "('only 0-dimensional arrays can be converted'), not ValueError")
-
+_GRAD_NAN_BUG = ("B13: the backward functions of refimpl/nn/linear.py, activations.py, conv1d.py, gru.py and "
+                 "lstm.py check the upstream gradient's shape but not its finiteness: a NaN/inf dy propagates "
+                 "(the quaternion/kinematics layers refuse it since B8 was fixed)")
+_GRAD_NAN_MODULES = ("refimpl.nn.linear", "refimpl.nn.activations", "refimpl.nn.conv1d", "refimpl.nn.gru",
+                     "refimpl.nn.lstm")
 # (qualified name, argument or "*", probe) -> reason: known gaps in other modules (strict xfail).
+# Fixed since (the tests now guard them): B7 0-d pred/target in quat/dq_pos/dq_offset losses (IndexError),
+# B8 NaN/inf upstream gradients in the quaternion/kinematics layers, B9 array dvalue (TypeError), B10
+# normalize_features/denormalize_features without finiteness/dtype checks (spec/robustness.md §7).
 KNOWN = {
-    **{(f"refimpl.losses.{f}", a, "ndim"): _NDIM_BUG
-       for f in ("quat_loss_forward", "dq_pos_loss_forward", "dq_offset_loss_forward") for a in ("pred", "target")},
-    **{(f"refimpl.{f}", a, probe): _PREPROC_BUG
-       for f in ("normalize_features", "denormalize_features") for a in ("frames", "mean", "std")
-       for probe in ("finite", "dtype")},
-    **{(f"refimpl.{f}", "frames", "ndim"): _PREPROC_BUG for f in ("normalize_features", "denormalize_features")},
     **{(q, a, probe): _KERNEL_BUG
        for q, a in (("refimpl.nn.linear.matmul_wt", "a"), ("refimpl.nn.linear.matmul_wt", "w"),
                     ("refimpl.nn.activations.sigmoid", "x"))
@@ -281,14 +273,11 @@ def _probe_ids(probe):
             if probe == "finite":
                 for value in (np.nan, np.inf, -np.inf):
                     reason = KNOWN.get((qual, arg, probe))
-                    if reason and arg == "std" and value == -np.inf and qual.endswith(".normalize_features"):
-                        reason = None  # normalize_features refuses a negative std as "not positive"
                     marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
                     out.append(pytest.param(qual, arg, value, id=f"{qual}:{arg}:{value}", marks=marks))
                 continue
             reason = KNOWN.get((qual, arg, probe))
-            raises = IndexError if reason == _NDIM_BUG else None
-            marks = [pytest.mark.xfail(strict=True, reason=reason, raises=raises)] if reason else []
+            marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
             out.append(pytest.param(qual, arg, id=f"{qual}:{arg}", marks=marks))
     return out
 
@@ -371,6 +360,7 @@ def test_non_numeric_dtype(qual, arg):
 # --------------------------------------------------------------------------------------------------------------
 
 def _backward_cases(probe):
+    """(forward qualname, backward) pairs; the NaN probe is a strict xfail for the modules of B13."""
     out = []
     for modname in CORE_MODULES:
         funcs = dict(_public_functions(modname))
@@ -381,13 +371,8 @@ def _backward_cases(probe):
             qual = f"{modname}.{fwd_name}"
             if not any(q == qual for q, _, _ in CASES):
                 continue
-            reason = None
-            if probe == "nan" and modname.startswith("refimpl.nn."):
-                reason = _GRAD_NAN_BUG
-            if probe == "shape" and modname == "refimpl.losses":
-                reason = _DVALUE_BUG
-            raises = TypeError if reason == _DVALUE_BUG else None
-            marks = [pytest.mark.xfail(strict=True, reason=reason, raises=raises)] if reason else []
+            known = probe == "nan" and modname in _GRAD_NAN_MODULES
+            marks = [pytest.mark.xfail(strict=True, reason=_GRAD_NAN_BUG)] if known else []
             out.append(pytest.param(qual, bwd, id=f"{modname}.{name}", marks=marks))
     return out
 

@@ -297,6 +297,9 @@ def _fk_case(rng, lead=(2, 3)):
     tr = rng.standard_normal(lead + (2,))
     tpos = rng.standard_normal(lead + (J, 3))
     ttr = rng.standard_normal(lead + (2,))
+    # keep |o − õ| >= 0.1, away from the kink of |·| that finite differences would straddle (hypothesis found
+    # o − õ = 4e-7)
+    ttr[..., 0] = tr[..., 0] - rng.choice([-1.0, 1.0], lead) * rng.uniform(0.1, 2.0, lead)
     off = rng.standard_normal((J, 3))
     return rot, tr, tpos, ttr, off
 
@@ -413,3 +416,120 @@ def test_every_loss_finite_at_edges(case):
     grads = bw(1.0, c)
     grads = grads if isinstance(grads, tuple) else (grads,)
     assert abs(v) < 1e-12 and all(np.all(np.isfinite(g)) for g in grads), (name, v)
+
+
+# ------------------------------------------------------------------------------------------------
+# overflow: defined behaviour (§6; spec/robustness.md §2.7, bugs B2, B3)
+
+def test_overflowing_difference_gives_inf_value_finite_gradient():
+    """spec/losses.md §6: when pred − target overflows for finite inputs the value is +inf (the true value is not
+    representable) and the gradient is the exact one where representable: no NaN (bug B3)."""
+    with np.errstate(over="ignore"):
+        _overflowing_difference_cases()
+
+
+def _overflowing_difference_cases():
+    p = np.full((2, 3), 1.5e308)
+    v, c = L.mse_loss_forward(p, -p)
+    assert v == math.inf
+    assert_close(L.mse_loss_backward(1.0, c), np.full((2, 3), 1e308), rtol=1e-15)  # 2 (p − t) / N = 2·3e308/6
+    v, c = L.mae_loss_forward(p, -p)
+    assert v == math.inf and np.all(L.mae_loss_backward(1.0, c) == 1 / 6)
+    # the mean is representable although one difference is not: MAE and the Euclidean loss report it exactly
+    big = np.zeros((4, 3))
+    big[0, 0], tgt = 1.5e308, np.zeros((4, 3))
+    tgt[0, 0] = -1.5e308
+    v, c = L.mae_loss_forward(big, tgt)
+    assert v == pytest.approx(1.5e308 / 6) and np.all(np.isfinite(L.mae_loss_backward(1.0, c)))
+    v, c = L.euclidean_loss_forward(big, tgt)
+    assert v == pytest.approx(1.5e308 / 2)
+    assert_close(L.euclidean_loss_backward(1.0, c)[0], [0.25, 0, 0], **TOL_EXACT)
+    v, c = L.euclidean_loss_forward(p, -p)
+    assert v == math.inf and np.all(np.isfinite(L.euclidean_loss_backward(1.0, c)))
+
+
+def test_regularisers_overflow_to_inf_never_nan():
+    """spec/losses.md §6: L_reg and the norm penalty are quartic: for raw outputs ≳ 1e77 the value is +inf and
+    the gradient is ±inf only where its exact value overflows (bug B2); below, the scaled evaluation equals the
+    direct formula."""
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((3, 5, 8))
+    for s in (1e77, 1e150, 1e200, 1e300):
+        with np.errstate(over="ignore"):  # the honest overflow of the value and of some gradient entries
+            v, c = L.dq_reg_loss_forward(x * s)
+            g = L.dq_reg_loss_backward(1.0, c)
+            assert v == math.inf and not np.any(np.isnan(g))
+            v, c = L.quat_norm_loss_forward(x[..., :4] * s)
+            g = L.quat_norm_loss_backward(1.0, c)
+            assert v == math.inf and not np.any(np.isnan(g))
+    # 1e60: the exact value ~1e240 is representable, the gradient ~1e180 too: both finite and exact
+    xs = x * 1e60
+    r, d = xs[..., :4], xs[..., 4:]
+    a, b = np.sum(r * r, -1) - 1, np.sum(r * d, -1)
+    v, c = L.dq_reg_loss_forward(xs)
+    assert v == pytest.approx(np.mean(a * a + b * b), rel=1e-14)
+    g = L.dq_reg_loss_backward(1.0, c)
+    n = a.size
+    gr, gd = (4 * a[..., None] * r + 2 * b[..., None] * d) / n, 2 * b[..., None] * r / n
+    assert_close(g[..., :4], gr, rtol=0, atol=1e-14 * np.abs(gr).max())  # the two terms may cancel
+    assert_close(g[..., 4:], gd, rtol=1e-14)
+    # a row of mixed magnitudes: the large terms overflow, the gradient of the small row stays exact
+    mixed = np.stack([x[0, 0] * 1e200, x[0, 1]])
+    with np.errstate(over="ignore"):
+        v, c = L.dq_reg_loss_forward(mixed)
+        g = L.dq_reg_loss_backward(1.0, c)
+    r1, d1 = x[0, 1, :4], x[0, 1, 4:]
+    a1, b1 = r1 @ r1 - 1, r1 @ d1
+    assert_close(g[1, :4], (4 * a1 * r1 + 2 * b1 * d1) / 2, rtol=0, atol=1e-14)
+
+
+def test_regularisers_float32_scaled():
+    """spec/losses.md §6: float32 raw outputs stay float32; 1e12 (quartic terms overflow float32) → +inf, no NaN."""
+    x = np.random.default_rng(4).standard_normal((2, 3, 8)).astype(np.float32)
+    for s in (np.float32(1), np.float32(1e12)):
+        with np.errstate(over="ignore"):
+            v, c = L.dq_reg_loss_forward(x * s)
+            g = L.dq_reg_loss_backward(1.0, c)
+        assert g.dtype == np.float32 and not np.any(np.isnan(g))
+        assert (v == math.inf) == (s > 1)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_no_nan_from_any_finite_input(seed):
+    """spec/losses.md §6: MSE, MAE, Euclidean, L_quat (current), L_reg and the norm penalty never return NaN (value
+    or gradient) for finite inputs of any magnitude, subnormal to the largest float, mixed signs, any dvalue."""
+    rng = np.random.default_rng(seed)
+    fmax = np.finfo(np.float64).max
+
+    def arr(shape):
+        a = rng.standard_normal(shape) * 10.0 ** rng.integers(-320, 308, shape)
+        a[rng.random(shape) < 0.25] = fmax * rng.choice([-1.0, 1.0])
+        return np.where(np.isfinite(a), a, fmax)
+
+    for _ in range(20):
+        cases = [(L.mse_loss_forward, L.mse_loss_backward, (arr((3, 5)), arr((3, 5)))),
+                 (L.mae_loss_forward, L.mae_loss_backward, (arr((3, 5)), arr((3, 5)))),
+                 (L.euclidean_loss_forward, L.euclidean_loss_backward, (arr((3, 3)), arr((3, 3)))),
+                 (L.quat_loss_forward, L.quat_loss_backward, (arr((3, 4)), arr((3, 4)))),
+                 (L.dq_reg_loss_forward, L.dq_reg_loss_backward, (arr((3, 8)),)),
+                 (L.quat_norm_loss_forward, L.quat_norm_loss_backward, (arr((3, 4)),))]
+        for fw, bw, args in cases:
+            with np.errstate(over="ignore"):
+                v, c = fw(*args)
+                for dvalue in (1.0, 1e300, 1e-300, -fmax):
+                    assert not np.any(np.isnan(bw(dvalue, c))), fw.__name__
+            assert not math.isnan(v), fw.__name__
+
+
+def test_dvalue_validation():
+    """spec/losses.md §1, spec/robustness.md §3 (bug B9): dvalue is a finite real scalar — a Python or NumPy
+    scalar or a 0-d array; arrays of any other shape, strings, NaN/inf are refused with ValueError naming it."""
+    p, t = np.ones((2, 3)), np.zeros((2, 3))
+    _, c = L.mse_loss_forward(p, t)
+    g = L.mse_loss_backward(1.0, c)
+    for ok in (np.float64(1.0), np.float32(1.0), np.array(1.0), 1, np.int64(1), True):
+        assert_close(L.mse_loss_backward(ok, c), g, **TOL_EXACT)
+    for bad in (np.ones(3), np.ones(1), np.ones((1, 1)), "1.0", np.array("1"), None, 1j, np.nan, np.inf, -np.inf,
+                np.array(np.nan)):
+        with pytest.raises(ValueError, match="dvalue"):
+            L.mse_loss_backward(bad, c)

@@ -128,8 +128,30 @@ def test_feature_statistics_and_normalisation():
         feature_statistics(np.zeros((0, 3)))
     with pytest.raises(ValueError, match="share the last axis"):
         feature_statistics([np.zeros((2, 3)), np.zeros((2, 4))])
-    with pytest.raises(ValueError, match="mean, std"):
+    with pytest.raises(ValueError, match=r"mean: expected shape \(6,\)"):
         normalize_features(x, mean[:3], std)
+
+
+@pytest.mark.parametrize("fn", [normalize_features, denormalize_features])
+def test_feature_normalisation_validation(fn):
+    """spec/data.md §5.5, spec/robustness.md §3 (bug B10): NaN/inf anywhere, std <= 0 or inf, strings, wrong
+    shapes and 0-d frames are refused with ValueError naming the argument; nothing passes through silently."""
+    x = np.arange(12.0).reshape(4, 3)
+    mean, std = np.zeros(3), np.ones(3)
+    fn(x, mean, std)
+    bad_cases = [
+        ("frames", (np.where(x == 5, np.nan, x), mean, std)), ("frames", (np.where(x == 5, np.inf, x), mean, std)),
+        ("mean", (x, np.array([0.0, np.nan, 0.0]), std)), ("mean", (x, np.array([0.0, -np.inf, 0.0]), std)),
+        ("std", (x, mean, np.array([1.0, np.inf, 1.0]))), ("std", (x, mean, np.array([1.0, np.nan, 1.0]))),
+        ("std", (x, mean, np.array([1.0, 0.0, 1.0]))), ("std", (x, mean, np.array([1.0, -2.0, 1.0]))),
+        ("frames", (np.full((4, 3), "a"), mean, std)), ("mean", (x, np.array(["a"] * 3), std)),
+        ("std", (x, mean, np.array(["a"] * 3))), ("frames", (np.float64(1.0), mean, std)),
+        ("mean", (x, np.zeros((1, 3)), std)), ("std", (x, mean, np.ones(4))),
+    ]
+    for name, args in bad_cases:
+        with pytest.raises(ValueError, match=rf"^{name}:"):
+            fn(*args)
+    assert fn(np.arange(6).reshape(2, 3), mean, std).dtype == np.float64  # integers become float64
 
 
 def test_statistics_of_real_expmap_data():

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from refimpl.quat import _quat_mul  # the Hamilton-product kernel (broadcasting, keeps float32)
+
 __all__ = [
     "EULER_ORDERS",
     "quat_normalize_forward", "quat_normalize_backward",
@@ -45,13 +47,14 @@ def _as_float_array(x, name: str, last: int | tuple[int, ...] | None = None, min
         raise ValueError(f"{name}: expected a real floating array, got dtype {a.dtype}")
     if not np.issubdtype(a.dtype, np.floating):
         a = a.astype(np.float64)
-    if a.ndim < min_ndim:
-        raise ValueError(f"{name}: expected at least {min_ndim} dimension(s), got shape {a.shape}")
-    if last is not None:
-        lasts = (last,) if isinstance(last, int) else tuple(last)
-        if a.shape[-1] not in lasts:
-            want = " or ".join(f"(..., {n})" for n in lasts)
+    lasts = () if last is None else (last,) if isinstance(last, int) else last
+    ndim = max(min_ndim, 1 if lasts else 0)  # a last-axis rule needs a last axis
+    if a.ndim < ndim or (lasts and a.shape[-1] not in lasts):
+        want = " or ".join(f"(..., {n})" for n in lasts)
+        if a.ndim >= ndim:
             raise ValueError(f"{name}: expected shape {want}, got {a.shape}")
+        expected = f"shape {want} (at least {ndim} dimension(s))" if lasts else f"at least {ndim} dimension(s)"
+        raise ValueError(f"{name}: expected {expected}, got shape {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name}: contains NaN or inf")
     return a
@@ -65,9 +68,14 @@ def _check_eps(eps: float, name: str = "eps") -> float:
 
 
 def _check_grad(dy, like_shape: tuple, name: str = "dy") -> np.ndarray:
+    """The upstream gradient of a layer: a finite real array of the forward output's shape."""
     a = np.asarray(dy)
     if a.shape != tuple(like_shape):
         raise ValueError(f"{name}: expected shape {tuple(like_shape)}, got {a.shape}")
+    if a.dtype.kind not in "biuf":
+        raise ValueError(f"{name}: expected a real floating array, got dtype {a.dtype}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or inf (shape {a.shape})")
     return a
 
 
@@ -85,18 +93,6 @@ def _unbroadcast(g: np.ndarray, shape: tuple) -> np.ndarray:
     if axes:
         g = g.sum(axis=axes, keepdims=True)
     return g
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a ⊗ b`` of ``(..., 4)`` arrays (broadcasting)."""
-    a0, a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    b0, b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape), dtype=np.result_type(a, b))
-    out[..., 0] = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
-    out[..., 1] = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
-    out[..., 2] = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
-    out[..., 3] = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
-    return out
 
 
 def _quat_conj(q: np.ndarray) -> np.ndarray:
