@@ -31,7 +31,6 @@ import os
 import platform
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -43,6 +42,7 @@ sys.path.insert(0, str(ROOT))
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init  # noqa: E402
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init  # noqa: E402
 from refimpl.nn.params import count_parameters, init_normal, merge_grads  # noqa: E402
+from refimpl.atomic import atomic_write_text  # noqa: E402
 
 try:
     from refimpl.optim import adam_init, adam_step, clip_grad_norm  # noqa: E402
@@ -185,17 +185,7 @@ def bench_torch(iters: int, threads: int | None) -> dict | None:
 
 
 def write_json_atomic(path: Path, obj) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(obj, f, indent=2)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    atomic_write_text(path, json.dumps(obj, indent=2), make_parents=True)
 
 
 def main(argv=None) -> int:

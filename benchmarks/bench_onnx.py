@@ -52,6 +52,7 @@ from deploy.runtime import make_session  # noqa: E402
 from deploy.validate import validate_model  # noqa: E402
 from refimpl.models.qtg import (QTGConfig, init_params, init_state, prepare_inference, rollout_forward,  # noqa: E402
                                 rollout_inference, step)
+from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.nn.gru import gru_init, gru_step_forward  # noqa: E402
 from refimpl.quat import quat_normalize  # noqa: E402
 from refimpl.transitions import denormalize_poses, split_pose  # noqa: E402
@@ -321,13 +322,7 @@ def main(argv=None) -> dict:
     print(_table(result))
     print(f"load average before {load_before}, after {result['load_average_after']}; model: {desc}")
     out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".bench_onnx-", suffix=".tmp", dir=str(out.parent))
-    with os.fdopen(fd, "w") as f:
-        json.dump(result, f, indent=2)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, out)
+    atomic_write_text(out, json.dumps(result, indent=2), make_parents=True)
     print(f"wrote {out}")
     return result
 

@@ -48,7 +48,6 @@ import argparse
 import contextlib
 import io
 import json
-import os
 import random
 import re
 import signal
@@ -70,6 +69,9 @@ __all__ = ["RandomDrawer", "Target", "Outcome", "build_targets", "mutate", "run_
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+
+from refimpl.atomic import atomic_write_text  # noqa: E402
+
 SAMPLE = ROOT / "refimpl" / "data" / "sample"
 
 #: memory bound per case: fixed allowance + allowance per byte of input file
@@ -1268,13 +1270,7 @@ def print_table(res: dict) -> None:
 
 
 def _write_json_atomic(path: Path, obj) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        json.dump(obj, f, indent=1, sort_keys=True)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(obj, indent=1, sort_keys=True), make_parents=True)
 
 
 def main(argv=None) -> int:

@@ -24,11 +24,11 @@ Shape legend: B batch, T time, F features.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
+
+from refimpl.atomic import atomic_write_bytes
 import onnx
 from onnx import helper, numpy_helper
 
@@ -79,20 +79,7 @@ def save_model(model: onnx.ModelProto, path) -> None:
 
     Models up to 2 GB only (no external data), which covers everything exported here.
     """
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    data = model.SerializeToString()
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".onnx", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+    atomic_write_bytes(path, model.SerializeToString())
 
 
 def _elem_type(dtype) -> int:

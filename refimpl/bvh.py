@@ -36,11 +36,12 @@ import dataclasses
 import math
 import os
 import re
-import tempfile
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+
+from refimpl.atomic import atomic_write_text
 
 from refimpl.motion import Motion
 from refimpl.quat import euler_from_quat, quat_fix, quat_from_euler
@@ -503,31 +504,6 @@ def read_bvh(path, frame_time: float | None = None, name: str | None = None,
 # writing
 # ---------------------------------------------------------------------------------------------------------
 
-def _atomic_write_text(path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically: temporary file in the same folder, fsync, ``os.replace``."""
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix="." + os.path.basename(path) + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    try:  # make the rename durable (best effort; not available on every platform)
-        dfd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
-
-
 def _resolve_orders(order, skel: Skeleton) -> list[str]:
     ends = set(skel.end_sites)
     if isinstance(order, str):
@@ -631,4 +607,4 @@ def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precisio
     data = np.where(np.abs(data) < 0.5 * 10.0 ** -p, 0.0, data)            # no "-0.000000"
     row_fmt = " ".join([f"%.{p}f"] * data.shape[1])
     out.extend(row_fmt % tuple(row) for row in data.tolist())
-    _atomic_write_text(path, "\n".join(out) + "\n")
+    atomic_write_text(path, "\n".join(out) + "\n")

@@ -31,7 +31,6 @@ import hmac
 import json
 import math
 import os
-import secrets
 import struct
 import tokenize
 import zipfile
@@ -39,6 +38,8 @@ import zlib
 from typing import Any, Mapping
 
 import numpy as np
+
+from refimpl.atomic import atomic_path
 
 __all__ = [
     "save_checkpoint", "load_checkpoint", "load_state_dict_npz", "check_params",
@@ -101,52 +102,12 @@ def _check_arrays(arrays, allow_reserved: bool = False) -> dict[str, np.ndarray]
     return out
 
 
-def _fsync_dir(directory: str) -> None:
-    """Best effort: make the rename durable (not supported on every platform)."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def _create_temp(directory: str, base: str) -> tuple[int, str]:
-    """A new file ``.<base>.<random>.tmp`` in ``directory``, created exclusively with mode 0o666 & ~umask (unlike
-    ``tempfile.mkstemp``'s 0o600, so the final checkpoint gets the usual permissions)."""
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
-    for _ in range(100):
-        tmp = os.path.join(directory, f".{base}.{secrets.token_hex(8)}.tmp")
-        try:
-            return os.open(tmp, flags, 0o666), tmp
-        except FileExistsError:
-            continue
-    raise FileExistsError(f"could not create a temporary file next to {base!r} in {directory!r}")
-
-
 def _write_npz_atomic(path: str, entries: Mapping[str, np.ndarray]) -> None:
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = _create_temp(directory, os.path.basename(path))
-    try:
-        with os.fdopen(fd, "wb") as f:
-            with zipfile.ZipFile(f, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-                for name, a in entries.items():
-                    with zf.open(name + ".npy", "w", force_zip64=True) as member:
-                        np.lib.format.write_array(member, a, allow_pickle=False)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    _fsync_dir(directory)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        with zipfile.ZipFile(f, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for name, a in entries.items():
+                with zf.open(name + ".npy", "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, a, allow_pickle=False)
 
 
 def _read_npy_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, where: str) -> np.ndarray:

@@ -46,6 +46,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.atomic import atomic_write_text
 from refimpl.models.qtg import QTGConfig
 
 __all__ = [
@@ -748,20 +749,6 @@ def _progress_line(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "w", newline="") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
     names = list(results)
     T = len(results[names[0]]["per_frame_cm"])
@@ -1058,9 +1045,9 @@ def print_results(results: Mapping[str, dict], test_ds, model: TrainedModel | No
 def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=None, csv_path=None) -> None:
     """Write :func:`evaluate_model` results as JSON (everything) and / or CSV (the per-frame curves)."""
     if json_path:
-        _write_text_atomic(Path(json_path), _results_json(results))
+        atomic_write_text(Path(json_path), _results_json(results), make_parents=True)
     if csv_path:
-        _write_text_atomic(Path(csv_path), _curve_csv(results, frame_time))
+        atomic_write_text(Path(csv_path), _curve_csv(results, frame_time), make_parents=True)
 
 
 def cmd_export(args) -> int:

@@ -23,11 +23,12 @@ from __future__ import annotations
 
 import csv
 import os
-import uuid
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
+
+from refimpl.atomic import atomic_path
 
 __all__ = ["render_strip", "render_gif", "render_loss_curve", "render_error_curves", "read_loss_log"]
 
@@ -54,30 +55,11 @@ def _figure(width: float, height: float, dpi: float):
     return fig
 
 
-def _atomic_target(path: Path) -> Path:
-    """A fresh temporary path in ``path``'s folder with the same suffix (the writer needs the suffix)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # a unique name created by the writer itself, so the file gets the usual permissions (not mkstemp's 0600)
-    return path.with_name(f".{path.stem}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
-
-
-def _commit(tmp: Path, path: Path) -> None:
-    """fsync the finished temporary file and move it over ``path``."""
-    with open(tmp, "rb+") as f:
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
 def _save_figure(fig, path: str | os.PathLike) -> Path:
     """Save ``fig`` as PNG to ``path`` atomically."""
     path = Path(path)
-    tmp = _atomic_target(path)
-    try:
+    with atomic_path(path, make_parents=True) as tmp:
         fig.savefig(tmp, format="png", facecolor="white")
-        _commit(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 
@@ -388,9 +370,8 @@ def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, 
     fig.subplots_adjust(left=0.0, right=1.0, bottom=0.04, top=0.9, wspace=0.0)
 
     path = Path(path)
-    tmp = _atomic_target(path)
     writer = PillowWriter(fps=max(1.0, fps / int(stride)))
-    try:
+    with atomic_path(path, make_parents=True) as tmp:
         with writer.saving(fig, str(tmp), dpi):
             for t in idx:  # one draw per frame: move the artists, then grab
                 context = highlight is not None and not (start <= t < stop)
@@ -402,10 +383,6 @@ def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, 
                             coll.set_color(_CONTEXT_COLOR if context else color)
                 caption.set_text(f"frame {numbers[t]}" + (" (context)" if context else ""))
                 writer.grab_frame(facecolor="white")
-        _commit(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 
