@@ -1,0 +1,9 @@
+"""Network models (layer 5): one module per network.
+
+Each module holds a frozen dataclass config (defaults = the paper's sizes or our documented reconstruction),
+``init_params(config, rng, dtype)`` returning a flat dict with PyTorch state-dict names, a sequence
+forward/backward pair and a ``step`` for online use (the function the ONNX exporter translates).
+
+Modules: ``refimpl.models.qtg`` (Quaternion Transition Generator, Geleijn et al. 2021; spec/qtg.md).
+Import from the submodules; this package re-exports nothing, so the model modules stay independent.
+"""

@@ -1,0 +1,762 @@
+"""Quaternion Transition Generator (QTG; Geleijn, Radziszewski, van Straaten, Galvan Debarba, IEEE VR 2021).
+
+Generates the ``T`` frames of an animation transition from 2 past poses and 2 target poses, one frame at a
+time, feeding each decoded pose back (spec/qtg.md). The paper gives the structure in words only (its Figure 2
+with the layer sizes is missing from every available copy); the sizes below are our reconstruction, chosen so
+that the per-frame operation count is ≈ 20 % of RTN's (the paper's "≈ 80 % fewer arithmetic operations"),
+see spec/qtg.md §2 and :func:`macs_per_frame`.
+
+Pose (P = 91 by default): ``[root translation (3, z-normalised) | 22 local joint quaternions (w, x, y, z)]``.
+
+Network (defaults of :class:`QTGConfig`; every size configurable)::
+
+    E  encoder   P -> 256 (LeakyReLU) -> 128 (LeakyReLU)       enc.0, enc.1       latent size Z = 128
+    GRU          input 3Z = 384, hidden H = 256                gru.*_l0
+    V  velocity  H -> Z, linear                                vel
+    D  decoder   Z -> 256 (LeakyReLU) -> P (linear)            dec.0, dec.1
+
+One step (spec/qtg.md §3), from the state ``(z_{t-1}, p_t, s_t)`` and the encoded targets ``e1 = E(g1)``,
+``e2 = E(g2)``::
+
+    z_t     = E(p_t)                                     (the fed-back pose is re-encoded)
+    x_t     = [z_t - z_{t-1} | e1 - z_t | e2 - e1]       latent velocity, offset to target, target velocity
+    s_{t+1} = GRU(x_t, s_t)
+    v_t     = W_v s_{t+1} + b_v                          latent velocity (linear: signed)
+    p_{t+1} = D(z_t + v_t)                               residual connection in latent space, then decode
+    state  <- (z_t, p_{t+1}, s_{t+1})
+
+Rollout: ``z_{-1} = E(p_{-1})``, ``p_0`` the last past pose, ``s_0 = 0``; steps ``t = 0 … T-1`` give
+``p_1 … p_T``. Backward (:func:`rollout_backward`) runs the step caches in reverse; gradients flow through the
+fed-back poses, the carried latents, the GRU state and the target encodings (BPTT, no detaching).
+
+Shape legend: B batch, T transition frames, P pose size, Z latent size, H GRU hidden size, L GRU layers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, NamedTuple
+
+import numpy as np
+
+from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
+from refimpl.nn.gru import gru_init, gru_step_backward, gru_step_forward
+from refimpl.nn.linear import linear_backward, linear_forward, linear_init
+from refimpl.nn.params import check_float_array
+
+__all__ = [
+    "QTGConfig", "QTGState", "QTGInference", "init_params", "count_parameters", "param_shapes",
+    "encode", "init_state", "step", "rollout_forward", "rollout_backward",
+    "prepare_inference", "rollout_inference", "macs_per_frame", "rtn_macs_per_frame",
+]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# configuration and parameters
+# ----------------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class QTGConfig:
+    """Sizes of the QTG network (defaults: our reconstruction, spec/qtg.md §2).
+
+    Attributes
+    ----------
+    pose_size : int
+        P, values per pose (3 root translation + 4 per joint; 91 for 22 joints).
+    encoder_sizes : tuple of int
+        Output sizes of the encoder's dense layers, all LeakyReLU; the last one is the latent size Z.
+    gru_hidden : int
+        H, GRU hidden size.
+    gru_layers : int
+        L, stacked GRU layers (1 in our reconstruction).
+    decoder_sizes : tuple of int
+        Hidden dense layers of the decoder (LeakyReLU); a final linear layer maps to ``pose_size``.
+    negative_slope : float
+        LeakyReLU slope (PyTorch default 0.01).
+    transition_length : int
+        Default T, frames generated per transition (30 = 1 s at 30 fps).
+    """
+
+    pose_size: int = 91
+    encoder_sizes: tuple[int, ...] = (256, 128)
+    gru_hidden: int = 256
+    gru_layers: int = 1
+    decoder_sizes: tuple[int, ...] = (256,)
+    negative_slope: float = 0.01
+    transition_length: int = 30
+
+    def __post_init__(self):
+        for name in ("pose_size", "gru_hidden", "gru_layers", "transition_length"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"QTGConfig.{name}: expected a positive integer, got {v!r}")
+        object.__setattr__(self, "encoder_sizes", tuple(int(s) for s in self.encoder_sizes))
+        object.__setattr__(self, "decoder_sizes", tuple(int(s) for s in self.decoder_sizes))
+        if len(self.encoder_sizes) < 1 or min(self.encoder_sizes) < 1:
+            raise ValueError(f"QTGConfig.encoder_sizes: expected at least one positive size, got {self.encoder_sizes}")
+        if self.decoder_sizes and min(self.decoder_sizes) < 1:
+            raise ValueError(f"QTGConfig.decoder_sizes: expected positive sizes, got {self.decoder_sizes}")
+        if not 0.0 <= float(self.negative_slope) < 1.0:
+            raise ValueError(f"QTGConfig.negative_slope: expected a value in [0, 1), got {self.negative_slope}")
+
+    @property
+    def latent_size(self) -> int:
+        """Z, the size of a latent pose (the encoder's last layer, the velocity head's output)."""
+        return self.encoder_sizes[-1]
+
+    @property
+    def gru_input_size(self) -> int:
+        """3 Z: latent velocity, offset to the target, target velocity."""
+        return 3 * self.latent_size
+
+    def to_dict(self) -> dict:
+        """Plain JSON-friendly dict (for checkpoint metadata); ``QTGConfig(**d)`` rebuilds it."""
+        return {"pose_size": self.pose_size, "encoder_sizes": list(self.encoder_sizes),
+                "gru_hidden": self.gru_hidden, "gru_layers": self.gru_layers,
+                "decoder_sizes": list(self.decoder_sizes), "negative_slope": float(self.negative_slope),
+                "transition_length": self.transition_length}
+
+
+def _mlp_sizes(config: QTGConfig, which: str) -> list[tuple[int, int]]:
+    if which == "enc":
+        sizes = (config.pose_size,) + config.encoder_sizes
+    else:
+        sizes = (config.latent_size,) + config.decoder_sizes + (config.pose_size,)
+    return list(zip(sizes[:-1], sizes[1:]))
+
+
+def param_shapes(config: QTGConfig) -> dict[str, tuple[int, ...]]:
+    """Name -> shape of every parameter (PyTorch layouts: ``weight (out, in)``, GRU blocks ``r|z|n``)."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    for which in ("enc", "dec"):
+        for i, (n_in, n_out) in enumerate(_mlp_sizes(config, which)):
+            shapes[f"{which}.{i}.weight"] = (n_out, n_in)
+            shapes[f"{which}.{i}.bias"] = (n_out,)
+    H = config.gru_hidden
+    for layer in range(config.gru_layers):
+        n_in = config.gru_input_size if layer == 0 else H
+        shapes[f"gru.weight_ih_l{layer}"] = (3 * H, n_in)
+        shapes[f"gru.weight_hh_l{layer}"] = (3 * H, H)
+        shapes[f"gru.bias_ih_l{layer}"] = (3 * H,)
+        shapes[f"gru.bias_hh_l{layer}"] = (3 * H,)
+    shapes["vel.weight"] = (config.latent_size, H)
+    shapes["vel.bias"] = (config.latent_size,)
+    return shapes
+
+
+def init_params(config: QTGConfig, rng: np.random.Generator, dtype=np.float64) -> dict[str, np.ndarray]:
+    """PyTorch-default initialisation of every layer (spec/qtg.md §2).
+
+    Dense layers ``U(±1/sqrt(in))``, GRU ``U(±1/sqrt(H))`` (``refimpl.nn`` initialisers).
+
+    Parameters
+    ----------
+    config : QTGConfig
+    rng : numpy.random.Generator
+    dtype : float32 or float64
+
+    Returns
+    -------
+    dict
+        Names ``enc.{i}.weight/bias``, ``gru.weight_ih_l{k}``…, ``vel.weight/bias``, ``dec.{i}.weight/bias``.
+    """
+    params: dict[str, np.ndarray] = {}
+    for i, (n_in, n_out) in enumerate(_mlp_sizes(config, "enc")):
+        params.update(linear_init(rng, n_in, n_out, f"enc.{i}", dtype=dtype))
+    params.update(gru_init(rng, config.gru_input_size, config.gru_hidden, config.gru_layers, "gru", dtype=dtype))
+    params.update(linear_init(rng, config.gru_hidden, config.latent_size, "vel", dtype=dtype))
+    for i, (n_in, n_out) in enumerate(_mlp_sizes(config, "dec")):
+        params.update(linear_init(rng, n_in, n_out, f"dec.{i}", dtype=dtype))
+    return params
+
+
+def count_parameters(config: QTGConfig) -> int:
+    """Number of scalar parameters of the network with ``config`` (638,811 for the defaults)."""
+    return int(sum(int(np.prod(s)) for s in param_shapes(config).values()))
+
+
+def macs_per_frame(config: QTGConfig = QTGConfig()) -> int:
+    """Multiply-accumulates of the dense and GRU matrix products per generated frame (spec/qtg.md §5).
+
+    One encoder pass (the fed-back pose), the GRU's input and recurrent products, the velocity head and the
+    decoder. The target encodings and ``E(p_{-1})`` are computed once per transition and not counted; biases and
+    element-wise operations (gates, activations, additions: about ``6 H + 4 Z + …`` per frame, < 1 %) are not
+    counted either. Defaults: 636,416.
+    """
+    macs = sum(i * o for i, o in _mlp_sizes(config, "enc")) + sum(i * o for i, o in _mlp_sizes(config, "dec"))
+    H = config.gru_hidden
+    for layer in range(config.gru_layers):
+        n_in = config.gru_input_size if layer == 0 else H
+        macs += 3 * H * (n_in + H)
+    macs += H * config.latent_size
+    return int(macs)
+
+
+def rtn_macs_per_frame(pose_size: int = 91, frame_encoder: tuple[int, ...] = (512, 512),
+                       offset_encoder: tuple[int, ...] = (128, 128), target_encoder: tuple[int, ...] = (128, 128),
+                       lstm_hidden: int = 512, decoder: tuple[int, ...] = (256, 128),
+                       count_target_encoder: bool = False) -> int:
+    """Multiply-accumulates per generated frame of the Recurrent Transition Network (Harvey & Pal 2018).
+
+    Sizes from the reference notes (dualquat_acrnn_qtg.md §3.3; a third-party re-implementation, unverified):
+    frame encoder ``P -> 512 -> 512``, offset encoder (target − current) ``P -> 128 -> 128``, target encoder
+    ``P -> 128 -> 128``, one LSTM of 512 on the concatenation (768 inputs), decoder ``512 -> 256 -> 128 -> P``.
+    The target encoding is constant over a transition and counted once per transition, i.e. not per frame,
+    unless ``count_target_encoder``. Defaults: 3,133,696 (3,161,728 with the target encoder).
+    """
+    def mlp(n_in, sizes):
+        dims = (n_in,) + tuple(sizes)
+        return sum(a * b for a, b in zip(dims[:-1], dims[1:]))
+
+    lstm_in = frame_encoder[-1] + offset_encoder[-1] + target_encoder[-1]
+    macs = mlp(pose_size, frame_encoder) + mlp(pose_size, offset_encoder)
+    macs += 4 * lstm_hidden * (lstm_in + lstm_hidden)
+    macs += mlp(lstm_hidden, tuple(decoder) + (pose_size,))
+    if count_target_encoder:
+        macs += mlp(pose_size, target_encoder)
+    return int(macs)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# building blocks: encoder and decoder MLPs
+# ----------------------------------------------------------------------------------------------------------------
+
+def _mlp_forward(x, params, prefix, n_layers, slope, last_linear):
+    """Dense layers ``{prefix}.0 … {prefix}.{n-1}``, LeakyReLU after each (except the last when ``last_linear``)."""
+    caches = []
+    for i in range(n_layers):
+        x, c_lin = linear_forward(x, params, f"{prefix}.{i}")
+        c_act = None
+        if not (last_linear and i == n_layers - 1):
+            x, c_act = leaky_relu_forward(x, slope)
+        caches.append((c_lin, c_act))
+    return x, caches
+
+
+def _mlp_backward(dy, caches, grads):
+    """Backward of :func:`_mlp_forward`; adds the parameter gradients into ``grads`` and returns ``dx``."""
+    for c_lin, c_act in reversed(caches):
+        if c_act is not None:
+            dy = leaky_relu_backward(dy, c_act)
+        dy, g = linear_backward(dy, c_lin)
+        _accumulate(grads, g)
+    return dy
+
+
+def _accumulate(total: dict, g: Mapping[str, np.ndarray]) -> None:
+    """``total[k] += g[k]`` (first occurrence copied), for parameters used at every step."""
+    for k, v in g.items():
+        if k in total:
+            total[k] += v
+        else:
+            total[k] = np.array(v, copy=True)
+
+
+def _encoder_forward(x, params, config):
+    return _mlp_forward(x, params, "enc", len(config.encoder_sizes), config.negative_slope, last_linear=False)
+
+
+def _decoder_forward(x, params, config):
+    return _mlp_forward(x, params, "dec", len(config.decoder_sizes) + 1, config.negative_slope, last_linear=True)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# public boundary checks
+# ----------------------------------------------------------------------------------------------------------------
+
+def _check_params(params: Mapping[str, np.ndarray], config: QTGConfig) -> np.dtype:
+    if not isinstance(config, QTGConfig):
+        raise ValueError(f"config: expected a QTGConfig, got {type(config).__name__}")
+    dtype = None
+    for name, shape in param_shapes(config).items():
+        if name not in params:
+            raise ValueError(f"params: missing parameter {name!r} (expected shape {shape})")
+        a = params[name]
+        if not isinstance(a, np.ndarray) or a.shape != shape:
+            raise ValueError(f"params[{name!r}]: expected shape {shape}, got {np.shape(a)}")
+        if dtype is None:
+            dtype = a.dtype
+        elif a.dtype != dtype:
+            raise ValueError(f"params[{name!r}]: expected dtype {dtype} like the other parameters, got {a.dtype}")
+    if dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
+        raise ValueError(f"params: expected float32 or float64 arrays, got {dtype}")
+    return dtype
+
+
+def _check_context(past, target, config: QTGConfig, dtype) -> tuple[np.ndarray, np.ndarray]:
+    P = config.pose_size
+    past = check_float_array(past, "past", (None, 2, P))
+    target = check_float_array(target, "target", (None, 2, P))
+    if past.shape[0] != target.shape[0]:
+        raise ValueError(f"target: expected batch size {past.shape[0]} like past, got shape {target.shape}")
+    for name, a in (("past", past), ("target", target)):
+        if a.dtype != dtype:
+            raise ValueError(f"{name}: expected dtype {dtype} (the parameters' dtype), got {a.dtype}")
+    return past, target
+
+
+def _check_length(T, config: QTGConfig) -> int:
+    T = config.transition_length if T is None else T
+    if not isinstance(T, (int, np.integer)) or T < 1:
+        raise ValueError(f"T: expected a positive integer number of frames, got {T!r}")
+    return int(T)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the step
+# ----------------------------------------------------------------------------------------------------------------
+
+class QTGState(NamedTuple):
+    """Recurrent state before generating frame ``t + 1``.
+
+    Attributes
+    ----------
+    latent_prev : ndarray (B, Z)
+        ``z_{t-1} = E(p_{t-1})``, the encoding of the second-latest pose.
+    pose : ndarray (B, P)
+        ``p_t``, the latest pose (given or generated), in the network's (normalised) pose space.
+    hidden : ndarray (L, B, H)
+        GRU state ``s_t`` (zeros at the start of a transition).
+    """
+
+    latent_prev: np.ndarray
+    pose: np.ndarray
+    hidden: np.ndarray
+
+
+def encode(params: Mapping[str, np.ndarray], poses, config: QTGConfig = QTGConfig()) -> np.ndarray:
+    """The pose encoder ``E`` (dense layers, LeakyReLU after each), over any leading axes.
+
+    Parameters
+    ----------
+    poses : ndarray (..., P)
+
+    Returns
+    -------
+    ndarray (..., Z)
+    """
+    dtype = _check_params(params, config)
+    poses = check_float_array(poses, "poses", (..., config.pose_size))
+    if poses.dtype != dtype:
+        raise ValueError(f"poses: expected dtype {dtype} (the parameters' dtype), got {poses.dtype}")
+    return _encoder_forward(poses, params, config)[0]
+
+
+def init_state(params: Mapping[str, np.ndarray], past, target,
+               config: QTGConfig = QTGConfig()) -> tuple[QTGState, np.ndarray]:
+    """Initial state and target encodings of a transition (spec/qtg.md §3).
+
+    Parameters
+    ----------
+    past : ndarray (B, 2, P)
+        ``p_{-1}, p_0``, the two poses before the transition (normalised pose space).
+    target : ndarray (B, 2, P)
+        ``g1 = p_{T+1}, g2 = p_{T+2}``, the two poses after it.
+
+    Returns
+    -------
+    state : QTGState
+        ``(E(p_{-1}), p_0, zeros (L, B, H))``.
+    target_latent : ndarray (B, 2, Z)
+        ``[E(g1), E(g2)]``, constant over the transition.
+    """
+    dtype = _check_params(params, config)
+    past, target = _check_context(past, target, config, dtype)
+    state, target_latent, _ = _init_forward(params, past, target, config)
+    return state, target_latent
+
+
+def _init_forward(params, past, target, config):
+    B = past.shape[0]
+    ctx = np.concatenate([past[:, :1], target], axis=1)  # (B, 3, P): p_{-1}, g1, g2
+    lat, c_enc = _encoder_forward(ctx, params, config)  # (B, 3, Z)
+    hidden = np.zeros((config.gru_layers, B, config.gru_hidden), dtype=past.dtype)  # (L, B, H)
+    state = QTGState(np.ascontiguousarray(lat[:, 0]), np.ascontiguousarray(past[:, 1]), hidden)
+    return state, np.ascontiguousarray(lat[:, 1:]), c_enc
+
+
+def _step_forward(params, state: QTGState, target_latent, config: QTGConfig):
+    """One QTG step with its cache: ``(p_{t+1}, new state, cache)`` (spec/qtg.md §3)."""
+    z, c_enc = _encoder_forward(state.pose, params, config)  # (B, Z)
+    e1 = target_latent[:, 0]  # (B, Z)
+    e2 = target_latent[:, 1]  # (B, Z)
+    x = np.concatenate([z - state.latent_prev, e1 - z, e2 - e1], axis=-1)  # (B, 3Z)
+    y, hidden, c_gru = gru_step_forward(x, state.hidden, params, "gru", num_layers=config.gru_layers)  # (B, H)
+    v, c_vel = linear_forward(y, params, "vel")  # (B, Z)
+    pose, c_dec = _decoder_forward(z + v, params, config)  # (B, P)
+    return pose, QTGState(z, pose, hidden), (c_enc, c_gru, c_vel, c_dec)
+
+
+def _step_backward(dpose_next, dlatent_out, dhidden_out, cache, grads):
+    """Backward of :func:`_step_forward`.
+
+    Parameters
+    ----------
+    dpose_next : ndarray (B, P)
+        Total cotangent of ``p_{t+1}`` (loss + its use as the next step's input pose).
+    dlatent_out : ndarray (B, Z) or None
+        Cotangent of the new state's ``latent_prev`` (= ``z_t``), from the next step.
+    dhidden_out : ndarray (L, B, H) or None
+        Cotangent of ``s_{t+1}``.
+    grads : dict
+        Parameter gradients, accumulated in place.
+
+    Returns
+    -------
+    dlatent_prev (B, Z), dpose (B, P), dhidden (L, B, H), dtarget_latent (B, 2, Z)
+    """
+    c_enc, c_gru, c_vel, c_dec = cache
+    dzf = _mlp_backward(dpose_next, c_dec, grads)  # (B, Z): d(z_t + v_t)
+    dy, g = linear_backward(dzf, c_vel)  # (B, H)
+    _accumulate(grads, g)
+    dx, dhidden, _ = gru_step_backward(dy, dhidden_out, c_gru, accumulate_into=grads)  # (B, 3Z), (L, B, H)
+    Z = dzf.shape[-1]
+    dx_vel, dx_off, dx_tgt = dx[:, :Z], dx[:, Z:2 * Z], dx[:, 2 * Z:]  # (B, Z) each
+    dz = dzf + dx_vel - dx_off  # (B, Z)
+    if dlatent_out is not None:
+        dz += dlatent_out
+    dtarget_latent = np.stack([dx_off - dx_tgt, dx_tgt], axis=1)  # (B, 2, Z)
+    dpose = _mlp_backward(dz, c_enc, grads)  # (B, P)
+    return -dx_vel, dpose, dhidden, dtarget_latent
+
+
+def step(params: Mapping[str, np.ndarray], state: QTGState, target_latent,
+         config: QTGConfig = QTGConfig()) -> tuple[np.ndarray, QTGState]:
+    """Generate one frame (spec/qtg.md §3); the function the ONNX exporter translates.
+
+    ``z_t = E(p_t)``; ``x_t = [z_t − z_{t−1} | e1 − z_t | e2 − e1]``; ``s_{t+1} = GRU(x_t, s_t)``;
+    ``p_{t+1} = D(z_t + W_v s_{t+1} + b_v)``.
+
+    Parameters
+    ----------
+    params : dict
+        From :func:`init_params` (float32 or float64).
+    state : QTGState
+        ``(latent_prev (B, Z), pose (B, P), hidden (L, B, H))``, from :func:`init_state` or the previous step.
+    target_latent : ndarray (B, 2, Z)
+        ``[E(g1), E(g2)]`` from :func:`init_state`.
+
+    Returns
+    -------
+    pose_next : ndarray (B, P)
+        ``p_{t+1}`` (normalised pose space; quaternions not normalised).
+    state : QTGState
+        ``(z_t, p_{t+1}, s_{t+1})``.
+    """
+    dtype = _check_params(params, config)
+    if not isinstance(state, tuple) or len(state) != 3:
+        raise ValueError(f"state: expected a QTGState (latent_prev, pose, hidden), got {type(state).__name__}")
+    Z, P, H, L = config.latent_size, config.pose_size, config.gru_hidden, config.gru_layers
+    lat, pose, hid = state
+    pose = check_float_array(pose, "state.pose", (None, P))
+    B = pose.shape[0]
+    lat = check_float_array(lat, "state.latent_prev", (B, Z))
+    hid = check_float_array(hid, "state.hidden", (L, B, H))
+    tl = check_float_array(target_latent, "target_latent", (B, 2, Z))
+    for name, a in (("state.latent_prev", lat), ("state.pose", pose), ("state.hidden", hid), ("target_latent", tl)):
+        if a.dtype != dtype:
+            raise ValueError(f"{name}: expected dtype {dtype} (the parameters' dtype), got {a.dtype}")
+    pose_next, new_state, _ = _step_forward(params, QTGState(lat, pose, hid), tl, config)
+    return pose_next, new_state
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# rollout: forward and backward
+# ----------------------------------------------------------------------------------------------------------------
+
+def rollout_forward(params: Mapping[str, np.ndarray], past, target, T: int | None = None,
+                    config: QTGConfig = QTGConfig()):
+    """Generate a whole transition, feeding each decoded pose back (spec/qtg.md §3).
+
+    Parameters
+    ----------
+    params : dict
+    past : ndarray (B, 2, P)
+        ``p_{-1}, p_0`` (normalised pose space: root translation z-normalised, quaternions raw).
+    target : ndarray (B, 2, P)
+        ``g1 = p_{T+1}, g2 = p_{T+2}``.
+    T : int, optional
+        Frames to generate (default ``config.transition_length``).
+    config : QTGConfig
+
+    Returns
+    -------
+    poses : ndarray (B, T, P)
+        ``p_1 … p_T``.
+    cache : dict
+        For :func:`rollout_backward`.
+    """
+    dtype = _check_params(params, config)
+    past, target = _check_context(past, target, config, dtype)
+    T = _check_length(T, config)
+    state, target_latent, c_init = _init_forward(params, past, target, config)
+    B = past.shape[0]
+    poses = np.empty((B, T, config.pose_size), dtype=dtype)  # (B, T, P)
+    step_caches = []
+    for t in range(T):
+        poses[:, t], state, c = _step_forward(params, state, target_latent, config)
+        step_caches.append(c)
+    return poses, {"init": c_init, "steps": step_caches, "config": config, "shape": (B, T, config.pose_size)}
+
+
+def rollout_backward(dposes, cache, *, input_grads: bool = False):
+    """Backpropagation through the whole rollout (reverse loop over the step caches; spec/qtg.md §4).
+
+    Parameters
+    ----------
+    dposes : ndarray (B, T, P)
+        Cotangent of the generated poses (e.g. from ``mae_loss_backward``).
+    cache : dict
+        From :func:`rollout_forward`.
+    input_grads : bool
+        Also return the gradients with respect to ``past`` and ``target``.
+
+    Returns
+    -------
+    grads : dict
+        One array per parameter, same names and shapes as the parameters.
+    dpast, dtarget : ndarray (B, 2, P)
+        Only when ``input_grads``.
+    """
+    shape = cache["shape"]
+    dposes = np.asarray(dposes)
+    if dposes.shape != shape:
+        raise ValueError(f"dposes: expected shape {shape}, got {dposes.shape}")
+    B, T, P = shape
+    grads: dict[str, np.ndarray] = {}
+    dpose_in = None  # cotangent of p_{t+1} from its use as step t+1's input pose
+    dlatent = None  # cotangent of z_t from its use as step t+1's latent_prev
+    dhidden = None
+    dtarget_latent = None
+    for t in range(T - 1, -1, -1):
+        dp = dposes[:, t] if dpose_in is None else dposes[:, t] + dpose_in  # (B, P)
+        dlatent, dpose_in, dhidden, dtl = _step_backward(dp, dlatent, dhidden, cache["steps"][t], grads)
+        dtarget_latent = dtl if dtarget_latent is None else dtarget_latent + dtl  # (B, 2, Z)
+    # init: latents of p_{-1}, g1, g2 came from one encoder call on (B, 3, P)
+    dctx_lat = np.concatenate([dlatent[:, None], dtarget_latent], axis=1)  # (B, 3, Z)
+    dctx = _mlp_backward(dctx_lat, cache["init"], grads)  # (B, 3, P)
+    if not input_grads:
+        return grads
+    dpast = np.stack([dctx[:, 0], dpose_in], axis=1)  # (B, 2, P)
+    return grads, dpast, np.ascontiguousarray(dctx[:, 1:])
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# lean inference path (no caches; pre-transposed contiguous weights)
+# ----------------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class QTGInference:
+    """Weights rearranged for fast inference by :func:`prepare_inference` (read-only arrays; spec/qtg.md §6).
+
+    * ``enc``, ``dec``: tuples of ``(W^T (in, out), b (out,))``; ``dec[0]``'s bias is ``b_v W_d0^T + b_d0``
+      (the velocity bias folded in: ``z + W_v s + b_v`` enters ``dec.0`` linearly); ``velT`` is ``W_v^T``.
+    * ``gru_z``: ``[(W1 − W2)^T | W1^T]`` ``(Z, 6H)``, where ``W_ih = [W1 | W2 | W3]`` are the column blocks of
+      the first GRU layer's input weight acting on the three parts of ``x_t``; ``gru_tail``: ``(W2^T, W3^T)``
+      for the constant target term; ``b_ih0``: ``b_ih`` with the ``r, z`` parts of ``b_hh`` added.
+    * ``gru_hhT``: ``W_hh^T (H, 3H)`` per layer; ``b_hn``: the ``n`` part of ``b_hh`` per layer; ``upper``:
+      ``(W_ih^T, b_ih + b_hh[r, z])`` of layers 1 … L−1.
+    * Every ``r, z`` gate column (weights and biases) is multiplied by ½ (exact in binary floating point), so
+      that ``σ(a) = ½ + ½ tanh(a/2)`` is one ``tanh`` of the product and two in-place scalings.
+    """
+
+    config: QTGConfig
+    enc: tuple
+    dec: tuple
+    gru_z: np.ndarray
+    gru_tail: tuple
+    b_ih0: np.ndarray
+    b_hn: tuple
+    gru_hhT: tuple
+    upper: tuple
+    velT: np.ndarray
+
+
+def prepare_inference(params: Mapping[str, np.ndarray], config: QTGConfig = QTGConfig()) -> QTGInference:
+    """Rearrange ``params`` for :func:`rollout_inference` (transposed, contiguous, same dtype).
+
+    Uses the identity ``W_ih x_t = (W1 − W2) z_t − W1 z_{t−1} + [W2 e1 + W3 (e2 − e1)]`` (spec/qtg.md §6):
+    one product of ``z_t`` per step gives both this step's ``(W1 − W2) z_t`` and the next step's ``W1 z_t``.
+    """
+    _check_params(params, config)
+
+    def c(a):
+        a = np.ascontiguousarray(a)
+        a.setflags(write=False)
+        return a
+
+    def half_rz(a):  # a (..., 3H) with gate blocks r | z | n along the last axis: halve r and z
+        a = np.array(a, copy=True)
+        a[..., :2 * H] *= 0.5
+        return a
+
+    def mlp(prefix, n):
+        return tuple((c(params[f"{prefix}.{i}.weight"].T), c(params[f"{prefix}.{i}.bias"])) for i in range(n))
+
+    Z, H = config.latent_size, config.gru_hidden
+    w_ih = params["gru.weight_ih_l0"]  # (3H, 3Z)
+    w1, w2, w3 = w_ih[:, :Z], w_ih[:, Z:2 * Z], w_ih[:, 2 * Z:]
+    b_hns, hhT, upper = [], [], []
+    b_ih0 = None
+    for layer in range(config.gru_layers):
+        b_ih = params[f"gru.bias_ih_l{layer}"].copy()
+        b_hh = params[f"gru.bias_hh_l{layer}"]
+        b_ih[:2 * H] += b_hh[:2 * H]
+        b_hns.append(c(b_hh[2 * H:]))
+        hhT.append(c(half_rz(params[f"gru.weight_hh_l{layer}"].T)))
+        if layer == 0:
+            b_ih0 = c(half_rz(b_ih))
+        else:
+            upper.append((c(half_rz(params[f"gru.weight_ih_l{layer}"].T)), c(half_rz(b_ih))))
+    return QTGInference(
+        config=config,
+        enc=mlp("enc", len(config.encoder_sizes)),
+        dec=((c(params["dec.0.weight"].T),  # the velocity bias is folded into the first decoder bias
+              c(params["vel.bias"] @ params["dec.0.weight"].T + params["dec.0.bias"])),)
+            + mlp("dec", len(config.decoder_sizes) + 1)[1:],
+        gru_z=c(np.concatenate([half_rz((w1 - w2).T), half_rz(w1.T)], axis=1)),  # (Z, 6H)
+        gru_tail=(c(half_rz(w2.T)), c(half_rz(w3.T))),
+        b_ih0=b_ih0, b_hn=tuple(b_hns), gru_hhT=tuple(hhT), upper=tuple(upper),
+        velT=c(params["vel.weight"].T))
+
+
+def rollout_inference(model: QTGInference, past, target, T: int | None = None) -> np.ndarray:
+    """Same result as :func:`rollout_forward` (up to rounding), without caches, for deployment and benchmarks.
+
+    Parameters
+    ----------
+    model : QTGInference
+        From :func:`prepare_inference`.
+    past, target : ndarray (B, 2, P)
+        Same dtype as the model's weights.
+    T : int, optional
+
+    Returns
+    -------
+    poses : ndarray (B, T, P)
+
+    Notes
+    -----
+    Per step: the encoder, one product ``z_t [(W1 − W2)ᵀ | W1ᵀ]``, ``s_t W_hhᵀ``, the gates in place, the
+    velocity head and the decoder (spec/qtg.md §6); about 30 NumPy calls, no allocation of caches.
+    """
+    if not isinstance(model, QTGInference):
+        raise ValueError(f"model: expected a QTGInference from prepare_inference, got {type(model).__name__}")
+    config = model.config
+    dtype = model.velT.dtype
+    past, target = _check_context(past, target, config, dtype)
+    T = _check_length(T, config)
+    s = dtype.type(config.negative_slope)
+    half = dtype.type(0.5)
+    B, H, L = past.shape[0], config.gru_hidden, config.gru_layers
+    H2, H3 = 2 * H, 3 * H
+    enc, dec, upper = model.enc, model.dec, model.upper
+    gru_z, hhT, b_hn = model.gru_z, model.gru_hhT, model.b_hn
+    velT = model.velT
+    matmul, maximum, multiply, add, subtract, tanh = np.matmul, np.maximum, np.multiply, np.add, np.subtract, np.tanh
+
+    def encode_(x):
+        for wT, b in enc:
+            x = matmul(x, wT)
+            add(x, b, out=x)
+            maximum(x, multiply(x, s), out=x)  # LeakyReLU, 0 <= slope < 1
+        return x
+
+    ctx = encode_(np.concatenate([past[:, 0], target[:, 0], target[:, 1]], axis=0))  # (3B, Z)
+    z_prev, e1, e2 = ctx[:B], ctx[B:2 * B], ctx[2 * B:]
+    w2T, w3T = model.gru_tail
+    const = e1 @ w2T  # (B, 3H): W2 e1 + W3 (e2 − e1) + b_ih (+ b_hr, b_hz)
+    const += (e2 - e1) @ w3T
+    const += model.b_ih0
+    w1z_prev = z_prev @ gru_z[:, H3:]  # (B, 3H)
+    hidden = [np.zeros((B, H), dtype=dtype) for _ in range(L)]
+    pose = np.ascontiguousarray(past[:, 1])  # (B, P)
+    out = np.empty((T, B, config.pose_size), dtype=dtype)  # time-major: each frame is written in place
+    last = len(dec) - 1
+    for t in range(T):
+        z = encode_(pose)  # (B, Z)
+        zz = matmul(z, gru_z)  # (B, 6H)
+        gi = subtract(zz[:, :H3], w1z_prev)  # (B, 3H)
+        add(gi, const, out=gi)
+        w1z_prev = zz[:, H3:]
+        for layer in range(L):
+            if layer:
+                wT, b = upper[layer - 1]
+                gi = matmul(h, wT)
+                add(gi, b, out=gi)
+            h = hidden[layer]
+            gh = matmul(h, hhT[layer])  # (B, 3H)
+            rz = gi[:, :H2]
+            add(rz, gh[:, :H2], out=rz)  # half the r, u pre-activations (weights pre-scaled)
+            tanh(rz, out=rz)
+            multiply(rz, half, out=rz)
+            add(rz, half, out=rz)  # r | u = σ(pre-activation) = ½ + ½ tanh(pre-activation / 2)
+            n = gh[:, H2:]
+            add(n, b_hn[layer], out=n)
+            multiply(n, rz[:, :H], out=n)
+            add(n, gi[:, H2:], out=n)
+            tanh(n, out=n)
+            h = subtract(h, n)
+            multiply(h, rz[:, H:], out=h)
+            add(h, n, out=h)  # (1 − u) n + u h
+            hidden[layer] = h
+        a = matmul(h, velT)
+        add(a, z, out=a)  # z_t + v_t − b_v (b_v is in dec[0]'s bias)
+        for i, (wT, b) in enumerate(dec):
+            if i < last:
+                a = matmul(a, wT)
+                add(a, b, out=a)
+                maximum(a, multiply(a, s), out=a)
+            else:
+                pose = matmul(a, wT, out=out[t])  # (B, P)
+                add(pose, b, out=pose)
+    return np.ascontiguousarray(out.transpose(1, 0, 2))  # (B, T, P)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# slow oracle
+# ----------------------------------------------------------------------------------------------------------------
+
+def _rollout_naive(params, past, target, T, config: QTGConfig = QTGConfig()) -> np.ndarray:
+    """Per-sample, per-gate loop version of :func:`rollout_forward` written from the equations (test oracle)."""
+    def lrelu(a):
+        return np.where(a > 0, a, config.negative_slope * a)
+
+    def enc(p):
+        for i in range(len(config.encoder_sizes)):
+            p = lrelu(params[f"enc.{i}.weight"] @ p + params[f"enc.{i}.bias"])
+        return p
+
+    def dec(z):
+        n = len(config.decoder_sizes) + 1
+        for i in range(n):
+            z = params[f"dec.{i}.weight"] @ z + params[f"dec.{i}.bias"]
+            if i < n - 1:
+                z = lrelu(z)
+        return z
+
+    def sig(a):
+        return 1.0 / (1.0 + np.exp(-a))
+
+    H = config.gru_hidden
+    B = past.shape[0]
+    out = np.zeros((B, T, config.pose_size), dtype=np.float64)
+    for b in range(B):
+        z_prev, pose = enc(past[b, 0]), past[b, 1]
+        e1, e2 = enc(target[b, 0]), enc(target[b, 1])
+        s = [np.zeros(H) for _ in range(config.gru_layers)]
+        for t in range(T):
+            z = enc(pose)
+            x = np.concatenate([z - z_prev, e1 - z, e2 - e1])
+            for k in range(config.gru_layers):
+                wi, wh = params[f"gru.weight_ih_l{k}"], params[f"gru.weight_hh_l{k}"]
+                bi, bh = params[f"gru.bias_ih_l{k}"], params[f"gru.bias_hh_l{k}"]
+                r = sig(wi[:H] @ x + bi[:H] + wh[:H] @ s[k] + bh[:H])
+                u = sig(wi[H:2 * H] @ x + bi[H:2 * H] + wh[H:2 * H] @ s[k] + bh[H:2 * H])
+                n = np.tanh(wi[2 * H:] @ x + bi[2 * H:] + r * (wh[2 * H:] @ s[k] + bh[2 * H:]))
+                s[k] = (1 - u) * n + u * s[k]
+                x = s[k]
+            v = params["vel.weight"] @ s[-1] + params["vel.bias"]
+            pose = dec(z + v)
+            out[b, t] = pose
+            z_prev = z
+    return out

@@ -1,0 +1,566 @@
+"""A generic training loop: Adam, clipping, LR decay, logging, atomic checkpoints, exact resume (spec/qtg.md §10).
+
+A model plugs in through a :class:`ModelAdapter` (plain callables, no subclassing):
+
+* ``init_params(rng) -> dict`` — initial parameters (the trainer's Generator, so runs are reproducible);
+* ``get_batch(indices, ctx) -> batch`` — the training examples ``indices`` (N,), plus any randomness
+  (augmentation, scheduled-sampling masks) drawn from ``ctx.rng`` and any schedule read from
+  ``ctx.epoch``/``ctx.step``;
+* ``loss_and_grads(params, batch) -> (loss, grads)`` — a Python float and one gradient per parameter;
+* ``validate(params) -> dict`` (optional) — metrics logged every ``validate_every`` steps.
+
+Batches: one ``numpy.random.Generator`` (PCG64, ``seed``) initialises the parameters, then draws a permutation
+of the ``num_examples`` training examples at the start of every epoch; an epoch is ``max(1, N // batch_size)``
+consecutive slices of it (the remainder is dropped). The same Generator is handed to ``get_batch``.
+
+Checkpoints (``refimpl.checkpoint``: atomic ``.npz``, no pickle, checksum) hold the parameters
+(``param.<name>``), the Adam state (``optim.<key>``), the current permutation, and as metadata the step,
+epoch, position in the epoch, the Generator state, the schedule state (current learning rate), both configs
+and the adapter's config. Resuming restores all of it, so ``k`` steps + resume + ``N − k`` steps gives
+bit-for-bit the parameters of ``N`` steps in one go (tested).
+
+Failure handling: a NaN/inf loss or gradient raises :class:`TrainingDiverged` before the parameters change,
+and the last checkpoint on disk is left as it was. ``KeyboardInterrupt`` (Ctrl-C, or raised by a callback)
+ends the run at a step boundary: the state after the last completed step is checkpointed and the result is
+returned with ``interrupted=True``.
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import math
+import os
+import signal
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from refimpl.checkpoint import load_checkpoint, rng_from_json, rng_state_to_json, save_checkpoint
+from refimpl.optim import adam_init, adam_step, clip_grad_norm, exponential_lr
+
+__all__ = [
+    "ModelAdapter", "OptimConfig", "TrainConfig", "TrainContext", "StepInfo", "TrainResult", "TrainingDiverged",
+    "train", "format_duration", "qtg_adapter", "train_qtg",
+]
+
+_FORMAT = "refimpl.train/1"
+_LOG_FIELDS = ("step", "epoch", "loss", "grad_norm", "lr", "elapsed_s")
+
+
+class TrainingDiverged(RuntimeError):
+    """A non-finite loss or gradient; the parameters were not updated and no checkpoint was written."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelAdapter:
+    """How the trainer talks to a model (see the module docstring).
+
+    Attributes
+    ----------
+    name : str
+        Stored in checkpoints; resuming a checkpoint of another model raises ValueError.
+    num_examples : int
+        Size of the training set the indices refer to.
+    init_params : callable ``rng -> dict``
+    get_batch : callable ``(indices (B,), ctx: TrainContext) -> batch``
+    loss_and_grads : callable ``(params, batch) -> (float, dict)``
+    validate : callable ``params -> dict[str, float]``, optional
+    config : dict
+        JSON-friendly description of the model (stored in checkpoints, compared on resume).
+    """
+
+    name: str
+    num_examples: int
+    init_params: Callable[[np.random.Generator], dict]
+    get_batch: Callable[[np.ndarray, "TrainContext"], Any]
+    loss_and_grads: Callable[[dict, Any], tuple]
+    validate: Callable[[dict], Mapping[str, float]] | None = None
+    config: Mapping = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass(frozen=True)
+class OptimConfig:
+    """Adam with optional global-norm clipping and per-epoch exponential LR decay.
+
+    ``lr_epoch = lr · lr_decay^epoch`` (:func:`refimpl.optim.exponential_lr`). Defaults: QTG's Adam
+    (lr 1e-4, β = (0.5, 0.9)), no clipping, no decay.
+    """
+
+    lr: float = 1e-4
+    betas: tuple[float, float] = (0.5, 0.9)
+    eps: float = 1e-8
+    weight_decay: float = 0.0
+    clip_norm: float | None = None
+    lr_decay: float = 1.0
+
+    def to_dict(self) -> dict:
+        return {"lr": self.lr, "betas": list(self.betas), "eps": self.eps, "weight_decay": self.weight_decay,
+                "clip_norm": self.clip_norm, "lr_decay": self.lr_decay}
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Run settings.
+
+    Attributes
+    ----------
+    steps : int
+        Total optimiser steps of the run (a resumed run continues up to this number).
+    batch_size : int
+    seed : int
+        Seed of the run's Generator (initialisation, shuffling, ``ctx.rng``).
+    checkpoint_path : str, optional
+        ``.npz`` file rewritten atomically every ``checkpoint_every`` steps and at the end.
+    checkpoint_every : int
+    log_path : str, optional
+        CSV file with one row per ``log_every_csv`` steps (``step, epoch, loss, grad_norm, lr, elapsed_s``);
+        validation metrics go to ``<stem>_val.csv``.
+    log_every_csv : int
+    progress_every : int
+        Steps between progress lines (rate and ETA).
+    validate_every : int, optional
+    """
+
+    steps: int
+    batch_size: int = 32
+    seed: int = 0
+    checkpoint_path: str | None = None
+    checkpoint_every: int = 1000
+    log_path: str | None = None
+    log_every_csv: int = 1
+    progress_every: int = 100
+    validate_every: int | None = None
+
+    def __post_init__(self):
+        for name in ("steps", "batch_size", "checkpoint_every", "log_every_csv", "progress_every"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < (0 if name == "steps" else 1):
+                raise ValueError(f"TrainConfig.{name}: expected a positive integer, got {v!r}")
+        if self.validate_every is not None and (not isinstance(self.validate_every, int) or self.validate_every < 1):
+            raise ValueError(f"TrainConfig.validate_every: expected a positive integer or None, "
+                             f"got {self.validate_every!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainContext:
+    """What ``get_batch`` may use: the run's Generator and the schedule position of the coming step."""
+
+    rng: np.random.Generator
+    step: int
+    epoch: int
+
+
+@dataclasses.dataclass(frozen=True)
+class StepInfo:
+    """Passed to the per-step callback after each completed step (``step`` = steps done so far)."""
+
+    step: int
+    epoch: int
+    loss: float
+    grad_norm: float
+    lr: float
+    elapsed_s: float
+    params: Mapping[str, np.ndarray]
+
+
+@dataclasses.dataclass
+class TrainResult:
+    """Outcome of :func:`train`."""
+
+    params: dict
+    optim_state: dict
+    step: int
+    epoch: int
+    losses: list
+    interrupted: bool
+    elapsed_s: float
+    checkpoint_path: str | None
+    validation: list
+
+
+def format_duration(seconds: float) -> str:
+    """``3723.4 -> '1h02m03s'``; ``42.0 -> '42s'``."""
+    if not math.isfinite(seconds):
+        return "?"
+    s = int(round(seconds))
+    h, rem = divmod(s, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}h{m:02d}m{s:02d}s" if h else (f"{m}m{s:02d}s" if m else f"{s}s")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# state <-> checkpoint
+# ----------------------------------------------------------------------------------------------------------------
+
+def _save(path, params, opt_state, perm, meta) -> None:
+    arrays = {f"param.{k}": v for k, v in params.items()}
+    arrays.update({f"optim.{k}": np.asarray(v) for k, v in opt_state.items()})
+    arrays["sampler.perm"] = perm
+    save_checkpoint(path, arrays, meta)
+
+
+def _load(path):
+    arrays, meta = load_checkpoint(path)
+    if meta.get("format") != _FORMAT:
+        raise ValueError(f"checkpoint {path}: expected format {_FORMAT!r}, got {meta.get('format')!r}")
+    params = {k[len("param."):]: np.array(v) for k, v in arrays.items() if k.startswith("param.")}
+    opt = {k[len("optim."):]: np.array(v) for k, v in arrays.items() if k.startswith("optim.")}
+    return params, opt, np.array(arrays["sampler.perm"]), meta
+
+
+def _truncate_csv(path: Path, max_step: int) -> None:
+    """Keep the header and the rows with ``step <= max_step`` (after a resume), rewritten atomically."""
+    if not path.is_file():
+        return
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        return
+    keep = [rows[0]] + [r for r in rows[1:] if r and int(r[0]) <= max_step]
+    buf = io.StringIO()
+    csv.writer(buf).writerows(keep)
+    _atomic_write_text(path, buf.getvalue())
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=str(path.parent), prefix=path.name + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+class _CsvLog:
+    def __init__(self, path: Path | None, fields):
+        self.path, self.fields, self.file, self.writer = path, list(fields) if fields else None, None, None
+
+    def write(self, row: Mapping) -> None:
+        if self.path is None:
+            return
+        if self.file is None:
+            new = not self.path.is_file() or self.path.stat().st_size == 0
+            if self.fields is None:
+                self.fields = list(row)
+            self.file = open(self.path, "a", newline="")
+            self.writer = csv.writer(self.file)
+            if new:
+                self.writer.writerow(self.fields)
+        self.writer.writerow([_fmt(row.get(k)) for k in self.fields])
+        self.file.flush()
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return repr(v)
+    return "" if v is None else str(v)
+
+
+class _DeferSigint:
+    """Turn Ctrl-C into a flag checked at step boundaries (main thread only); a second Ctrl-C raises at once."""
+
+    def __init__(self):
+        self.requested = False
+        self.old = None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self.old = signal.getsignal(signal.SIGINT)
+
+            def handler(signum, frame):
+                if self.requested:
+                    raise KeyboardInterrupt
+                self.requested = True
+
+            signal.signal(signal.SIGINT, handler)
+        return self
+
+    def __exit__(self, *exc):
+        if self.old is not None:
+            signal.signal(signal.SIGINT, self.old)
+        return False
+
+
+def _default_progress(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the loop
+# ----------------------------------------------------------------------------------------------------------------
+
+def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, resume: bool = True,
+          callback: Callable[[StepInfo], None] | None = None,
+          progress: Callable[[str], None] | None = _default_progress) -> TrainResult:
+    """Train ``adapter``'s model with Adam (spec/qtg.md §10).
+
+    Parameters
+    ----------
+    adapter : ModelAdapter
+    optim : OptimConfig
+    config : TrainConfig
+    resume : bool
+        When ``config.checkpoint_path`` exists, continue from it (same model, optimiser and batch settings
+        required); otherwise start fresh. With ``resume=False`` an existing checkpoint is overwritten.
+    callback : callable, optional
+        Called with a :class:`StepInfo` after every completed step; may raise ``KeyboardInterrupt`` to stop.
+    progress : callable, optional
+        Receives the progress lines (step, loss, it/s, ETA); default: print to stderr; None: silent.
+
+    Returns
+    -------
+    TrainResult
+
+    Raises
+    ------
+    TrainingDiverged
+        On a NaN/inf loss or gradient (parameters unchanged, checkpoint on disk untouched).
+    ValueError
+        Bad configuration, or a checkpoint that does not match the adapter/optimiser/batch settings.
+    """
+    if not isinstance(adapter, ModelAdapter):
+        raise ValueError(f"adapter: expected a ModelAdapter, got {type(adapter).__name__}")
+    if not isinstance(optim, OptimConfig) or not isinstance(config, TrainConfig):
+        raise ValueError("optim, config: expected an OptimConfig and a TrainConfig")
+    N = int(adapter.num_examples)
+    if N < 1:
+        raise ValueError(f"adapter.num_examples: expected at least 1 example, got {N}")
+    B = min(config.batch_size, N)
+    per_epoch = max(1, N // B)
+    ckpt = Path(config.checkpoint_path) if config.checkpoint_path else None
+    identity = {"model": adapter.name, "model_config": _jsonable(adapter.config), "optim": optim.to_dict(),
+                "batch_size": config.batch_size, "num_examples": N}
+
+    if ckpt is not None and resume and ckpt.is_file():
+        params, opt_state, perm, meta = _load(ckpt)
+        for key, value in identity.items():
+            if _jsonable(meta.get(key)) != _jsonable(value):
+                raise ValueError(f"checkpoint {ckpt}: {key} {meta.get(key)!r} does not match this run's {value!r}")
+        step, epoch, pos = int(meta["step"]), int(meta["epoch"]), int(meta["position"])
+        rng = rng_from_json(meta["rng_state"])
+        elapsed0 = float(meta.get("elapsed_s", 0.0))
+    else:
+        rng = np.random.Generator(np.random.PCG64(config.seed))
+        params = {k: np.array(v) for k, v in adapter.init_params(rng).items()}
+        opt_state = adam_init(params)
+        perm = np.arange(N)
+        step, epoch, pos, elapsed0 = 0, 0, 0, 0.0
+
+    log = _CsvLog(Path(config.log_path) if config.log_path else None, _LOG_FIELDS)
+    val_log = _CsvLog(None if config.log_path is None else
+                      Path(config.log_path).with_name(Path(config.log_path).stem + "_val.csv"), None)
+    for lg in (log, val_log):
+        if lg.path is not None:
+            lg.path.parent.mkdir(parents=True, exist_ok=True)
+            _truncate_csv(lg.path, step)
+
+    def meta_now():
+        return dict(identity, format=_FORMAT, step=step, epoch=epoch, position=pos,
+                    rng_state=rng_state_to_json(rng), lr=exponential_lr(optim.lr, optim.lr_decay, epoch),
+                    steps_target=config.steps, elapsed_s=elapsed0 + (time.perf_counter() - t0),
+                    train_config=dataclasses.asdict(config))
+
+    def checkpoint():
+        if ckpt is not None:
+            ckpt.parent.mkdir(parents=True, exist_ok=True)
+            _save(ckpt, params, opt_state, perm, meta_now())
+
+    losses, validation = [], []
+    interrupted = False
+    t0 = time.perf_counter()
+    t_rate, step_rate = t0, step
+    start_step = step
+    try:
+        with _DeferSigint() as sigint:
+            while step < config.steps:
+                rng_snapshot = rng.bit_generator.state
+                try:
+                    if pos == 0:
+                        perm = rng.permutation(N)
+                    idx = perm[pos * B:(pos + 1) * B]
+                    batch = adapter.get_batch(idx, TrainContext(rng=rng, step=step, epoch=epoch))
+                    loss, grads = adapter.loss_and_grads(params, batch)
+                except KeyboardInterrupt:
+                    rng.bit_generator.state = rng_snapshot  # nothing of this step is kept
+                    interrupted = True
+                    break
+                loss = float(loss)
+                if not math.isfinite(loss):
+                    rng.bit_generator.state = rng_snapshot
+                    raise TrainingDiverged(f"{adapter.name}: loss is {loss} at step {step + 1} (epoch {epoch}); "
+                                           f"parameters left at step {step}"
+                                           + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
+                for k, g in grads.items():
+                    if not np.all(np.isfinite(g)):
+                        rng.bit_generator.state = rng_snapshot
+                        raise TrainingDiverged(f"{adapter.name}: gradient of {k!r} is not finite at step {step + 1} "
+                                               f"(epoch {epoch}); parameters left at step {step}"
+                                               + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
+                lr = exponential_lr(optim.lr, optim.lr_decay, epoch)
+                if optim.clip_norm is not None:
+                    gnorm = clip_grad_norm(grads, optim.clip_norm)
+                else:
+                    gnorm = math.sqrt(math.fsum(float(np.vdot(g, g)) for g in grads.values()))
+                adam_step(params, grads, opt_state, lr, betas=optim.betas, eps=optim.eps,
+                          weight_decay=optim.weight_decay)
+                step += 1
+                pos += 1
+                if pos == per_epoch:
+                    pos, epoch = 0, epoch + 1
+                losses.append(loss)
+                try:  # the step is complete: an interrupt from here on keeps it
+                    elapsed = elapsed0 + time.perf_counter() - t0
+                    if step % config.log_every_csv == 0 or step == config.steps:
+                        log.write({"step": step, "epoch": epoch, "loss": loss, "grad_norm": gnorm, "lr": lr,
+                                   "elapsed_s": round(elapsed, 3)})
+                    if adapter.validate is not None and config.validate_every and step % config.validate_every == 0:
+                        metrics = {k: float(v) for k, v in adapter.validate(params).items()}
+                        validation.append(dict(step=step, **metrics))
+                        val_log.write(dict(step=step, **metrics))
+                    if progress is not None and (step % config.progress_every == 0 or step == config.steps):
+                        now = time.perf_counter()
+                        rate = (step - step_rate) / max(now - t_rate, 1e-9)
+                        t_rate, step_rate = now, step
+                        eta = (config.steps - step) / rate if rate > 0 else math.inf
+                        val = "" if not validation or validation[-1]["step"] != step else " | " + " ".join(
+                            f"{k} {v:.4g}" for k, v in validation[-1].items() if k != "step")
+                        progress(f"[{adapter.name}] step {step}/{config.steps} epoch {epoch} loss {loss:.5g} "
+                                 f"lr {lr:.3g} | {rate:.1f} it/s | elapsed {format_duration(elapsed)} "
+                                 f"ETA {format_duration(eta)}{val}")
+                    if ckpt is not None and step % config.checkpoint_every == 0:
+                        checkpoint()
+                    if callback is not None:
+                        callback(StepInfo(step=step, epoch=epoch, loss=loss, grad_norm=gnorm, lr=lr,
+                                          elapsed_s=elapsed, params=params))
+                except KeyboardInterrupt:
+                    interrupted = True
+                    break
+                if sigint.requested:
+                    interrupted = True
+                    break
+    finally:
+        log.close()
+        val_log.close()
+    checkpoint()
+    if interrupted and progress is not None:
+        progress(f"[{adapter.name}] interrupted after step {step}; checkpoint "
+                 f"{ckpt if ckpt is not None else '(none: no checkpoint_path)'}")
+    return TrainResult(params=params, optim_state=opt_state, step=step, epoch=epoch, losses=losses,
+                       interrupted=interrupted, elapsed_s=elapsed0 + time.perf_counter() - t0,
+                       checkpoint_path=None if ckpt is None else str(ckpt), validation=validation)
+
+
+def _jsonable(x):
+    """Tuples -> lists, numpy scalars -> Python numbers (for comparing configs with JSON metadata)."""
+    if isinstance(x, Mapping):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# QTG
+# ----------------------------------------------------------------------------------------------------------------
+
+def qtg_adapter(train_poses, config=None, dtype=np.float32, validation_poses=None, name: str = "qtg") -> ModelAdapter:
+    """A :class:`ModelAdapter` for QTG on normalised windows (spec/qtg.md §10.2).
+
+    Parameters
+    ----------
+    train_poses : ndarray (N, 2 + T + 2, P)
+        NORMALISED windows (``TransitionDataset.normalized()``).
+    config : QTGConfig, optional
+    dtype : float32 or float64
+        Training dtype (parameters and batches).
+    validation_poses : ndarray (M, 2 + T + 2, P), optional
+        Normalised windows; ``validate`` returns their MAE (``val_mae``).
+
+    Notes
+    -----
+    Loss: ``mean |p_pred − p_gt|`` over the B·T·P values of the generated transition (MAE, paper), in the
+    normalised pose space.
+    """
+    from refimpl.losses import mae_loss_backward, mae_loss_forward
+    from refimpl.models.qtg import QTGConfig, init_params, rollout_backward, rollout_forward
+
+    config = QTGConfig() if config is None else config
+    poses = np.ascontiguousarray(train_poses, dtype=dtype)
+    if poses.ndim != 3 or poses.shape[1] < 5 or poses.shape[2] != config.pose_size:
+        raise ValueError(f"train_poses: expected shape (N, 2 + T + 2, {config.pose_size}), got {poses.shape}")
+    T = poses.shape[1] - 4
+
+    def get_batch(idx, ctx):
+        return poses[idx]  # (B, W, P)
+
+    def loss_and_grads(params, batch):
+        pred, cache = rollout_forward(params, batch[:, :2], batch[:, -2:], T, config)
+        loss, lcache = mae_loss_forward(pred, batch[:, 2:-2])
+        return loss, rollout_backward(mae_loss_backward(1.0, lcache), cache)
+
+    validate = None
+    if validation_poses is not None:
+        vposes = np.ascontiguousarray(validation_poses, dtype=dtype)
+
+        def validate(params):
+            total = 0.0
+            for i in range(0, len(vposes), 512):
+                b = vposes[i:i + 512]
+                pred, _ = rollout_forward(params, b[:, :2], b[:, -2:], T, config)
+                total += float(np.abs(pred - b[:, 2:-2]).astype(np.float64).sum())
+            return {"val_mae": total / vposes[:, 2:-2].size}
+
+    return ModelAdapter(name=name, num_examples=len(poses),
+                        init_params=lambda rng: init_params(config, rng, dtype=dtype),
+                        get_batch=get_batch, loss_and_grads=loss_and_grads, validate=validate,
+                        config=dict(config.to_dict(), dtype=np.dtype(dtype).name, transition_length=T))
+
+
+def train_qtg(train_data, steps: int, *, config=None, optim: OptimConfig = OptimConfig(), batch_size: int = 32,
+              seed: int = 0, dtype=np.float32, checkpoint_path: str | None = None, checkpoint_every: int = 1000,
+              log_path: str | None = None, validation_data=None, validate_every: int | None = None,
+              progress: Callable[[str], None] | None = _default_progress, resume: bool = True,
+              callback: Callable[[StepInfo], None] | None = None) -> TrainResult:
+    """Train QTG on a :class:`refimpl.transitions.TransitionDataset` (paper: MAE, Adam 1e-4, β = (0.5, 0.9),
+    batch 32).
+
+    Parameters
+    ----------
+    train_data : TransitionDataset
+        Its ``normalized()`` windows are the training examples.
+    steps : int
+    validation_data : TransitionDataset, optional
+        Normalised with ``train_data``'s statistics; its MAE is logged every ``validate_every`` steps.
+    Other parameters as :class:`TrainConfig` / :func:`train`.
+
+    Returns
+    -------
+    TrainResult
+    """
+    from refimpl.transitions import normalize_poses
+
+    vposes = None
+    if validation_data is not None:
+        vposes = normalize_poses(validation_data.poses, train_data.root_mean, train_data.root_std)
+    adapter = qtg_adapter(train_data.normalized(), config=config, dtype=dtype, validation_poses=vposes)
+    tc = TrainConfig(steps=steps, batch_size=batch_size, seed=seed, checkpoint_path=checkpoint_path,
+                     checkpoint_every=checkpoint_every, log_path=log_path, validate_every=validate_every)
+    return train(adapter, optim, tc, resume=resume, callback=callback, progress=progress)
