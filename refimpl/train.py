@@ -198,6 +198,10 @@ def format_duration(seconds: float) -> str:
 # state <-> checkpoint
 # ----------------------------------------------------------------------------------------------------------------
 
+#: Metadata every training checkpoint carries (checked on resume).
+_META_KEYS = ("step", "epoch", "position", "rng_state")
+
+
 def _save(path, params, opt_state, perm, meta) -> None:
     arrays = {f"param.{k}": v for k, v in params.items()}
     arrays.update({f"optim.{k}": np.asarray(v) for k, v in opt_state.items()})
@@ -209,6 +213,9 @@ def _load(path):
     arrays, meta = load_checkpoint(path)
     if meta.get("format") != _FORMAT:
         raise ValueError(f"checkpoint {path}: expected format {_FORMAT!r}, got {meta.get('format')!r}")
+    missing = [k for k in _META_KEYS if k not in meta] + [k for k in ("sampler.perm",) if k not in arrays]
+    if missing:
+        raise ValueError(f"checkpoint {path}: not a complete training state, missing {missing}")
     params = {k[len("param."):]: np.array(v) for k, v in arrays.items() if k.startswith("param.")}
     opt = {k[len("optim."):]: np.array(v) for k, v in arrays.items() if k.startswith("optim.")}
     return params, opt, np.array(arrays["sampler.perm"]), meta

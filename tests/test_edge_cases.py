@@ -747,10 +747,6 @@ def _tampered_checkpoint(tmp_path, edit):
     return ckpt
 
 
-@pytest.mark.xfail(strict=True, raises=KeyError,
-                   reason="refimpl/train.py train(resume=True): a checksummed checkpoint whose "
-                          "metadata lacks 'step'/'position' or whose arrays lack 'sampler.perm' "
-                          "raises KeyError (meta['step'], arrays['sampler.perm']), not ValueError")
 @pytest.mark.parametrize("what", ["no-step", "no-perm"])
 def test_training_resume_refuses_incomplete_checkpoint(tmp_path, what):
     """spec/robustness.md §5: a well-formed checkpoint missing trainer state is refused with ValueError."""

@@ -80,8 +80,7 @@ PROFILES = [
                     "rng": lambda: np.random.default_rng(0), "skeleton": lambda: _skeleton(),
                     "joints": lambda: [2]}),
     ("nn-linear", {"x": lambda: _rng.standard_normal((2, 3, 4)), "params": lambda: _nn_params("linear"),
-                   "prefix": lambda: "fc", "a": lambda: _rng.standard_normal((3, 4)),
-                   "w": lambda: _rng.standard_normal((5, 4))}),
+                   "prefix": lambda: "fc"}),
     ("nn-conv", {"x": lambda: _rng.standard_normal((2, 6, 4)), "params": lambda: _nn_params("conv"),
                  "prefix": lambda: "conv"}),
     ("nn-gru", {"x": lambda: _rng.standard_normal((2, 3, 4)), "x_t": lambda: _rng.standard_normal((2, 4)),
@@ -143,7 +142,7 @@ NOT_PROBED = {
 }
 
 # (function name, argument) whose last axis may have any size (the last-axis probe does not apply)
-_ELEMENTWISE = ("relu_forward", "leaky_relu_forward", "tanh_forward", "sigmoid_forward", "sigmoid")
+_ELEMENTWISE = ("relu_forward", "leaky_relu_forward", "tanh_forward", "sigmoid_forward")
 LAST_AXIS_FREE = {("windows", "array"), ("feature_statistics", "frames"), ("normalize_features", "frames"),
                   ("denormalize_features", "frames")} | {(f, "x") for f in _ELEMENTWISE}
 # (function name, argument) for which a 0-d value is valid (elementwise functions)
@@ -233,30 +232,13 @@ def _array_args(kwargs):
     return [k for k, v in kwargs.items() if k not in _NON_ARRAY and isinstance(v, np.ndarray)]
 
 
-_KERNEL_BUG = ("refimpl/nn/linear.py matmul_wt and refimpl/nn/activations.py sigmoid are public (__all__) but "
-               "unchecked performance kernels: NaN/inf, strings and wrong shapes are not refused with a ValueError "
-               "naming the argument (make them private, or validate)")
-_RNN_SIZE_BUG = ("refimpl/nn/gru.py, refimpl/nn/lstm.py: an input x/x_t (or h0/h) with the wrong feature size is "
-                 "reported as a wrong parameter shape (\"params['rnn.weight_ih_l0']: expected shape (15, 6), got "
-                 "(15, 4)\"): the message names params, not the argument, and not its actual shape")
-_GRAD_NAN_BUG = ("B13: the backward functions of refimpl/nn/linear.py, activations.py, conv1d.py, gru.py and "
-                 "lstm.py check the upstream gradient's shape but not its finiteness: a NaN/inf dy propagates "
-                 "(the quaternion/kinematics layers refuse it since B8 was fixed)")
-_GRAD_NAN_MODULES = ("refimpl.nn.linear", "refimpl.nn.activations", "refimpl.nn.conv1d", "refimpl.nn.gru",
-                     "refimpl.nn.lstm")
 # (qualified name, argument or "*", probe) -> reason: known gaps in other modules (strict xfail).
 # Fixed since (the tests now guard them): B7 0-d pred/target in quat/dq_pos/dq_offset losses (IndexError),
 # B8 NaN/inf upstream gradients in the quaternion/kinematics layers, B9 array dvalue (TypeError), B10
-# normalize_features/denormalize_features without finiteness/dtype checks (spec/robustness.md §7).
-KNOWN = {
-    **{(q, a, probe): _KERNEL_BUG
-       for q, a in (("refimpl.nn.linear.matmul_wt", "a"), ("refimpl.nn.linear.matmul_wt", "w"),
-                    ("refimpl.nn.activations.sigmoid", "x"))
-       for probe in ("last", "finite", "ndim", "dtype")},
-    **{(f"refimpl.nn.{q}", a, "last"): _RNN_SIZE_BUG
-       for q, a in (("gru.gru_forward", "x"), ("gru.gru_forward", "h0"), ("gru.gru_step_forward", "x_t"),
-                    ("gru.gru_step_forward", "h"), ("lstm.lstm_forward", "x"), ("lstm.lstm_step_forward", "x_t"))},
-}
+# normalize_features/denormalize_features without finiteness/dtype checks, B11 a wrong x/h0 feature size in the
+# GRU/LSTM reported as a parameter shape, B12 the unchecked kernels matmul_wt/sigmoid in __all__ (now private),
+# B13 NaN/inf upstream gradients in the linear, activation, conv1d, GRU and LSTM backwards (spec/robustness.md §7).
+KNOWN: dict = {}
 
 
 def _probe_ids(probe):
@@ -360,7 +342,7 @@ def test_non_numeric_dtype(qual, arg):
 # --------------------------------------------------------------------------------------------------------------
 
 def _backward_cases(probe):
-    """(forward qualname, backward) pairs; the NaN probe is a strict xfail for the modules of B13."""
+    """(forward qualname, backward) pairs."""
     out = []
     for modname in CORE_MODULES:
         funcs = dict(_public_functions(modname))
@@ -371,9 +353,7 @@ def _backward_cases(probe):
             qual = f"{modname}.{fwd_name}"
             if not any(q == qual for q, _, _ in CASES):
                 continue
-            known = probe == "nan" and modname in _GRAD_NAN_MODULES
-            marks = [pytest.mark.xfail(strict=True, reason=_GRAD_NAN_BUG)] if known else []
-            out.append(pytest.param(qual, bwd, id=f"{modname}.{name}", marks=marks))
+            out.append(pytest.param(qual, bwd, id=f"{modname}.{name}"))
     return out
 
 

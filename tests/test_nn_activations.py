@@ -1,6 +1,7 @@
 """Tests of refimpl.nn.activations (spec/layers.md §3)."""
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -10,7 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from refimpl.gradcheck import check_gradients, check_vjp
-from refimpl.nn.activations import (leaky_relu_backward, leaky_relu_forward, relu_backward, relu_forward, sigmoid,
+from refimpl.nn.activations import (_sigmoid, leaky_relu_backward, leaky_relu_forward, relu_backward, relu_forward,
                                     sigmoid_backward, sigmoid_forward, tanh_backward, tanh_forward)
 from refimpl.testing import TOL_EXACT, assert_close
 
@@ -74,25 +75,26 @@ def test_rectifier_derivative_at_zero_is_left_derivative():
 
 
 def test_sigmoid_extremes_without_warnings():
-    """spec/layers.md §3: sigmoid saturates to exactly 0 / 1 without overflow warnings, float32 and float64."""
+    """spec/layers.md §3: the kernel _sigmoid saturates to exactly 0 / 1 without overflow warnings, float32 and
+    float64."""
     for dt in (np.float32, np.float64):
         x = np.array([-1e4, -100.0, 0.0, 100.0, 1e4], dtype=dt)
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            y = sigmoid(x)
+            y = _sigmoid(x)
         assert y.dtype == dt
         assert y[0] == 0 and y[-1] == 1 and y[2] == 0.5
         assert np.all(np.isfinite(y))
 
 
 def test_sigmoid_in_place_and_accuracy():
-    """spec/layers.md §3: ``sigmoid(x, out=x)``; relative accuracy everywhere, including the tails, against an
+    """spec/layers.md §3: ``_sigmoid(x, out=x)``; relative accuracy everywhere, including the tails, against an
     extended-precision evaluation."""
     x = np.linspace(-700, 30, 2001)
     xl = x.astype(np.longdouble)
     expect = (1 / (1 + np.exp(-xl))).astype(np.float64)
     y = x.copy()
-    assert sigmoid(y, out=y) is y
+    assert _sigmoid(y, out=y) is y
     assert_close(y, expect, rtol=2e-15, atol=0.0)
 
 
@@ -103,3 +105,23 @@ def test_activations_reject_non_finite_and_non_float():
             fwd(np.array([0.0, np.nan]))
         with pytest.raises(ValueError, match="x: expected a float32 or float64"):
             fwd(np.array([1, 2]))
+
+
+@pytest.mark.parametrize("name", sorted(LAYERS))
+def test_backward_refuses_bad_upstream_gradient(name):
+    """spec/layers.md §3, spec/robustness.md B13: dy with NaN/inf, of the wrong shape (even a broadcastable one)
+    or not float → ValueError naming dy."""
+    fwd, bwd = LAYERS[name]
+    y, cache = fwd(np.linspace(-1, 1, 6).reshape(2, 3))
+    for bad in (np.nan, np.inf, -np.inf):
+        dy = np.ones((2, 3))
+        dy[1, 2] = bad
+        with pytest.raises(ValueError, match=r"^dy: expected finite"):
+            bwd(dy, cache)
+    for shape in ((2, 4), (3,), (1, 3), ()):
+        with pytest.raises(ValueError, match=rf"^dy: expected shape \(2, 3\), got {re.escape(str(shape))}"):
+            bwd(np.ones(shape), cache)
+    with pytest.raises(ValueError, match=r"^dy: expected a float32 or float64 array"):
+        bwd(np.ones((2, 3), int), cache)
+    y0, cache0 = fwd(np.float64(0.5))  # 0-d input: 0-d dy
+    assert np.shape(bwd(np.float64(2.0), cache0)) == ()

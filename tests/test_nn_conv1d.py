@@ -123,3 +123,8 @@ def test_rejects_bad_input():
     _, cache = conv1d_causal_forward(x, params, "conv")
     with pytest.raises(ValueError, match=r"dy: expected shape \(2, 5, 4\)"):
         conv1d_causal_backward(gy[:, :4], cache)
+    for bad in (np.nan, np.inf, -np.inf):  # spec/robustness.md B13
+        dy = gy.copy()
+        dy[1, 3, 2] = bad
+        with pytest.raises(ValueError, match=r"^dy: expected finite"):
+            conv1d_causal_backward(dy, cache)

@@ -253,10 +253,12 @@ def test_init_names_shapes_and_count():
 def test_rejects_bad_input():
     """spec/architecture.md: ValueError naming the argument and the expected and actual shape / dtype."""
     params, x, h0, _, _ = _case(1, 2, 3, 4, 5, 2, False)
-    with pytest.raises(ValueError, match=r"h0: expected shape \(2, 2, \*\), got \(1, 2, 5\)"):
+    with pytest.raises(ValueError, match=r"h0: expected shape \(2, 2, 5\), got \(1, 2, 5\)"):
         gru_forward(x, h0[:1], params, "rnn", 2)
-    with pytest.raises(ValueError, match=r"weight_ih_l0'\]: expected shape \(15, 3\), got \(15, 4\)"):
-        gru_forward(x[:, :, :3], h0, params, "rnn", 2)
+    with pytest.raises(ValueError, match=r"weight_ih_l1'\]: expected shape \(15, 5\), got \(15, 4\)"):
+        gru_forward(x, h0, {**params, "rnn.weight_ih_l1": np.zeros((15, 4))}, "rnn", 2)
+    with pytest.raises(ValueError, match=r"weight_hh_l0'\]: expected shape \(3H, H\) = \(12, 4\), got \(15, 4\)"):
+        gru_forward(x, h0, {**params, "rnn.weight_hh_l0": np.zeros((15, 4))}, "rnn", 2)
     with pytest.raises(ValueError, match="missing parameter 'rnn.weight_ih_l2'"):
         gru_forward(x, np.zeros((3, 2, 5)), params, "rnn", 3)
     with pytest.raises(ValueError, match="missing parameter 'rnn.weight_ih_l0_reverse'"):
@@ -271,8 +273,59 @@ def test_rejects_bad_input():
         gru_forward(x[:, :0], h0, params, "rnn", 2)
     with pytest.raises(ValueError, match="num_layers"):
         gru_forward(x, h0, params, "rnn", 0)
-    with pytest.raises(ValueError, match=r"x_t: expected shape \(\*, \*\), got \(2, 3, 4\)"):
+    with pytest.raises(ValueError, match=r"x_t: expected shape \(\*, 4\), got \(2, 3, 4\)"):
         gru_step_forward(x, h0, params, "rnn", 2)
     _, _, cache = gru_forward(x, h0, params, "rnn", 2)
     with pytest.raises(ValueError, match=r"dy: expected shape \(2, 3, 5\)"):
         gru_backward(np.zeros((2, 3, 4)), None, cache)
+
+
+@pytest.mark.parametrize("step", [False, True])
+def test_wrong_input_size_names_the_input(step):
+    """spec/layers.md §4.5, spec/robustness.md B11: an input or state with the wrong feature size is reported on
+    that argument (expected and actual shape, and where I / H come from), not as a wrong parameter shape."""
+    params, x, h0, _, _ = _case(2, 2, 3, 4, 5, 2, False)
+    fwd = gru_step_forward if step else gru_forward
+    xn, hn = ("x_t", "h") if step else ("x", "h0")
+    x = x[:, 0] if step else x
+    lead = r"\(\*, " if step else r"\(\*, \*, "
+    with pytest.raises(ValueError, match=rf"^{xn}: expected shape {lead}4\), got \({'2, ' if step else '2, 3, '}5\); "
+                                         r"I = 4 from params\['rnn.weight_ih_l0'\]"):
+        fwd(np.concatenate([x, x[..., :1]], axis=-1), h0, params, "rnn", 2)
+    with pytest.raises(ValueError, match=rf"^{xn}: expected shape {lead}4\), got \({'2, ' if step else '2, 3, '}3\)"):
+        fwd(x[..., :3], h0, params, "rnn", 2)
+    with pytest.raises(ValueError, match=rf"^{hn}: expected shape \(2, 2, 5\), got \(2, 2, 6\); .*"
+                                         r"H = 5 from params\['rnn.weight_hh_l0'\]"):
+        fwd(x, np.concatenate([h0, h0[..., :1]], axis=-1), params, "rnn", 2)
+    with pytest.raises(ValueError, match=rf"^{hn}: expected shape \(2, 2, 5\), got \(2, 3, 5\)"):
+        fwd(x, np.concatenate([h0, h0[:, :1]], axis=1), params, "rnn", 2)
+    with pytest.raises(ValueError, match=rf"^{hn}: expected finite"):
+        fwd(x, np.full_like(h0, np.inf), params, "rnn", 2)
+
+
+def test_backwards_refuse_non_finite_cotangents():
+    """spec/layers.md §4.5, spec/robustness.md B13: NaN/inf in dy, dh_n (sequence) or dy, dh_new (step) →
+    ValueError naming the argument; a cotangent of the wrong shape too."""
+    params, x, h0, gy, gh = _case(3, 2, 3, 4, 5, 2, False)
+    _, _, cache = gru_forward(x, h0, params, "rnn", 2)
+    _, _, step_cache = gru_step_forward(x[:, 0], h0, params, "rnn", 2)
+    for bad in (np.nan, np.inf, -np.inf):
+        dy, dh = gy.copy(), gh.copy()
+        dy[1, 2, 3] = bad
+        dh[1, 0, 4] = bad
+        with pytest.raises(ValueError, match=r"^dy: expected finite"):
+            gru_backward(dy, gh, cache)
+        with pytest.raises(ValueError, match=r"^dh_n: expected finite"):
+            gru_backward(gy, dh, cache)
+        with pytest.raises(ValueError, match=r"^dh_n: expected finite"):
+            gru_backward(None, dh, cache)
+        with pytest.raises(ValueError, match=r"^dy: expected finite"):
+            gru_step_backward(dy[:, 2], gh, step_cache)
+        with pytest.raises(ValueError, match=r"^dh_new: expected finite"):
+            gru_step_backward(gy[:, 0], dh, step_cache)
+    with pytest.raises(ValueError, match=r"^dh_new: expected shape \(2, 2, 5\), got \(1, 2, 5\)"):
+        gru_step_backward(None, gh[:1], step_cache)
+    with pytest.raises(ValueError, match=r"^dy: expected shape \(2, 5\), got \(2, 4\)"):
+        gru_step_backward(gy[:, 0, :4], None, step_cache)
+    with pytest.raises(ValueError, match=r"^dy: expected a float32 or float64 array"):
+        gru_backward(gy.astype(int), None, cache)

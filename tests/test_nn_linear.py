@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from conftest import load_golden
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
-from refimpl.nn.linear import linear_backward, linear_forward, linear_init, matmul_wt
+from refimpl.nn.linear import _matmul_wt, linear_backward, linear_forward, linear_init
 from refimpl.nn.params import merge_grads
 from refimpl.testing import TOL_EXACT, TOL_GOLDEN, assert_close
 
@@ -86,13 +86,13 @@ def test_linear_init_shapes_and_bound():
     assert set(linear_init(np.random.default_rng(3), 2, 2, "fc", bias=False)) == {"fc.weight"}
 
 
-def test_matmul_wt():
-    """spec/layers.md §2: the kernel x @ W^T that reads W in its stored layout."""
+def test_matmul_wt_kernel():
+    """spec/layers.md §2: the internal kernel x @ W^T that reads W in its stored layout."""
     rng = np.random.default_rng(4)
     a, w = rng.standard_normal((6, 5)), rng.standard_normal((3, 5))
-    assert_close(matmul_wt(a, w), a @ w.T, **TOL_EXACT)
+    assert_close(_matmul_wt(a, w), a @ w.T, **TOL_EXACT)
     out = np.empty((6, 3))
-    assert matmul_wt(a, w, out=out) is out and out.flags.c_contiguous
+    assert _matmul_wt(a, w, out=out) is out and out.flags.c_contiguous
     assert_close(out, a @ w.T, **TOL_EXACT)
 
 
@@ -109,3 +109,21 @@ def test_linear_rejects_bad_input():
         linear_forward(np.full((2, 4), np.inf), params, "fc")
     with pytest.raises(ValueError, match="missing parameter 'fc.bias'"):
         linear_forward(np.zeros((2, 4)), {"fc.weight": params["fc.weight"]}, "fc")
+
+
+def test_linear_backward_refuses_bad_upstream_gradient():
+    """spec/layers.md §2, spec/robustness.md B13: dy with NaN/inf, of the wrong shape (even one with the right
+    number of entries) or not float → ValueError naming dy."""
+    params = linear_init(np.random.default_rng(6), 4, 3, "fc")
+    _, cache = linear_forward(np.ones((2, 5, 4)), params, "fc")
+    for bad in (np.nan, np.inf, -np.inf):
+        dy = np.ones((2, 5, 3))
+        dy[1, 4, 2] = bad
+        with pytest.raises(ValueError, match=r"^dy: expected finite"):
+            linear_backward(dy, cache)
+    with pytest.raises(ValueError, match=r"^dy: expected shape \(2, 5, 3\), got \(10, 3\)"):
+        linear_backward(np.ones((10, 3)), cache)
+    with pytest.raises(ValueError, match=r"^dy: expected shape \(2, 5, 3\), got \(2, 5, 4\)"):
+        linear_backward(np.ones((2, 5, 4)), cache)
+    with pytest.raises(ValueError, match=r"^dy: expected a float32 or float64 array"):
+        linear_backward(np.ones((2, 5, 3), int), cache)

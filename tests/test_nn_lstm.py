@@ -260,15 +260,19 @@ def test_init_names_shapes_and_count():
 def test_rejects_bad_input():
     """spec/architecture.md: ValueError naming the argument and the expected and actual shape / dtype."""
     params, x, (h0, c0), _, _ = _case(1, 2, 3, 4, 5, 2)
-    with pytest.raises(ValueError, match=r"state\[1\] \(c\): expected shape \(2, 2, 5\), got \(1, 2, 5\)"):
+    with pytest.raises(ValueError, match=r"state\[1\] \(c0\): expected shape \(2, 2, 5\), got \(1, 2, 5\)"):
         lstm_forward(x, (h0, c0[:1]), params, "lstm", 2)
     with pytest.raises(ValueError, match="state: expected a tuple"):
         lstm_forward(x, h0, params, "lstm", 2)
-    with pytest.raises(ValueError, match=r"weight_ih_l0'\]: expected shape \(20, 3\), got \(20, 4\)"):
-        lstm_forward(x[:, :, :3], (h0, c0), params, "lstm", 2)
+    with pytest.raises(ValueError, match=r"weight_ih_l1'\]: expected shape \(20, 5\), got \(20, 4\)"):
+        lstm_forward(x, (h0, c0), {**params, "lstm.weight_ih_l1": np.zeros((20, 4))}, "lstm", 2)
+    with pytest.raises(ValueError, match=r"weight_hh_l0'\]: expected shape \(4H, H\) = \(16, 4\), got \(20, 4\)"):
+        lstm_forward(x, (h0, c0), {**params, "lstm.weight_hh_l0": np.zeros((20, 4))}, "lstm", 2)
+    with pytest.raises(ValueError, match=r"lstm.weight_hh_l0'\]: expected dtype float32 \(the dtype of x\)"):
+        lstm_forward(x.astype(np.float32), (h0.astype(np.float32), c0.astype(np.float32)), params, "lstm", 2)
     with pytest.raises(ValueError, match="missing parameter 'lstm.weight_ih_l2'"):
         lstm_forward(x, (np.zeros((3, 2, 5)), np.zeros((3, 2, 5))), params, "lstm", 3)
-    with pytest.raises(ValueError, match=r"state\[0\] \(h\): expected dtype float64"):
+    with pytest.raises(ValueError, match=r"state\[0\] \(h0\): expected dtype float64"):
         lstm_forward(x, (h0.astype(np.float32), c0), params, "lstm", 2)
     with pytest.raises(ValueError, match="x: expected finite"):
         lstm_forward(np.full_like(x, np.inf), (h0, c0), params, "lstm", 2)
@@ -277,3 +281,56 @@ def test_rejects_bad_input():
     _, _, cache = lstm_forward(x, (h0, c0), params, "lstm", 2)
     with pytest.raises(ValueError, match=r"dstate_n\[0\] \(dh_n\): expected shape \(2, 2, 5\)"):
         lstm_backward(None, (np.zeros((1, 2, 5)), None), cache)
+
+
+@pytest.mark.parametrize("step", [False, True])
+def test_wrong_input_size_names_the_input(step):
+    """spec/layers.md §5.5, spec/robustness.md B11: an input or state entry with the wrong feature size is reported
+    on that argument (expected and actual shape, and where I / H come from), not as a wrong parameter shape."""
+    params, x, (h0, c0), _, _ = _case(2, 2, 3, 4, 5, 2)
+    fwd = lstm_step_forward if step else lstm_forward
+    xn, hn, cn = ("x_t", "h", "c") if step else ("x", "h0", "c0")
+    x = x[:, 0] if step else x
+    lead, got = (r"\(\*, ", "2, ") if step else (r"\(\*, \*, ", "2, 3, ")
+    with pytest.raises(ValueError, match=rf"^{xn}: expected shape {lead}4\), got \({got}5\); "
+                                         r"I = 4 from params\['lstm.weight_ih_l0'\]"):
+        fwd(np.concatenate([x, x[..., :1]], axis=-1), (h0, c0), params, "lstm", 2)
+    with pytest.raises(ValueError, match=rf"^{xn}: expected shape {lead}4\), got \({got}3\)"):
+        fwd(x[..., :3], (h0, c0), params, "lstm", 2)
+    wide = lambda a: np.concatenate([a, a[..., :1]], axis=-1)  # noqa: E731
+    with pytest.raises(ValueError, match=rf"^state\[0\] \({hn}\): expected shape \(2, 2, 5\), got \(2, 2, 6\); "
+                                         r".*H = 5 from params\['lstm.weight_hh_l0'\]"):
+        fwd(x, (wide(h0), c0), params, "lstm", 2)
+    with pytest.raises(ValueError, match=rf"^state\[1\] \({cn}\): expected shape \(2, 2, 5\), got \(2, 2, 6\)"):
+        fwd(x, (h0, wide(c0)), params, "lstm", 2)
+    with pytest.raises(ValueError, match=rf"^state\[0\] \({hn}\): expected shape \(2, 2, 5\), got \(1, 2, 5\)"):
+        fwd(x, (h0[:1], c0[:1]), params, "lstm", 2)
+    with pytest.raises(ValueError, match=rf"^state\[1\] \({cn}\): expected finite"):
+        fwd(x, (h0, np.full_like(c0, np.nan)), params, "lstm", 2)
+
+
+def test_backwards_refuse_non_finite_cotangents():
+    """spec/layers.md §5.5, spec/robustness.md B13: NaN/inf in dy, dh_n, dc_n (sequence) or dy, dh_new, dc_new
+    (step) → ValueError naming the argument."""
+    params, x, (h0, c0), gy, (gh, gc) = _case(3, 2, 3, 4, 5, 2)
+    _, _, cache = lstm_forward(x, (h0, c0), params, "lstm", 2)
+    _, _, step_cache = lstm_step_forward(x[:, 0], (h0, c0), params, "lstm", 2)
+    for bad in (np.nan, np.inf, -np.inf):
+        dy, dh, dc = gy.copy(), gh.copy(), gc.copy()
+        dy[0, 1, 2] = bad
+        dh[1, 1, 0] = bad
+        dc[0, 0, 4] = bad
+        with pytest.raises(ValueError, match=r"^dy: expected finite"):
+            lstm_backward(dy, (gh, gc), cache)
+        with pytest.raises(ValueError, match=r"^dstate_n\[0\] \(dh_n\): expected finite"):
+            lstm_backward(gy, (dh, gc), cache)
+        with pytest.raises(ValueError, match=r"^dstate_n\[1\] \(dc_n\): expected finite"):
+            lstm_backward(None, (None, dc), cache)
+        with pytest.raises(ValueError, match=r"^dy: expected finite"):
+            lstm_step_backward(dy[:, 1], (gh, gc), step_cache)
+        with pytest.raises(ValueError, match=r"^dstate_new\[0\] \(dh_new\): expected finite"):
+            lstm_step_backward(gy[:, 0], (dh, None), step_cache)
+        with pytest.raises(ValueError, match=r"^dstate_new\[1\] \(dc_new\): expected finite"):
+            lstm_step_backward(None, (gh, dc), step_cache)
+    with pytest.raises(ValueError, match=r"^dy: expected shape \(2, 5\), got \(2, 4\)"):
+        lstm_step_backward(gy[:, 0, :4], None, step_cache)

@@ -96,6 +96,11 @@ def test_check_float_array_shapes_dtypes_and_finiteness():
     with pytest.raises(ValueError, match="x: expected finite"):
         check_float_array(bad, "x", (None, 3, 4))
     check_float_array(bad, "x", (None, 3, 4), finite=False)
+    with pytest.raises(ValueError, match=r"^x: expected shape \(\*, 5, 4\), got \(2, 3, 4\); I = 5 from here$"):
+        check_float_array(x, "x", (None, 5, 4), context="I = 5 from here")
+    assert check_float_array(np.float64(np.inf), "x", (), finite=False).shape == ()
+    with pytest.raises(ValueError, match="x: expected finite"):
+        check_float_array(np.float64(np.inf), "x", ())
 
 
 def test_get_param_and_check_same_dtype():

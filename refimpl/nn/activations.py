@@ -15,6 +15,10 @@ sigmoid        y = 1 / (1 + exp(-x))                   dx = dy * y * (1 - y)
 
 At ``x == 0`` the rectifiers take the left derivative (``slope``, resp. 0), as PyTorch does.
 QuaterNet's control block uses ``slope = 0.05``; PyTorch's default (``nn.LeakyReLU()``) is 0.01.
+
+Checks (spec/layers.md §3): every ``*_forward`` validates ``x`` (float32/float64, finite; any shape, 0-d
+included); every ``*_backward`` validates ``dy`` (float32/float64, the shape of the forward's output, finite) and
+raises ``ValueError`` naming it. :func:`_sigmoid` is the unchecked kernel used inside the recurrent cells.
 """
 from __future__ import annotations
 
@@ -24,12 +28,12 @@ from refimpl.nn.params import check_float_array
 
 __all__ = [
     "leaky_relu_forward", "leaky_relu_backward", "relu_forward", "relu_backward",
-    "tanh_forward", "tanh_backward", "sigmoid_forward", "sigmoid_backward", "sigmoid",
+    "tanh_forward", "tanh_backward", "sigmoid_forward", "sigmoid_backward",
 ]
 
 
-def sigmoid(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Logistic function ``1 / (1 + exp(-x))``, elementwise, without overflow warnings.
+def _sigmoid(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Internal kernel (no checks): the logistic function ``1 / (1 + exp(-x))``, elementwise, without overflow warnings.
 
     Parameters
     ----------
@@ -69,9 +73,15 @@ def leaky_relu_forward(x: np.ndarray, slope: float = 0.01):
     return y, (mask, slope)
 
 
+def _check_dy(dy, shape: tuple) -> np.ndarray:
+    """The upstream gradient of an activation: a finite float array of the forward output's ``shape``."""
+    return check_float_array(dy, "dy", shape)
+
+
 def leaky_relu_backward(dy: np.ndarray, cache) -> np.ndarray:
-    """``dx = dy (x > 0), slope * dy (x <= 0)``."""
+    """``dx = dy (x > 0), slope * dy (x <= 0)``; ``dy`` of ``y``'s shape, finite (else ``ValueError``)."""
     mask, slope = cache
+    dy = _check_dy(dy, mask.shape)
     return np.where(mask, dy, dy * dy.dtype.type(slope))
 
 
@@ -83,7 +93,8 @@ def relu_forward(x: np.ndarray):
 
 
 def relu_backward(dy: np.ndarray, cache) -> np.ndarray:
-    """``dx = dy`` where ``x > 0``, else 0."""
+    """``dx = dy`` where ``x > 0``, else 0; ``dy`` of ``y``'s shape, finite (else ``ValueError``)."""
+    dy = _check_dy(dy, cache.shape)
     return np.where(cache, dy, dy.dtype.type(0))
 
 
@@ -95,19 +106,21 @@ def tanh_forward(x: np.ndarray):
 
 
 def tanh_backward(dy: np.ndarray, cache) -> np.ndarray:
-    """``dx = dy * (1 - y^2)``."""
+    """``dx = dy * (1 - y^2)``; ``dy`` of ``y``'s shape, finite (else ``ValueError``)."""
     y = cache
+    dy = _check_dy(dy, y.shape)
     return dy * (1 - y * y)
 
 
 def sigmoid_forward(x: np.ndarray):
     """``y = 1 / (1 + exp(-x))``; returns ``y, cache`` (cache: ``y``)."""
     x = check_float_array(x, "x", (...,))
-    y = sigmoid(x)
+    y = _sigmoid(x, out=np.empty_like(x))  # an array out: also a 0-d x gives a 0-d array, not a scalar
     return y, y
 
 
 def sigmoid_backward(dy: np.ndarray, cache) -> np.ndarray:
-    """``dx = dy * y * (1 - y)``."""
+    """``dx = dy * y * (1 - y)``; ``dy`` of ``y``'s shape, finite (else ``ValueError``)."""
     y = cache
+    dy = _check_dy(dy, y.shape)
     return dy * y * (1 - y)

@@ -17,6 +17,9 @@ Implementation: the K shifted copies of the padded input are laid side by side i
 ``W_col[k*C_in + c, o] = weight[o, c, k]``, and the whole convolution is ONE GEMM ``X_col @ W_col``; the
 backward is two GEMMs (``dW_col = X_col^T dy``, ``dX_col = dy W_col^T``) and a K-term shifted sum.
 ``_conv1d_causal_forward_naive`` / ``_conv1d_causal_backward_naive`` are per-(b, t, k) loops (the oracles).
+
+Checks (spec/layers.md §6): the forward validates ``x`` (dtype, shape, finite), ``dilation`` and the parameters
+(shape, dtype; not their values); the backward validates ``dy`` (dtype, shape ``(B, T, C_out)``, finite).
 """
 from __future__ import annotations
 
@@ -95,7 +98,7 @@ def conv1d_causal_backward(dy: np.ndarray, cache):
 
     Parameters
     ----------
-    dy : ndarray (B, T, C_out)
+    dy : ndarray (B, T, C_out), float32 or float64, finite
     cache : tuple
         From :func:`conv1d_causal_forward`.
 
@@ -104,9 +107,14 @@ def conv1d_causal_backward(dy: np.ndarray, cache):
     dx : ndarray (B, T, C_in)
     grads : dict
         ``{prefix}.weight`` ``(C_out, C_in, K)``, ``{prefix}.bias`` ``(C_out,)``.
+
+    Raises
+    ------
+    ValueError
+        When ``dy`` is not a float array of ``y``'s shape, or holds NaN/inf.
     """
     xcol, wcol, (batch, t_len, c_in, c_out, taps, dilation), prefix = cache
-    dy = check_float_array(dy, "dy", (batch, t_len, c_out), finite=False)
+    dy = check_float_array(dy, "dy", (batch, t_len, c_out))
     dy2 = dy.reshape(batch * t_len, c_out)  # (B*T, C_out)
     dwcol = xcol.T @ dy2  # (K*C_in, C_out)
     dxcol = (dy2 @ wcol.T).reshape(batch, t_len, taps * c_in)  # (B, T, K*C_in)

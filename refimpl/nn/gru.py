@@ -24,6 +24,13 @@ per-step recurrent product uses a weight transposed once per call; back-propagat
 per-step pre-activation gradients and forms ``dW_hh``, ``dW_ih`` and ``dx`` with one GEMM each after the loop.
 Internally arrays are time-major ``(T, B, ...)`` so that each step reads contiguous rows.
 The per-step, per-gate loop versions ``_gru_forward_naive`` / ``_gru_backward_naive`` are the test oracles.
+
+Checks (spec/layers.md §4.5), once per public call, never inside the step loops: the sizes I and H are read
+from layer 0's parameters first, then ``x`` / ``x_t`` (dtype, shape ``(.., I)``, finite) and ``h0`` / ``h``
+(dtype, shape ``(L*D, B, H)``, finite) are checked against them, so a wrong input size is reported on the input,
+with the expected and the actual shape; then every parameter's shape and dtype (not its values: that would cost
+a pass over all weights per step). The backwards check their cotangents ``dy``, ``dh_n`` / ``dh_new`` (dtype,
+shape, finite).
 """
 from __future__ import annotations
 
@@ -31,8 +38,8 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.nn.activations import sigmoid
-from refimpl.nn.linear import matmul_wt
+from refimpl.nn.activations import _sigmoid
+from refimpl.nn.linear import _matmul_wt
 from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["gru_forward", "gru_backward", "gru_step_forward", "gru_step_backward", "gru_init"]
@@ -46,19 +53,47 @@ def _suffix(layer: int, direction: int) -> str:
     return f"l{layer}" + ("_reverse" if direction else "")
 
 
-def _layer_weights(params, prefix, layer, direction, in_size, hidden, dtype):
-    """(W_ih (3H, I_k), W_hh (3H, H), b_ih (3H,), b_hh (3H,)) of one layer and direction, checked."""
-    sfx = _suffix(layer, direction)
-    ws = (get_param(params, prefix, f"weight_ih_{sfx}", (3 * hidden, in_size), dtype),
-          get_param(params, prefix, f"weight_hh_{sfx}", (3 * hidden, hidden), dtype),
-          get_param(params, prefix, f"bias_ih_{sfx}", (3 * hidden,), dtype),
-          get_param(params, prefix, f"bias_hh_{sfx}", (3 * hidden,), dtype))
-    return ws
+def _all_weights(params, prefix, num_layers, directions):
+    """Every layer's and direction's ``(W_ih (3H, I_k), W_hh (3H, H), b_ih (3H,), b_hh (3H,))``, checked.
+
+    The sizes are read from layer 0 (``H`` from ``weight_hh_l0`` ``(3H, H)``, ``I`` from ``weight_ih_l0``
+    ``(3H, I)``) BEFORE the inputs are checked, so that a wrong ``x`` / ``h0`` is reported on the input, not as a
+    wrong parameter shape. Every parameter must have ``weight_hh_l0``'s dtype (float32 or float64); the values are
+    not checked. Returns ``(weights, I, H)`` with ``weights[k][d]`` the tuple of layer ``k``, direction ``d``.
+    """
+    w_hh0 = get_param(params, prefix, "weight_hh_l0", (None, None))  # (3H, H)
+    hid, dt = w_hh0.shape[1], w_hh0.dtype
+    if w_hh0.shape[0] != 3 * hid:
+        raise ValueError(f"params[{param_name(prefix, 'weight_hh_l0')!r}]: expected shape (3H, H) = "
+                         f"({3 * hid}, {hid}), got {w_hh0.shape}")
+    w_ih0 = get_param(params, prefix, "weight_ih_l0", (3 * hid, None), dt)  # (3H, I)
+    in_size = w_ih0.shape[1]
+    weights = []
+    for k in range(num_layers):
+        in_k = in_size if k == 0 else directions * hid
+        dirs = []
+        for d in range(directions):
+            sfx = _suffix(k, d)
+            first = k == 0 and d == 0
+            dirs.append((w_ih0 if first else get_param(params, prefix, f"weight_ih_{sfx}", (3 * hid, in_k), dt),
+                         w_hh0 if first else get_param(params, prefix, f"weight_hh_{sfx}", (3 * hid, hid), dt),
+                         get_param(params, prefix, f"bias_ih_{sfx}", (3 * hid,), dt),
+                         get_param(params, prefix, f"bias_hh_{sfx}", (3 * hid,), dt)))
+        weights.append(dirs)
+    return weights, in_size, hid
 
 
-def _all_weights(params, prefix, num_layers, directions, in_size, hidden, dtype):
-    return [[_layer_weights(params, prefix, k, d, in_size if k == 0 else directions * hidden, hidden, dtype)
-             for d in range(directions)] for k in range(num_layers)]
+def _size_note(prefix: str, letter: str, size: int, name: str) -> str:
+    """Where an expected size comes from, for an input's shape error: ``"I = 4 from params['rnn.weight_ih_l0']"``."""
+    return f"{letter} = {size} from params[{param_name(prefix, name)!r}]"
+
+
+def _check_params_dtype(x: np.ndarray, x_name: str, weights, prefix: str) -> None:
+    """The parameters (all of ``weight_hh_l0``'s dtype, see :func:`_all_weights`) must have the input's dtype."""
+    dt = weights[0][0][1].dtype
+    if dt != x.dtype:
+        raise ValueError(f"params[{param_name(prefix, 'weight_hh_l0')!r}]: expected dtype {x.dtype} (the dtype of "
+                         f"{x_name}), got {dt}")
 
 
 def _check_layers(num_layers: int) -> None:
@@ -101,16 +136,16 @@ def _cell_forward(gi, h, w_hh, whh_t, b_hn, g, n, h_new):
 
     gi (B, 3H): ``W_ih x + b_ih`` with ``b_hr, b_hz`` already added to the r, z blocks.
     h (B, H): previous state. ``whh_t`` (H, 3H) C-contiguous ``W_hh^T`` or None (then ``w_hh`` is used via
-    :func:`matmul_wt`). Writes g (B, 3H) = [r | z | W_hn h + b_hn], n (B, H), h_new (B, H).
+    :func:`~refimpl.nn.linear._matmul_wt`). Writes g (B, 3H) = [r | z | W_hn h + b_hn], n (B, H), h_new (B, H).
     """
     hid = h.shape[1]
     if whh_t is not None:
         np.matmul(h, whh_t, out=g)  # (B, 3H)
     else:
-        matmul_wt(h, w_hh, out=g)  # (B, 3H)
+        _matmul_wt(h, w_hh, out=g)  # (B, 3H)
     rz = g[:, :2 * hid]  # (B, 2H)
     rz += gi[:, :2 * hid]
-    sigmoid(rz, out=rz)
+    _sigmoid(rz, out=rz)
     ghn = g[:, 2 * hid:]  # (B, H)
     ghn += b_hn
     np.multiply(g[:, :hid], ghn, out=n)  # r * (W_hn h + b_hn)
@@ -154,7 +189,7 @@ def _cell_backward(dh, h, g, n, w_hh, dgi, dgh, tmp):
 
 def _input_gates(x2, w_ih, b_ih, b_hh, hid, out=None):
     """``x W_ih^T + b_ih``, with ``b_hr, b_hz`` folded into the r, z blocks: (N, 3H)."""
-    gi = matmul_wt(x2, w_ih, out=out)  # (N, 3H)
+    gi = _matmul_wt(x2, w_ih, out=out)  # (N, 3H)
     gi += b_ih
     gi[:, :2 * hid] += b_hh[:2 * hid]
     return gi
@@ -234,17 +269,25 @@ def gru_forward(x: np.ndarray, h0: np.ndarray, params: Mapping[str, np.ndarray],
         Final states (for the reverse direction: its state after reading ``x[:, 0]``).
     cache : dict
         For :func:`gru_backward`.
+
+    Raises
+    ------
+    ValueError
+        Naming ``x`` or ``h0`` (expected and actual shape, dtype, NaN/inf; I and H are those of the parameters),
+        ``num_layers``, or the full name of a missing or mis-shaped parameter.
     """
     _check_layers(num_layers)
-    x = check_float_array(x, "x", (None, None, None))
-    batch, t_len, in_size = x.shape
+    d_count = 2 if bidirectional else 1
+    weights, in_size, hid = _all_weights(params, prefix, num_layers, d_count)
+    x = check_float_array(x, "x", (None, None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    batch, t_len, _ = x.shape
     if t_len < 1:
         raise ValueError(f"x: expected at least one time step (B, T >= 1, I), got {x.shape}")
-    d_count = 2 if bidirectional else 1
-    h0 = check_float_array(h0, "h0", (num_layers * d_count, batch, None))
+    h_note = _size_note(prefix, "H", hid, "weight_hh_l0")
+    h0 = check_float_array(h0, "h0", (num_layers * d_count, batch, hid),
+                           context=f"L*D = {num_layers * d_count}, B = {batch} from x, {h_note}")
     check_same_dtype(x, "x", {"h0": h0})
-    hid = h0.shape[2]
-    weights = _all_weights(params, prefix, num_layers, d_count, in_size, hid, x.dtype)
+    _check_params_dtype(x, "x", weights, prefix)
 
     xs = np.array(x.transpose(1, 0, 2), order="C")  # (T, B, I), always a copy (the cache must not alias x)
     h_n = np.empty((num_layers * d_count, batch, hid), dtype=x.dtype)
@@ -272,9 +315,9 @@ def gru_backward(dy: np.ndarray | None, dh_n: np.ndarray | None, cache):
     Parameters
     ----------
     dy : ndarray (B, T, D*H) or None
-        Cotangent of ``y`` (None: zero).
+        Cotangent of ``y`` (None: zero); float32 or float64, finite.
     dh_n : ndarray (L*D, B, H) or None
-        Cotangent of ``h_n`` (None: zero).
+        Cotangent of ``h_n`` (None: zero); float32 or float64, finite.
     cache : dict
         From :func:`gru_forward`.
 
@@ -302,10 +345,10 @@ def gru_backward(dy: np.ndarray | None, dh_n: np.ndarray | None, cache):
     if dy is None:
         dys = np.zeros((t_len, batch, d_count * hid), dtype=dtype)
     else:
-        dy = check_float_array(dy, "dy", (batch, t_len, d_count * hid), finite=False)
+        dy = check_float_array(dy, "dy", (batch, t_len, d_count * hid))
         dys = dy.transpose(1, 0, 2)  # (T, B, D*H) view
     if dh_n is not None:
-        dh_n = check_float_array(dh_n, "dh_n", (num_layers * d_count, batch, hid), finite=False)
+        dh_n = check_float_array(dh_n, "dh_n", (num_layers * d_count, batch, hid))
     dh0 = np.empty((num_layers * d_count, batch, hid), dtype=dtype)
     grads = {}
     for k in range(num_layers - 1, -1, -1):
@@ -355,17 +398,25 @@ def gru_step_forward(x_t: np.ndarray, h: np.ndarray, params: Mapping[str, np.nda
     cache : dict
         For :func:`gru_step_backward`.
 
+    Raises
+    ------
+    ValueError
+        Naming ``x_t`` or ``h`` (expected and actual shape, dtype, NaN/inf; I and H are those of the parameters),
+        ``num_layers``, or the full name of a missing or mis-shaped parameter. The weights' values are not
+        checked (this is called once per step of a rollout).
+
     Notes
     -----
     ``gru_step_forward`` repeated over t gives exactly the outputs of :func:`gru_forward` on the whole sequence.
     """
     _check_layers(num_layers)
-    x_t = check_float_array(x_t, "x_t", (None, None))
-    batch, in_size = x_t.shape
-    h = check_float_array(h, "h", (num_layers, batch, None))
+    weights, in_size, hid = _all_weights(params, prefix, num_layers, 1)
+    x_t = check_float_array(x_t, "x_t", (None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    batch = x_t.shape[0]
+    h_note = _size_note(prefix, "H", hid, "weight_hh_l0")
+    h = check_float_array(h, "h", (num_layers, batch, hid), context=f"L = {num_layers}, B = {batch} from x_t, {h_note}")
     check_same_dtype(x_t, "x_t", {"h": h})
-    hid = h.shape[2]
-    weights = _all_weights(params, prefix, num_layers, 1, in_size, hid, x_t.dtype)
+    _check_params_dtype(x_t, "x_t", weights, prefix)
     x_t, h = x_t.copy(), h.copy()  # the cache must not alias the caller's (possibly reused) buffers
     h_new = np.empty_like(h)  # (L, B, H)
     layers = []
@@ -388,9 +439,10 @@ def gru_step_backward(dy: np.ndarray | None, dh_new: np.ndarray | None, cache, a
     Parameters
     ----------
     dy : ndarray (B, H) or None
-        Cotangent of ``y`` (None: zero).
+        Cotangent of ``y`` (None: zero); float32 or float64, finite.
     dh_new : ndarray (L, B, H) or None
-        Cotangent of ``h_new`` (None: zero), i.e. the ``dh`` returned by the backward of the NEXT step.
+        Cotangent of ``h_new`` (None: zero), i.e. the ``dh`` returned by the backward of the NEXT step; float32 or
+        float64, finite.
     cache : dict
         From :func:`gru_step_forward`.
     accumulate_into : dict, optional
@@ -411,9 +463,9 @@ def gru_step_backward(dy: np.ndarray | None, dh_new: np.ndarray | None, cache, a
     batch, in_size, hid = cache["shape"]
     dtype = layers[0][2].dtype
     if dy is not None:
-        dy = check_float_array(dy, "dy", (batch, hid), finite=False)
+        dy = check_float_array(dy, "dy", (batch, hid))
     if dh_new is not None:
-        dh_new = check_float_array(dh_new, "dh_new", (num_layers, batch, hid), finite=False)
+        dh_new = check_float_array(dh_new, "dh_new", (num_layers, batch, hid))
     grads = {} if accumulate_into is None else accumulate_into
     dh_prev = np.empty((num_layers, batch, hid), dtype=dtype)
     tmp = np.empty((batch, hid), dtype=dtype)

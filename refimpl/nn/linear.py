@@ -5,6 +5,10 @@
 Shapes: ``x (..., I)`` with any leading axes (``(B, F)``, ``(B, T, F)``, ...), ``weight (O, I)``,
 ``bias (O,)``, ``y (..., O)``. All leading axes are flattened into one GEMM ``(N, I) @ (I, O)``.
 Parameters are read from the model's flat dict under ``prefix`` (``"fc"`` -> ``"fc.weight"``, ``"fc.bias"``).
+
+Checks (spec/layers.md §2): :func:`linear_forward` validates ``x`` (dtype, last axis, finite) and the parameters
+(shape, dtype; not their values); :func:`linear_backward` validates ``dy`` (dtype, shape ``(..., O)`` of ``y``,
+finite). :func:`_matmul_wt` is the unchecked kernel the recurrent layers call inside their step loops.
 """
 from __future__ import annotations
 
@@ -15,11 +19,13 @@ import numpy as np
 from refimpl.nn.params import (check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform,
                                param_name)
 
-__all__ = ["linear_forward", "linear_backward", "linear_init", "matmul_wt"]
+__all__ = ["linear_forward", "linear_backward", "linear_init"]
 
 
-def matmul_wt(a: np.ndarray, w: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def _matmul_wt(a: np.ndarray, w: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``a @ w.T`` for a PyTorch-layout weight ``w (O, I)`` and ``a (N, I)``, into a C-contiguous ``(N, O)``.
+
+    Internal kernel: no checks (called inside the recurrent layers' step loops; the public functions validate).
 
     Computed as ``(w @ a.T)`` written into the transposed view of the result, i.e. the BLAS call reads ``w`` in
     its stored row-major layout. With OpenBLAS this is markedly faster for small ``N`` (e.g. a batch-32 RNN step)
@@ -63,7 +69,7 @@ def linear_forward(x: np.ndarray, params: Mapping[str, np.ndarray], prefix: str,
     check_same_dtype(x, "x", {param_name(prefix, "weight"): w, param_name(prefix, "bias"): b})
     lead = x.shape[:-1]
     x2 = x.reshape(-1, in_f)  # (N, I)
-    y = matmul_wt(x2, w)  # (N, O)
+    y = _matmul_wt(x2, w)  # (N, O)
     if bias:
         y += b
     return y.reshape(*lead, out_f), (x2, w, lead, prefix, bias)
@@ -76,8 +82,8 @@ def linear_backward(dy: np.ndarray, cache):
 
     Parameters
     ----------
-    dy : ndarray (..., O)
-        Cotangent of ``y``.
+    dy : ndarray (..., O), float32 or float64, finite
+        Cotangent of ``y``, of ``y``'s shape.
     cache : tuple
         From :func:`linear_forward`.
 
@@ -86,10 +92,16 @@ def linear_backward(dy: np.ndarray, cache):
     dx : ndarray (..., I)
     grads : dict
         ``{prefix}.weight`` ``(O, I)`` and ``{prefix}.bias`` ``(O,)`` (when the layer has a bias).
+
+    Raises
+    ------
+    ValueError
+        When ``dy`` is not a float array of ``y``'s shape, or holds NaN/inf.
     """
     x2, w, lead, prefix, bias = cache
     out_f, in_f = w.shape
-    dy2 = np.asarray(dy).reshape(-1, out_f)  # (N, O)
+    dy = check_float_array(dy, "dy", (*lead, out_f))
+    dy2 = dy.reshape(-1, out_f)  # (N, O)
     dx = (dy2 @ w).reshape(*lead, in_f)  # (..., I)
     grads = {param_name(prefix, "weight"): dy2.T @ x2}  # (O, I)
     if bias:

@@ -31,6 +31,12 @@ after the BPTT loop. The skew is only a shift of the input sequence: layer k's i
 ``[h0[k-1], h^{k-1}_0, ..., h^{k-1}_{T-2}]`` instead of ``[h^{k-1}_0, ..., h^{k-1}_{T-1}]``.
 ``_lstm_forward_naive`` / ``_lstm_backward_naive`` (time-outer, per-gate loops, as acRNN's code steps its
 cells) are the test oracles.
+
+Checks (spec/layers.md §5.5), once per public call, never inside the step loops: I and H are read from layer 0's
+parameters first, then ``x`` / ``x_t`` (dtype, shape ``(.., I)``, finite) and the state entries ``h0``, ``c0`` /
+``h``, ``c`` (dtype, shape ``(L, B, H)``, finite) are checked against them, so a wrong input size is reported on
+the input with the expected and the actual shape; then every parameter's shape and dtype (not its values). The
+backwards check their cotangents ``dy`` and ``dh_n``, ``dc_n`` / ``dh_new``, ``dc_new`` (dtype, shape, finite).
 """
 from __future__ import annotations
 
@@ -38,8 +44,8 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.nn.activations import sigmoid
-from refimpl.nn.linear import matmul_wt
+from refimpl.nn.activations import _sigmoid
+from refimpl.nn.linear import _matmul_wt
 from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["lstm_forward", "lstm_backward", "lstm_step_forward", "lstm_step_backward", "lstm_init"]
@@ -49,17 +55,33 @@ __all__ = ["lstm_forward", "lstm_backward", "lstm_step_forward", "lstm_step_back
 # parameters
 
 
-def _layer_weights(params, prefix, layer, in_size, hidden, dtype):
-    """(W_ih (4H, I_k), W_hh (4H, H), b_ih (4H,), b_hh (4H,)) of one layer, checked."""
-    return (get_param(params, prefix, f"weight_ih_l{layer}", (4 * hidden, in_size), dtype),
-            get_param(params, prefix, f"weight_hh_l{layer}", (4 * hidden, hidden), dtype),
-            get_param(params, prefix, f"bias_ih_l{layer}", (4 * hidden,), dtype),
-            get_param(params, prefix, f"bias_hh_l{layer}", (4 * hidden,), dtype))
+def _all_weights(params, prefix, num_layers):
+    """Every layer's ``(W_ih (4H, I_k), W_hh (4H, H), b_ih (4H,), b_hh (4H,))``, checked.
+
+    The sizes are read from layer 0 (``H`` from ``weight_hh_l0`` ``(4H, H)``, ``I`` from ``weight_ih_l0``
+    ``(4H, I)``) BEFORE the inputs are checked, so that a wrong ``x`` / state is reported on the input, not as a
+    wrong parameter shape. Every parameter must have ``weight_hh_l0``'s dtype (float32 or float64); the values are
+    not checked. Returns ``(weights, I, H)`` with ``weights[k]`` the tuple of layer ``k``.
+    """
+    w_hh0 = get_param(params, prefix, "weight_hh_l0", (None, None))  # (4H, H)
+    hid, dt = w_hh0.shape[1], w_hh0.dtype
+    if w_hh0.shape[0] != 4 * hid:
+        raise ValueError(f"params[{param_name(prefix, 'weight_hh_l0')!r}]: expected shape (4H, H) = "
+                         f"({4 * hid}, {hid}), got {w_hh0.shape}")
+    w_ih0 = get_param(params, prefix, "weight_ih_l0", (4 * hid, None), dt)  # (4H, I)
+    in_size = w_ih0.shape[1]
+    weights = []
+    for k in range(num_layers):
+        weights.append((w_ih0 if k == 0 else get_param(params, prefix, f"weight_ih_l{k}", (4 * hid, hid), dt),
+                        w_hh0 if k == 0 else get_param(params, prefix, f"weight_hh_l{k}", (4 * hid, hid), dt),
+                        get_param(params, prefix, f"bias_ih_l{k}", (4 * hid,), dt),
+                        get_param(params, prefix, f"bias_hh_l{k}", (4 * hid,), dt)))
+    return weights, in_size, hid
 
 
-def _all_weights(params, prefix, num_layers, in_size, hidden, dtype):
-    return [_layer_weights(params, prefix, k, in_size if k == 0 else hidden, hidden, dtype)
-            for k in range(num_layers)]
+def _size_note(prefix: str, letter: str, size: int, name: str) -> str:
+    """Where an expected size comes from, for an input's shape error: ``"I = 4 from params['rnn.weight_ih_l0']"``."""
+    return f"{letter} = {size} from params[{param_name(prefix, name)!r}]"
 
 
 def _check_layers(num_layers: int) -> None:
@@ -67,12 +89,21 @@ def _check_layers(num_layers: int) -> None:
         raise ValueError(f"num_layers: expected an integer >= 1, got {num_layers!r}")
 
 
-def _check_state(state, name, num_layers, batch, dtype_ref):
+def _check_state(state, name, entries, shape, x, x_name, prefix, weights):
+    """The state tuple ``(h, c)``: each entry a finite array of ``shape`` = (L, B, H) and of ``x``'s dtype, which
+    must also be the parameters' dtype. ``entries`` names them in messages (``("h0", "c0")``: ``"state[0] (h0)"``)."""
     if not (isinstance(state, (tuple, list)) and len(state) == 2):
-        raise ValueError(f"{name}: expected a tuple (h, c) of two (L, B, H) arrays, got {type(state).__name__}")
-    h = check_float_array(state[0], f"{name}[0] (h)", (num_layers, batch, None))
-    c = check_float_array(state[1], f"{name}[1] (c)", h.shape)
-    check_same_dtype(dtype_ref, "x", {f"{name}[0] (h)": h, f"{name}[1] (c)": c})
+        raise ValueError(f"{name}: expected a tuple ({', '.join(entries)}) of two (L, B, H) arrays, "
+                         f"got {type(state).__name__}")
+    context = f"L = {shape[0]}, B = {shape[1]} from {x_name}, " + _size_note(prefix, "H", shape[2], "weight_hh_l0")
+    names = [f"{name}[{j}] ({e})" for j, e in enumerate(entries)]
+    h = check_float_array(state[0], names[0], shape, context=context)
+    c = check_float_array(state[1], names[1], shape, context=context)
+    check_same_dtype(x, x_name, {names[0]: h, names[1]: c})
+    dt = weights[0][1].dtype
+    if dt != x.dtype:
+        raise ValueError(f"params[{param_name(prefix, 'weight_hh_l0')!r}]: expected dtype {x.dtype} (the dtype of "
+                         f"{x_name}), got {dt}")
     return h, c
 
 
@@ -106,18 +137,18 @@ def _cell_forward(gi, h, c, w_hh, whh_t, g, c_new, tc, h_new):
     """One LSTM step.
 
     gi (B, 4H): ``W_ih x + b_ih + b_hh``. h, c (B, H): previous state. ``whh_t`` (H, 4H) C-contiguous
-    ``W_hh^T`` or None (then ``w_hh`` is used via :func:`matmul_wt`). Writes g (B, 4H) = activated gates
-    [i | f | g | o], c_new, tc = tanh(c_new), h_new (all (B, H)).
+    ``W_hh^T`` or None (then ``w_hh`` is used via :func:`~refimpl.nn.linear._matmul_wt`). Writes g (B, 4H) =
+    activated gates [i | f | g | o], c_new, tc = tanh(c_new), h_new (all (B, H)).
     """
     hid = h.shape[1]
     if whh_t is not None:
         np.matmul(h, whh_t, out=g)  # (B, 4H)
     else:
-        matmul_wt(h, w_hh, out=g)
+        _matmul_wt(h, w_hh, out=g)
     g += gi
-    sigmoid(g[:, :2 * hid], out=g[:, :2 * hid])  # i, f
+    _sigmoid(g[:, :2 * hid], out=g[:, :2 * hid])  # i, f
     np.tanh(g[:, 2 * hid:3 * hid], out=g[:, 2 * hid:3 * hid])  # g
-    sigmoid(g[:, 3 * hid:], out=g[:, 3 * hid:])  # o
+    _sigmoid(g[:, 3 * hid:], out=g[:, 3 * hid:])  # o
     np.multiply(g[:, hid:2 * hid], c, out=c_new)  # c' = f c + i g
     np.multiply(g[:, :hid], g[:, 2 * hid:3 * hid], out=tc)
     c_new += tc
@@ -168,7 +199,7 @@ def _layer_forward(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
     """xs (T, B, I). Returns hs, cs (T+1, B, H) (index 0 = initial state), g (T, B, 4H), tc (T, B, H)."""
     t_len, batch, in_size = xs.shape
     hid = w_hh.shape[1]
-    gi = matmul_wt(xs.reshape(t_len * batch, in_size), w_ih)  # (T*B, 4H), one GEMM for all steps
+    gi = _matmul_wt(xs.reshape(t_len * batch, in_size), w_ih)  # (T*B, 4H), one GEMM for all steps
     gi += b_ih + b_hh
     gi = gi.reshape(t_len, batch, 4 * hid)
     whh_t = np.ascontiguousarray(w_hh.T)  # (H, 4H), transposed once per call
@@ -230,15 +261,21 @@ def lstm_forward(x: np.ndarray, state: tuple, params: Mapping[str, np.ndarray], 
     (h_n, c_n) : tuple of ndarray (L, B, H)
     cache : dict
         For :func:`lstm_backward`.
+
+    Raises
+    ------
+    ValueError
+        Naming ``x``, ``state`` or its entries ``state[0] (h0)``, ``state[1] (c0)`` (expected and actual shape,
+        dtype, NaN/inf; I and H are those of the parameters), ``num_layers``, or the full name of a missing or
+        mis-shaped parameter.
     """
     _check_layers(num_layers)
-    x = check_float_array(x, "x", (None, None, None))
-    batch, t_len, in_size = x.shape
+    weights, in_size, hid = _all_weights(params, prefix, num_layers)
+    x = check_float_array(x, "x", (None, None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    batch, t_len, _ = x.shape
     if t_len < 1:
         raise ValueError(f"x: expected at least one time step (B, T >= 1, I), got {x.shape}")
-    h0, c0 = _check_state(state, "state", num_layers, batch, x)
-    hid = h0.shape[2]
-    weights = _all_weights(params, prefix, num_layers, in_size, hid, x.dtype)
+    h0, c0 = _check_state(state, "state", ("h0", "c0"), (num_layers, batch, hid), x, "x", prefix, weights)
     xs = np.array(x.transpose(1, 0, 2), order="C")  # (T, B, I), always a copy
     h_n = np.empty_like(h0)
     c_n = np.empty_like(c0)
@@ -260,9 +297,9 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
     Parameters
     ----------
     dy : ndarray (B, T, H) or None
-        Cotangent of ``y`` (None: zero).
+        Cotangent of ``y`` (None: zero); float32 or float64, finite.
     dstate_n : tuple (dh_n, dc_n) or None
-        Cotangents of ``(h_n, c_n)``, each ``(L, B, H)`` or None (zero).
+        Cotangents of ``(h_n, c_n)``, each ``(L, B, H)`` (float32 or float64, finite) or None (zero).
     cache : dict
         From :func:`lstm_forward`.
 
@@ -289,7 +326,7 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
     if dy is None:
         dys = np.zeros((t_len, batch, hid), dtype=dt)
     else:
-        dy = check_float_array(dy, "dy", (batch, t_len, hid), finite=False)
+        dy = check_float_array(dy, "dy", (batch, t_len, hid))
         dys = dy.transpose(1, 0, 2)  # (T, B, H) view
     dh_n = dc_n = None
     if dstate_n is not None:
@@ -297,9 +334,9 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
             raise ValueError("dstate_n: expected None or a tuple (dh_n, dc_n)")
         dh_n, dc_n = dstate_n
         if dh_n is not None:
-            dh_n = check_float_array(dh_n, "dstate_n[0] (dh_n)", (num_layers, batch, hid), finite=False)
+            dh_n = check_float_array(dh_n, "dstate_n[0] (dh_n)", (num_layers, batch, hid))
         if dc_n is not None:
-            dc_n = check_float_array(dc_n, "dstate_n[1] (dc_n)", (num_layers, batch, hid), finite=False)
+            dc_n = check_float_array(dc_n, "dstate_n[1] (dc_n)", (num_layers, batch, hid))
     dh0 = np.empty((num_layers, batch, hid), dtype=dt)
     dc0 = np.empty((num_layers, batch, hid), dtype=dt)
     grads = {}
@@ -352,23 +389,29 @@ def lstm_step_forward(x_t: np.ndarray, state: tuple, params: Mapping[str, np.nda
     cache : dict
         For :func:`lstm_step_backward`.
 
+    Raises
+    ------
+    ValueError
+        Naming ``x_t``, ``state`` or its entries ``state[0] (h)``, ``state[1] (c)`` (expected and actual shape,
+        dtype, NaN/inf; I and H are those of the parameters), ``num_layers``, or the full name of a missing or
+        mis-shaped parameter. The weights' values are not checked (this is called once per step of a rollout).
+
     Notes
     -----
     Repeated over t it gives exactly :func:`lstm_forward` (with the same ``skewed``).
     """
     _check_layers(num_layers)
-    x_t = check_float_array(x_t, "x_t", (None, None))
-    batch, in_size = x_t.shape
-    h, c = _check_state(state, "state", num_layers, batch, x_t)
-    hid = h.shape[2]
-    weights = _all_weights(params, prefix, num_layers, in_size, hid, x_t.dtype)
+    weights, in_size, hid = _all_weights(params, prefix, num_layers)
+    x_t = check_float_array(x_t, "x_t", (None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    batch = x_t.shape[0]
+    h, c = _check_state(state, "state", ("h", "c"), (num_layers, batch, hid), x_t, "x_t", prefix, weights)
     x_t, h, c = x_t.copy(), h.copy(), c.copy()  # the cache must not alias the caller's buffers
     h_new, c_new = np.empty_like(h), np.empty_like(c)
     layers = []
     for k in range(num_layers):
         w_ih, w_hh, b_ih, b_hh = weights[k]
         inp = x_t if k == 0 else (h[k - 1] if skewed else h_new[k - 1])  # (B, I_k)
-        gi = matmul_wt(inp, w_ih)  # (B, 4H)
+        gi = _matmul_wt(inp, w_ih)  # (B, 4H)
         gi += b_ih
         gi += b_hh
         g = np.empty((batch, 4 * hid), dtype=x_t.dtype)
@@ -386,9 +429,10 @@ def lstm_step_backward(dy: np.ndarray | None, dstate_new, cache, accumulate_into
     Parameters
     ----------
     dy : ndarray (B, H) or None
-        Cotangent of ``y``.
+        Cotangent of ``y`` (None: zero); float32 or float64, finite.
     dstate_new : tuple (dh_new, dc_new) or None
-        Cotangents of the new states (each ``(L, B, H)`` or None), i.e. what the next step's backward returned.
+        Cotangents of the new states (each ``(L, B, H)``, float32 or float64, finite, or None), i.e. what the next
+        step's backward returned.
     cache : dict
         From :func:`lstm_step_forward`.
     accumulate_into : dict, optional
@@ -406,16 +450,16 @@ def lstm_step_backward(dy: np.ndarray | None, dstate_new, cache, accumulate_into
     batch, in_size, hid = cache["shape"]
     dt = layers[0][3].dtype
     if dy is not None:
-        dy = check_float_array(dy, "dy", (batch, hid), finite=False)
+        dy = check_float_array(dy, "dy", (batch, hid))
     dh_new = dc_new = None
     if dstate_new is not None:
         if not (isinstance(dstate_new, (tuple, list)) and len(dstate_new) == 2):
             raise ValueError("dstate_new: expected None or a tuple (dh_new, dc_new)")
         dh_new, dc_new = dstate_new
         if dh_new is not None:
-            dh_new = check_float_array(dh_new, "dstate_new[0] (dh_new)", (num_layers, batch, hid), finite=False)
+            dh_new = check_float_array(dh_new, "dstate_new[0] (dh_new)", (num_layers, batch, hid))
         if dc_new is not None:
-            dc_new = check_float_array(dc_new, "dstate_new[1] (dc_new)", (num_layers, batch, hid), finite=False)
+            dc_new = check_float_array(dc_new, "dstate_new[1] (dc_new)", (num_layers, batch, hid))
     grads = {} if accumulate_into is None else accumulate_into
     dh_prev = np.empty((num_layers, batch, hid), dtype=dt)
     dc_prev = np.empty((num_layers, batch, hid), dtype=dt)

@@ -101,7 +101,7 @@ def _shape_str(shape) -> str:
     return "(" + ", ".join("..." if s is Ellipsis else ("*" if s is None else str(s)) for s in shape) + ")"
 
 
-def check_float_array(x, name: str, shape: tuple, finite: bool = True) -> np.ndarray:
+def check_float_array(x, name: str, shape: tuple, finite: bool = True, context: str = "") -> np.ndarray:
     """Validate an array argument at a public boundary and return it as an ndarray.
 
     Parameters
@@ -115,6 +115,9 @@ def check_float_array(x, name: str, shape: tuple, finite: bool = True) -> np.nda
         (zero or more) of leading axes.
     finite : bool
         Also require every entry to be finite.
+    context : str
+        Appended to a shape error after ``"; "``: where the expected sizes come from (e.g.
+        ``"I = 4 from params['rnn.weight_ih_l0']"``).
 
     Raises
     ------
@@ -130,8 +133,9 @@ def check_float_array(x, name: str, shape: tuple, finite: bool = True) -> np.nda
     else:
         ok = a.ndim == len(shape) and all(s is None or s == d for s, d in zip(shape, a.shape))
     if not ok:
-        raise ValueError(f"{name}: expected shape {_shape_str(shape)}, got {a.shape}")
-    if finite and not np.all(np.isfinite(a)):
+        note = f"; {context}" if context else ""
+        raise ValueError(f"{name}: expected shape {_shape_str(shape)}, got {a.shape}{note}")
+    if finite and not np.isfinite(a).all():
         raise ValueError(f"{name}: expected finite values, got NaN or inf")
     return a
 
