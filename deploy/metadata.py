@@ -29,6 +29,8 @@ from typing import Any, Mapping
 import numpy as np
 import onnx
 
+from refimpl._parsing import json_loads_strict
+
 __all__ = ["EXPORTER_VERSION", "FORMAT", "QTG_PAPER", "skeleton_metadata", "read_metadata",
            "qtg_representation"]
 
@@ -57,9 +59,6 @@ def qtg_representation(pose_size: int) -> dict:
                         "quaternion": "(w, x, y, z), Hamilton, local to the parent joint, not normalised"}]}
 
 
-def _reject_constant(name: str):
-    raise ValueError(f"{name} is not JSON (RFC 8259 has no NaN or Infinity)")
-
 
 def _finite_float(text: str) -> float:
     value = float(text)
@@ -84,7 +83,7 @@ def read_metadata(model: onnx.ModelProto | str | bytes) -> dict[str, Any]:
     out = {}
     for prop in model.metadata_props:
         try:
-            out[prop.key] = json.loads(prop.value, parse_constant=_reject_constant, parse_float=_finite_float)
+            out[prop.key] = json_loads_strict(prop.value)
         except (ValueError, RecursionError) as exc:  # JSONDecodeError is a ValueError
             raise ValueError(f"metadata[{prop.key!r}]: expected a JSON value, got {prop.value[:60]!r} "
                              f"({type(exc).__name__})") from exc

@@ -41,6 +41,7 @@ from typing import Sequence
 
 import numpy as np
 
+from refimpl._parsing import locate_bad_row
 from refimpl.atomic import atomic_write_text
 
 from refimpl.motion import Motion
@@ -362,26 +363,6 @@ def read_bvh_header(path) -> BvhHeader:
     return header
 
 
-def _locate_bad_row(lines: list[str], first: int, num_channels: int, where: str) -> ValueError:
-    """Slow path, only after the fast parse failed: find the first bad data line and describe it."""
-    row = 0
-    for i in range(first, len(lines)):
-        toks = lines[i].split()
-        if not toks:
-            continue
-        row += 1
-        for t in toks:
-            try:
-                v = float(t)
-            except ValueError:
-                return ValueError(f"{where}:{i + 1}: frame {row}: non-numeric value {t!r}")
-            if not math.isfinite(v):
-                return ValueError(f"{where}:{i + 1}: frame {row}: non-finite value {t!r}")
-        if len(toks) != num_channels:
-            return ValueError(f"{where}:{i + 1}: frame {row}: expected {num_channels} numbers "
-                              f"(the channels of the hierarchy), got {len(toks)}")
-    return ValueError(f"{where}: malformed motion data")
-
 
 def _parse_motion(header: BvhHeader, lines: list[str], first: int, where: str) -> np.ndarray:
     """Numbers of the motion block as ``(T, C)`` float64, checked against the header."""
@@ -398,9 +379,9 @@ def _parse_motion(header: BvhHeader, lines: list[str], first: int, where: str) -
     try:
         flat = np.array(" ".join(data_lines).split(), dtype=np.float64)   # one call for the whole block
     except ValueError:
-        raise _locate_bad_row(lines, first, c, where) from None
+        raise locate_bad_row(lines, first, c, where, unit="frame", expected="numbers (the channels of the hierarchy)") from None
     if flat.size != len(data_lines) * c or not np.all(np.isfinite(flat)):
-        raise _locate_bad_row(lines, first, c, where)
+        raise locate_bad_row(lines, first, c, where, unit="frame", expected="numbers (the channels of the hierarchy)")
     return flat.reshape(len(data_lines), c)                                # (T, C)
 
 

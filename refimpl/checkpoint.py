@@ -39,6 +39,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from refimpl._parsing import json_loads_strict
 from refimpl.atomic import atomic_path
 
 __all__ = [
@@ -223,16 +224,6 @@ def save_checkpoint(path, arrays: Mapping[str, np.ndarray], meta: Mapping[str, A
     _write_npz_atomic(os.fspath(path), entries)
 
 
-def _refuse_json_constant(name: str):
-    raise ValueError(f"{name} is not allowed in the metadata (the format has no NaN/inf)")
-
-
-def _finite_json_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"{text[:40]} overflows to inf (the format has no NaN/inf)")
-    return value
-
 
 def load_checkpoint(path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Read a checkpoint written by :func:`save_checkpoint` and verify its checksum.
@@ -268,8 +259,7 @@ def load_checkpoint(path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ValueError(f"{os.fspath(path)}: malformed metadata entry (dtype {meta_raw.dtype}, shape "
                          f"{meta_raw.shape}); expected UTF-8 JSON text as uint8 (n,)")
     try:
-        meta = json.loads(meta_raw.tobytes().decode("utf-8"), parse_constant=_refuse_json_constant,
-                          parse_float=_finite_json_float)
+        meta = json_loads_strict(meta_raw.tobytes().decode("utf-8"))
     except (ValueError, RecursionError) as e:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
         raise ValueError(f"{os.fspath(path)}: malformed metadata: {type(e).__name__}: {str(e)[:200]}") from e
     if not isinstance(meta, dict):

@@ -20,12 +20,12 @@ Shape legend: T frames, J joints.
 """
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 
 import numpy as np
 
+from refimpl._parsing import locate_bad_row
 from refimpl.motion import Motion
 from refimpl.quat import quat_fix, quat_from_axis_angle
 from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
@@ -38,24 +38,6 @@ EXPMAP_LAYOUTS = {
     "cmu": (117, 1.0 / 120.0, True),
 }
 
-
-def _locate_bad_row(lines: list[str], width: int, where: str) -> ValueError:
-    row = 0
-    for i, line in enumerate(lines):
-        toks = line.replace(",", " ").split()
-        if not toks:
-            continue
-        row += 1
-        for t in toks:
-            try:
-                v = float(t)
-            except ValueError:
-                return ValueError(f"{where}:{i + 1}: row {row}: non-numeric value {t!r}")
-            if not math.isfinite(v):
-                return ValueError(f"{where}:{i + 1}: row {row}: non-finite value {t!r}")
-        if len(toks) != width:
-            return ValueError(f"{where}:{i + 1}: row {row}: expected {width} values, got {len(toks)}")
-    return ValueError(f"{where}: malformed exp-map data")
 
 
 def read_expmap(path, layout: str = "cmu", frame_time: float | None = None, name: str | None = None,
@@ -104,9 +86,9 @@ def read_expmap(path, layout: str = "cmu", frame_time: float | None = None, name
     try:
         flat = np.array(" ".join(rows).replace(",", " ").split(), dtype=np.float64)   # one call for all rows
     except ValueError:
-        raise _locate_bad_row(lines, width, where) from None
+        raise locate_bad_row(lines, 0, width, where, commas=True) from None
     if flat.size != len(rows) * width or not np.all(np.isfinite(flat)):
-        raise _locate_bad_row(lines, width, where)
+        raise locate_bad_row(lines, 0, width, where, commas=True)
     values = flat.reshape(len(rows), width // 3, 3)                        # (T, 1 + J, 3)
 
     skel = cmu_asf_skeleton() if layout == "cmu" else h36m_skeleton()
