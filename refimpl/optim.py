@@ -74,7 +74,9 @@ def _check_finite_squares(grads: Mapping[str, np.ndarray]) -> None:
     """Refuse NaN/inf, and gradients whose squares overflow (Adam's second moment would become inf)."""
     for k, g in grads.items():
         flat = g.reshape(-1)
-        if not np.isfinite(np.dot(flat, flat)):
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow is what this test looks for
+            sq = np.dot(flat, flat)
+        if not np.isfinite(sq):
             raise ValueError(f"grads[{k!r}]: contains NaN/inf or values whose square overflows {g.dtype}")
 
 
@@ -233,7 +235,8 @@ def _adam_step_naive(params, grads, state, lr, betas=(0.9, 0.999), eps=1e-8, wei
 def _tensor_norm(g: np.ndarray) -> float:
     """L2 norm of one array as float64: BLAS dot first; scaled float64 recomputation on overflow/underflow."""
     flat = g.reshape(-1)
-    sq = float(np.dot(flat, flat))
+    with np.errstate(over="ignore", invalid="ignore"):  # handled below by the scaled recomputation
+        sq = float(np.dot(flat, flat))
     if math.isfinite(sq) and (sq > 0.0 or not flat.any()):
         return math.sqrt(sq)
     s = float(np.max(np.abs(flat)))
