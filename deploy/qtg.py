@@ -185,6 +185,13 @@ def _builder(name, dtype, opset, primitive):
     return GraphBuilder(name, dtype=dtype, opset=opset, primitive=primitive)
 
 
+def _context_inputs(g, norm, P: int):
+    """Graph inputs ``past (B, 2, P)``, ``target (B, 2, P)`` and their normalised forms."""
+    past = g.input("past", ["B", 2, P])
+    target = g.input("target", ["B", 2, P])
+    return past, target, _pose_in(g, past, norm, name="past_norm"), _pose_in(g, target, norm, name="target_norm")
+
+
 def _pose_in(g, x, norm, *, name):
     return x if norm is None else standardize(g, x, norm[0], norm[1], name=name, wname="pose_norm")
 
@@ -235,10 +242,7 @@ def export_qtg_init(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
     norm = stats if normalize_in_graph else None
     P, Z, H, L = config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
     g = _builder("qtg_init", dtype, opset, primitive)
-    past = g.input("past", ["B", 2, P])
-    target = g.input("target", ["B", 2, P])
-    past_n = _pose_in(g, past, norm, name="past_norm")
-    target_n = _pose_in(g, target, norm, name="target_norm")
+    past, target, past_n, target_n = _context_inputs(g, norm, P)
     latent_prev, pose, _, _, tl = _encode_context(g, past_n, target_n, params, config, name="init")
     hidden = _zero_hidden(g, past, config, name="init.hidden")
     g.output(latent_prev, "latent_prev", ["B", Z])
@@ -331,10 +335,7 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
     T = int(T)
     P, Z, H, L = config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
     g = _builder("qtg_rollout", dtype, opset, primitive)
-    past = g.input("past", ["B", 2, P])
-    target = g.input("target", ["B", 2, P])
-    past_n = _pose_in(g, past, norm, name="past_norm")
-    target_n = _pose_in(g, target, norm, name="target_norm")
+    past, target, past_n, target_n = _context_inputs(g, norm, P)
     latent_prev, pose, e1, e21, _ = _encode_context(g, past_n, target_n, params, config, name="init")
     hidden = _zero_hidden(g, past, config, name="init.hidden")
     if mode == "unrolled":

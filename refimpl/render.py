@@ -55,6 +55,16 @@ def _figure(width: float, height: float, dpi: float):
     return fig
 
 
+def _finish_plot(fig, ax, title, path) -> Path:
+    """Grid, legend and title of a line plot, then save it as PNG (atomically)."""
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return _save_figure(fig, path)
+
+
 def _save_figure(fig, path: str | os.PathLike) -> Path:
     """Save ``fig`` as PNG to ``path`` atomically."""
     path = Path(path)
@@ -470,12 +480,7 @@ def render_loss_curve(path: str | os.PathLike, log, *, x: str | None = None,
         ax.set_yscale("log")
     ax.set_xlabel(x or "log row")
     ax.set_ylabel("loss")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    if title:
-        ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    return _save_figure(fig, path)
+    return _finish_plot(fig, ax, title, path)
 
 
 def render_error_curves(path: str | os.PathLike, curves: Mapping[str, np.ndarray], *,
@@ -512,9 +517,4 @@ def render_error_curves(path: str | os.PathLike, curves: Mapping[str, np.ndarray
     ax.set_xlabel("time into the transition (ms)" if frame_time else "transition frame")
     ax.set_ylabel(ylabel)
     ax.set_ylim(bottom=0.0)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    if title:
-        ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    return _save_figure(fig, path)
+    return _finish_plot(fig, ax, title, path)
