@@ -316,7 +316,7 @@ def qtg_method(params: Mapping[str, np.ndarray], config: QTGConfig, root_mean, r
     de-normalises the output's root translation and normalises its joint quaternions to unit length.
     """
     model = prepare_inference(params, config)
-    dtype = model.velT.dtype
+    dtype = model.dtype
     mean = np.asarray(root_mean, dtype=np.float64)
     std = np.asarray(root_std, dtype=np.float64)
 

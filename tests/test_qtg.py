@@ -13,6 +13,8 @@ from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
 TINY = QTGConfig(pose_size=11, encoder_sizes=(6, 4), gru_hidden=5, decoder_sizes=(6,), transition_length=4)
 TINY2 = QTGConfig(pose_size=11, encoder_sizes=(5,), gru_hidden=4, gru_layers=2, decoder_sizes=(),
                   negative_slope=0.2, transition_length=3)
+TINY3 = QTGConfig(pose_size=11, encoder_sizes=(7, 6, 4), gru_hidden=3, gru_layers=3, decoder_sizes=(5, 6),
+                  negative_slope=0.1, transition_length=5)
 
 
 def _context(rng, B, P, dtype=np.float64):
@@ -129,7 +131,7 @@ def test_gradient_reaches_targets_and_past():
         assert np.any(a != 0)
 
 
-@pytest.mark.parametrize("cfg", [TINY, TINY2, QTGConfig()])
+@pytest.mark.parametrize("cfg", [TINY, TINY2, TINY3, QTGConfig()])
 def test_rollout_inference_equals_rollout_forward(cfg):
     """spec/qtg.md §6: the lean inference path computes the same function."""
     rng = np.random.default_rng(5)
@@ -148,7 +150,7 @@ def test_inference_weights_are_read_only():
     """spec/qtg.md §6: prepared weights cannot be modified by accident."""
     model = prepare_inference(init_params(TINY, np.random.default_rng(0)), TINY)
     with pytest.raises(ValueError):
-        model.gru_z[0, 0] = 1.0
+        model.z_product[0, 0] = 1.0
 
 
 def test_bad_inputs():

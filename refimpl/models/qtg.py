@@ -541,82 +541,101 @@ def rollout_backward(dposes, cache, *, input_grads: bool = False):
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# lean inference path (no caches; pre-transposed contiguous weights)
+# lean inference path (no caches; weights folded, transposed and bias-augmented once; buffers reused per step)
 # ----------------------------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class QTGInference:
     """Weights rearranged for fast inference by :func:`prepare_inference` (read-only arrays; spec/qtg.md §6).
 
-    * ``enc``, ``dec``: tuples of ``(W^T (in, out), b (out,))``; ``dec[0]``'s bias is ``b_v W_d0^T + b_d0``
-      (the velocity bias folded in: ``z + W_v s + b_v`` enters ``dec.0`` linearly); ``velT`` is ``W_v^T``.
-    * ``gru_z``: ``[(W1 − W2)^T | W1^T]`` ``(Z, 6H)``, where ``W_ih = [W1 | W2 | W3]`` are the column blocks of
-      the first GRU layer's input weight acting on the three parts of ``x_t``; ``gru_tail``: ``(W2^T, W3^T)``
-      for the constant target term; ``b_ih0``: ``b_ih`` with the ``r, z`` parts of ``b_hh`` added.
-    * ``gru_hhT``: ``W_hh^T (H, 3H)`` per layer; ``b_hn``: the ``n`` part of ``b_hh`` per layer; ``upper``:
-      ``(W_ih^T, b_ih + b_hh[r, z])`` of layers 1 … L−1.
-    * Every ``r, z`` gate column (weights and biases) is multiplied by ½ (exact in binary floating point), so
-      that ``σ(a) = ½ + ½ tanh(a/2)`` is one ``tanh`` of the product and two in-place scalings.
+    Matrices are stored transposed and, where a bias follows, *bias-augmented*: ``A = [Wᵀ ; bᵀ]``
+    ``(in + 1, out)``, so that ``[x | 1] A = x Wᵀ + b``. With ``W_ih = [W1 | W2 | W3]`` the column blocks of the
+    first GRU layer's input weight (acting on the three parts of ``x_t``), and every ``r, z`` gate column
+    pre-multiplied by ½:
+
+    * ``enc``, ``dec``: the encoder and decoder layers, ``(n_i + 1, n_{i+1})`` each.
+    * ``z_product`` ``(Z, 6H)``: ``[(W1 − W2)ᵀ | W1ᵀ]``.
+    * ``target_product`` ``(2Z + 1, 3H)``: ``[W2ᵀ ; W3ᵀ ; b_ih0ᵀ]`` (``b_ih0`` is ``b_ih`` with ``b_hr, b_hz``
+      added), for the constant target term ``k = W2 e1 + W3 (e2 − e1) + b_ih0`` of a transition.
+    * ``upper_ih``, ``lower_hh``: ``W_ih`` of layers 1 … L−1 (bias row ``b_ih + [b_hr, b_hz, 0]``) and ``W_hh``
+      of layers 0 … L−2 (bias row ``[0, 0, b_hn]``).
+    * ``h_product`` ``(H + 1, 3H + Z)``: the top layer's ``[W_hhᵀ | W_vᵀ]``, bias row ``[0, 0, b_hn | b_v]``:
+      one product of the new state gives the velocity ``v_t`` and the next step's ``W_hh s``.
     """
 
     config: QTGConfig
     enc: tuple
+    z_product: np.ndarray
+    target_product: np.ndarray
+    upper_ih: tuple
+    lower_hh: tuple
+    h_product: np.ndarray
     dec: tuple
-    gru_z: np.ndarray
-    gru_tail: tuple
-    b_ih0: np.ndarray
-    b_hn: tuple
-    gru_hhT: tuple
-    upper: tuple
-    velT: np.ndarray
+
+    @property
+    def dtype(self) -> np.dtype:
+        """The dtype of every weight (that of the parameters given to :func:`prepare_inference`)."""
+        return self.z_product.dtype
 
 
 def prepare_inference(params: Mapping[str, np.ndarray], config: QTGConfig = QTGConfig()) -> QTGInference:
-    """Rearrange ``params`` for :func:`rollout_inference` (transposed, contiguous, same dtype).
+    """Rearrange ``params`` for :func:`rollout_inference` (transposed, bias-augmented, contiguous; same dtype).
 
-    Uses the identity ``W_ih x_t = (W1 − W2) z_t − W1 z_{t−1} + [W2 e1 + W3 (e2 − e1)]`` (spec/qtg.md §6):
-    one product of ``z_t`` per step gives both this step's ``(W1 − W2) z_t`` and the next step's ``W1 z_t``.
+    Exact rewrites (spec/qtg.md §6):
+
+    1. ``W_ih x_t + b_ih = (W1 − W2) z_t + c_t`` with ``c_t = k − W1 z_{t−1}``: one product of ``z_t`` gives this
+       step's ``(W1 − W2) z_t`` and the next step's ``W1 z_t``.
+    2. One product of the top layer's new state ``s`` gives ``W_v s + b_v`` and the next step's ``W_hh s + b_hh``.
+    3. ``σ(a) = ½ + ½ tanh(a/2)``: the ``r, z`` columns are halved (exact in binary floating point).
+    4. Biases ride in an extra weight row, multiplied by a constant 1 column of the input buffers.
     """
-    _check_params(params, config)
+    dtype = _check_params(params, config)
+    Z, H, L = config.latent_size, config.gru_hidden, config.gru_layers
 
-    def c(a):
-        a = np.ascontiguousarray(a)
+    def ro(a):
+        a = np.ascontiguousarray(a, dtype=dtype)
         a.setflags(write=False)
         return a
+
+    def aug(wT, b):  # [Wᵀ ; bᵀ] (in + 1, out)
+        return ro(np.concatenate([wT, np.asarray(b)[None, :]], axis=0))
 
     def half_rz(a):  # a (..., 3H) with gate blocks r | z | n along the last axis: halve r and z
         a = np.array(a, copy=True)
         a[..., :2 * H] *= 0.5
         return a
 
-    def mlp(prefix, n):
-        return tuple((c(params[f"{prefix}.{i}.weight"].T), c(params[f"{prefix}.{i}.bias"])) for i in range(n))
+    def b_hh_n(layer):  # [0, 0, b_hn]
+        return np.concatenate([np.zeros(2 * H, dtype=dtype), params[f"gru.bias_hh_l{layer}"][2 * H:]])
 
-    Z, H = config.latent_size, config.gru_hidden
+    def b_ih_rz(layer):  # b_ih + [b_hr, b_hz, 0]
+        b = params[f"gru.bias_ih_l{layer}"].copy()
+        b[:2 * H] += params[f"gru.bias_hh_l{layer}"][:2 * H]
+        return half_rz(b)
+
+    def dense(prefix, n):
+        return tuple(aug(params[f"{prefix}.{i}.weight"].T, params[f"{prefix}.{i}.bias"]) for i in range(n))
+
     w_ih = params["gru.weight_ih_l0"]  # (3H, 3Z)
     w1, w2, w3 = w_ih[:, :Z], w_ih[:, Z:2 * Z], w_ih[:, 2 * Z:]
-    b_hns, hhT, upper = [], [], []
-    b_ih0 = None
-    for layer in range(config.gru_layers):
-        b_ih = params[f"gru.bias_ih_l{layer}"].copy()
-        b_hh = params[f"gru.bias_hh_l{layer}"]
-        b_ih[:2 * H] += b_hh[:2 * H]
-        b_hns.append(c(b_hh[2 * H:]))
-        hhT.append(c(half_rz(params[f"gru.weight_hh_l{layer}"].T)))
-        if layer == 0:
-            b_ih0 = c(half_rz(b_ih))
-        else:
-            upper.append((c(half_rz(params[f"gru.weight_ih_l{layer}"].T)), c(half_rz(b_ih))))
+    top = L - 1
     return QTGInference(
         config=config,
-        enc=mlp("enc", len(config.encoder_sizes)),
-        dec=((c(params["dec.0.weight"].T),  # the velocity bias is folded into the first decoder bias
-              c(params["vel.bias"] @ params["dec.0.weight"].T + params["dec.0.bias"])),)
-            + mlp("dec", len(config.decoder_sizes) + 1)[1:],
-        gru_z=c(np.concatenate([half_rz((w1 - w2).T), half_rz(w1.T)], axis=1)),  # (Z, 6H)
-        gru_tail=(c(half_rz(w2.T)), c(half_rz(w3.T))),
-        b_ih0=b_ih0, b_hn=tuple(b_hns), gru_hhT=tuple(hhT), upper=tuple(upper),
-        velT=c(params["vel.weight"].T))
+        enc=dense("enc", len(config.encoder_sizes)),
+        z_product=ro(np.concatenate([half_rz((w1 - w2).T), half_rz(w1.T)], axis=1)),
+        target_product=aug(half_rz(np.concatenate([w2.T, w3.T], axis=0)), b_ih_rz(0)),
+        upper_ih=tuple(aug(half_rz(params[f"gru.weight_ih_l{k}"].T), b_ih_rz(k)) for k in range(1, L)),
+        lower_hh=tuple(aug(half_rz(params[f"gru.weight_hh_l{k}"].T), b_hh_n(k)) for k in range(L - 1)),
+        h_product=aug(np.concatenate([half_rz(params[f"gru.weight_hh_l{top}"].T), params["vel.weight"].T], axis=1),
+                      np.concatenate([b_hh_n(top), params["vel.bias"]])),
+        dec=dense("dec", len(config.decoder_sizes) + 1))
+
+
+def _augmented(B: int, n: int, dtype) -> tuple[np.ndarray, np.ndarray]:
+    """A buffer ``(B, n + 1)`` whose last column is 1, and the view of its first ``n`` columns."""
+    a = np.empty((B, n + 1), dtype=dtype)
+    a[:, n] = 1
+    return a, a[:, :n]
 
 
 def rollout_inference(model: QTGInference, past, target, T: int | None = None) -> np.ndarray:
@@ -636,80 +655,96 @@ def rollout_inference(model: QTGInference, past, target, T: int | None = None) -
 
     Notes
     -----
-    Per step: the encoder, one product ``z_t [(W1 − W2)ᵀ | W1ᵀ]``, ``s_t W_hhᵀ``, the gates in place, the
-    velocity head and the decoder (spec/qtg.md §6); about 30 NumPy calls, no allocation of caches.
+    Every per-step array is allocated once per call, with its views, and written in place (``out=``); the
+    inputs of the dense layers carry a constant 1 column so that the bias rows of the augmented weights add
+    the biases. Per step (default sizes): 6 matrix products and 19 element-wise calls (spec/qtg.md §6).
     """
     if not isinstance(model, QTGInference):
         raise ValueError(f"model: expected a QTGInference from prepare_inference, got {type(model).__name__}")
-    config = model.config
-    dtype = model.velT.dtype
+    config, dtype = model.config, model.dtype
     past, target = _check_context(past, target, config, dtype)
     T = _check_length(T, config)
-    s = dtype.type(config.negative_slope)
-    half = dtype.type(0.5)
-    B, H, L = past.shape[0], config.gru_hidden, config.gru_layers
+    B, P, Z, H, L = past.shape[0], config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
     H2, H3 = 2 * H, 3 * H
-    enc, dec, upper = model.enc, model.dec, model.upper
-    gru_z, hhT, b_hn = model.gru_z, model.gru_hhT, model.b_hn
-    velT = model.velT
     matmul, maximum, multiply, add, subtract, tanh = np.matmul, np.maximum, np.multiply, np.add, np.subtract, np.tanh
+    slope = dtype.type(config.negative_slope)
 
-    def encode_(x):
-        for wT, b in enc:
-            x = matmul(x, wT)
-            add(x, b, out=x)
-            maximum(x, multiply(x, s), out=x)  # LeakyReLU, 0 <= slope < 1
+    def encode_(x):  # context poses only
+        for a in model.enc:
+            x = matmul(x, a[:-1])
+            add(x, a[-1], out=x)
+            maximum(x, multiply(x, slope), out=x)
         return x
 
     ctx = encode_(np.concatenate([past[:, 0], target[:, 0], target[:, 1]], axis=0))  # (3B, Z)
     z_prev, e1, e2 = ctx[:B], ctx[B:2 * B], ctx[2 * B:]
-    w2T, w3T = model.gru_tail
-    const = e1 @ w2T  # (B, 3H): W2 e1 + W3 (e2 − e1) + b_ih (+ b_hr, b_hz)
-    const += (e2 - e1) @ w3T
-    const += model.b_ih0
-    w1z_prev = z_prev @ gru_z[:, H3:]  # (B, 3H)
-    hidden = [np.zeros((B, H), dtype=dtype) for _ in range(L)]
-    pose = np.ascontiguousarray(past[:, 1])  # (B, P)
-    out = np.empty((T, B, config.pose_size), dtype=dtype)  # time-major: each frame is written in place
-    last = len(dec) - 1
+    targets = np.concatenate([e1, e2 - e1, np.ones((B, 1), dtype=dtype)], axis=1)  # (B, 2Z + 1)
+    k = targets @ model.target_product  # (B, 3H): k = W2 e1 + W3 (e2 − e1) + b_ih0, constant over the transition
+    c = k - z_prev @ model.z_product[:, H3:]  # (B, 3H): c_t = k − W1 z_{t−1}
+
+    # buffers and their views, allocated once; the loop only calls NumPy kernels with out=
+    frames = np.empty((T + 1, B, P + 1), dtype=dtype)  # [p_t | 1], t = 0 … T
+    frames[..., P] = 1
+    frames[0, :, :P] = past[:, 1]
+    layers = []  # (augmented weight, pre-activation, scratch, output view, next input) of the LeakyReLU layers
+    n_enc = len(model.enc)
+    dense_in = [_augmented(B, a.shape[0] - 1, dtype) for a in model.enc[1:] + model.dec]
+    z = np.empty((B, Z), dtype=dtype)
+    for i, a in enumerate(model.enc + model.dec[:-1]):
+        nxt, dst = (z, z) if i == n_enc - 1 else dense_in[i]
+        layers.append((a, np.empty((B, a.shape[1]), dtype=dtype), np.empty((B, a.shape[1]), dtype=dtype), dst, nxt))
+    enc_layers, dec_layers = layers[:n_enc], layers[n_enc:]
+    dec_first = dense_in[n_enc - 1]  # [z_t + v_t | 1] and its first Z columns
+    dec_last = model.dec[-1]
+    slopes = {m: np.full((B, m), slope, dtype=dtype) for m in {lay[1].shape[1] for lay in layers}}
+    zz = np.empty((B, 6 * H), dtype=dtype)  # [(W1 − W2) z_t | W1 z_t] (r, z halved)
+    zz_a, zz_b = zz[:, :H3], zz[:, H3:]
+    hs = [_augmented(B, H, dtype) for _ in range(L)]  # GRU states [s | 1], start at 0
+    for h_aug, _ in hs:
+        h_aug[:, :H] = 0
+    gi = [np.empty((B, H3), dtype=dtype) for _ in range(L)]
+    gh = [np.empty((B, H3), dtype=dtype) for _ in range(L - 1)]
+    hm = matmul(hs[-1][0], model.h_product)  # (B, 3H + Z): [W_hh s + (0, 0, b_hn) | W_v s + b_v], top layer
+    gh.append(hm[:, :H3])
+    velocity = hm[:, H3:]
+    n, d = np.empty((B, H), dtype=dtype), np.empty((B, H), dtype=dtype)
+    half = np.full((B, H2), 0.5, dtype=dtype)
+    cells = [(g_i[:, :H2], g_h[:, :H2], g_h[:, H2:], g_i[:, H2:], g_i[:, :H], g_i[:, H:H2], h_aug, h)
+             for g_i, g_h, (h_aug, h) in zip(gi, gh, hs)]
+
+    def dense(x, lays):  # LeakyReLU dense layers (0 <= slope < 1: max(a, slope a)); returns the last buffer
+        for a, pre, tmp, dst, nxt in lays:
+            matmul(x, a, out=pre)
+            multiply(pre, slopes[pre.shape[1]], out=tmp)
+            maximum(pre, tmp, out=dst)
+            x = nxt
+        return x
+
     for t in range(T):
-        z = encode_(pose)  # (B, Z)
-        zz = matmul(z, gru_z)  # (B, 6H)
-        gi = subtract(zz[:, :H3], w1z_prev)  # (B, 3H)
-        add(gi, const, out=gi)
-        w1z_prev = zz[:, H3:]
-        for layer in range(L):
+        dense(frames[t], enc_layers)  # z_t = E(p_t)
+        matmul(z, model.z_product, out=zz)
+        add(zz_a, c, out=gi[0])  # W_ih x_t + b_ih (+ b_hr, b_hz), r and z halved
+        subtract(k, zz_b, out=c)  # c_{t+1} = k − W1 z_t
+        for layer, (rz, gh_rz, gh_n, gi_n, r, u, h_aug, h) in enumerate(cells):
             if layer:
-                wT, b = upper[layer - 1]
-                gi = matmul(h, wT)
-                add(gi, b, out=gi)
-            h = hidden[layer]
-            gh = matmul(h, hhT[layer])  # (B, 3H)
-            rz = gi[:, :H2]
-            add(rz, gh[:, :H2], out=rz)  # half the r, u pre-activations (weights pre-scaled)
+                matmul(hs[layer - 1][0], model.upper_ih[layer - 1], out=gi[layer])
+            if layer < L - 1:
+                matmul(h_aug, model.lower_hh[layer], out=gh[layer])
+            add(rz, gh_rz, out=rz)  # halved pre-activations of r | u
             tanh(rz, out=rz)
             multiply(rz, half, out=rz)
-            add(rz, half, out=rz)  # r | u = σ(pre-activation) = ½ + ½ tanh(pre-activation / 2)
-            n = gh[:, H2:]
-            add(n, b_hn[layer], out=n)
-            multiply(n, rz[:, :H], out=n)
-            add(n, gi[:, H2:], out=n)
+            add(rz, half, out=rz)  # r | u = ½ + ½ tanh(a/2) = σ(a)
+            multiply(gh_n, r, out=n)  # r (W_hn s + b_hn)
+            add(n, gi_n, out=n)
             tanh(n, out=n)
-            h = subtract(h, n)
-            multiply(h, rz[:, H:], out=h)
-            add(h, n, out=h)  # (1 − u) n + u h
-            hidden[layer] = h
-        a = matmul(h, velT)
-        add(a, z, out=a)  # z_t + v_t − b_v (b_v is in dec[0]'s bias)
-        for i, (wT, b) in enumerate(dec):
-            if i < last:
-                a = matmul(a, wT)
-                add(a, b, out=a)
-                maximum(a, multiply(a, s), out=a)
-            else:
-                pose = matmul(a, wT, out=out[t])  # (B, P)
-                add(pose, b, out=pose)
-    return np.ascontiguousarray(out.transpose(1, 0, 2))  # (B, T, P)
+            subtract(h, n, out=d)
+            multiply(d, u, out=d)
+            add(d, n, out=h)  # s' = n + u (s − n) = (1 − u) n + u s
+        matmul(hs[-1][0], model.h_product, out=hm)  # v_t and the next step's W_hh s (top layer)
+        add(velocity, z, out=dec_first[1])  # z_t + v_t
+        x = dense(dec_first[0], dec_layers)
+        matmul(x, dec_last, out=frames[t + 1, :, :P])  # p_{t+1}
+    return np.ascontiguousarray(frames[1:, :, :P].transpose(1, 0, 2))  # (B, T, P)
 
 
 # ----------------------------------------------------------------------------------------------------------------
