@@ -1,8 +1,8 @@
 """deploy: ONNX export of the refimpl networks and a small onnxruntime wrapper.
 
 Built with the onnx package's own graph API (no PyTorch, no tracing). One builder module per layer family
-(``linear``, ``activations``, ``gru``, ``lstm``, ``conv1d``, ``quat``, ``kinematics``, ``features``), the QTG
-exporters (``qtg``, ``qtg_compact``), validation (``validate``: checker, strict shape inference, the ONNX
+(``linear``, ``activations``, ``gru``, ``lstm``, ``conv1d``, ``quat``, ``kinematics``, ``features``), block
+quantisation for onnxruntime's ``MatMulNBits`` (``quantize``), the QTG exporters (``qtg``, ``qtg_compact``), validation (``validate``: checker, strict shape inference, the ONNX
 reference evaluator, onnxruntime) and the runtime wrapper (``runtime``). See ``spec/deploy.md`` and
 ``deploy/README.md`` (input/output contract, C API example).
 
@@ -10,7 +10,8 @@ Requires the ``deploy`` extra: ``pip install 'refimpl[deploy]'``.
 """
 from . import (graph as _graph, linear as _linear, activations as _activations, recurrent as _recurrent,
                gru as _gru, lstm as _lstm, conv1d as _conv1d, quat as _quat, kinematics as _kinematics,
-               features as _features, metadata as _metadata, qtg as _qtg, qtg_compact as _qtg_compact,
+               features as _features, metadata as _metadata, quantize as _quantize, qtg as _qtg,
+               qtg_compact as _qtg_compact,
                validate as _validate, runtime as _runtime)
 from .graph import *  # noqa: F401,F403
 from .linear import *  # noqa: F401,F403
@@ -23,10 +24,11 @@ from .quat import *  # noqa: F401,F403
 from .kinematics import *  # noqa: F401,F403
 from .features import *  # noqa: F401,F403
 from .metadata import *  # noqa: F401,F403
+from .quantize import *  # noqa: F401,F403
 from .qtg import *  # noqa: F401,F403
 from .qtg_compact import *  # noqa: F401,F403
 from .validate import *  # noqa: F401,F403
 from .runtime import *  # noqa: F401,F403
 
 __all__ = [n for m in (_graph, _linear, _activations, _recurrent, _gru, _lstm, _conv1d, _quat, _kinematics,
-                       _features, _metadata, _qtg, _qtg_compact, _validate, _runtime) for n in m.__all__]
+                       _features, _metadata, _quantize, _qtg, _qtg_compact, _validate, _runtime) for n in m.__all__]

@@ -35,73 +35,9 @@ from refimpl.models.qtg import QTGConfig
 from deploy.graph import OPSET, GraphBuilder
 from deploy.metadata import EXPORTER_VERSION
 from deploy.qtg import _check_normalization, _check_params, _io, _metadata, _pose_in, _pose_out
+from deploy.quantize import WEIGHT_FORMATS, WeightMatmul, quantize_blocks  # noqa: F401 (re-exported)
 
-__all__ = ["export_qtg_rollout_compact", "quantize_blocks", "WEIGHT_FORMATS"]
-
-WEIGHT_FORMATS = ("float32", "int8", "int4")
-
-
-def quantize_blocks(w: np.ndarray, bits: int = 8, block_size: int = 32):
-    """Symmetric block-wise quantisation of ``w`` ``(K, N)`` in onnxruntime's ``MatMulNBits`` layout.
-
-    Each column ``j`` is cut along ``K`` into blocks of ``block_size`` (the last one zero-padded); block ``b`` gets
-    ``scale[j, b] = max |w| / (2^(bits−1) − 1)`` (1 for an all-zero block) and integer values
-    ``q = round(w / scale)`` in ``[−(2^(bits−1) − 1), 2^(bits−1) − 1]``, stored with the implicit zero point
-    ``2^(bits−1)`` as unsigned ``bits``-bit numbers (two per byte for 4 bits, low nibble first).
-
-    Returns
-    -------
-    packed : ndarray uint8 (N, ceil(K / block_size), block_size · bits / 8)
-    scales : ndarray float32 (N · ceil(K / block_size),)
-    dequantized : ndarray float64 (K, N)
-        ``scale · q``, what the kernel multiplies with (for accuracy checks).
-    """
-    w = np.asarray(w, dtype=np.float64)
-    if w.ndim != 2:
-        raise ValueError(f"w: expected a matrix (K, N), got shape {w.shape}")
-    if bits not in (4, 8):
-        raise ValueError(f"bits: expected 4 or 8, got {bits}")
-    K, N = w.shape
-    n_blocks = -(-K // block_size)
-    padded = np.zeros((n_blocks * block_size, N))
-    padded[:K] = w
-    blocks = padded.T.reshape(N, n_blocks, block_size)                   # (N, kb, bs)
-    qmax = 2 ** (bits - 1) - 1
-    amax = np.abs(blocks).max(axis=-1)                                   # (N, kb)
-    scales = np.where(amax > 0, amax / qmax, 1.0).astype(np.float32)
-    q = np.clip(np.rint(blocks / scales[..., None].astype(np.float64)), -qmax, qmax).astype(np.int64)
-    u = q + 2 ** (bits - 1)                                              # unsigned with zero point 2^(bits-1)
-    packed = u.astype(np.uint8) if bits == 8 else (u[..., 0::2] | (u[..., 1::2] << 4)).astype(np.uint8)
-    deq = (q * scales[..., None].astype(np.float64)).reshape(N, -1).T[:K]  # (K, N)
-    return packed, scales.reshape(-1), deq
-
-
-class _Weights:
-    """Emits ``x @ W (+ bias)`` for ``W (K, N)``: float initializers, or ``MatMulNBits`` with 8/4-bit weights."""
-
-    def __init__(self, g: GraphBuilder, fmt: str, block_size: int = 32):
-        self.g, self.fmt, self.block_size = g, fmt, block_size
-
-    def matmul(self, x: str, w: np.ndarray, wname: str, name: str, bias: np.ndarray | str | None = None) -> str:
-        g = self.g
-        if isinstance(bias, np.ndarray):
-            bias = g.weight(f"{wname}.b", bias)
-        if self.fmt == "float32":
-            wt = g.weight(f"{wname}.W", w)
-            if bias is None:
-                return g.node("MatMul", [x, wt], name)
-            return g.node("Gemm", [x, wt, bias], name)                   # (B, N)
-        bits = 8 if self.fmt == "int8" else 4
-        packed, scales, _ = quantize_blocks(w, bits, self.block_size)
-        K, N = np.shape(w)
-        inputs = [x, g.constant(f"{wname}.Wq{bits}", packed), g.constant(f"{wname}.scales", scales)]
-        const_bias = bias is not None and g.is_initializer(bias)  # a constant (N,): MatMulNBits' own bias input
-        if const_bias:
-            inputs += ["", "", bias]                                     # no zero points, no g_idx
-        y = g.node("MatMulNBits", inputs, name if bias is None or const_bias else f"{name}.mm",
-                   domain="com.microsoft", K=int(K), N=int(N), bits=bits, block_size=self.block_size,
-                   accuracy_level=4)                                     # (B, N), int8 compute
-        return y if bias is None or const_bias else g.node("Add", [y, bias], name)
+__all__ = ["export_qtg_rollout_compact"]
 
 
 def _prepare(params, config: QTGConfig):
@@ -173,7 +109,7 @@ def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConf
     p = prep["p"]
     n_enc, n_dec = len(config.encoder_sizes), len(config.decoder_sizes) + 1
     g = GraphBuilder("qtg_rollout_compact", dtype=np.float32, opset=opset)
-    W = _Weights(g, weights)
+    W = WeightMatmul(g, weights)
     past = _pose_in(g, g.input("past", ["B", 2, P]), norm, name="past_norm")
     target = _pose_in(g, g.input("target", ["B", 2, P]), norm, name="target_norm")
 
