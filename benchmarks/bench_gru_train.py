@@ -144,6 +144,11 @@ def bench_numpy(dtype, iters: int) -> dict:
 
 
 def bench_adam_alone(iters: int) -> dict | None:
+    """Adam alone on the model's parameters: one and two threads interleaved, and the memory floor.
+
+    The floor is the time to move Adam's minimum traffic (read p, g, m, v; write p, m, v: 28 bytes per float32
+    parameter) at the copy bandwidth measured in the same run (``np.copyto`` of a parameter-sized array).
+    """
     if not HAVE_OPTIM:
         return None
     params, _, _ = make_model(np.float32)
@@ -151,8 +156,18 @@ def bench_adam_alone(iters: int) -> dict | None:
     grads = {k: (1e-3 * rng.standard_normal(v.shape)).astype(np.float32) for k, v in params.items()}
     state = adam_init(params)
     adam_step(params, grads, state, lr=LR)
-    ts = [_timed(lambda: adam_step(params, grads, state, lr=LR)) for _ in range(max(iters, 10))]
-    return {"n_params": count_parameters(params), "ms_median": 1e3 * statistics.median(ts), "ms_min": 1e3 * min(ts)}
+    n = count_parameters(params)
+    src, dst = np.ones(n, np.float32), np.empty(n, np.float32)
+    ts = {1: [], 2: [], "copy": []}
+    for _ in range(max(iters, 10)):
+        for th in (1, 2):
+            ts[th].append(_timed(lambda: adam_step(params, grads, state, lr=LR, threads=th)))
+        ts["copy"].append(_timed(lambda: np.copyto(dst, src)))
+    copy_gbs = 8 * n / min(ts["copy"]) / 1e9
+    return {"n_params": n, "ms_median": 1e3 * statistics.median(ts[2]), "ms_min": 1e3 * min(ts[2]),
+            "threads": 2, "one_thread_ms_median": 1e3 * statistics.median(ts[1]),
+            "one_thread_ms_min": 1e3 * min(ts[1]), "copy_bandwidth_gb_s": copy_gbs,
+            "memory_floor_ms": 28 * n / (copy_gbs * 1e9) * 1e3}
 
 
 def bench_torch(iters: int, threads: int | None) -> dict | None:
@@ -235,8 +250,10 @@ def main(argv=None) -> int:
         print(f"{dt}: {ms:.1f} ms/iteration (min {r['ms_min']['iteration']:.1f}), {gflops:.0f} GFLOP/s "
               f"= {100 * gflops / peak:.0f} % of the measured {dt} GEMM peak; {r['n_params']:,} parameters")
     if adam:
-        print(f"Adam step alone, {adam['n_params']:,} float32 parameters: {adam['ms_median']:.1f} ms "
-              f"(min {adam['ms_min']:.1f})")
+        print(f"Adam step alone, {adam['n_params']:,} float32 parameters: {adam['ms_median']:.1f} ms with 2 threads "
+              f"(min {adam['ms_min']:.1f}), {adam['one_thread_ms_median']:.1f} ms with 1 (min "
+              f"{adam['one_thread_ms_min']:.1f}); memory floor {adam['memory_floor_ms']:.1f} ms (28 B/parameter at "
+              f"the {adam['copy_bandwidth_gb_s']:.0f} GB/s copy bandwidth measured here)")
     if torch_row:
         ratio = summary["float32"]["ms"] / torch_row["ms_median"]
         print(f"torch {torch_row['version']} ({torch_row['threads']} threads): "

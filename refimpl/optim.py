@@ -15,12 +15,17 @@ The papers' settings are module constants: :data:`QUATERNET_ADAM`, :data:`QUATER
 :data:`QUATERNET_CLIP_NORM` (QuaterNet), :data:`ACRNN_ADAM` (acRNN and the dual-quaternion acRNN),
 :data:`QTG_ADAM` (QTG).
 
-Speed: the Adam update streams each parameter in blocks of :data:`_BLOCK` elements through one scratch buffer,
-so the temporaries stay in cache and every array is read and written once (12 ufunc calls per block).
+Speed: the Adam update streams each parameter in blocks of :data:`_BLOCK` elements through one scratch buffer
+per thread, so the temporaries stay in cache and every array is read and written once (12 ufunc calls per
+block). NumPy's ufuncs release the GIL, so for large models (:data:`_THREAD_MIN_SIZE` elements or more) the
+blocks are shared between two threads; every element goes through the same operations whichever thread takes
+its block, so the result does not depend on the thread count (bit for bit).
 """
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from types import MappingProxyType
 from typing import Mapping, MutableMapping
 
@@ -42,7 +47,8 @@ ACRNN_ADAM = MappingProxyType({"lr": 1e-4, "betas": (0.9, 0.999), "eps": 1e-8, "
 #: QTG (Geleijn et al.): Adam lr 1e-4, β1 = 0.5, β2 = 0.9.
 QTG_ADAM = MappingProxyType({"lr": 1e-4, "betas": (0.5, 0.9), "eps": 1e-8, "weight_decay": 0.0})
 
-_BLOCK = 1 << 16  # elements per block in adam_step (4 arrays + 1 scratch block of float32 ≈ 1.3 MB)
+_BLOCK = 1 << 17  # elements per block in adam_step (4 arrays + 1 scratch block of float32 ≈ 2.6 MB per thread)
+_THREAD_MIN_SIZE = 1 << 20  # adam_step uses two threads from this many parameter elements on (when threads=None)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -140,7 +146,7 @@ def _adam_block(p, g, m, v, t, w1, b2, w2, eps_s, neg_step_s) -> None:
 
 def adam_step(params: MutableMapping[str, np.ndarray], grads: Mapping[str, np.ndarray],
               state: MutableMapping[str, np.ndarray], lr: float, betas: tuple[float, float] = (0.9, 0.999),
-              eps: float = 1e-8, weight_decay: float = 0.0) -> None:
+              eps: float = 1e-8, weight_decay: float = 0.0, threads: int | None = None) -> None:
     """One Adam step, in place on ``params`` and ``state`` (``torch.optim.Adam``, ``amsgrad=False``).
 
     With ``t = step + 1`` and ``g = grad + weight_decay · p``::
@@ -169,6 +175,10 @@ def adam_step(params: MutableMapping[str, np.ndarray], grads: Mapping[str, np.nd
         Added to the bias-corrected ``sqrt(v)`` (>= 0).
     weight_decay : float
         L2 penalty added to the gradient (PyTorch ``Adam``, not ``AdamW``), >= 0.
+    threads : int, optional
+        Threads sharing the blocks (>= 1). Default: 2 when the parameters hold at least
+        :data:`_THREAD_MIN_SIZE` elements and the machine has 2 or more CPUs, else 1. The result is the same
+        for every value.
     """
     _check_param_dict(params, "params")
     _check_param_dict(grads, "grads")
@@ -188,6 +198,11 @@ def adam_step(params: MutableMapping[str, np.ndarray], grads: Mapping[str, np.nd
     b2 = _check_scalar(betas[1], "betas[1]", 0.0, 1.0, hi_open=True)
     eps = _check_scalar(eps, "eps", 0.0)
     weight_decay = _check_scalar(weight_decay, "weight_decay", 0.0)
+    if threads is None:
+        big = sum(p.size for p in params.values()) >= _THREAD_MIN_SIZE
+        threads = 2 if big and (os.cpu_count() or 1) >= 2 else 1
+    elif isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"threads: expected a positive integer or None, got {threads!r}")
     _check_finite_squares(grads)
 
     step = int(state["step"]) + 1
@@ -197,22 +212,34 @@ def adam_step(params: MutableMapping[str, np.ndarray], grads: Mapping[str, np.nd
     neg_step_s = -lr / bc1 * bc2_sqrt
     eps_s = eps * bc2_sqrt
 
-    scratch: dict[np.dtype, np.ndarray] = {}
+    blocks = []  # (p, g, m, v) views: cache-sized pieces of contiguous arrays, strided arrays whole
     for k, p in params.items():
         g, m, v = grads[k], state[f"m.{k}"], state[f"v.{k}"]
         if weight_decay:
             g = g + weight_decay * p  # one temporary per parameter: torch's grad.add(param, alpha=wd)
         if all(a.flags.c_contiguous for a in (p, g, m, v)):
             pf, gf, mf, vf = (a.reshape(-1) for a in (p, g, m, v))
+            blocks += [(pf[s:s + _BLOCK], gf[s:s + _BLOCK], mf[s:s + _BLOCK], vf[s:s + _BLOCK])
+                       for s in range(0, pf.size, _BLOCK)]
+        else:
+            blocks.append((p, g, m, v))
+
+    def run(first: int) -> None:  # blocks first, first + threads, ...; one scratch buffer per dtype and thread
+        scratch: dict[np.dtype, np.ndarray] = {}
+        for p, g, m, v in blocks[first::threads]:
+            if p.ndim != 1:  # strided views: a full-size scratch
+                _adam_block(p, g, m, v, np.empty_like(p), 1.0 - b1, b2, 1.0 - b2, eps_s, neg_step_s)
+                continue
             buf = scratch.get(p.dtype)
-            if buf is None or buf.size < min(_BLOCK, p.size):
-                buf = scratch[p.dtype] = np.empty(min(_BLOCK, max(p.size, 1)), dtype=p.dtype)
-            for s in range(0, pf.size, _BLOCK):
-                e = min(s + _BLOCK, pf.size)
-                _adam_block(pf[s:e], gf[s:e], mf[s:e], vf[s:e], buf[:e - s], 1.0 - b1, b2, 1.0 - b2, eps_s,
-                            neg_step_s)
-        else:  # strided views: one whole-array pass with a full-size scratch
-            _adam_block(p, g, m, v, np.empty_like(p), 1.0 - b1, b2, 1.0 - b2, eps_s, neg_step_s)
+            if buf is None or buf.size < p.size:
+                buf = scratch[p.dtype] = np.empty(p.size, dtype=p.dtype)
+            _adam_block(p, g, m, v, buf[:p.size], 1.0 - b1, b2, 1.0 - b2, eps_s, neg_step_s)
+
+    if threads == 1 or len(blocks) < 2:
+        run(0)
+    else:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            list(pool.map(run, range(threads)))  # list(): re-raises a worker's exception here
 
 
 def _adam_step_naive(params, grads, state, lr, betas=(0.9, 0.999), eps=1e-8, weight_decay=0.0) -> None:

@@ -114,6 +114,34 @@ def test_adam_in_place_float32_and_strided():
         assert_close(params[k], naive[k], rtol=1e-5, atol=1e-7, name=k)
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_adam_threads_give_identical_bits(dtype):
+    """spec/optim.md §1: the blocks shared between threads give the same bits as one thread (many small blocks,
+    a strided view, weight decay, several steps), and the default picks the same result."""
+    old_block = optim._BLOCK
+    optim._BLOCK = 7
+    try:
+        rng = np.random.default_rng(3)
+        base = _params(rng, dtype)
+        base["strided"] = rng.standard_normal((6, 8)).astype(dtype)[:, ::2]
+        runs = {}
+        for threads in (1, 2, 3, None):
+            p = _copy(base)
+            p["strided"] = base["strided"].base.copy()[:, ::2]
+            state = adam_init(p)
+            for step in range(3):
+                g = {k: np.random.default_rng(10 + step).standard_normal(v.shape).astype(dtype) for k, v in p.items()}
+                adam_step(p, g, state, lr=1e-2, weight_decay=0.01, threads=threads)
+            runs[threads] = (p, state)
+        for threads in (2, 3, None):
+            for k in base:
+                assert np.array_equal(runs[threads][0][k], runs[1][0][k]), (threads, k)
+                assert np.array_equal(runs[threads][1]["v." + k], runs[1][1]["v." + k]), (threads, k)
+        assert not np.array_equal(runs[1][0]["h0"], base["h0"])
+    finally:
+        optim._BLOCK = old_block
+
+
 def test_adam_first_step_is_lr_sign():
     """spec/optim.md §1: with bias correction the first step moves each entry by lr·g/(|g| + eps) ≈ lr·sign(g)."""
     params = {"w": np.zeros(4)}
@@ -140,6 +168,8 @@ def test_adam_validation_leaves_state_untouched():
         (grads, {"lr": -1.0}, "lr"),
         (grads, {"betas": (1.0, 0.9)}, "betas"),
         (grads, {"eps": math.nan}, "eps"),
+        (grads, {"threads": 0}, "threads"),
+        (grads, {"threads": 1.5}, "threads"),
     ]
     for g, kw, msg in bad_cases:
         with pytest.raises(ValueError, match=msg):
