@@ -1,11 +1,18 @@
 """Benchmark: onnxruntime latency of the exported models next to the NumPy forward, and the int8 accuracy cost.
 
 What is measured (spec/deploy.md §9), all float32 unless stated, one process, interleaved rounds (every variant
-timed once per round, so that machine load hits all of them alike; medians and minima over rounds are reported):
+timed once per round, so that machine load hits all of them alike; medians and minima over rounds are reported).
+The onnxruntime variants are interleaved with each other and the NumPy ones timed in a separate group after
+them: OpenBLAS's worker threads keep spinning for a while after each NumPy product and would slow the next
+onnxruntime call (seen: the 2-thread fused GRU step at 4-8 ms instead of 0.9 ms when interleaved).
 
 * GRU 2×1000 step (QuaterNet size: input 128, 2 layers, hidden 1000) through the GRU builder (``deploy.gru``,
-  fused ONNX ``GRU`` nodes and the primitive form) at batch 1 and 32, against ``refimpl.nn.gru.gru_step_forward``.
-  Targets: ≤ 0.55 ms at batch 1, ≤ 2.0 ms at batch 32.
+  fused ONNX ``GRU`` nodes, the primitive form, and the int8 / int4 ``MatMulNBits`` step, int8 also with blocks
+  of 128) at batch 1 and 32, against ``refimpl.nn.gru.gru_step_forward``. Targets: ≤ 0.55 ms at batch 1,
+  ≤ 2.0 ms at batch 32. Next to them a float32 floor: a NumPy ``x @ W`` over the concatenation of the four
+  weight matrices (37.5 MB, the bytes a float32 step must read), at 1 and 2 BLAS threads; and the accuracy cost of
+  each ORT form (max/mean ``|h_new − gru_step_forward|``, float32 NumPy, batch 32, ``x ~ N(0, 1)``,
+  ``h = tanh(N(0, 1))``).
 * QTG (default sizes): one step at batch 1 and 32 (step model vs ``refimpl.models.qtg.step``); a whole 30-frame
   transition at batch 1 and 32: the rollout model in every form (``unrolled``, ``loop``, ``scan``; the compact
   deployment variant with float32, int8 and int4 weights) against ``rollout_inference`` (the lean NumPy path) and
@@ -28,6 +35,7 @@ average before and after. Nothing asserts on time. A table is printed and JSON w
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -105,28 +113,53 @@ def _env(threads: int) -> dict:
 
 # ---------------------------------------------------------------------------------------------------- GRU
 def bench_gru(threads: int, rounds: int, min_time: float) -> dict:
-    """GRU 2x1000 step: ORT fused / primitive at ``threads`` and at 2 threads (the targets' setting), NumPy."""
+    """GRU 2x1000 step: ORT fused / primitive / int8 / int4 at ``threads`` and at 2 threads (the targets' setting),
+    NumPy, the float32 weight-streaming floor; and the accuracy of each ORT form against float32 NumPy."""
     I, H, L = 128, 1000, 2
     rng = np.random.default_rng(0)
     params = gru_init(rng, I, H, L, "gru", dtype=np.float32)
+    variants = {"fused": {}, "primitive": {"primitive": True}, "int8": {"weights": "int8"},
+                "int8_b128": {"weights": "int8", "block_size": 128}, "int4": {"weights": "int4"}}
+    thread_counts = sorted({threads, 2})
     sessions = {}
-    for prim in (False, True):
-        g = GraphBuilder("gru_step", primitive=prim)
+    for name, kw in variants.items():
+        kw = dict(kw)
+        g = GraphBuilder("gru_step", primitive=kw.pop("primitive", False))
         x, h = g.input("x", ["B", I]), g.input("h", [L, "B", H])
-        y, h_new = gru_step(g, x, h, params, "gru", name="gru", num_layers=L)
+        y, h_new = gru_step(g, x, h, params, "gru", name="gru", num_layers=L, **kw)
         g.output(h_new, "h_new", [L, "B", H])
         m = g.model()
         validate_model(m)
-        for n in sorted({threads, 2}):
-            key = f"ort_{'primitive' if prim else 'fused'}_{n}thr"
-            sessions[key] = make_session(m, intra_op_threads=n)
-    out = {}
+        for n in thread_counts:
+            sessions[f"ort_{name}_{n}thr"] = make_session(m, intra_op_threads=n)
+    # the float32 floor: one product reading every weight of the step once (K = I + 3H rows, 3H columns)
+    w_all = np.ascontiguousarray(np.concatenate([params[f"gru.weight_{t}_l{k}"] for k in range(L)
+                                                 for t in ("ih", "hh")], axis=1).T)  # (I + 3H, 3H) float32
+    out = {"floor_weight_mb": w_all.nbytes / 1e6}
     for B in (1, 32):
         xv = rng.standard_normal((B, I)).astype(np.float32)
         hv = rng.standard_normal((L, B, H)).astype(np.float32)
         fns = {k: (lambda s=s: s.run(None, {"x": xv, "h": hv})) for k, s in sessions.items()}
-        fns["numpy"] = lambda: gru_step_forward(xv, hv, params, "gru", num_layers=L)
-        out[f"batch{B}"] = _time(fns, rounds, min_time)
+        res = _time(fns, rounds, min_time)
+        res.update(_time({"numpy": lambda: gru_step_forward(xv, hv, params, "gru", num_layers=L)}, rounds, min_time))
+        xa = rng.standard_normal((B, w_all.shape[0])).astype(np.float32)
+        buf = np.empty((B, w_all.shape[1]), np.float32)
+        for n in thread_counts:                          # BLAS threads set outside the timed call
+            limit = threadpool_limits(limits=n) if threadpool_limits is not None else contextlib.nullcontext()
+            with limit:
+                res.update(_time({f"numpy_floor_x@W_{n}thr": lambda: np.matmul(xa, w_all, out=buf)},
+                                 rounds, min_time))
+        out[f"batch{B}"] = res
+    B = 32                                               # accuracy cost on random inputs, one batch of 32
+    xv = rng.standard_normal((B, I)).astype(np.float32)
+    hv = np.tanh(rng.standard_normal((L, B, H))).astype(np.float32)
+    _, ref, _ = gru_step_forward(xv, hv, params, "gru", num_layers=L)      # float32 NumPy
+    acc = {}
+    for name in variants:
+        (h_new,) = sessions[f"ort_{name}_{thread_counts[0]}thr"].run(None, {"x": xv, "h": hv})
+        d = np.abs(h_new.astype(np.float64) - ref)
+        acc[name] = {"h_new_max_abs": float(d.max()), "h_new_mean_abs": float(d.mean())}
+    out["accuracy_vs_numpy_float32"] = {"batch": B, "inputs": "x ~ N(0, 1), h = tanh(N(0, 1))", "errors": acc}
     return out
 
 
@@ -171,15 +204,18 @@ def bench_qtg(params32, cfg, sessions, rounds, min_time) -> dict:
         state, tl = init_state(params32, past, target, cfg)
         sf = {"pose": state.pose, "latent_prev": state.latent_prev, "hidden": state.hidden, "target_latent": tl}
         out[f"step_batch{B}"] = _time({"ort_step": lambda: sessions["step"].run(None, sf),
-                                       "ort_step_primitive": lambda: sessions["step_primitive"].run(None, sf),
-                                       "numpy_step": lambda: step(params32, state, tl, cfg)}, rounds, min_time)
+                                       "ort_step_primitive": lambda: sessions["step_primitive"].run(None, sf)},
+                                      rounds, min_time)
+        out[f"step_batch{B}"].update(_time({"numpy_step": lambda: step(params32, state, tl, cfg)}, rounds, min_time))
         feeds = {"past": past, "target": target}
         fns = {f"ort_{k}": (lambda s=sessions[k]: s.run(None, feeds))
                for k in sessions if k.startswith(("rollout", "compact"))}
         fns["ort_host_loop_step"] = lambda: _host_loop(sessions["init"], sessions["step"], past, target, T)
-        fns["numpy_rollout_inference"] = lambda: rollout_inference(lean, past, target)
-        fns["numpy_rollout_forward"] = lambda: rollout_forward(params32, past, target, config=cfg)
         out[f"rollout_batch{B}"] = _time(fns, rounds, min_time)
+        out[f"rollout_batch{B}"].update(_time(
+            {"numpy_rollout_inference": lambda: rollout_inference(lean, past, target),
+             "numpy_rollout_forward": lambda: rollout_forward(params32, past, target, config=cfg)},
+            rounds, min_time))
     return out
 
 
@@ -267,9 +303,17 @@ def _model_params(args, cfg):
 def _table(result) -> str:
     lines = []
     g = result["gru_2x1000_step"]
-    lines.append("GRU 2x1000 step (input 128)       batch 1 ms   batch 32 ms   (targets 0.55 / 2.0)")
+    lines.append("GRU 2x1000 step (input 128)       batch 1 ms (min)     batch 32 ms (min)   (targets 0.55 / 2.0)")
     for k in g["batch1"]:
-        lines.append(f"  {k:30s} {g['batch1'][k]['median_ms']:10.3f} {g['batch32'][k]['median_ms']:12.3f}")
+        b1, b32 = g["batch1"][k], g["batch32"][k]
+        lines.append(f"  {k:30s} {b1['median_ms']:8.3f} ({b1['min_ms']:.3f}) {b32['median_ms']:10.3f} "
+                     f"({b32['min_ms']:.3f})")
+    lines.append(f"  (numpy_floor_x@W: x @ W over all {g['floor_weight_mb']:.1f} MB of float32 weights)")
+    a = g["accuracy_vs_numpy_float32"]
+    lines.append(f"GRU 2x1000 step accuracy vs float32 NumPy (batch {a['batch']}, {a['inputs']}): "
+                 "max / mean |h_new diff|")
+    for k, e in a["errors"].items():
+        lines.append(f"  {k:30s} {e['h_new_max_abs']:.2e} / {e['h_new_mean_abs']:.2e}")
     q = result["qtg"]
     for B in (1, 32):
         st = q[f"step_batch{B}"]
