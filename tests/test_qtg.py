@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from refimpl.gradcheck import check_gradients, check_vjp
-from refimpl.models.qtg import (QTGConfig, QTGState, _rollout_naive, count_parameters, encode, init_params,
-                                init_state, macs_per_frame, param_shapes, prepare_inference, rollout_backward,
-                                rollout_forward, rollout_inference, rtn_macs_per_frame, step)
+from refimpl.models.qtg import (QTGConfig, QTGState, _rollout_backward_per_step, _rollout_naive, count_parameters,
+                                encode, init_params, init_state, macs_per_frame, param_shapes, prepare_inference,
+                                rollout_backward, rollout_forward, rollout_inference, rtn_macs_per_frame, step)
 from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
 
 TINY = QTGConfig(pose_size=11, encoder_sizes=(6, 4), gru_hidden=5, decoder_sizes=(6,), transition_length=4)
@@ -15,6 +15,8 @@ TINY2 = QTGConfig(pose_size=11, encoder_sizes=(5,), gru_hidden=4, gru_layers=2, 
                   negative_slope=0.2, transition_length=3)
 TINY3 = QTGConfig(pose_size=11, encoder_sizes=(7, 6, 4), gru_hidden=3, gru_layers=3, decoder_sizes=(5, 6),
                   negative_slope=0.1, transition_length=5)
+TINY4 = QTGConfig(pose_size=9, encoder_sizes=(6, 5), gru_hidden=4, gru_layers=2, decoder_sizes=(7,),
+                  negative_slope=0.0, transition_length=4)
 
 
 def _context(rng, B, P, dtype=np.float64):
@@ -87,7 +89,7 @@ def test_default_length_and_float32():
     assert_close(poses, ref, rtol=1e-4, atol=1e-5)
 
 
-@pytest.mark.parametrize("cfg", [TINY, TINY2])
+@pytest.mark.parametrize("cfg", [TINY, TINY2, TINY3])
 def test_whole_generator_gradients(cfg):
     """spec/qtg.md §4: BPTT through fed-back poses, latents, GRU state and target encodings.
 
@@ -116,6 +118,55 @@ def test_whole_generator_gradients(cfg):
         return dict(g, past=dp, target=dt)
 
     check_vjp(fn, arrays, vjp)
+
+
+@pytest.mark.parametrize("cfg, B, T", [(TINY, 3, 4), (TINY2, 2, 1), (TINY3, 2, 6), (TINY4, 1, 5), (QTGConfig(), 2, 3)])
+def test_batched_backward_equals_per_step_oracle(cfg, B, T):
+    """spec/qtg.md §4: weight gradients formed once over the stacked rows of all steps (and the context rows)
+    equal the per-step formulation (every step's gradients formed and summed in the reverse loop), float64;
+    float32 stays float32 and agrees to float32 rounding."""
+    rng = np.random.default_rng(7)
+    params = init_params(cfg, rng)
+    past, target = _context(rng, B, cfg.pose_size)
+    w = rng.standard_normal((B, T, cfg.pose_size))
+    poses, cache = rollout_forward(params, past, target, T, cfg)
+    grads, dpast, dtarget = rollout_backward(w, cache, input_grads=True)
+    ref_poses, ref_grads, ref_dpast, ref_dtarget = _rollout_backward_per_step(params, past, target, w, cfg)
+    assert_close(poses, ref_poses, **TOL_EXACT, name="poses")
+    assert list(grads) == list(params) and set(ref_grads) == set(params)
+    for k, g in grads.items():
+        assert g.shape == params[k].shape and g.dtype == np.float64
+        assert_close(g, ref_grads[k], **TOL_EXACT, name=k)
+    assert_close(dpast, ref_dpast, **TOL_EXACT, name="dpast")
+    assert_close(dtarget, ref_dtarget, **TOL_EXACT, name="dtarget")
+    only = rollout_backward(w, cache)
+    assert all(np.array_equal(only[k], grads[k]) for k in grads)
+
+    p32 = {k: v.astype(np.float32) for k, v in params.items()}
+    _, c32 = rollout_forward(p32, past.astype(np.float32), target.astype(np.float32), T, cfg)
+    g32, dp32, dt32 = rollout_backward(w.astype(np.float32), c32, input_grads=True)
+    assert dp32.dtype == dt32.dtype == np.float32
+    for k, g in g32.items():
+        assert g.dtype == np.float32
+        scale = float(np.abs(grads[k]).max())
+        assert_close(g, grads[k], rtol=1e-3, atol=1e-4 * max(scale, 1.0), name=f"float32 {k}")
+
+
+def test_backward_leaves_cache_and_inputs_intact():
+    """spec/qtg.md §4: rollout_backward reads its cache and dposes only (a second backward gives the same
+    gradients); the returned poses are not a view of the cache."""
+    rng = np.random.default_rng(8)
+    params = init_params(TINY3, rng)
+    past, target = _context(rng, 3, TINY3.pose_size)
+    w = rng.standard_normal((3, 4, TINY3.pose_size))
+    w_copy = w.copy()
+    poses, cache = rollout_forward(params, past, target, 4, TINY3)
+    first = rollout_backward(w, cache, input_grads=True)
+    poses[...] = 0.0
+    second = rollout_backward(w, cache, input_grads=True)
+    assert np.array_equal(w, w_copy)
+    for a, b in zip([*first[0].values(), *first[1:]], [*second[0].values(), *second[1:]]):
+        assert np.array_equal(a, b)
 
 
 def test_gradient_reaches_targets_and_past():
@@ -186,5 +237,11 @@ def test_bad_inputs():
     with pytest.raises(ValueError, match="dposes"):
         _, cache = rollout_forward(params, past, target, 3, TINY)
         rollout_backward(np.zeros((2, 4, 11)), cache)
+    nan = np.zeros((2, 3, 11))
+    nan[1, 2, 3] = np.nan
+    with pytest.raises(ValueError, match="dposes"):
+        rollout_backward(nan, cache)
+    with pytest.raises(ValueError, match="dposes: expected dtype"):
+        rollout_backward(np.zeros((2, 3, 11), dtype=np.float32), cache)
     with pytest.raises(ValueError, match="model"):
         rollout_inference(params, past, target, 3)

@@ -26,8 +26,11 @@ One step (spec/qtg.md §3), from the state ``(z_{t-1}, p_t, s_t)`` and the encod
     state  <- (z_t, p_{t+1}, s_{t+1})
 
 Rollout: ``z_{-1} = E(p_{-1})``, ``p_0`` the last past pose, ``s_0 = 0``; steps ``t = 0 … T-1`` give
-``p_1 … p_T``. Backward (:func:`rollout_backward`) runs the step caches in reverse; gradients flow through the
-fed-back poses, the carried latents, the GRU state and the target encodings (BPTT, no detaching).
+``p_1 … p_T``. Backward (:func:`rollout_backward`) runs the steps in reverse; gradients flow through the
+fed-back poses, the carried latents, the GRU state and the target encodings (BPTT, no detaching). The training
+path keeps every layer's inputs time-major (``_Record``); the reverse loop propagates only the input and state
+cotangents and keeps the pre-activation cotangents, and each weight gradient is then ONE matrix product over the
+stacked rows of all steps (``_weight_grads``). ``_rollout_backward_per_step`` is the per-step test oracle.
 
 Shape legend: B batch, T transition frames, P pose size, Z latent size, H GRU hidden size, L GRU layers.
 """
@@ -39,8 +42,8 @@ from typing import Mapping, NamedTuple
 import numpy as np
 
 from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
-from refimpl.nn.gru import gru_init, gru_step_backward, gru_step_forward
-from refimpl.nn.linear import linear_backward, linear_forward, linear_init
+from refimpl.nn.gru import _cell_backward, _cell_forward, _input_gates, gru_init, gru_step_backward, gru_step_forward
+from refimpl.nn.linear import _matmul_wt, linear_backward, linear_forward, linear_init
 from refimpl.nn.params import check_float_array
 
 __all__ = [
@@ -365,60 +368,6 @@ def init_state(params: Mapping[str, np.ndarray], past, target,
     return state, target_latent
 
 
-def _init_forward(params, past, target, config):
-    B = past.shape[0]
-    ctx = np.concatenate([past[:, :1], target], axis=1)  # (B, 3, P): p_{-1}, g1, g2
-    lat, c_enc = _encoder_forward(ctx, params, config)  # (B, 3, Z)
-    hidden = np.zeros((config.gru_layers, B, config.gru_hidden), dtype=past.dtype)  # (L, B, H)
-    state = QTGState(np.ascontiguousarray(lat[:, 0]), np.ascontiguousarray(past[:, 1]), hidden)
-    return state, np.ascontiguousarray(lat[:, 1:]), c_enc
-
-
-def _step_forward(params, state: QTGState, target_latent, config: QTGConfig):
-    """One QTG step with its cache: ``(p_{t+1}, new state, cache)`` (spec/qtg.md §3)."""
-    z, c_enc = _encoder_forward(state.pose, params, config)  # (B, Z)
-    e1 = target_latent[:, 0]  # (B, Z)
-    e2 = target_latent[:, 1]  # (B, Z)
-    x = np.concatenate([z - state.latent_prev, e1 - z, e2 - e1], axis=-1)  # (B, 3Z)
-    y, hidden, c_gru = gru_step_forward(x, state.hidden, params, "gru", num_layers=config.gru_layers)  # (B, H)
-    v, c_vel = linear_forward(y, params, "vel")  # (B, Z)
-    pose, c_dec = _decoder_forward(z + v, params, config)  # (B, P)
-    return pose, QTGState(z, pose, hidden), (c_enc, c_gru, c_vel, c_dec)
-
-
-def _step_backward(dpose_next, dlatent_out, dhidden_out, cache, grads):
-    """Backward of :func:`_step_forward`.
-
-    Parameters
-    ----------
-    dpose_next : ndarray (B, P)
-        Total cotangent of ``p_{t+1}`` (loss + its use as the next step's input pose).
-    dlatent_out : ndarray (B, Z) or None
-        Cotangent of the new state's ``latent_prev`` (= ``z_t``), from the next step.
-    dhidden_out : ndarray (L, B, H) or None
-        Cotangent of ``s_{t+1}``.
-    grads : dict
-        Parameter gradients, accumulated in place.
-
-    Returns
-    -------
-    dlatent_prev (B, Z), dpose (B, P), dhidden (L, B, H), dtarget_latent (B, 2, Z)
-    """
-    c_enc, c_gru, c_vel, c_dec = cache
-    dzf = _mlp_backward(dpose_next, c_dec, grads)  # (B, Z): d(z_t + v_t)
-    dy, g = linear_backward(dzf, c_vel)  # (B, H)
-    _accumulate(grads, g)
-    dx, dhidden, _ = gru_step_backward(dy, dhidden_out, c_gru, accumulate_into=grads)  # (B, 3Z), (L, B, H)
-    Z = dzf.shape[-1]
-    dx_vel, dx_off, dx_tgt = dx[:, :Z], dx[:, Z:2 * Z], dx[:, 2 * Z:]  # (B, Z) each
-    dz = dzf + dx_vel - dx_off  # (B, Z)
-    if dlatent_out is not None:
-        dz += dlatent_out
-    dtarget_latent = np.stack([dx_off - dx_tgt, dx_tgt], axis=1)  # (B, 2, Z)
-    dpose = _mlp_backward(dz, c_enc, grads)  # (B, P)
-    return -dx_vel, dpose, dhidden, dtarget_latent
-
-
 def step(params: Mapping[str, np.ndarray], state: QTGState, target_latent,
          config: QTGConfig = QTGConfig()) -> tuple[np.ndarray, QTGState]:
     """Generate one frame (spec/qtg.md §3); the function the ONNX exporter translates.
@@ -460,6 +409,240 @@ def step(params: Mapping[str, np.ndarray], state: QTGState, target_latent,
 
 
 # ----------------------------------------------------------------------------------------------------------------
+# the training path: time-major records of a rollout, per-step kernels (spec/qtg.md §3, §4)
+# ----------------------------------------------------------------------------------------------------------------
+
+class _Weights(NamedTuple):
+    """The parameters a rollout reads, looked up once (the arrays of ``params``, PyTorch layouts, no copies)."""
+
+    enc: tuple  # ((W (n_{i+1}, n_i), b (n_{i+1},)), ...): encoder layers, LeakyReLU after each
+    gru: tuple  # ((W_ih (3H, I_k), W_hh (3H, H), b_ih (3H,), b_hh (3H,)), ...): one per GRU layer
+    vel: tuple  # (W_v (Z, H), b_v (Z,)): velocity head, linear
+    dec: tuple  # ((W (m_{j+1}, m_j), b), ...): decoder layers, LeakyReLU after each but the last
+    slope: np.floating  # LeakyReLU negative slope, in the parameters' dtype
+
+
+def _gather_weights(params: Mapping[str, np.ndarray], config: QTGConfig) -> _Weights:
+    def dense(prefix, n):
+        return tuple((params[f"{prefix}.{i}.weight"], params[f"{prefix}.{i}.bias"]) for i in range(n))
+
+    gru = tuple(tuple(params[f"gru.{name}_l{k}"] for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"))
+                for k in range(config.gru_layers))
+    slope = params["vel.weight"].dtype.type(config.negative_slope)
+    return _Weights(dense("enc", len(config.encoder_sizes)), gru, (params["vel.weight"], params["vel.bias"]),
+                    dense("dec", len(config.decoder_sizes) + 1), slope)
+
+
+class _Record(NamedTuple):
+    """Every layer's input at every step of a rollout, time-major (the cache :func:`rollout_backward` reads).
+
+    Encoder arrays are stacked in blocks of B rows: block 0 ``g1``, block 1 ``g2``, block 2 ``p_{-1}`` (the
+    context, encoded once), block ``3 + t`` the pose ``p_t`` that step t encodes. ``enc[0]`` has one more block,
+    ``T + 3``, for the last generated pose ``p_T``. So ``enc[-1]`` holds ``e1, e2, z_{-1}, z_0 … z_{T-1}``: step t
+    reads ``z_{t-1}`` from block ``2 + t`` and writes ``z_t`` into block ``3 + t``, and its decoder writes
+    ``p_{t+1}`` into block ``4 + t`` of ``enc[0]``, the next step's input. With the context blocks first, the rows
+    of every encoder layer's weight gradient (context and all steps) are one contiguous ``((T + 3) B, n)`` slice.
+    A LeakyReLU's derivative is read from its output (``y > 0`` iff its input ``> 0``, for ``0 <= slope``), i.e.
+    from the next layer's input: no masks are stored.
+    """
+
+    enc: list  # enc[i] (T + 3, B, n_i): input of encoder layer i (enc[0] has T + 4 blocks); enc[-1]: latents
+    gru_x: np.ndarray  # (T, B, 3Z): x_t = [z_t − z_{t−1} | e1 − z_t | e2 − e1]
+    hidden: np.ndarray  # (T + 1, L, B, H): s_t of every layer, s_0 = 0
+    gates: np.ndarray  # (L, T, B, 3H): [r | u | W_hn s_t + b_hn] (refimpl.nn.gru._cell_forward)
+    cand: np.ndarray  # (L, T, B, H): the candidate state n
+    dec: list  # dec[j] (T, B, m_j): input of decoder layer j; dec[0] = z_t + v_t
+
+
+def _new_record(B: int, T: int, config: QTGConfig, dtype) -> _Record:
+    Z, H, L = config.latent_size, config.gru_hidden, config.gru_layers
+    hidden = np.empty((T + 1, L, B, H), dtype=dtype)  # (T + 1, L, B, H)
+    hidden[0] = 0
+    return _Record(
+        enc=[np.empty((T + (4 if i == 0 else 3), B, n), dtype=dtype)
+             for i, n in enumerate((config.pose_size,) + config.encoder_sizes)],
+        gru_x=np.empty((T, B, 3 * Z), dtype=dtype), hidden=hidden,
+        gates=np.empty((L, T, B, 3 * H), dtype=dtype), cand=np.empty((L, T, B, H), dtype=dtype),
+        dec=[np.empty((T, B, m), dtype=dtype) for m in (Z,) + config.decoder_sizes])
+
+
+def _dense(x, weight, bias, slope, out):
+    """``out = x Wᵀ + b`` (x (N, I), out (N, O)), then LeakyReLU in place unless ``slope`` is None.
+
+    ``max(a, slope a)`` equals ``a`` for ``a > 0`` and ``slope a`` otherwise, since ``0 <= slope < 1``."""
+    _matmul_wt(x, weight, out=out)
+    out += bias
+    if slope is not None:
+        np.maximum(out, out * slope, out=out)
+    return out
+
+
+def _leaky_backward(dy, y, slope, out):
+    """``out = dy`` where the LeakyReLU output ``y > 0``, ``slope dy`` elsewhere (its input cotangent).
+
+    Computed as ``dy · max([y > 0], slope)``: the factor is exactly 1 or ``slope`` (``out`` must not be ``dy``)."""
+    np.greater(y, 0, out=out)
+    np.maximum(out, slope, out=out)
+    return np.multiply(out, dy, out=out)
+
+
+def _encode_context(w: _Weights, rec: _Record, past, target) -> None:
+    """Blocks 0-3 of ``rec.enc[0]`` = ``g1, g2, p_{-1}, p_0``; one encoder pass over blocks 0-2 (3B rows)."""
+    B = past.shape[0]
+    rec.enc[0][0:2] = target.transpose(1, 0, 2)  # g1, g2
+    rec.enc[0][2:4] = past.transpose(1, 0, 2)  # p_{-1}, p_0
+    x = rec.enc[0][:3].reshape(3 * B, past.shape[2])  # (3B, P)
+    for i, (weight, bias) in enumerate(w.enc):
+        x = _dense(x, weight, bias, w.slope, rec.enc[i + 1][:3].reshape(3 * B, weight.shape[0]))
+
+
+def _init_forward(params, past, target, config, T: int = 0):
+    """Record of a ``T``-step rollout with its context encoded: ``(state, target_latent, (weights, record))``."""
+    w = _gather_weights(params, config)
+    rec = _new_record(past.shape[0], T, config, past.dtype)
+    _encode_context(w, rec, past, target)
+    latents = rec.enc[-1]  # (T + 3, B, Z)
+    state = QTGState(latents[2], rec.enc[0][3], rec.hidden[0])  # (z_{-1}, p_0, 0): views of the record
+    return state, np.ascontiguousarray(latents[:2].transpose(1, 0, 2)), (w, rec)
+
+
+def _step_into(w: _Weights, rec: _Record, t: int) -> np.ndarray:
+    """Step t of the rollout held in ``rec`` (spec/qtg.md §3).
+
+    Reads ``p_t``, ``z_{t-1}``, ``s_t`` and the target latents from ``rec``, writes every layer's output of the
+    step into it and returns ``p_{t+1}`` (B, P), a view of block ``4 + t`` of ``rec.enc[0]``.
+    """
+    x = rec.enc[0][3 + t]  # p_t (B, P)
+    for i, (weight, bias) in enumerate(w.enc):
+        x = _dense(x, weight, bias, w.slope, rec.enc[i + 1][3 + t])
+    latents = rec.enc[-1]
+    z, z_prev, e1, e2 = x, latents[2 + t], latents[0], latents[1]  # (B, Z) each
+    Z = z.shape[1]
+    x_t = rec.gru_x[t]  # (B, 3Z)
+    np.subtract(z, z_prev, out=x_t[:, :Z])
+    np.subtract(e1, z, out=x_t[:, Z:2 * Z])
+    np.subtract(e2, e1, out=x_t[:, 2 * Z:])
+    inp = x_t
+    for k, (w_ih, w_hh, b_ih, b_hh) in enumerate(w.gru):
+        H = w_hh.shape[1]
+        gi = _input_gates(inp, w_ih, b_ih, b_hh, H)  # (B, 3H)
+        _cell_forward(gi, rec.hidden[t, k], w_hh, None, b_hh[2 * H:], rec.gates[k, t], rec.cand[k, t],
+                      rec.hidden[t + 1, k])
+        inp = rec.hidden[t + 1, k]  # s_{t+1} of layer k (B, H)
+    h = _dense(inp, *w.vel, None, rec.dec[0][t])  # v_t (B, Z)
+    h += z  # z_t + v_t
+    last = len(w.dec) - 1
+    for j, (weight, bias) in enumerate(w.dec):
+        h = _dense(h, weight, bias, None if j == last else w.slope,
+                   rec.enc[0][4 + t] if j == last else rec.dec[j + 1][t])
+    return h  # p_{t+1} (B, P)
+
+
+def _step_forward(params, state: QTGState, target_latent, config: QTGConfig):
+    """One QTG step with its record: ``(p_{t+1}, new state, (weights, record))`` (spec/qtg.md §3).
+
+    The same kernel as :func:`rollout_forward`'s steps (:func:`_step_into`), on a one-step record."""
+    w = _gather_weights(params, config)
+    rec = _new_record(state.pose.shape[0], 1, config, state.pose.dtype)
+    rec.enc[-1][0:2] = np.asarray(target_latent).transpose(1, 0, 2)  # e1, e2
+    rec.enc[-1][2] = state.latent_prev
+    rec.enc[0][3] = state.pose
+    rec.hidden[0] = state.hidden
+    pose = _step_into(w, rec, 0)  # (B, P)
+    return pose, QTGState(rec.enc[-1][3], pose, rec.hidden[1]), (w, rec)
+
+
+class _Cotangents(NamedTuple):
+    """Per-step cotangents of every layer's pre-activations, time-major; each pairs with a :class:`_Record` array
+    for the weight gradients formed after the reverse loop."""
+
+    enc: list  # enc[i] (T + 3, B, n_{i+1}): encoder layer i (blocks as in _Record); pairs with rec.enc[i]
+    gru_in: np.ndarray  # (L, T, B, 3H): [da_r | da_u | da_n], pairs with the layer's input (x_t or s_{t+1} below)
+    gru_hh: np.ndarray  # (L, T, B, 3H): [da_r | da_u | r da_n], pairs with rec.hidden[:-1] (s_t)
+    vel: np.ndarray  # (T, B, Z): cotangent of z_t + v_t (the velocity head's output); pairs with s_{t+1} (top)
+    dec: list  # dec[j] (T, B, m_{j+1}): decoder layer j; the last one is the total cotangent of p_{t+1}
+
+
+def _new_cotangents(B: int, T: int, config: QTGConfig, dtype) -> _Cotangents:
+    Z, H, L = config.latent_size, config.gru_hidden, config.gru_layers
+    return _Cotangents(
+        enc=[np.empty((T + 3, B, n), dtype=dtype) for n in config.encoder_sizes],
+        gru_in=np.empty((L, T, B, 3 * H), dtype=dtype), gru_hh=np.empty((L, T, B, 3 * H), dtype=dtype),
+        vel=np.empty((T, B, Z), dtype=dtype),
+        dec=[np.empty((T, B, m), dtype=dtype) for m in config.decoder_sizes + (config.pose_size,)])
+
+
+def _step_backward(w: _Weights, rec: _Record, cot: _Cotangents, t: int, dhidden, dlatent, tmp, need_dpose: bool):
+    """Backward of step t (spec/qtg.md §4): only the sequential input and state cotangents, no weight gradients.
+
+    On entry ``cot.dec[-1][t]`` holds the total cotangent of ``p_{t+1}``, ``dhidden`` (L, B, H) that of
+    ``s_{t+1}``, and ``dlatent`` (B, Z) or None that of ``z_t`` from step t + 1. Writes the step's pre-activation
+    cotangents into ``cot``, overwrites ``dhidden`` with the cotangent of ``s_t`` (``tmp`` (B, H) is scratch) and
+    returns ``(dz_{t-1} (B, Z), dp_t (B, P) or None unless need_dpose)``.
+    """
+    last = len(w.dec) - 1
+    dy = cot.dec[last][t]  # (B, P)
+    for j in range(last, -1, -1):
+        if j < last:
+            dy = _leaky_backward(dy, rec.dec[j + 1][t], w.slope, cot.dec[j][t])
+        dy = np.matmul(dy, w.dec[j][0], out=cot.vel[t] if j == 0 else None)  # (B, m_j)
+    dzv = dy  # (B, Z): d(z_t + v_t) = dv_t
+    d_out = dzv @ w.vel[0]  # (B, H): ds_{t+1} (top layer) from the velocity head
+    for k in range(len(w.gru) - 1, -1, -1):
+        w_ih, w_hh = w.gru[k][:2]
+        dh = dhidden[k]  # (B, H)
+        dh += d_out
+        _cell_backward(dh, rec.hidden[t, k], rec.gates[k, t], rec.cand[k, t], w_hh, cot.gru_in[k, t],
+                       cot.gru_hh[k, t], tmp)
+        if k > 0:
+            d_out = cot.gru_in[k, t] @ w_ih  # (B, H): cotangent of the output of layer k − 1
+    Z = dzv.shape[1]
+    # dx_t[vel], dx_t[off] only; e1 and e2 get Σ_t dx_t, formed once after the loop
+    dx = cot.gru_in[0, t] @ w.gru[0][0][:, :2 * Z]  # (B, 2Z)
+    dx_vel, dx_off = dx[:, :Z], dx[:, Z:]  # (B, Z) each
+    dz = dzv + dx_vel  # dz_t = d(z_t + v_t) + dx_t[vel] − dx_t[off] (+ from step t + 1)
+    dz -= dx_off
+    if dlatent is not None:
+        dz += dlatent
+    dy = dz
+    for i in range(len(w.enc) - 1, -1, -1):
+        da = _leaky_backward(dy, rec.enc[i + 1][3 + t], w.slope, cot.enc[i][3 + t])  # (B, n_{i+1})
+        dy = da @ w.enc[i][0] if i > 0 or need_dpose else None  # (B, n_i)
+    return -dx_vel, dy
+
+
+def _weight_grads(w: _Weights, rec: _Record, cot: _Cotangents) -> dict[str, np.ndarray]:
+    """Every parameter's gradient, formed once per rollout: ONE product over all stacked rows per weight.
+
+    ``dW = Σ_rows da ⊗ x`` over the T·B step rows (and the 3B context rows for the encoder), ``db = Σ_rows da``.
+    """
+    def rows(a):
+        return a.reshape(-1, a.shape[-1])
+
+    grads: dict[str, np.ndarray] = {}
+
+    def dense(name, da, x):
+        da = rows(da)  # (N, O)
+        grads[f"{name}.weight"] = da.T @ rows(x)  # (O, I)
+        grads[f"{name}.bias"] = da.sum(axis=0)  # (O,)
+
+    T = rec.gru_x.shape[0]
+    for i in range(len(w.enc)):
+        dense(f"enc.{i}", cot.enc[i], rec.enc[i][:T + 3])
+    for k in range(len(w.gru)):
+        dgi, dgh = rows(cot.gru_in[k]), rows(cot.gru_hh[k])  # (T B, 3H)
+        x = rec.gru_x if k == 0 else rec.hidden[1:, k - 1]  # (T, B, I_k)
+        grads[f"gru.weight_ih_l{k}"] = dgi.T @ rows(x)
+        grads[f"gru.weight_hh_l{k}"] = dgh.T @ rows(rec.hidden[:-1, k])
+        grads[f"gru.bias_ih_l{k}"] = dgi.sum(axis=0)
+        grads[f"gru.bias_hh_l{k}"] = dgh.sum(axis=0)
+    dense("vel", cot.vel, rec.hidden[1:, -1])
+    for j in range(len(w.dec)):
+        dense(f"dec.{j}", cot.dec[j], rec.dec[j])
+    return grads
+
+
+# ----------------------------------------------------------------------------------------------------------------
 # rollout: forward and backward
 # ----------------------------------------------------------------------------------------------------------------
 
@@ -483,61 +666,75 @@ def rollout_forward(params: Mapping[str, np.ndarray], past, target, T: int | Non
     poses : ndarray (B, T, P)
         ``p_1 … p_T``.
     cache : dict
-        For :func:`rollout_backward`.
+        For :func:`rollout_backward` (every layer's input at every step, time-major; it references ``params``,
+        which must not be modified before the backward).
     """
     dtype = _check_params(params, config)
     past, target = _check_context(past, target, config, dtype)
     T = _check_length(T, config)
-    state, target_latent, c_init = _init_forward(params, past, target, config)
-    B = past.shape[0]
-    poses = np.empty((B, T, config.pose_size), dtype=dtype)  # (B, T, P)
-    step_caches = []
+    _, _, (w, rec) = _init_forward(params, past, target, config, T)
     for t in range(T):
-        poses[:, t], state, c = _step_forward(params, state, target_latent, config)
-        step_caches.append(c)
-    return poses, {"init": c_init, "steps": step_caches, "config": config, "shape": (B, T, config.pose_size)}
+        _step_into(w, rec, t)
+    B = past.shape[0]
+    poses = np.ascontiguousarray(rec.enc[0][4:].transpose(1, 0, 2))  # (B, T, P), not a view of the cache
+    return poses, {"weights": w, "record": rec, "config": config, "shape": (B, T, config.pose_size)}
 
 
 def rollout_backward(dposes, cache, *, input_grads: bool = False):
-    """Backpropagation through the whole rollout (reverse loop over the step caches; spec/qtg.md §4).
+    """Backpropagation through the whole rollout (BPTT through all steps; spec/qtg.md §4).
+
+    The reverse loop over the steps propagates only the input and state cotangents (they are sequential) and
+    keeps every layer's pre-activation cotangents; after the loop, each weight gradient is ONE matrix product
+    over the stacked rows of all steps (for the encoder, also the context rows), each bias gradient one sum.
 
     Parameters
     ----------
     dposes : ndarray (B, T, P)
-        Cotangent of the generated poses (e.g. from ``mae_loss_backward``).
+        Cotangent of the generated poses (e.g. from ``mae_loss_backward``), finite, in the parameters' dtype.
     cache : dict
-        From :func:`rollout_forward`.
+        From :func:`rollout_forward` (not modified: it can be back-propagated again).
     input_grads : bool
         Also return the gradients with respect to ``past`` and ``target``.
 
     Returns
     -------
     grads : dict
-        One array per parameter, same names and shapes as the parameters.
+        One array per parameter, same names, shapes and dtype as the parameters.
     dpast, dtarget : ndarray (B, 2, P)
         Only when ``input_grads``.
     """
-    shape = cache["shape"]
-    dposes = np.asarray(dposes)
-    if dposes.shape != shape:
-        raise ValueError(f"dposes: expected shape {shape}, got {dposes.shape}")
+    shape, w, rec, config = cache["shape"], cache["weights"], cache["record"], cache["config"]
+    dtype = rec.gru_x.dtype
+    dposes = check_float_array(dposes, "dposes", shape)
+    if dposes.dtype != dtype:
+        raise ValueError(f"dposes: expected dtype {dtype} (the parameters' dtype), got {dposes.dtype}")
     B, T, P = shape
-    grads: dict[str, np.ndarray] = {}
-    dpose_in = None  # cotangent of p_{t+1} from its use as step t+1's input pose
-    dlatent = None  # cotangent of z_t from its use as step t+1's latent_prev
-    dhidden = None
-    dtarget_latent = None
+    Z, H, L = config.latent_size, config.gru_hidden, config.gru_layers
+    cot = _new_cotangents(B, T, config, dtype)
+    dhidden = np.zeros((L, B, H), dtype=dtype)  # cotangent of s_{t+1}, then of s_t
+    tmp = np.empty((B, H), dtype=dtype)
+    dlatent = None  # cotangent of z_t from its use as step t+1's z_{t-1}
+    dpose = None  # cotangent of p_{t+1} from its use as step t+1's input pose
     for t in range(T - 1, -1, -1):
-        dp = dposes[:, t] if dpose_in is None else dposes[:, t] + dpose_in  # (B, P)
-        dlatent, dpose_in, dhidden, dtl = _step_backward(dp, dlatent, dhidden, cache["steps"][t], grads)
-        dtarget_latent = dtl if dtarget_latent is None else dtarget_latent + dtl  # (B, 2, Z)
-    # init: latents of p_{-1}, g1, g2 came from one encoder call on (B, 3, P)
-    dctx_lat = np.concatenate([dlatent[:, None], dtarget_latent], axis=1)  # (B, 3, Z)
-    dctx = _mlp_backward(dctx_lat, cache["init"], grads)  # (B, 3, P)
+        dp = cot.dec[-1][t]  # (B, P): total cotangent of p_{t+1}
+        if dpose is None:
+            dp[...] = dposes[:, t]
+        else:
+            np.add(dposes[:, t], dpose, out=dp)
+        dlatent, dpose = _step_backward(w, rec, cot, t, dhidden, dlatent, tmp, need_dpose=t > 0 or input_grads)
+    # the context latents e1, e2 (used by every x_t) and z_{-1} (step 0), back through the initial encoder pass
+    dx = cot.gru_in[0].sum(axis=0) @ w.gru[0][0]  # (B, 3Z): Σ_t dx_t = (Σ_t [da_r | da_u | da_n]_t) W_ih
+    dy = np.concatenate([dx[:, Z:2 * Z] - dx[:, 2 * Z:], dx[:, 2 * Z:], dlatent])  # (3B, Z): de1, de2, dz_{-1}
+    for i in range(len(w.enc) - 1, -1, -1):
+        n = w.enc[i][0].shape[0]
+        da = _leaky_backward(dy, rec.enc[i + 1][:3].reshape(3 * B, n), w.slope, cot.enc[i][:3].reshape(3 * B, n))
+        dy = da @ w.enc[i][0] if i > 0 or input_grads else None  # (3B, n_i)
+    grads = _weight_grads(w, rec, cot)
     if not input_grads:
         return grads
-    dpast = np.stack([dctx[:, 0], dpose_in], axis=1)  # (B, 2, P)
-    return grads, dpast, np.ascontiguousarray(dctx[:, 1:])
+    dctx = dy.reshape(3, B, P)  # g1, g2, p_{-1}
+    dpast = np.stack([dctx[2], dpose], axis=1)  # (B, 2, P)
+    return grads, dpast, np.ascontiguousarray(dctx[:2].transpose(1, 0, 2))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -795,3 +992,47 @@ def _rollout_naive(params, past, target, T, config: QTGConfig = QTGConfig()) -> 
             out[b, t] = pose
             z_prev = z
     return out
+
+
+def _rollout_backward_per_step(params, past, target, dposes, config: QTGConfig = QTGConfig()):
+    """Slow oracle for :func:`rollout_forward` + :func:`rollout_backward`: the per-step formulation.
+
+    Built from the layers' public functions (``linear_*``, ``leaky_relu_*``, ``gru_step_*``) with per-step caches;
+    every step's weight gradients are formed inside the reverse loop and summed (the implementation before the
+    batched backward). ``dposes`` (B, T, P). Returns ``(poses (B, T, P), grads, dpast, dtarget)``.
+    """
+    B, T, _ = dposes.shape
+    Z, L = config.latent_size, config.gru_layers
+    ctx = np.concatenate([past[:, :1], target], axis=1)  # (B, 3, P): p_{-1}, g1, g2
+    lat, c_ctx = _encoder_forward(ctx, params, config)  # (B, 3, Z)
+    z_prev, e1, e2, pose = lat[:, 0], lat[:, 1], lat[:, 2], past[:, 1]
+    hidden = np.zeros((L, B, config.gru_hidden), dtype=past.dtype)  # (L, B, H)
+    poses, caches = [], []
+    for _ in range(T):
+        z, c_enc = _encoder_forward(pose, params, config)  # (B, Z)
+        x = np.concatenate([z - z_prev, e1 - z, e2 - e1], axis=-1)  # (B, 3Z)
+        y, hidden, c_gru = gru_step_forward(x, hidden, params, "gru", num_layers=L)  # (B, H)
+        v, c_vel = linear_forward(y, params, "vel")  # (B, Z)
+        pose, c_dec = _decoder_forward(z + v, params, config)  # (B, P)
+        poses.append(pose)
+        caches.append((c_enc, c_gru, c_vel, c_dec))
+        z_prev = z
+    grads: dict[str, np.ndarray] = {}
+    dpose = dlatent = dhidden = None
+    dtarget_latent = 0.0
+    for t in range(T - 1, -1, -1):
+        c_enc, c_gru, c_vel, c_dec = caches[t]
+        dp = dposes[:, t] if dpose is None else dposes[:, t] + dpose  # (B, P)
+        dzv = _mlp_backward(dp, c_dec, grads)  # (B, Z): d(z_t + v_t)
+        dy, g = linear_backward(dzv, c_vel)  # (B, H)
+        _accumulate(grads, g)
+        dx, dhidden, _ = gru_step_backward(dy, dhidden, c_gru, accumulate_into=grads)  # (B, 3Z), (L, B, H)
+        dx_vel, dx_off, dx_tgt = dx[:, :Z], dx[:, Z:2 * Z], dx[:, 2 * Z:]
+        dz = dzv + dx_vel - dx_off
+        if dlatent is not None:
+            dz += dlatent
+        dlatent = -dx_vel
+        dtarget_latent = dtarget_latent + np.stack([dx_off - dx_tgt, dx_tgt], axis=1)  # (B, 2, Z)
+        dpose = _mlp_backward(dz, c_enc, grads)  # (B, P)
+    dctx = _mlp_backward(np.concatenate([dlatent[:, None], dtarget_latent], axis=1), c_ctx, grads)  # (B, 3, P)
+    return np.stack(poses, axis=1), grads, np.stack([dctx[:, 0], dpose], axis=1), dctx[:, 1:]
