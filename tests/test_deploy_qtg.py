@@ -6,6 +6,7 @@ NumPy model within refimpl.testing's float32 tolerances (TOL_ORT_STEP per step, 
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -226,7 +227,7 @@ def test_bad_arguments():
 def test_quantize_blocks_layout_and_kernel(bits, block):
     """spec/deploy.md §5.4: block-wise symmetric quantisation; onnxruntime's MatMulNBits reads our packing."""
     from deploy.graph import GraphBuilder
-    from deploy.qtg_compact import quantize_blocks
+    from deploy.quantize import quantize_blocks
 
     rng = np.random.default_rng(bits)
     K, N = 91, 24                                                    # K not a multiple of the block size
@@ -252,20 +253,177 @@ def test_quantize_blocks_layout_and_kernel(bits, block):
         quantize_blocks(w, 2)
 
 
+# the TINY configurations of the compact variant: 1 / 2 GRU layers, 0 / 1 decoder hidden layers, 1 / 2 encoder layers
+TINY = {f"L{L}_dec{len(d)}_enc{len(e)}": dataclasses.replace(SMALL, gru_layers=L, decoder_sizes=d, encoder_sizes=e)
+        for L, d, e in ((1, (), (6,)), (1, (8,), (9, 6)), (2, (), (9, 6)), (2, (8,), (9, 6)))}
+
+
+def _compact_numpy(params, config, past, target, T, mat=lambda w: w):
+    """float64 NumPy of the compact graph's arithmetic (spec/deploy.md §5.4), every weight matrix through ``mat``
+    (identity: exact algebra; ``quantize_blocks(w)[2]``: the weights an int8/int4 graph multiplies with)."""
+    from deploy.qtg_compact import _prepare
+
+    prep, H, L = _prepare(params, config), config.gru_hidden, config.gru_layers
+    p, n_enc, n_dec = prep["p"], len(config.encoder_sizes), len(config.decoder_sizes) + 1
+
+    def mlp(x, prefix, n, last_linear, first_bias=None):
+        for i in range(n):
+            b = first_bias if (i == 0 and first_bias is not None) else p[f"{prefix}.{i}.bias"]
+            x = x @ mat(p[f"{prefix}.{i}.weight"].T) + b
+            if not (last_linear and i == n - 1):
+                x = np.where(x > 0, x, config.negative_slope * x)
+        return x
+
+    def sigmoid(a):
+        return 1.0 / (1.0 + np.exp(-a))
+
+    z_prev, z, e1, e2 = mlp(np.concatenate([past, target], axis=1), "enc", n_enc, False).transpose(1, 0, 2)
+    k = np.concatenate([e1, e2], axis=-1) @ mat(prep["target"]) + prep["target_b"]      # (B, 3H)
+    s = [np.zeros((past.shape[0], H))] * L
+    poses = []
+    for t in range(T):
+        if t:
+            z_prev, z = z, mlp(poses[-1], "enc", n_enc, False)
+        x = np.concatenate([z_prev, z], axis=-1) @ mat(prep["pair"]) + k                 # layer 0 input term
+        for layer in range(L):
+            w, b = mat(prep["state"][layer]), prep["state_b"][layer]
+            gh = s[layer] @ w[:, :3 * H] + b[:3 * H]                                      # W_hh s + [0, 0, b_hn]
+            r, u = sigmoid(x[:, :H] + gh[:, :H]), sigmoid(x[:, H:2 * H] + gh[:, H:2 * H])
+            n = np.tanh(x[:, 2 * H:] + r * gh[:, 2 * H:])
+            s[layer] = n + u * (s[layer] - n)
+            x = s[layer] @ w[:, 3 * H:] + b[3 * H:]                     # input term of layer + 1, or W_v s
+        poses.append(mlp(z + x, "dec", n_dec, True, first_bias=prep["dec0_b"]))
+    return np.stack(poses, axis=1)                                                        # (B, T, P)
+
+
+def _compact(params, config, **kw):
+    from deploy.qtg_compact import export_qtg_rollout_compact
+
+    model = export_qtg_rollout_compact(params, config, **kw)
+    validate_model(model)
+    return model
+
+
+@pytest.mark.parametrize("T", [1, 6])
+@pytest.mark.parametrize("name", sorted(TINY))
+def test_compact_float32_matches_rollout_forward(name, T):
+    """spec/deploy.md §5.4, spec/qtg.md §6: the rearranged weights (pair product, fused state products, folded
+    biases, batched init encoder) are exact in float64 NumPy, and the float32 graph (onnxruntime and the ONNX
+    reference evaluator) equals rollout_forward within TOL_ORT_ROLLOUT, for 1/2 GRU layers, 0/1 decoder hidden
+    layers, T = 1 (step 0 is also the last step) and T = 6."""
+    config = TINY[name]
+    params = _params(config)
+    past, target = _context(config, 3)
+    expect, _ = rollout_forward(params, past, target, config=config, T=T)
+    assert_close(_compact_numpy(params, config, past, target, T), expect, **TOL_EXACT, name="rearranged algebra")
+    model = _compact(params, config, weights="float32", T=T)
+    assert "MatMulNBits" not in {n.op_type for n in model.graph.node}
+    feeds = _cast({"past": past, "target": target}, np.float32)
+    for (poses,), who in ((run_onnxruntime(model, feeds), "ort"), (run_reference(model, feeds), "reference")):
+        assert poses.shape == (3, T, config.pose_size)
+        assert_close(poses, expect, **TOL_ORT_ROLLOUT, name=f"compact float32 {who}")
+
+
+@pytest.mark.parametrize("weights", ["int8", "int4"])
+@pytest.mark.parametrize("name", sorted(TINY))
+def test_compact_quantized_equals_numpy_with_dequantized_weights(name, weights, monkeypatch):
+    """spec/deploy.md §5.4: with float32 compute (MatMulNBits accuracy_level 1) the int8/int4 graph equals the
+    rearranged NumPy rollout with the dequantised matrices to float32 rounding — which matrices are quantised,
+    their layout and biases; the deployed int8-activation form (accuracy_level 4) stays close to it."""
+    import deploy.qtg_compact as qc
+    from deploy.quantize import WeightMatmul, quantize_blocks
+
+    config = TINY[name]
+    params = _params(config)
+    past, target = _context(config, 3)
+    bits = {"int8": 8, "int4": 4}[weights]
+    expect = _compact_numpy(params, config, past, target, config.transition_length,
+                            mat=lambda w: quantize_blocks(w, bits)[2])
+    feeds = _cast({"past": past, "target": target}, np.float32)
+    deployed = _compact(params, config, weights=weights)
+    monkeypatch.setattr(qc, "WeightMatmul", functools.partial(WeightMatmul, accuracy_level=1))
+    (poses,) = run_onnxruntime(_compact(params, config, weights=weights), feeds)
+    # float32 rounding only (observed <= 1e-7), so the one-step tolerance; sharp: the float weights fail it
+    assert_close(poses, expect, **TOL_ORT_STEP, name=f"compact {weights}, float32 compute")
+    float_poses, _ = rollout_forward(params, past, target, config=config)
+    with pytest.raises(AssertionError):
+        assert_close(float_poses, expect, **TOL_ORT_STEP)
+    (poses4,) = run_onnxruntime(deployed, feeds)
+    assert 0 < np.abs(poses4 - expect).max() < 0.02 * np.abs(expect).max()
+
+
+@pytest.mark.parametrize("name", sorted(TINY))
+def test_compact_graph_structure(name):
+    """spec/deploy.md §5.4 (regression guard): per middle step n_enc + 1 + L + n_dec matrix products reading
+    macs_per_frame − 3ZH weights, and the element-wise nodes of the fused structure; step 0 has no encoder pass,
+    the last step multiplies the top state by W_v only."""
+    from collections import Counter
+
+    from refimpl.models.qtg import macs_per_frame
+
+    config = TINY[name]
+    params = _params(config)
+    n_enc, n_dec, L = len(config.encoder_sizes), len(config.decoder_sizes) + 1, config.gru_layers
+    Z, H = config.latent_size, config.gru_hidden
+    for weights in ("float32", "int8"):
+        model = _compact(params, config, weights=weights)
+        dims = {t.name: list(t.dims) for t in model.graph.initializer}
+
+        def step_nodes(t):
+            return [n for n in model.graph.node if n.name.startswith(f"t{t:03d}.")]
+
+        def weights_read(nodes):  # K·N of every product
+            total = 0
+            for n in nodes:
+                if n.op_type == "MatMulNBits":
+                    a = {x.name: x.i for x in n.attribute}
+                    total += a["K"] * a["N"]
+                elif n.op_type in ("Gemm", "MatMul"):
+                    total += int(np.prod(dims[n.input[1]]))
+            return total
+
+        mid = step_nodes(2)
+        mm = "MatMulNBits" if weights == "int8" else "Gemm"
+        expect = {mm: n_enc + 1 + L + n_dec, "LeakyRelu": n_enc + n_dec - 1, "Concat": 1, "Split": 1 + 2 * L,
+                  "Add": (weights == "int8") + 3 * L + 1, "Mul": 2 * L, "Sub": L, "Sigmoid": L, "Tanh": L}
+        assert Counter(n.op_type for n in mid) == expect, weights
+        assert weights_read(mid) == macs_per_frame(config) - 3 * Z * H
+        first, last = step_nodes(0), step_nodes(config.transition_length - 1)
+        assert not [n for n in first if n.name.startswith(("t000.enc", "t000.pair"))]
+        assert Counter(n.op_type for n in first)[mm] == 1 + L + n_dec
+        assert weights_read(last) == weights_read(mid) - L * 3 * H * H       # no W_hh products after the last step
+
+
+def test_compact_default_size_node_count():
+    """spec/deploy.md §5.4: the default QTG has 23 nodes per middle step with int8 weights (6 MatMulNBits), 22 with
+    float32 weights (6 Gemm) — against 25 (8 products) before the fused structure."""
+    config = QTGConfig()
+    params = _params(config)
+    for weights, total in (("int8", 23), ("float32", 22)):
+        model = _compact(params, config, weights=weights)
+        ops = [n.op_type for n in model.graph.node if n.name.startswith("t010.")]
+        assert len(ops) == total and ops.count("MatMulNBits" if weights == "int8" else "Gemm") == 6, ops
+
+
 @pytest.mark.parametrize("opset", OPSETS)
 @pytest.mark.parametrize("weights,max_err", [("float32", None), ("int8", 0.02), ("int4", 0.1)])
 def test_compact_rollout(opset, weights, max_err):
-    """spec/deploy.md §5.4: the rearranged rollout equals rollout_forward (float32) or stays close (int8, int4)."""
-    from deploy.qtg_compact import export_qtg_rollout_compact
-
+    """spec/deploy.md §5.4: the rearranged rollout equals rollout_forward (float32) or stays close (int8, int4),
+    with raw poses in and out (normalisation in the graph), and keeps the rollout model's I/O and metadata."""
     config = QTGConfig(pose_size=11, encoder_sizes=(40, 24), gru_hidden=32, decoder_sizes=(40,),
                        transition_length=8)
     params = _params(config)
     past, target = _context(config, 3)
     stats = (np.array([1.0, -2.0, 0.5]), np.array([2.0, 3.0, 0.25]))
-    model = export_qtg_rollout_compact(params, config, weights=weights, normalization=stats, opset=opset)
-    validate_model(model)
-    assert read_metadata(model)["exporter"]["variant"] == f"compact.{weights}"
+    model = _compact(params, config, weights=weights, normalization=stats, opset=opset, skeleton=cmu_skeleton())
+    assert model.opset_import[0].version == opset
+    # same contract as export_qtg_rollout: inputs, outputs, metadata (but the variant)
+    plain = export_qtg_rollout(params, config, normalization=stats, opset=opset, skeleton=cmu_skeleton())
+    assert [str(v) for v in model.graph.input] == [str(v) for v in plain.graph.input]
+    assert [str(v) for v in model.graph.output] == [str(v) for v in plain.graph.output]
+    meta, plain_meta = read_metadata(model), read_metadata(plain)
+    assert meta["exporter"].pop("variant") == f"compact.{weights}" and plain_meta["exporter"].pop("variant")
+    assert meta == plain_meta
     raw = lambda p: p * np.r_[stats[1], np.ones(8)] + np.r_[stats[0], np.zeros(8)]  # noqa: E731
     expect, _ = rollout_forward(params, past, target, config=config)
     feeds = _cast({"past": raw(past), "target": raw(target)}, np.float32)
@@ -278,7 +436,19 @@ def test_compact_rollout(opset, weights, max_err):
     else:
         err = np.abs(got - expect)
         assert err.max() < max_err and err.mean() < max_err / 5, (err.max(), err.mean())
+
+
+def test_compact_bad_arguments():
+    """spec/deploy.md §5.4: bad weights format, length, parameters raise ValueError."""
+    from deploy.qtg_compact import export_qtg_rollout_compact
+
+    params = _params()
     with pytest.raises(ValueError, match="weights"):
-        export_qtg_rollout_compact(params, config, weights="fp16")
-    with pytest.raises(ValueError, match="gru_layers"):
-        export_qtg_rollout_compact(_params(SMALL), SMALL)
+        export_qtg_rollout_compact(params, SMALL, weights="fp16")
+    for T in (0, 2.5):
+        with pytest.raises(ValueError, match="T"):
+            export_qtg_rollout_compact(params, SMALL, T=T)
+    with pytest.raises(ValueError, match="gru.weight_hh_l1"):
+        export_qtg_rollout_compact({k: v for k, v in params.items() if k != "gru.weight_hh_l1"}, SMALL)
+    with pytest.raises(ValueError, match="normalization"):
+        export_qtg_rollout_compact(params, SMALL, normalization=(np.zeros(3), np.zeros(3)))
