@@ -47,18 +47,36 @@ def load_qtg_checkpoint(path):
 
 
 def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None, opset=None, dtype=np.float32,
-                   mode: str = "scan", T: int | None = None, metadata=None) -> dict[str, Path]:
-    """Export, validate and atomically write ``qtg_init/step/rollout.onnx`` into ``out_dir``; return the paths."""
+                   mode: str = "scan", T: int | None = None, metadata=None,
+                   compact: str | None = None) -> dict[str, Path]:
+    """Export, validate and atomically write ``qtg_init/step/rollout.onnx`` into ``out_dir``; return the paths.
+
+    ``compact`` (``"float32"``, ``"int8"`` or ``"int4"``; float32 graphs only) writes the rollout model as the
+    compact deployment variant with those weights (``deploy.qtg_compact``, ``spec/deploy.md`` §5.4) instead of
+    the ``mode`` translation; the init and step models are unchanged.
+    """
     from deploy.graph import OPSET, save_model
     from deploy.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
+    from deploy.qtg_compact import export_qtg_rollout_compact
+    from deploy.quantize import WEIGHT_FORMATS
     from deploy.validate import validate_model
 
+    if compact is not None:
+        if compact not in WEIGHT_FORMATS:
+            raise ValueError(f"compact: expected one of {WEIGHT_FORMATS} or None, got {compact!r}")
+        if np.dtype(dtype) != np.float32:
+            raise ValueError(f"compact: the compact rollout is a float32 graph, got dtype {np.dtype(dtype)}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     kw = dict(dtype=dtype, opset=OPSET if opset is None else opset, normalization=normalization,
               skeleton=skeleton, metadata=metadata)
+    if compact is None:
+        rollout = export_qtg_rollout(params, config, T=T, mode=mode, **kw)
+    else:
+        rollout = export_qtg_rollout_compact(params, config, T=T, weights=compact, opset=kw["opset"],
+                                             normalization=normalization, skeleton=skeleton, metadata=metadata)
     models = {"init": export_qtg_init(params, config, **kw), "step": export_qtg_step(params, config, **kw),
-              "rollout": export_qtg_rollout(params, config, T=T, mode=mode, **kw)}
+              "rollout": rollout}
     paths = {}
     for role, m in models.items():
         validate_model(m)
@@ -92,7 +110,7 @@ def _cmd_export(args) -> int:
     skeleton = _skeleton_from_bvh(args.skeleton_bvh, args.joints) if args.skeleton_bvh else None
     dtype = {"float32": np.float32, "float64": np.float64}[args.dtype]
     paths = export_qtg_dir(params, config, args.out_dir, normalization=normalization, skeleton=skeleton,
-                           opset=args.opset, dtype=dtype, mode=args.mode, T=args.frames,
+                           opset=args.opset, dtype=dtype, mode=args.mode, T=args.frames, compact=args.compact,
                            metadata={"checkpoint": {"path": str(args.checkpoint), "step": meta.get("step")}})
     for role, p in paths.items():
         print(f"{role}: {p} ({p.stat().st_size / 1e6:.2f} MB)")
@@ -190,6 +208,9 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--opset", type=int, default=None)
     e.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     e.add_argument("--mode", choices=("scan", "loop", "unrolled"), default="scan")
+    e.add_argument("--compact", choices=("float32", "int8", "int4"), default=None,
+                   help="write the rollout model as the compact deployment variant with these weights "
+                        "(onnxruntime only for int8/int4; spec/deploy.md §5.4)")
     e.add_argument("--frames", type=int, default=None, help="T of the rollout model (default: the config's)")
     e.set_defaults(func=_cmd_export)
     r = sub.add_parser("run", help="generate a transition inside a BVH clip with exported models")

@@ -147,6 +147,33 @@ def test_export_dir_matches_numpy(tmp_path):
     assert all(onnx.load(str(p)).ir_version == 8 for p in paths.values())
 
 
+def test_export_dir_compact(tmp_path, capsys):
+    """spec/deploy.md §8: ``--compact`` writes the compact rollout (same contract; int8 via MatMulNBits) and the
+    runtime uses it; float32 compact reproduces rollout_forward; bad combinations are refused."""
+    params = _params()
+    rng = np.random.default_rng(4)
+    past, target = rng.normal(size=(2, 2, 91)).astype(np.float32), rng.normal(size=(2, 2, 91)).astype(np.float32)
+    expect, _ = rollout_forward(params, past, target, config=SMALL)
+    export_qtg_dir(params, SMALL, tmp_path / "f32", compact="float32")
+    assert_close(QTGRuntime.from_dir(tmp_path / "f32").transition(past, target), expect, **TOL_ORT_ROLLOUT,
+                 name="compact float32")
+    ck = tmp_path / "ck.npz"
+    save_checkpoint(ck, {f"param.{k}": v for k, v in params.items()},
+                    {"model_config": dict(SMALL.to_dict(), dtype="float32")})
+    assert main(["export", str(ck), str(tmp_path / "i8"), "--compact", "int8"]) == 0
+    rollout = onnx.load(str(tmp_path / "i8" / "qtg_rollout.onnx"))
+    assert any(n.op_type == "MatMulNBits" for n in rollout.graph.node)
+    assert load_model(tmp_path / "i8" / "qtg_rollout.onnx").metadata["exporter"]["variant"] == "compact.int8"
+    got = QTGRuntime.from_dir(tmp_path / "i8").transition(past, target)
+    assert got.shape == expect.shape and np.all(np.isfinite(got))
+    assert 0 < np.abs(got - expect).max() < 0.05 * np.abs(expect).max()   # quantised: close, not equal
+    with pytest.raises(ValueError, match="compact"):
+        export_qtg_dir(params, SMALL, tmp_path / "bad", compact="int2")
+    with pytest.raises(ValueError, match="float32 graph"):
+        export_qtg_dir(params, SMALL, tmp_path / "bad", compact="int8", dtype=np.float64)
+    capsys.readouterr()
+
+
 def test_to_world_inverts_make_windows():
     """spec/deploy.md §8: the CLI's world transform undoes make_windows' root-relative transform exactly."""
     from refimpl.quat import quat_normalize
