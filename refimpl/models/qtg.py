@@ -901,7 +901,8 @@ def rollout_inference(model: QTGInference, past, target, T: int | None = None) -
         h_aug[:, :H] = 0
     gi = [np.empty((B, H3), dtype=dtype) for _ in range(L)]
     gh = [np.empty((B, H3), dtype=dtype) for _ in range(L - 1)]
-    hm = matmul(hs[-1][0], model.h_product)  # (B, 3H + Z): [W_hh s + (0, 0, b_hn) | W_v s + b_v], top layer
+    hm = np.empty((B, model.h_product.shape[1]), dtype=dtype)  # [W_hh s + (0, 0, b_hn) | W_v s + b_v], top layer
+    hm[...] = model.h_product[-1]  # s = 0: the bias row
     gh.append(hm[:, :H3])
     velocity = hm[:, H3:]
     n, d = np.empty((B, H), dtype=dtype), np.empty((B, H), dtype=dtype)
