@@ -203,8 +203,18 @@ def bench_torch(iters: int, threads: int | None) -> dict | None:
 
     it()
     ts = [_timed(it) for _ in range(iters)]
+    adam = {}  # torch.optim.Adam alone on the same parameters: default (for-loop), foreach and fused kernels
+    for kind, kw in (("default", {}), ("foreach", {"foreach": True}), ("fused", {"fused": True})):
+        try:
+            o = torch.optim.Adam(ps, lr=LR, **kw)
+        except (RuntimeError, TypeError, ValueError) as exc:  # a kernel this build lacks
+            adam[kind] = f"unavailable: {exc}"
+            continue
+        o.step()
+        ta = [_timed(o.step) for _ in range(max(iters, 10))]
+        adam[kind] = {"ms_median": 1e3 * statistics.median(ta), "ms_min": 1e3 * min(ta)}
     return {"version": torch.__version__, "threads": torch.get_num_threads(),
-            "ms_median": 1e3 * statistics.median(ts), "ms_min": 1e3 * min(ts)}
+            "ms_median": 1e3 * statistics.median(ts), "ms_min": 1e3 * min(ts), "adam_alone": adam}
 
 
 def write_json_atomic(path: Path, obj) -> None:
@@ -266,6 +276,8 @@ def main(argv=None) -> int:
         ratio = summary["float32"]["ms"] / torch_row["ms_median"]
         print(f"torch {torch_row['version']} ({torch_row['threads']} threads): "
               f"{torch_row['ms_median']:.1f} ms/iteration; NumPy / torch = {ratio:.2f}")
+        ta = {k: (f"{v['ms_median']:.1f} ms" if isinstance(v, dict) else v) for k, v in torch_row["adam_alone"].items()}
+        print("torch.optim.Adam alone (median): " + ", ".join(f"{k} {v}" for k, v in ta.items()))
     else:
         print("torch: not importable, no comparison")
 

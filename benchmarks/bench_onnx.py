@@ -25,7 +25,8 @@ onnxruntime call (seen: the 2-thread fused GRU step at 4-8 ms instead of 0.9 ms 
   ``--train-steps`` steps on the sample (0: the random initialisation).
 
 NumPy's BLAS is limited to the same number of threads as onnxruntime's intra-op pool (threadpoolctl). PyTorch is
-timed only when installed (it is not on the development VM). Settings recorded in the JSON:
+timed only when installed (eager mode, ``torch.no_grad()``, the same thread count): ``torch.nn.GRU`` for the GRU
+step, and the QTG rollout written with ``torch.nn.functional`` and ``GRUCell`` (checked against NumPy). Settings recorded in the JSON:
 onnxruntime version and session options, BLAS libraries (threadpoolctl), BLAS environment variables, load
 average before and after. Nothing asserts on time. A table is printed and JSON written atomically to
 ``benchmarks/results/bench_onnx.json``.
@@ -70,9 +71,10 @@ try:
 except ImportError:  # optional
     threadpool_info = threadpool_limits = None
 try:
-    import torch  # noqa: F401
+    import torch
     HAVE_TORCH = True
 except ImportError:
+    torch = None
     HAVE_TORCH = False
 
 
@@ -108,7 +110,68 @@ def _env(threads: int) -> dict:
             "ort_session": {"intra_op_num_threads": threads, "inter_op_num_threads": 1,
                             "execution_mode": "sequential", "graph_optimization": "all",
                             "session.intra_op.allow_spinning": "0"},
-            "torch": "installed" if HAVE_TORCH else "not installed (not timed)"}
+            "torch": (f"{torch.__version__}, {threads} intra-op thread(s), torch.no_grad()" if HAVE_TORCH
+                      else "not installed (not timed)")}
+
+
+# -------------------------------------------------------------------------------------------------- torch
+def _torch_gru(params, I, H, L):
+    """``torch.nn.GRU`` with the same (PyTorch-layout) parameters, or None without torch."""
+    if not HAVE_TORCH:
+        return None
+    gru = torch.nn.GRU(I, H, L)
+    with torch.no_grad():
+        for name, p in gru.named_parameters():
+            p.copy_(torch.from_numpy(np.ascontiguousarray(params[f"gru.{name}"])))
+    return gru
+
+
+def _torch_qtg_rollout(params, cfg):
+    """The QTG rollout (spec/qtg.md §3) in PyTorch eager mode with the same float32 parameters, or None."""
+    if not HAVE_TORCH:
+        return None
+    P = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in params.items()}
+    n_enc, n_dec = len(cfg.encoder_sizes), len(cfg.decoder_sizes) + 1
+    lrelu = torch.nn.functional.leaky_relu
+    cells = []
+    for k in range(cfg.gru_layers):
+        c = torch.nn.GRUCell(P[f"gru.weight_ih_l{k}"].shape[1], cfg.gru_hidden)
+        with torch.no_grad():
+            for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"):
+                getattr(c, name).copy_(P[f"gru.{name}_l{k}"])
+        cells.append(c)
+
+    def enc(x):
+        for i in range(n_enc):
+            x = lrelu(torch.nn.functional.linear(x, P[f"enc.{i}.weight"], P[f"enc.{i}.bias"]), cfg.negative_slope)
+        return x
+
+    def dec(x):
+        for j in range(n_dec):
+            x = torch.nn.functional.linear(x, P[f"dec.{j}.weight"], P[f"dec.{j}.bias"])
+            if j < n_dec - 1:
+                x = lrelu(x, cfg.negative_slope)
+        return x
+
+    @torch.no_grad()
+    def rollout(past, target):
+        past, target = torch.from_numpy(past), torch.from_numpy(target)
+        B = past.shape[0]
+        z_prev, pose = enc(past[:, 0]), past[:, 1]
+        e1, e2 = enc(target[:, 0]), enc(target[:, 1])
+        hs = [torch.zeros(B, cfg.gru_hidden) for _ in cells]
+        out = []
+        for _ in range(cfg.transition_length):
+            z = enc(pose)
+            x = torch.cat([z - z_prev, e1 - z, e2 - e1], dim=1)
+            for k, c in enumerate(cells):
+                hs[k] = x = c(x, hs[k])
+            pose = dec(z + torch.nn.functional.linear(x, P["vel.weight"], P["vel.bias"]))
+            out.append(pose)
+            z_prev = z
+        return torch.stack(out, dim=1).numpy()
+
+    return rollout
 
 
 # ---------------------------------------------------------------------------------------------------- GRU
@@ -121,6 +184,7 @@ def bench_gru(threads: int, rounds: int, min_time: float) -> dict:
     variants = {"fused": {}, "primitive": {"primitive": True}, "int8": {"weights": "int8"},
                 "int8_b128": {"weights": "int8", "block_size": 128}, "int4": {"weights": "int4"}}
     thread_counts = sorted({threads, 2})
+    tgru = _torch_gru(params, I, H, L)
     sessions = {}
     for name, kw in variants.items():
         kw = dict(kw)
@@ -142,6 +206,14 @@ def bench_gru(threads: int, rounds: int, min_time: float) -> dict:
         fns = {k: (lambda s=s: s.run(None, {"x": xv, "h": hv})) for k, s in sessions.items()}
         res = _time(fns, rounds, min_time)
         res.update(_time({"numpy": lambda: gru_step_forward(xv, hv, params, "gru", num_layers=L)}, rounds, min_time))
+        if tgru is not None:
+            xt, ht = torch.from_numpy(xv[None]), torch.from_numpy(hv)
+
+            def torch_step():
+                with torch.no_grad():
+                    return tgru(xt, ht)
+
+            res.update(_time({"torch": torch_step}, rounds, min_time))
         xa = rng.standard_normal((B, w_all.shape[0])).astype(np.float32)
         buf = np.empty((B, w_all.shape[1]), np.float32)
         for n in thread_counts:                          # BLAS threads set outside the timed call
@@ -196,6 +268,7 @@ def _host_loop(init, stp, past, target, T):
 def bench_qtg(params32, cfg, sessions, rounds, min_time) -> dict:
     rng = np.random.default_rng(1)
     lean = prepare_inference(params32, cfg)
+    trollout = _torch_qtg_rollout(params32, cfg)
     T = cfg.transition_length
     out = {}
     for B in (1, 32):
@@ -216,6 +289,10 @@ def bench_qtg(params32, cfg, sessions, rounds, min_time) -> dict:
             {"numpy_rollout_inference": lambda: rollout_inference(lean, past, target),
              "numpy_rollout_forward": lambda: rollout_forward(params32, past, target, config=cfg)},
             rounds, min_time))
+        if trollout is not None:
+            diff = float(np.abs(trollout(past, target) - rollout_inference(lean, past, target)).max())
+            out[f"rollout_batch{B}"].update(_time({"torch_eager": lambda: trollout(past, target)}, rounds, min_time))
+            out[f"rollout_batch{B}"]["torch_eager"]["max_abs_diff_vs_numpy"] = diff
     return out
 
 
@@ -353,6 +430,8 @@ def main(argv=None) -> dict:
     load_before = os.getloadavg()
     if threadpool_limits is not None:                  # NumPy's BLAS gets as many threads as onnxruntime
         threadpool_limits(limits=args.threads)
+    if HAVE_TORCH:                                     # and so does PyTorch
+        torch.set_num_threads(args.threads)
     cfg = QTGConfig()
     params64, desc, data = _model_params(args, cfg)
     params32 = {k: v.astype(np.float32) for k, v in params64.items()}
