@@ -14,7 +14,7 @@ bidirectional layer feeds ``[forward | backward]`` ``(T, B, 2H)`` upwards.
 
 Fused form (default for float32): one ``GRU`` node per layer, transposes at the batch-first boundary.
 Primitive form (``g.primitive``, float64): ``MatMul`` of all input projections, then a ``Scan`` over time whose
-body is the cell above written with ``MatMul``/``Split``/``Sigmoid``/``Tanh``.
+body is the cell above written with ``MatMul``/``Split``/``Sigmoid``/``Tanh`` as ``h' = n + z ⊙ (h − n)``.
 Quantised step (``gru_step(..., weights="int8" | "int4")``, onnxruntime only): both products of each layer as
 ``com.microsoft.MatMulNBits`` with block-quantised weights (``deploy.quantize``), the cell element-wise, written
 ``h' = n + z ⊙ (h − n)``.
@@ -224,16 +224,34 @@ def _quantized_step(g: GraphBuilder, x_t: str, h: str, params, prefix: str, name
 
 
 def _gates(g: GraphBuilder, gi: str, gh: str, h: str, hidden: int, name: str) -> str:
-    """``[r|z] = σ(gi_rz + gh_rz)``, ``n = tanh(gi_n + r ⊙ gh_n)``, ``h' = n + z ⊙ (h − n)``; gates r|z|n."""
+    """The cell of the quantised step from whole products ``gi = x W_ihᵀ + b_ih``, ``gh = h W_hhᵀ + b_hh``."""
     sizes = g.ints([2 * hidden, hidden])
     i_rz, i_n = g.node("Split", [gi, sizes], f"{name}.gi", axis=-1, outputs=("rz", "n"))  # (·, B, 2H), (·, B, H)
     h_rz, h_n = g.node("Split", [gh, sizes], f"{name}.gh", axis=-1, outputs=("rz", "n"))  # (1, B, 2H), (1, B, H)
-    rz = g.node("Sigmoid", [g.node("Add", [i_rz, h_rz], f"{name}.rz_pre")], f"{name}.rz")  # (1, B, 2H)
+    return _gru_gates(g, i_rz, i_n, h_rz, h_n, h, hidden, name)          # (1, B, H)
+
+
+def _gru_gates(g: GraphBuilder, i_rz: str, i_n: str, h_rz: str | None, h_n: str, h: str | None, hidden: int,
+               name: str) -> str:
+    """The GRU cell from its split pre-activations (gate order r|z|n); shared by every primitive-operator form.
+
+    ``i_rz (·, 2H)``, ``i_n (·, H)``: the input side ``x W_iᵀ + b_i``; ``h_rz``, ``h_n``: the recurrent side
+    ``h W_hᵀ + b_h``. ``h_rz = None`` means 0 and ``h_n`` may be a constant ``(H,)`` (``b_hn``) for the state 0,
+    which ``h = None`` stands for::
+
+        r, z = σ(i_rz + h_rz);   n = tanh(i_n + r ⊙ h_n);   h' = n + z ⊙ (h − n)   (n − z ⊙ n for h = 0)
+
+    ``n + z ⊙ (h − n)`` equals ``(1 − z) ⊙ n + z ⊙ h`` and is what ``refimpl.nn.gru`` computes.
+    """
+    rz_pre = i_rz if h_rz is None else g.node("Add", [i_rz, h_rz], f"{name}.rz_pre")   # (·, 2H)
+    rz = g.node("Sigmoid", [rz_pre], f"{name}.rz")
     r, z = g.node("Split", [rz, g.ints([hidden, hidden])], f"{name}.gates", axis=-1, outputs=("r", "z"))
     n = g.node("Tanh", [g.node("Add", [i_n, g.node("Mul", [r, h_n], f"{name}.rhn")], f"{name}.n_pre")],
-               f"{name}.n")                                              # (1, B, H)
-    d = g.node("Mul", [z, g.node("Sub", [h, n], f"{name}.h_n")], f"{name}.z_d")  # (1, B, H)
-    return g.node("Add", [n, d], f"{name}.h_new")                        # (1, B, H)
+               f"{name}.n")                                              # (·, H)
+    if h is None:
+        return g.node("Sub", [n, g.node("Mul", [z, n], f"{name}.z_n")], f"{name}.h_new")
+    d = g.node("Mul", [z, g.node("Sub", [h, n], f"{name}.h_n")], f"{name}.z_d")  # (·, H)
+    return g.node("Add", [n, d], f"{name}.h_new")                        # (·, H)
 
 
 # --------------------------------------------------------------------------------------- primitive form
@@ -244,14 +262,7 @@ def _gru_cell(g: GraphBuilder, xp: str, h: str, wh: str, bh: str, hidden: int, n
     sizes = g.ints([2 * hidden, hidden])
     x_rz, x_n = g.node("Split", [xp, sizes], f"{name}.xs", axis=-1, outputs=("rz", "n"))  # (B, 2H), (B, H)
     h_rz, h_n = g.node("Split", [hp, sizes], f"{name}.hs", axis=-1, outputs=("rz", "n"))  # (B, 2H), (B, H)
-    rz = g.node("Sigmoid", [g.node("Add", [x_rz, h_rz], f"{name}.rz_pre")], f"{name}.rz")  # (B, 2H)
-    r, z = g.node("Split", [rz, g.ints([hidden, hidden])], f"{name}.gates", axis=-1, outputs=("r", "z"))
-    n = g.node("Tanh", [g.node("Add", [x_n, g.node("Mul", [r, h_n], f"{name}.rhn")], f"{name}.n_pre")],
-               f"{name}.n")                                              # (B, H)
-    one_minus_z = g.node("Sub", [g.scalar(1.0), z], f"{name}.1mz")        # (B, H)
-    a = g.node("Mul", [one_minus_z, n], f"{name}.a")                     # (B, H)
-    c = g.node("Mul", [z, h], f"{name}.c")                               # (B, H)
-    return g.node("Add", [a, c], f"{name}.h_new")                        # (B, H)
+    return _gru_gates(g, x_rz, x_n, h_rz, h_n, h, hidden, name)          # (B, H)
 
 
 def _primitive_layer(g, seq, h0_layer, params, prefix, layer, dirs, lname, wl):

@@ -53,6 +53,7 @@ import onnx
 from refimpl.models.qtg import QTGConfig
 
 from deploy.graph import OPSET, GraphBuilder
+from deploy.gru import _gru_gates
 from deploy.metadata import EXPORTER_VERSION
 from deploy.qtg import _check_normalization, _check_params, _io, _metadata, _pose_in, _pose_out
 from deploy.quantize import WEIGHT_FORMATS, WeightMatmul
@@ -94,23 +95,6 @@ def _prepare(params, config: QTGConfig) -> dict:
         prep["last"].append(nxt)
         prep["last_b"].append(nxt_b)
     return prep
-
-
-def _gru_cell(g, i_rz, i_n, h_rz, h_n, h, hidden, name):
-    """One GRU cell from its split pre-activations, all ``(B, ·)``; ``h = None`` at step 0 (state 0).
-
-    ``r, u = σ(i_rz + h_rz)``; ``n = tanh(i_n + r ⊙ h_n)``; ``h' = n + u ⊙ (h − n)`` (``n − u ⊙ n`` for ``h = 0``).
-    ``h_rz = None`` means 0; ``h_n`` may be a constant ``(H,)`` (``b_hn``).
-    """
-    rz_pre = i_rz if h_rz is None else g.node("Add", [i_rz, h_rz], f"{name}.rz_pre")       # (B, 2H)
-    rz = g.node("Sigmoid", [rz_pre], f"{name}.rz")
-    r, u = g.node("Split", [rz, g.ints([hidden, hidden])], f"{name}.gates", axis=-1, outputs=("r", "u"))
-    n = g.node("Tanh", [g.node("Add", [i_n, g.node("Mul", [r, h_n], f"{name}.r_hn")], f"{name}.n_pre")],
-               f"{name}.n")                                                                    # (B, H)
-    if h is None:
-        return g.node("Sub", [n, g.node("Mul", [u, n], f"{name}.u_n")], f"{name}.h_new")      # (B, H)
-    d = g.node("Mul", [u, g.node("Sub", [h, n], f"{name}.h_n")], f"{name}.u_d")
-    return g.node("Add", [n, d], f"{name}.h_new")                                             # (B, H)
 
 
 def _mlp(g, W, x, p, prefix, n_layers, slope, last_linear, name, first_bias=None):
@@ -189,7 +173,7 @@ def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConf
         for layer in range(L):
             c, top = f"{s}.l{layer}", layer == L - 1
             h_rz, h_n = recurrent[layer] or (None, g.weight(f"gru.l{layer}.b_hn", prep["hn_b"][layer]))
-            states[layer] = _gru_cell(g, i_rz, i_n, h_rz, h_n, states[layer], H, f"{c}.cell")  # (B, H)
+            states[layer] = _gru_gates(g, i_rz, i_n, h_rz, h_n, states[layer], H, f"{c}.cell")  # (B, H)
             # one product of the new state: the next step's recurrent term (none after the last step) and the
             # term the state feeds now, v_t (top layer) or the input term of layer + 1
             if last:

@@ -782,7 +782,8 @@ def prepare_inference(params: Mapping[str, np.ndarray], config: QTGConfig = QTGC
 
     1. ``W_ih x_t + b_ih = (W1 − W2) z_t + c_t`` with ``c_t = k − W1 z_{t−1}``: one product of ``z_t`` gives this
        step's ``(W1 − W2) z_t`` and the next step's ``W1 z_t``.
-    2. One product of the top layer's new state ``s`` gives ``W_v s + b_v`` and the next step's ``W_hh s + b_hh``.
+    2. One product of the top layer's new state ``s`` gives ``W_v s + b_v`` and the next step's
+       ``W_hh s + (0, 0, b_hn)`` (``b_hr, b_hz`` are in ``k``).
     3. ``σ(a) = ½ + ½ tanh(a/2)``: the ``r, z`` columns are halved (exact in binary floating point).
     4. Biases ride in an extra weight row, multiplied by a constant 1 column of the input buffers.
     """
