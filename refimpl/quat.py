@@ -84,7 +84,7 @@ def _finite_output(fn):
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
             out = fn(*args, **kwargs)
         for o in (out if isinstance(out, tuple) else (out,)):
-            if isinstance(o, np.ndarray) and o.dtype.kind == "f" and not np.isfinite(o).all():
+            if isinstance(o, (np.ndarray, np.floating)) and o.dtype.kind == "f" and not np.isfinite(o).all():
                 raise ValueError(f"{fn.__name__}: the result is not representable in {o.dtype} for this input "
                                  f"(a value beyond the float range, from an input too large or, for an inverse, "
                                  f"too small; output shape {o.shape})")
@@ -403,7 +403,8 @@ def quat_exp(q) -> np.ndarray:
     unit quaternion of the rotation by angle ``2|u|`` about ``u``. Any finite ``u`` is accepted: ``|u|`` is
     computed without overflow and ``cos``, ``sin`` reduce it exactly modulo ``2π`` (for ``|u| > 2^53`` the float
     ``|u|`` is no longer meaningful modulo ``2π``, but the result is a finite quaternion of norm ``e^w``).
-    ``w > log(max float) ≈ 709.78`` (float64) overflows ``e^w``: ``ValueError`` (spec/math.md §1.7).
+    ``w > log(max float) ≈ 709.78`` (float64) overflows ``e^w``, and ``|u|`` itself can exceed the float range
+    (components near ``1e308``): both give ``ValueError`` (spec/math.md §1.7).
 
     Parameters
     ----------

@@ -710,8 +710,8 @@ def rotate_about_up(rotations, root_positions, angle, up="y"):
     a = _axis_index(up)
     rot = _as_float_array(rotations, "rotations")
     _check_last_axes(rot, "rotations", (4,), "(..., J, 4)")
-    if rot.ndim < 2:
-        raise ValueError(f"rotations: expected shape (..., J, 4), got {rot.shape}")
+    if rot.ndim < 2 or rot.shape[-2] == 0:
+        raise ValueError(f"rotations: expected shape (..., J, 4) with J >= 1 joints, got {rot.shape}")
     pos = _as_float_array(root_positions, "root_positions")
     if pos.shape != rot.shape[:-2] + (3,):
         raise ValueError(f"root_positions: expected shape {rot.shape[:-2] + (3,)}, got {pos.shape}")
