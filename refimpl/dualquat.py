@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import (_as_float, _atan_ratio, _check_rotation_matrix, _hemisphere_sign,
+from refimpl.quat import (_as_float, _atan_ratio, _check_rotation_matrix, _check_scalar, _finite_output,
+                          _hemisphere_sign, _zeros_of,
                           _matrix_from_quat, _prescaled,
                           _quat_conj, _quat_from_matrix, _quat_mul, _quat_norm, _quat_rotate, _sin_over_x)
 
@@ -49,8 +50,7 @@ def _dq_prescaled(a: np.ndarray, name: str, what: str = "real part") -> np.ndarr
 
 def dq_identity(shape=(), dtype=np.float64) -> np.ndarray:
     """Identity DQs ``(1, 0, 0, 0 | 0, 0, 0, 0)`` of shape ``shape + (8,)`` (spec/math.md §5.1)."""
-    shape = (shape,) if np.isscalar(shape) else tuple(shape)
-    a = np.zeros(shape + (8,), dtype=dtype)
+    a = _zeros_of(shape, dtype, 8)
     a[..., 0] = 1
     return a
 
@@ -61,6 +61,7 @@ def _dq_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return _join(_quat_mul(ar, br), _quat_mul(ar, bd) + _quat_mul(ad, br))
 
 
+@_finite_output
 def dq_mul(a, b) -> np.ndarray:
     """DQ product ``a ⊗ b = a_r b_r + ε (a_r b_d + a_d b_r)`` (paper Eq. 1; spec/math.md §5.2).
 
@@ -87,6 +88,7 @@ def _dq_conj(a: np.ndarray) -> np.ndarray:
     return a * np.array(_SIGN_CONJ, dtype=a.dtype)
 
 
+@_finite_output
 def dq_conj(a) -> np.ndarray:
     """Quaternion conjugate of both parts ``(q_r*, q_d*)`` = inverse of a UNIT DQ (spec/math.md §5.3).
 
@@ -96,12 +98,14 @@ def dq_conj(a) -> np.ndarray:
     return _dq_conj(a)
 
 
+@_finite_output
 def dq_conj_dual(a) -> np.ndarray:
     """Dual-number conjugate ``(q_r, −q_d)`` (spec/math.md §5.3)."""
     a = _as_float(a, "a", (8,))
     return a * np.array(_SIGN_DUAL, dtype=a.dtype)
 
 
+@_finite_output
 def dq_conj_combined(a) -> np.ndarray:
     """Combined conjugate ``(q_r*, −q_d*)`` (used in point transforms ``σ (1 + ε p) σ†``) (spec/math.md §5.3).
 
@@ -111,6 +115,7 @@ def dq_conj_combined(a) -> np.ndarray:
     return a * np.array(_SIGN_COMBINED, dtype=a.dtype)
 
 
+@_finite_output
 def dq_inv(a) -> np.ndarray:
     """General inverse ``(q_r⁻¹, −q_r⁻¹ q_d q_r⁻¹)`` of a DQ with non-zero real part (spec/math.md §5.3).
 
@@ -131,6 +136,7 @@ def dq_inv(a) -> np.ndarray:
     return _join(real, dual)
 
 
+@_finite_output
 def dq_norm(a):
     """Dual-number magnitude ``|q| = |q_r| + ε ⟨q_r, q_d⟩/|q_r|`` (paper Eq. 2; spec/math.md §5.4).
 
@@ -150,6 +156,7 @@ def dq_norm(a):
     return (ns if e is None else np.ldexp(ns, e)), np.sum(rs * d, axis=-1) / ns
 
 
+@_finite_output
 def dq_is_unit(a, atol_norm: float | None = None, atol_dot: float | None = None) -> np.ndarray:
     """Unit test (paper Eq. 3): ``| |q_r| − 1 | <= atol_norm`` and ``|⟨q_r, q_d⟩| <= atol_dot`` (spec/math.md §5.4).
 
@@ -168,8 +175,8 @@ def dq_is_unit(a, atol_norm: float | None = None, atol_dot: float | None = None)
     """
     a = _as_float(a, "a", (8,))
     default = 1e-6 if a.dtype.itemsize >= 8 else 1e-4
-    atol_norm = default if atol_norm is None else atol_norm
-    atol_dot = default if atol_dot is None else atol_dot
+    atol_norm = default if atol_norm is None else _check_scalar(atol_norm, "atol_norm")
+    atol_dot = default if atol_dot is None else _check_scalar(atol_dot, "atol_dot")
     r, d = _split(a)
     return (np.abs(_quat_norm(r) - 1) <= atol_norm) & (np.abs(np.sum(r * d, axis=-1)) <= atol_dot)
 
@@ -181,6 +188,7 @@ def _dq_normalize(a: np.ndarray) -> np.ndarray:
     return _join(rh, d / n - rh * (np.sum(r * d, axis=-1, keepdims=True) / (n * n)))
 
 
+@_finite_output
 def dq_normalize(a) -> np.ndarray:
     """Unit DQ ``q / |q|`` (paper Eq. 13; spec/math.md §5.5).
 
@@ -205,6 +213,7 @@ def _dq_from_quat_translation(q: np.ndarray, t: np.ndarray) -> np.ndarray:
     return _join(q, 0.5 * _quat_mul(_pure(t), q))
 
 
+@_finite_output
 def dq_from_quat_translation(q, t) -> np.ndarray:
     """DQ of ``p ↦ R(q) p + t``: ``(q | ½ (0, t) ⊗ q)`` (paper Eq. 6, typo corrected; spec/math.md §5.6).
 
@@ -232,6 +241,7 @@ def _translation_from_dq(a: np.ndarray) -> np.ndarray:
     return 2 * _quat_mul(d, _quat_conj(r))[..., 1:] / np.sum(r * r, axis=-1, keepdims=True)
 
 
+@_finite_output
 def translation_from_dq(a) -> np.ndarray:
     """Translation ``t = vec(2 q_d ⊗ q_r*) / |q_r|²`` (paper Eq. 8; spec/math.md §5.7).
 
@@ -251,6 +261,7 @@ def translation_from_dq(a) -> np.ndarray:
     return _translation_from_dq(_dq_prescaled(a, "a"))
 
 
+@_finite_output
 def quat_translation_from_dq(a):
     """Rotation and translation of a DQ: ``(q_r/|q_r|, translation_from_dq(a))`` (spec/math.md §5.7).
 
@@ -264,6 +275,7 @@ def quat_translation_from_dq(a):
     return a[..., :4] / _quat_norm(a[..., :4])[..., None], _translation_from_dq(a)
 
 
+@_finite_output
 def dq_from_matrix(m) -> np.ndarray:
     """Unit DQ of homogeneous rigid transforms ``[[R, t], [0, 1]]``, ``(..., 4, 4) → (..., 8)`` (spec/math.md §5.8).
 
@@ -285,6 +297,7 @@ def dq_from_matrix(m) -> np.ndarray:
     return _dq_from_quat_translation(_quat_from_matrix(rot), m[..., :3, 3])
 
 
+@_finite_output
 def matrix_from_dq(a) -> np.ndarray:
     """Homogeneous matrix ``[[R(q_r), t], [0, 1]]`` of a DQ with non-zero real part, ``(..., 4, 4)`` (spec/math.md §5.8).
 
@@ -305,6 +318,7 @@ def _dq_transform_point_naive(a: np.ndarray, p: np.ndarray) -> np.ndarray:
     return out[..., 5:]
 
 
+@_finite_output
 def dq_transform_point(a, p) -> np.ndarray:
     """Apply a unit DQ to points: ``R(q_r) p + t`` with ``t = vec(2 q_d q_r*)`` (spec/math.md §5.9).
 
@@ -349,6 +363,7 @@ def _dq_fix_naive(a: np.ndarray) -> np.ndarray:
     return out
 
 
+@_finite_output
 def dq_fix(a) -> np.ndarray:
     """Antipodal continuity over time, axis 0 (paper §5.1; spec/math.md §5.10).
 
@@ -403,6 +418,7 @@ def _dq_exp(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return _join(real, dual)
 
 
+@_finite_output
 def dq_sclerp(a, b, t) -> np.ndarray:
     """Screw linear interpolation ``a ⊗ (a* ⊗ b)^t`` along the shortest path (spec/math.md §5.11).
 
@@ -444,6 +460,7 @@ def _dq_blend_naive(weights: np.ndarray, dqs: np.ndarray) -> np.ndarray:
     return _dq_normalize(acc)
 
 
+@_finite_output
 def dq_blend(weights, dqs) -> np.ndarray:
     """Dual quaternion linear blending (DLB, Kavan et al. 2008) (spec/math.md §5.12).
 
@@ -473,6 +490,7 @@ def dq_blend(weights, dqs) -> np.ndarray:
         raise ValueError(f"weights, dqs: expected shapes (..., K) and (..., K, 8), got {weights.shape} and {dqs.shape}")
     lead = np.broadcast_shapes(weights.shape[:-1], dqs.shape[:-2])
     k = dqs.shape[-2]
+    weights, _ = _prescaled(weights)  # only the ratios matter: exact power-of-two rescaling where Σ could overflow
     weights = np.broadcast_to(weights, lead + (k,))
     dqs = np.broadcast_to(dqs, lead + (k, 8))
     pivot = np.argmax(weights, axis=-1)  # (...)

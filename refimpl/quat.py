@@ -22,7 +22,9 @@ Each function names the section of spec/math.md that states it.
 """
 from __future__ import annotations
 
+import functools
 import math
+import numbers
 
 import numpy as np
 
@@ -52,7 +54,10 @@ def _as_float(x, name: str, tail: tuple, finite: bool = True) -> np.ndarray:
 
     Integer and boolean arrays become float64; floating arrays keep their dtype; anything else is rejected.
     """
-    a = np.asarray(x)
+    try:
+        a = np.asarray(x)
+    except (TypeError, OverflowError, ValueError) as exc:  # ragged nesting, objects refusing conversion
+        raise ValueError(f"{name}: expected a real numeric array, got {type(x).__name__} ({exc})") from None
     if a.dtype.kind in "biu":
         a = a.astype(np.float64)
     elif a.dtype.kind != "f":
@@ -64,6 +69,37 @@ def _as_float(x, name: str, tail: tuple, finite: bool = True) -> np.ndarray:
     if finite and not np.all(np.isfinite(a)):
         raise ValueError(f"{name}: contains NaN or inf (shape {a.shape})")
     return a
+
+
+def _finite_output(fn):
+    """Public-boundary guard (spec/math.md §6, spec/robustness.md §8): run ``fn`` with NumPy's floating-point
+    warnings silenced and raise ``ValueError`` if a floating result is not finite.
+
+    Inputs are checked finite by :func:`_as_float`, so a non-finite result can only come from a result (or an
+    intermediate of it) beyond the float range: e.g. ``quat_mul`` of components near ``1e308``, ``quat_exp`` with
+    ``w > 709``, ``dq_inv`` of a real part near ``1e-310``. One vectorised ``isfinite`` pass over the output.
+    """
+    @functools.wraps(fn)
+    def guarded(*args, **kwargs):
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            out = fn(*args, **kwargs)
+        for o in (out if isinstance(out, tuple) else (out,)):
+            if isinstance(o, (np.ndarray, np.floating)) and o.dtype.kind == "f" and not np.isfinite(o).all():
+                raise ValueError(f"{fn.__name__}: the result is not representable in {o.dtype} for this input "
+                                 f"(a value beyond the float range, from an input too large or, for an inverse, "
+                                 f"too small; output shape {o.shape})")
+        return out
+    return guarded
+
+
+def _check_scalar(x, name: str, low: float = 0.0) -> float:
+    """``x`` as a Python float; ValueError unless it is a real, finite number ``>= low`` (bool refused)."""
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (numbers.Real, np.integer, np.floating)):
+        raise ValueError(f"{name}: expected a real number, got {type(x).__name__} {x!r:.60}")
+    v = float(x)
+    if not math.isfinite(v) or v < low:
+        raise ValueError(f"{name}: expected a finite number >= {low}, got {v!r}")
+    return v
 
 
 def _check_nonzero(norm: np.ndarray, name: str, what: str = "quaternion") -> None:
@@ -86,14 +122,29 @@ def _prescaled(q: np.ndarray, name: str | None = None, what: str = "quaternion")
     """
     with np.errstate(over="ignore", under="ignore"):  # detected here
         n2 = np.sum(q * q, axis=-1)  # (...)
-    k = np.finfo(q.dtype).maxexp // 4
-    if np.all((n2 >= 2.0 ** -k) & (n2 <= 2.0 ** k)):
+    low, high = _scale_limits(q.dtype)
+    if np.all((n2 >= low) & (n2 <= high)):
         return q, None
     m = np.max(np.abs(q), axis=-1)  # (...)
     if name is not None:
         _check_nonzero(m, name, what)
     e = np.frexp(m)[1]  # (...) int, 0 for a zero object
     return np.ldexp(q, -e[..., None]), e
+
+
+_SCALE_LIMITS = {np.dtype(t): (2.0 ** -(np.finfo(t).maxexp // 4), 2.0 ** (np.finfo(t).maxexp // 4))
+                 for t in (np.float16, np.float32, np.float64)}
+
+
+def _scale_limits(dtype) -> tuple:
+    """``(2^-k, 2^k)``, ``k = maxexp/4`` of ``dtype``, as numbers of that dtype's range (long double included:
+    ``2.0 ** 4096`` would overflow a Python float, so it is built with ``ldexp``)."""
+    lim = _SCALE_LIMITS.get(np.dtype(dtype))
+    if lim is None:
+        k = np.finfo(dtype).maxexp // 4
+        one = np.ones((), dtype=dtype)
+        lim = (np.ldexp(one, -k), np.ldexp(one, k))
+    return lim
 
 
 def _parse_order(order) -> str:
@@ -116,10 +167,33 @@ def _eps(dtype) -> float:
 
 def quat_identity(shape=(), dtype=np.float64) -> np.ndarray:
     """Identity quaternions ``(1, 0, 0, 0)`` of shape ``shape + (4,)`` (spec/math.md §1.1)."""
-    shape = (shape,) if np.isscalar(shape) else tuple(shape)
-    q = np.zeros(shape + (4,), dtype=dtype)
+    q = _zeros_of(shape, dtype, 4)
     q[..., 0] = 1
     return q
+
+
+def _zeros_of(shape, dtype, size: int) -> np.ndarray:
+    """``np.zeros(shape + (size,), dtype)`` for :func:`quat_identity` / ``dq_identity``; ValueError unless
+    ``shape`` is a non-negative int or a sequence of them and ``dtype`` a floating dtype, or if the array would
+    not fit in memory."""
+    sides = (shape,) if isinstance(shape, (numbers.Integral, np.integer)) else shape
+    try:
+        sides = tuple(sides)
+    except TypeError:
+        raise ValueError(f"shape: expected an int or a sequence of ints, got {shape!r:.60}") from None
+    if any(isinstance(n, (bool, np.bool_)) or not isinstance(n, (numbers.Integral, np.integer)) or n < 0
+           for n in sides):
+        raise ValueError(f"shape: expected non-negative ints, got {shape!r:.60}")
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        raise ValueError(f"dtype: expected a floating dtype, got {dtype!r:.60}") from None
+    if dt.kind != "f":
+        raise ValueError(f"dtype: expected a floating dtype (float32, float64...), got {dt}")
+    try:
+        return np.zeros(tuple(int(n) for n in sides) + (size,), dtype=dt)
+    except (MemoryError, ValueError) as exc:
+        raise ValueError(f"shape: {shape!r:.60} is too large ({exc})") from None
 
 
 def _quat_mul(q: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -156,6 +230,7 @@ def _quat_mul_naive(q: np.ndarray, r: np.ndarray) -> np.ndarray:
     return out.reshape(q.shape)
 
 
+@_finite_output
 def quat_mul(q, r) -> np.ndarray:
     """Hamilton product ``q ⊗ r`` (spec/math.md §1.2).
 
@@ -182,6 +257,7 @@ def _quat_conj(q: np.ndarray) -> np.ndarray:
     return q * np.array([1, -1, -1, -1], dtype=q.dtype)
 
 
+@_finite_output
 def quat_conj(q) -> np.ndarray:
     """Conjugate ``q* = (w, −x, −y, −z)`` (spec/math.md §1.3). Equals the inverse for a unit quaternion."""
     return _quat_conj(_as_float(q, "q", (4,)))
@@ -191,6 +267,7 @@ def _quat_norm(q: np.ndarray) -> np.ndarray:
     return np.sqrt(np.sum(q * q, axis=-1))  # (...)
 
 
+@_finite_output
 def quat_norm(q) -> np.ndarray:
     """Euclidean norm ``|q| = sqrt(w² + x² + y² + z²)``, shape ``(...)`` (spec/math.md §1.3).
 
@@ -202,6 +279,7 @@ def quat_norm(q) -> np.ndarray:
     return n if e is None else np.ldexp(n, e)
 
 
+@_finite_output
 def quat_inv(q) -> np.ndarray:
     """Inverse ``q⁻¹ = q* / |q|²`` of a non-zero quaternion (spec/math.md §1.3).
 
@@ -221,6 +299,7 @@ def _quat_normalize(q: np.ndarray) -> np.ndarray:
     return q / _quat_norm(q)[..., None]
 
 
+@_finite_output
 def quat_normalize(q, eps: float = 0.0) -> np.ndarray:
     """Unit quaternion ``q / |q|`` (spec/math.md §1.4).
 
@@ -239,10 +318,12 @@ def quat_normalize(q, eps: float = 0.0) -> np.ndarray:
         If some ``|q| <= eps`` (the direction of a zero quaternion is undefined; no identity is substituted).
     """
     q = _as_float(q, "q", (4,))
+    eps = _check_scalar(eps, "eps")
     scale = np.max(np.abs(q), axis=-1, keepdims=True)  # (..., 1)
     bad = scale[..., 0] == 0
     if eps > 0:
-        bad |= _quat_norm(q) <= eps
+        with np.errstate(divide="ignore", invalid="ignore"):  # zero rows are already bad
+            bad |= _quat_norm(q / scale) * scale[..., 0] <= eps  # scaled: no under/overflow of |q|²
     if np.any(bad):
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
         raise ValueError(f"q: quaternion with norm <= {eps} at index {idx}; normalisation is undefined")
@@ -258,6 +339,7 @@ def _quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v + 2 * (w * uv + uuv)  # (..., 3)
 
 
+@_finite_output
 def quat_rotate(q, v) -> np.ndarray:
     """Rotate vectors: ``vec(q ⊗ (0, v) ⊗ q*) = v + 2 (w (u × v) + u × (u × v))``, ``u = (x, y, z)`` (spec/math.md §1.5).
 
@@ -279,6 +361,7 @@ def quat_rotate(q, v) -> np.ndarray:
     return _quat_rotate(np.broadcast_to(q, lead + (4,)), np.broadcast_to(v, lead + (3,)))
 
 
+@_finite_output
 def quat_dot(q, r) -> np.ndarray:
     """Four-dimensional dot product ``⟨q, r⟩ = w1w2 + x1x2 + y1y2 + z1z2``, shape ``(...)`` (spec/math.md §1.6)."""
     q = _as_float(q, "q", (4,))
@@ -286,6 +369,7 @@ def quat_dot(q, r) -> np.ndarray:
     return np.sum(q * r, axis=-1)
 
 
+@_finite_output
 def quat_angle(q, r=None) -> np.ndarray:
     """Geodesic angle in ``[0, π]`` of the rotation ``q`` (or of ``q* ⊗ r`` when ``r`` is given) (spec/math.md §1.6).
 
@@ -311,11 +395,16 @@ def _sin_over_x(x: np.ndarray) -> np.ndarray:
     return np.where(small, 1 - x2 / 6 + x2 * x2 / 120, np.sin(xs) / xs)
 
 
+@_finite_output
 def quat_exp(q) -> np.ndarray:
     """Quaternion exponential ``exp(w, u) = e^w (cos|u|, sin|u| u/|u|)`` (spec/math.md §1.7).
 
     Stable at ``|u| = 0`` (Taylor series of ``sin|u|/|u|``). For a pure quaternion ``(0, u)`` the result is the
-    unit quaternion of the rotation by angle ``2|u|`` about ``u``.
+    unit quaternion of the rotation by angle ``2|u|`` about ``u``. Any finite ``u`` is accepted: ``|u|`` is
+    computed without overflow and ``cos``, ``sin`` reduce it exactly modulo ``2π`` (for ``|u| > 2^53`` the float
+    ``|u|`` is no longer meaningful modulo ``2π``, but the result is a finite quaternion of norm ``e^w``).
+    ``w > log(max float) ≈ 709.78`` (float64) overflows ``e^w``, and ``|u|`` itself can exceed the float range
+    (components near ``1e308``): both give ``ValueError`` (spec/math.md §1.7).
 
     Parameters
     ----------
@@ -327,9 +416,15 @@ def quat_exp(q) -> np.ndarray:
     """
     q = _as_float(q, "q", (4,))
     u = q[..., 1:]
-    a = np.sqrt(np.sum(u * u, axis=-1))  # (...)
+    us, e = _prescaled(u)  # u = 2^e us where |u|² could under/overflow: exact
+    a = _quat_norm(us) if e is None else np.ldexp(_quat_norm(us), e)  # (...) |u|, finite (|u| <= 2 max|u_i|)
     ew = np.exp(q[..., 0])
-    return np.concatenate([(ew * np.cos(a))[..., None], (ew * _sin_over_x(a))[..., None] * u], axis=-1)
+    if e is None:
+        vec = (ew * _sin_over_x(a))[..., None] * u
+    else:  # sin|u| · u/|u| with the unit axis us/|us|: no overflow of a and no underflow of sin|u|/|u|
+        axis = us / np.where(a == 0, 1, _quat_norm(us))[..., None]
+        vec = np.where((a < 1)[..., None], (ew * _sin_over_x(a))[..., None] * u, (ew * np.sin(a))[..., None] * axis)
+    return np.concatenate([(ew * np.cos(a))[..., None], vec], axis=-1)
 
 
 def _atan_ratio(s: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -345,6 +440,7 @@ def _atan_ratio(s: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.where(small, (1 - r2 / 3 + r2 * r2 / 5) / ws, np.arctan2(ss, w) / ss)
 
 
+@_finite_output
 def quat_log(q) -> np.ndarray:
     """Quaternion logarithm ``log q = (log|q|, atan2(|u|, w) u/|u|)`` (spec/math.md §1.7).
 
@@ -371,6 +467,7 @@ def quat_log(q) -> np.ndarray:
     return np.concatenate([log_n[..., None], vec], axis=-1)
 
 
+@_finite_output
 def quat_canonical(q) -> np.ndarray:
     """The representative of ``±q`` whose first non-zero component is positive (spec/math.md §1.8).
 
@@ -404,6 +501,7 @@ def _quat_fix_naive(q: np.ndarray) -> np.ndarray:
     return out
 
 
+@_finite_output
 def quat_fix(q) -> np.ndarray:
     """Antipodal continuity over time, axis 0 (QuaterNet's ``qfix``) (spec/math.md §1.8).
 
@@ -435,6 +533,7 @@ def _hemisphere_sign(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     return np.where(lead < 0, -1, 1).astype(rel.dtype)
 
 
+@_finite_output
 def quat_slerp(q0, q1, t) -> np.ndarray:
     """Spherical linear interpolation along the shortest arc (spec/math.md §1.9).
 
@@ -472,12 +571,15 @@ def quat_slerp(q0, q1, t) -> np.ndarray:
 # axis-angle (exponential map)
 # ----------------------------------------------------------------------------------------------------------------
 
+@_finite_output
 def quat_from_axis_angle(v) -> np.ndarray:
     """Unit quaternion of the rotation vector ``v = θ n`` (exponential map) (spec/math.md §2.1).
 
     ``q = (cos(θ/2), sin(θ/2)/θ · v)``; ``sin(θ/2)/θ`` uses its Taylor series ``½ − θ²/48 + θ⁴/3840`` near 0,
     so ``v = 0`` gives the identity. ``θ = 2π`` gives ``(−1, 0, 0, 0)`` (the identity rotation); no sign is
-    canonicalised.
+    canonicalised. Every finite ``v`` gives a finite unit quaternion: ``θ`` is computed without overflow (exact
+    power-of-two rescaling, spec/math.md §6) and ``cos``/``sin`` reduce ``θ/2`` exactly modulo ``2π``; for
+    ``θ > 2^53`` the float ``θ`` itself is coarser than a turn, so such a rotation is defined but not meaningful.
 
     Parameters
     ----------
@@ -488,11 +590,18 @@ def quat_from_axis_angle(v) -> np.ndarray:
     ndarray, (..., 4)
     """
     v = _as_float(v, "v", (3,))
-    theta = np.sqrt(np.sum(v * v, axis=-1))  # (...)
-    half = 0.5 * theta
-    return np.concatenate([np.cos(half)[..., None], (0.5 * _sin_over_x(half))[..., None] * v], axis=-1)
+    vs, e = _prescaled(v)  # v = 2^e vs where θ² could under/overflow: exact
+    if e is None:
+        half = 0.5 * np.sqrt(np.sum(v * v, axis=-1))  # (...) θ/2
+        return np.concatenate([np.cos(half)[..., None], (0.5 * _sin_over_x(half))[..., None] * v], axis=-1)
+    ns = _quat_norm(vs)  # (...) |vs|
+    half = np.ldexp(ns, e - 1)  # θ/2 = 2^(e-1) |vs|: finite for every finite v (θ/2 <= 0.87 max|v_i|)
+    axis = vs / np.where(ns == 0, 1, ns)[..., None]  # (..., 3) unit axis (0 for v = 0)
+    vec = np.where((half < 1)[..., None], (0.5 * _sin_over_x(half))[..., None] * v, np.sin(half)[..., None] * axis)
+    return np.concatenate([np.cos(half)[..., None], vec], axis=-1)
 
 
+@_finite_output
 def axis_angle_from_quat(q) -> np.ndarray:
     """Rotation vector ``θ n`` with ``θ ∈ [0, π]`` of a non-zero quaternion (logarithm map) (spec/math.md §2.1).
 
@@ -525,6 +634,7 @@ def _quat_elementary(axis: int, angle: np.ndarray) -> np.ndarray:
     return q
 
 
+@_finite_output
 def quat_from_euler(angles, order: str) -> np.ndarray:
     """Quaternion ``q_{order[0]}(a0) ⊗ q_{order[1]}(a1) ⊗ q_{order[2]}(a2)`` (spec/math.md §3.1; paper Eq. 4-5).
 
@@ -585,6 +695,7 @@ def _euler_from_quat(q: np.ndarray, o: str) -> np.ndarray:
     return np.stack([_wrap_angle(alpha), beta, _wrap_angle(gamma)], axis=-1)
 
 
+@_finite_output
 def euler_from_quat(q, order: str) -> np.ndarray:
     """Euler angles (radians) in ``order`` of a non-zero quaternion (spec/math.md §3.2; paper Eq. 7 for ``zyx``).
 
@@ -607,11 +718,13 @@ def euler_from_quat(q, order: str) -> np.ndarray:
     return _euler_from_quat(q, o)
 
 
+@_finite_output
 def matrix_from_euler(angles, order: str) -> np.ndarray:
     """Rotation matrix ``R_{order[0]}(a0) R_{order[1]}(a1) R_{order[2]}(a2)``, ``(..., 3, 3)`` (spec/math.md §3.3)."""
     return _matrix_from_quat(quat_from_euler(angles, order))
 
 
+@_finite_output
 def euler_from_matrix(m, order: str) -> np.ndarray:
     """Euler angles in ``order`` of rotation matrices ``(..., 3, 3)``, via :func:`quat_from_matrix` (spec/math.md §3.3)."""
     o = _parse_order(order)
@@ -636,6 +749,7 @@ def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
     return m.reshape(q.shape[:-1] + (3, 3))
 
 
+@_finite_output
 def matrix_from_quat(q) -> np.ndarray:
     """Rotation matrix of a non-zero quaternion (of ``q/|q|``), ``(..., 3, 3)`` (spec/math.md §4.1).
 
@@ -658,16 +772,23 @@ def _orthonormality_tol(dtype) -> float:
 
 def _check_rotation_matrix(m: np.ndarray, name: str) -> None:
     """Raise ValueError unless ``m`` is orthonormal with det +1 (to the dtype's tolerance)."""
+    if not isinstance(m, np.ndarray) or m.dtype.kind != "f" or m.shape[-2:] != (3, 3):
+        raise ValueError(f"{name}: expected a floating array of rotation matrices (..., 3, 3), got "
+                         f"{getattr(m, 'dtype', type(m).__name__)} of shape {getattr(m, 'shape', None)}")
     tol = _orthonormality_tol(m.dtype)
-    mtm = np.swapaxes(m, -1, -2) @ m
-    err = np.abs(mtm - np.eye(3, dtype=m.dtype))
-    if np.any(err > tol):
-        idx = np.unravel_index(int(np.argmax(err)), err.shape)[:-2]
-        raise ValueError(f"{name}: not orthonormal at index {tuple(int(i) for i in idx)} "
-                         f"(max |MᵀM − I| = {float(np.max(err)):.3g} > {tol}); expected rotation matrices (..., 3, 3)")
-    det = np.linalg.det(m) if m.size else np.ones(m.shape[:-2])
-    if np.any(det <= 0):
-        idx = tuple(int(i) for i in np.argwhere(det <= 0)[0])
+    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: inf/NaN, refused below
+        mtm = np.einsum("...ki,...kj->...ij", m, m)  # (..., 3, 3) MᵀM (any float dtype, unlike matmul/linalg)
+        err = np.abs(mtm - np.eye(3, dtype=m.dtype))
+        bad = ~(err <= tol)  # NaN counts as bad
+        if np.any(bad):
+            idx = np.unravel_index(int(np.argmax(np.where(bad, np.inf, err))), err.shape)[:-2]
+            raise ValueError(f"{name}: not orthonormal at index {tuple(int(i) for i in idx)} "
+                             f"(max |MᵀM − I| = {float(np.nanmax(np.where(bad, np.inf, err))):.3g} > {tol}); "
+                             "expected rotation matrices (..., 3, 3)")
+    # det = m0 · (m1 × m2) (rows): no LAPACK, so float16 and long double work too
+    det = np.sum(m[..., 0, :] * np.cross(m[..., 1, :], m[..., 2, :]), axis=-1)  # (...)
+    if np.any(~(det > 0)):
+        idx = tuple(int(i) for i in np.argwhere(~(det > 0))[0])
         raise ValueError(f"{name}: determinant <= 0 at index {idx} (a reflection, not a rotation)")
 
 
@@ -713,6 +834,7 @@ def _quat_from_matrix_naive(m: np.ndarray) -> np.ndarray:
     return out.reshape(m.shape[:-2] + (4,))
 
 
+@_finite_output
 def quat_from_matrix(m) -> np.ndarray:
     """Unit quaternion with ``w >= 0`` of rotation matrices ``(..., 3, 3)`` (spec/math.md §4.2).
 
@@ -731,6 +853,7 @@ def quat_from_matrix(m) -> np.ndarray:
     return _quat_from_matrix(m)
 
 
+@_finite_output
 def ortho6d_from_matrix(m) -> np.ndarray:
     """6-D rotation representation (Zhou et al. 2019): the first two COLUMNS of ``R`` (spec/math.md §4.3).
 
@@ -745,6 +868,7 @@ def ortho6d_from_matrix(m) -> np.ndarray:
     return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
 
 
+@_finite_output
 def matrix_from_ortho6d(x) -> np.ndarray:
     """Rotation matrix from 6 numbers by Gram-Schmidt (Zhou et al. 2019) (spec/math.md §4.3).
 
@@ -778,12 +902,14 @@ def matrix_from_ortho6d(x) -> np.ndarray:
 # layout converters
 # ----------------------------------------------------------------------------------------------------------------
 
+@_finite_output
 def quat_xyzw_from_wxyz(q) -> np.ndarray:
     """``(w, x, y, z) → (x, y, z, w)`` (scalar-last, as scipy and ROS) (spec/conventions.md)."""
     q = _as_float(q, "q", (4,))
     return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
+@_finite_output
 def quat_wxyz_from_xyzw(q) -> np.ndarray:
     """``(x, y, z, w) → (w, x, y, z)`` (spec/conventions.md)."""
     q = _as_float(q, "q", (4,))

@@ -31,8 +31,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from refimpl.dualquat import dq_conj, dq_from_quat_translation, dq_mul, translation_from_dq
-from refimpl.quat import matrix_from_quat, quat_from_axis_angle, quat_mul, quat_rotate
+from refimpl.dualquat import (_dq_conj, _dq_from_quat_translation, _dq_mul, dq_from_quat_translation, dq_mul,
+                              translation_from_dq)
+from refimpl.quat import (_check_scalar, _finite_output, _quat_mul, _quat_rotate, matrix_from_quat,
+                          quat_from_axis_angle, quat_mul, quat_rotate)
 
 __all__ = [
     "Skeleton",
@@ -58,8 +60,8 @@ def _validate_parents(parents, name: str = "parents") -> np.ndarray:
     """Return ``parents`` as an int64 array after checking the topological-order rules."""
     try:
         arr = np.asarray(parents)
-    except Exception as exc:  # pragma: no cover - defensive
-        raise ValueError(f"{name}: expected a sequence of ints, got {parents!r}") from exc
+    except (TypeError, OverflowError, ValueError) as exc:  # ragged nesting, objects refusing conversion
+        raise ValueError(f"{name}: expected a sequence of ints, got {type(parents).__name__} ({exc})") from None
     if arr.ndim != 1 or arr.size == 0:
         raise ValueError(f"{name}: expected a non-empty 1-D sequence of ints, got shape {arr.shape}")
     if arr.dtype.kind not in "iu":
@@ -83,7 +85,10 @@ def _validate_parents(parents, name: str = "parents") -> np.ndarray:
 
 
 def _as_float_array(x, name: str) -> np.ndarray:
-    arr = np.asarray(x)
+    try:
+        arr = np.asarray(x)
+    except (TypeError, OverflowError, ValueError) as exc:  # ragged nesting, objects refusing conversion
+        raise ValueError(f"{name}: expected a real numeric array, got {type(x).__name__} ({exc})") from None
     if arr.dtype.kind not in "fiub":
         raise ValueError(f"{name}: expected a real numeric array, got dtype {arr.dtype}")
     if arr.dtype.kind != "f":
@@ -119,11 +124,29 @@ def _depth_levels(parents: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], .
     depth = np.zeros(parents.size, dtype=np.int64)
     for j in range(1, parents.size):
         depth[j] = depth[parents[j]] + 1
-    levels = []
-    for d in range(1, int(depth.max()) + 1):
-        idx = np.flatnonzero(depth == d)
-        levels.append((idx, parents[idx]))
-    return tuple(levels)
+    order = np.argsort(depth, kind="stable")  # joints by depth, increasing index within a depth
+    starts = np.searchsorted(depth[order], np.arange(1, int(depth.max()) + 2))  # O(J log J), not O(J · depth)
+    return tuple((order[a:b], parents[order[a:b]]) for a, b in zip(starts[:-1], starts[1:]))
+
+
+def _index_list(x, name: str, num: int, allow_names: Sequence[str] | None = None) -> tuple[int, ...]:
+    """Joint indices from an iterable of ints (or, with ``allow_names``, joint names); ValueError on anything
+    else: a string or a non-iterable in place of the list, bools, floats, ``None``, indices outside ``0..num-1``."""
+    if isinstance(x, (str, bytes)) or not isinstance(x, Iterable):
+        raise ValueError(f"{name}: expected a sequence of joint indices, got {type(x).__name__} {x!r:.60}")
+    out = []
+    for v in x:
+        if allow_names is not None and isinstance(v, str):
+            if v not in allow_names:
+                raise ValueError(f"{name}: no joint called {v!r}; joints are {list(allow_names)}")
+            out.append(allow_names.index(v))
+            continue
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+            raise ValueError(f"{name}: expected integer joint indices, got {type(v).__name__} {v!r:.60}")
+        if not 0 <= v < num:
+            raise ValueError(f"{name}: index {v} out of range 0..{num - 1}")
+        out.append(int(v))
+    return tuple(out)
 
 
 def _side_of(name: str) -> tuple[str, str] | None:
@@ -204,6 +227,8 @@ class Skeleton:
         if names is None:
             nms = tuple(f"joint_{j}" for j in range(num))
         else:
+            if isinstance(names, (str, bytes)) or not isinstance(names, Iterable):
+                raise ValueError(f"names: expected a sequence of {num} strings, got {type(names).__name__}")
             nms = tuple(names)
             if len(nms) != num:
                 raise ValueError(f"names: expected {num} names, got {len(nms)}")
@@ -216,9 +241,9 @@ class Skeleton:
         children = [[] for _ in range(num)]
         for j in range(1, num):
             children[par[j]].append(j)
-        ends = tuple(sorted({int(e) for e in end_sites}))
+        ends = tuple(sorted(set(_index_list(end_sites, "end_sites", num))))
         for e in ends:
-            if not 0 < e < num:
+            if e == 0:
                 raise ValueError(f"end_sites: index {e} out of range 1..{num - 1}")
             if children[e]:
                 raise ValueError(f"end_sites: joint {e} ({nms[e]!r}) has children {children[e]}; "
@@ -228,8 +253,8 @@ class Skeleton:
         else:
             if joints_left is None or joints_right is None:
                 raise ValueError("joints_left, joints_right: give both lists or neither")
-            left = tuple(int(j) for j in joints_left)
-            right = tuple(int(j) for j in joints_right)
+            left = _index_list(joints_left, "joints_left", num)
+            right = _index_list(joints_right, "joints_right", num)
             if len(left) != len(right):
                 raise ValueError(f"joints_left, joints_right: expected paired lists of equal length, "
                                  f"got {len(left)} and {len(right)}")
@@ -299,6 +324,7 @@ class Skeleton:
         dtype = np.result_type(rot.dtype, pos.dtype)
         return rot.astype(dtype, copy=False), pos.astype(dtype, copy=False)
 
+    @_finite_output
     def world_rotations(self, rotations) -> np.ndarray:
         """World (global) rotation of every joint: ``q_world[j] = q_world[p(j)] ⊗ q[j]``, ``q_world[0] = q[0]``.
 
@@ -314,6 +340,7 @@ class Skeleton:
         rot, _ = self._check_motion(rotations, unit=True)
         return _world_rotations(self._levels, rot)
 
+    @_finite_output
     def forward_kinematics(self, rotations, root_positions) -> np.ndarray:
         """Joint positions by quaternion forward kinematics (QuaterNet, quaternet_reference_code.md §3.2).
 
@@ -335,6 +362,7 @@ class Skeleton:
         rot, pos = self._check_motion(rotations, root_positions, unit=True)
         return _forward_kinematics(self._levels, self._offsets.astype(rot.dtype), rot, pos)
 
+    @_finite_output
     def forward_kinematics_matrices(self, rotations, root_positions) -> np.ndarray:
         """Joint positions by chaining 4x4 homogeneous matrices (an independent oracle for the quaternion FK).
 
@@ -370,7 +398,7 @@ def _world_rotations(levels, rot: np.ndarray) -> np.ndarray:
     world = np.empty_like(rot)                                              # (..., J, 4)
     world[..., 0, :] = rot[..., 0, :]
     for idx, par in levels:
-        world[..., idx, :] = quat_mul(world[..., par, :], rot[..., idx, :])
+        world[..., idx, :] = _quat_mul(world[..., par, :], rot[..., idx, :])
     return world
 
 
@@ -381,8 +409,8 @@ def _forward_kinematics(levels, offsets: np.ndarray, rot: np.ndarray, root_pos: 
     pos[..., 0, :] = root_pos
     for idx, par in levels:
         q_par = world[..., par, :]                                          # (..., n, 4)
-        pos[..., idx, :] = pos[..., par, :] + quat_rotate(q_par, np.broadcast_to(offsets[idx], q_par.shape[:-1] + (3,)))
-        world[..., idx, :] = quat_mul(q_par, rot[..., idx, :])
+        pos[..., idx, :] = pos[..., par, :] + _quat_rotate(q_par, np.broadcast_to(offsets[idx], q_par.shape[:-1] + (3,)))
+        world[..., idx, :] = _quat_mul(q_par, rot[..., idx, :])
     return pos
 
 
@@ -405,6 +433,7 @@ def _forward_kinematics_naive(parents, offsets, rot, root_pos):
 # current coordinates (dual-quaternion paper Eq. 8-12)
 # ---------------------------------------------------------------------------------------------------------
 
+@_finite_output
 def current_dq_from_local(rotations, offsets, parents) -> np.ndarray:
     """Current (root-relative) dual quaternions from local rotations and offsets (paper Eq. 9-11).
 
@@ -437,12 +466,12 @@ def current_dq_from_local(rotations, offsets, parents) -> np.ndarray:
 
 def _current_dq_from_local(levels, rot, off):
     off = np.broadcast_to(off, rot.shape[:-1] + (3,))
-    local = dq_from_quat_translation(rot, off)                              # (..., J, 8)
+    local = _dq_from_quat_translation(rot, off)                             # (..., J, 8)
     cur = np.empty_like(local)
     cur[..., 0, :4] = rot[..., 0, :]
     cur[..., 0, 4:] = 0.0
     for idx, par in levels:
-        cur[..., idx, :] = dq_mul(cur[..., par, :], local[..., idx, :])
+        cur[..., idx, :] = _dq_mul(cur[..., par, :], local[..., idx, :])
     return cur
 
 
@@ -458,6 +487,7 @@ def _current_dq_from_local_naive(parents, rot, off):
     return cur
 
 
+@_finite_output
 def local_from_current_dq(dqs, parents) -> tuple[np.ndarray, np.ndarray]:
     """Local rotations and offsets from current dual quaternions (paper Eq. 12).
 
@@ -487,9 +517,10 @@ def local_from_current_dq(dqs, parents) -> tuple[np.ndarray, np.ndarray]:
 def _local_dq_from_current(par, dq):
     parent_dq = dq[..., np.maximum(par, 0), :].copy()                       # (..., J, 8)
     parent_dq[..., 0, :] = np.array([1, 0, 0, 0, 0, 0, 0, 0], dtype=dq.dtype)
-    return dq_mul(dq_conj(parent_dq), dq)                               # (..., J, 8)
+    return _dq_mul(_dq_conj(parent_dq), dq)                                 # (..., J, 8)
 
 
+@_finite_output
 def positions_from_current_dq(dqs) -> np.ndarray:
     """Root-relative joint positions from current dual quaternions: ``p[j] = vec(2 q_d ⊗ q_r*)`` (paper Eq. 8).
 
@@ -508,6 +539,7 @@ def positions_from_current_dq(dqs) -> np.ndarray:
     return translation_from_dq(dq)
 
 
+@_finite_output
 def offsets_from_current_dq(dqs, parents) -> np.ndarray:
     """Local bone offsets ``vec(2 L_d ⊗ L_r*)`` with ``L[j] = C[p(j)]⁻¹ ⊗ C[j]`` (root: its own translation).
 
@@ -558,17 +590,12 @@ def remove_joints(skeleton: Skeleton, rotations, joints: Iterable[int | str], of
     """
     if not isinstance(skeleton, Skeleton):
         raise ValueError(f"skeleton: expected a Skeleton, got {type(skeleton).__name__}")
-    if offsets not in ("compose", "drop"):
-        raise ValueError(f"offsets: expected 'compose' or 'drop', got {offsets!r}")
     num = skeleton.num_joints
-    removed = set()
-    for j in joints:
-        k = skeleton.index(j) if isinstance(j, str) else int(j)
-        if not 0 <= k < num:
-            raise ValueError(f"joints: index {k} out of range 0..{num - 1}")
-        if k == 0:
-            raise ValueError("joints: the root (joint 0) cannot be removed")
-        removed.add(k)
+    if not isinstance(offsets, str) or offsets not in ("compose", "drop"):
+        raise ValueError(f"offsets: expected 'compose' or 'drop', got {offsets!r:.60}")
+    removed = set(_index_list(joints, "joints", num, allow_names=skeleton.names))
+    if 0 in removed:
+        raise ValueError("joints: the root (joint 0) cannot be removed")
     rot = None
     if rotations is not None:
         rot, _ = skeleton._check_motion(rotations)
@@ -608,6 +635,7 @@ def _axis_index(axis) -> int:
     raise ValueError(f"axis: expected 'x', 'y', 'z' or 0, 1, 2, got {axis!r}")
 
 
+@_finite_output
 def mirror(skeleton: Skeleton, rotations, root_positions, axis="x", mirror_offsets: bool = False):
     """Reflect a motion across the plane normal to ``axis`` through the origin and swap left and right.
 
@@ -657,6 +685,7 @@ def mirror(skeleton: Skeleton, rotations, root_positions, axis="x", mirror_offse
     return new_skel, new_rot, new_pos
 
 
+@_finite_output
 def rotate_about_up(rotations, root_positions, angle, up="y"):
     """Rotate a whole motion about the vertical axis through the origin (data augmentation).
 
@@ -681,8 +710,8 @@ def rotate_about_up(rotations, root_positions, angle, up="y"):
     a = _axis_index(up)
     rot = _as_float_array(rotations, "rotations")
     _check_last_axes(rot, "rotations", (4,), "(..., J, 4)")
-    if rot.ndim < 2:
-        raise ValueError(f"rotations: expected shape (..., J, 4), got {rot.shape}")
+    if rot.ndim < 2 or rot.shape[-2] == 0:
+        raise ValueError(f"rotations: expected shape (..., J, 4) with J >= 1 joints, got {rot.shape}")
     pos = _as_float_array(root_positions, "root_positions")
     if pos.shape != rot.shape[:-2] + (3,):
         raise ValueError(f"root_positions: expected shape {rot.shape[:-2] + (3,)}, got {pos.shape}")
@@ -700,6 +729,7 @@ def rotate_about_up(rotations, root_positions, angle, up="y"):
     return new_rot, quat_rotate(q_up, pos.astype(dtype))
 
 
+@_finite_output
 def random_rotate_about_up(rotations, root_positions, rng: np.random.Generator, low: float = -np.pi,
                            high: float = np.pi, up="y"):
     """:func:`rotate_about_up` by one angle drawn from ``U(low, high)`` for the whole motion.
@@ -720,6 +750,9 @@ def random_rotate_about_up(rotations, root_positions, rng: np.random.Generator, 
     """
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
+    low, high = _check_scalar(low, "low", -np.inf), _check_scalar(high, "high", -np.inf)
+    if not (high >= low and np.isfinite(high - low)):
+        raise ValueError(f"low, high: expected low <= high with a finite difference, got {low!r}, {high!r}")
     angle = float(rng.uniform(low, high))
     rot, pos = rotate_about_up(rotations, root_positions, angle, up=up)
     return rot, pos, angle
