@@ -233,6 +233,13 @@ def test_method_output_shape_is_checked(h36m_dir):
         P.evaluate(lambda prefix, k: prefix[:, -k:], data, P.make_protocol(), method_name="bad")
     with pytest.raises(ValueError, match="method"):
         P.evaluate("zero", data, P.make_protocol())
+    with pytest.raises(ValueError, match="not finite"):
+        P.evaluate(lambda prefix, k: np.full(prefix.shape[:1] + (k,) + prefix.shape[2:], np.nan), data,
+                   P.make_protocol(), method_name="nan")
+    with pytest.raises(ValueError, match="batch_size"):
+        P.evaluate(P.zero_velocity, data, P.make_protocol(), batch_size=0)
+    with pytest.raises(ValueError, match="jogging"):
+        P.evaluate(P.zero_velocity, data, P.make_protocol(), actions=["jogging"])
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -356,6 +363,7 @@ def test_json_schema_and_table(tmp_path, h36m_dir):
     assert (doc["dataset"], doc["protocol"], doc["method"], doc["samples_per_sequence"]) == \
         ("h36m", "standard", "zero-velocity", 4)
     assert doc["horizons_ms"] == [80, 160, 320, 400, 560, 1000, 2000, 3000, 4000]
+    assert all(isinstance(h, int) for h in doc["horizons_ms"]) and doc["horizon_frames"][0] == 1
     assert list(doc["actions"]) == ["walking", "eating"]
     assert all(len(v) == 9 and all(isinstance(x, float) for x in v) for v in doc["actions"].values())
     np.testing.assert_allclose(doc["average"], np.mean([doc["actions"]["walking"], doc["actions"]["eating"]], axis=0))
@@ -428,3 +436,22 @@ def test_zyx_euler_of_the_negated_expmap_equals_the_srnn_euler_of_the_file_expma
     srnn = _rotmat2euler_srnn(matrix_from_quat(quat_from_axis_angle(e)))
     ours = euler_from_quat(quat_from_axis_angle(-e), "zyx")[..., ::-1]                # (z, y, x) → (x, y, z)
     np.testing.assert_allclose(srnn, ours, atol=1e-9)
+
+
+def test_table_in_the_spec_is_what_format_table_prints():
+    data = P.load_cmu(SAMPLE_CMU)
+    methods = P.baseline_methods()
+    results = [P.evaluate(methods[n], data, P.make_protocol("cmu"), method_name=n)
+               for n in ("run. avg. 2", "zero-velocity")]
+    assert P.format_table(results) == """\
+dataset cmu, protocol standard (4 samples per sequence, 4 windows per action)
+milliseconds     |    80 |   160 |   320 |   400 |   560 |  1000
+running
+  run. avg. 2    |  0.70 |  1.13 |  1.44 |  1.48 |  1.54 |  1.53
+  zero-velocity  |  0.58 |  1.02 |  1.35 |  1.42 |  1.54 |  1.53
+walking
+  run. avg. 2    |  0.43 |  0.62 |  0.89 |  0.97 |  1.04 |  1.35
+  zero-velocity  |  0.39 |  0.57 |  0.85 |  0.93 |  1.01 |  1.35
+average
+  run. avg. 2    |  0.57 |  0.87 |  1.17 |  1.23 |  1.29 |  1.44
+  zero-velocity  |  0.49 |  0.79 |  1.10 |  1.17 |  1.27 |  1.44"""

@@ -539,6 +539,9 @@ def evaluate(method: Callable, data: PredictionData, protocol: Protocol, *, meth
     acts = data.test_actions() if actions is None else tuple(actions)
     if not acts:
         raise ValueError(f"data: no test sequences to evaluate ({data.dataset})")
+    if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer))
+                                   or batch_size < 1):
+        raise ValueError(f"batch_size: expected a positive int or None, got {batch_size!r}")
     curves, counts = {}, {}
     K = protocol.target_length
     for action in acts:
@@ -552,6 +555,8 @@ def evaluate(method: Callable, data: PredictionData, protocol: Protocol, *, meth
             if p.shape != want:
                 raise ValueError(f"method {method_name!r}: expected output shape {want} (B, n_future, J, 4), "
                                  f"got {p.shape}")
+            if p.dtype.kind not in "fiu" or not np.all(np.isfinite(p)):
+                raise ValueError(f"method {method_name!r}: the prediction for {action!r} is not finite real numbers")
             preds.append(p)
         err = euler_errors(np.concatenate(preds), target, wrap=wrap, mask_constant=mask_constant)   # (N, K)
         curves[action] = err.mean(axis=0)
@@ -642,7 +647,7 @@ def format_table(results: Sequence[PredictionResult], decimals: int = 2) -> str:
             vals = r.average if a == "average" else r.actions.get(a)
             if vals is not None:
                 lines.append(row("  " + r.method, [f"{v:.{decimals}f}" for v in vals]))
-    return "\n".join(lines)
+    return "\n".join(line.rstrip() for line in lines)
 
 
 def results_to_dict(result: PredictionResult) -> dict:
@@ -653,7 +658,7 @@ def results_to_dict(result: PredictionResult) -> dict:
     p = result.protocol
     return {"dataset": result.dataset, "protocol": p.name, "method": result.method,
             "samples_per_sequence": int(p.samples_per_sequence),
-            "horizons_ms": [float(h) for h in p.horizons_ms],
+            "horizons_ms": [int(h) if float(h).is_integer() else float(h) for h in p.horizons_ms],
             "actions": result.actions, "average": result.average,
             "horizon_frames": list(p.horizon_frames), "frame_ms": float(p.frame_ms),
             "prefix_length": int(p.prefix_length), "target_length": int(p.target_length), "seed": int(p.seed),
