@@ -8,8 +8,10 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, strategies as st
 
 from refimpl.quat import quat_from_axis_angle
+from refimpl.strategies import unit_quaternions
 from refimpl.tasks import prediction as P
 
 SAMPLE_CMU = P.__file__.rsplit("tasks", 1)[0] + "data/sample/expmap"
@@ -455,3 +457,22 @@ walking
 average
   run. avg. 2    |  0.57 |  0.87 |  1.17 |  1.23 |  1.29 |  1.44
   zero-velocity  |  0.49 |  0.79 |  1.10 |  1.17 |  1.27 |  1.44"""
+
+
+@given(lengths=st.lists(st.integers(67, 400), min_size=1, max_size=3), n=st.integers(1, 20),
+       low=st.integers(0, 16))
+def test_window_starts_property(lengths, n, low):
+    proto = P.Protocol(name="x", samples_per_sequence=n, prefix_length=20, target_length=30, low=low,
+                       horizons_ms=(40,))
+    draws = P.window_starts(lengths, proto)
+    assert [i for i, _ in draws] == list(range(len(lengths))) * n
+    assert all(low <= s < lengths[i] - 50 for i, s in draws)
+    assert draws == _expected_starts(lengths, n, low, 20, 30)
+
+
+@given(pred=unit_quaternions((2, 3, 4)), target=unit_quaternions((2, 3, 4)),
+       scale=st.floats(0.5, 2.0), flip=st.lists(st.booleans(), min_size=24, max_size=24))
+def test_euler_errors_ignore_scale_and_sign(pred, target, scale, flip):
+    signs = np.where(np.array(flip).reshape(2, 3, 4, 1), -1.0, 1.0)
+    base = P.euler_errors(pred, target, wrap=True)          # wrap: angles are equal modulo 2π at the ±π seam
+    np.testing.assert_allclose(P.euler_errors(pred * signs * scale, target, wrap=True), base, atol=1e-9)
