@@ -189,11 +189,15 @@ def load_h36m(root, *, validation: bool = False, actions: Sequence[str] | None =
     if not subjects:
         raise ValueError(f"{base}: no subject folders S1 … S11 (expected the layout S{{n}}/{{action}}_{{k}}.txt, "
                          f"e.g. the 'dataset' folder of h3.6m.zip)")
-    train_subjects = tuple(s for s in H36M_TRAIN_SUBJECTS if not (validation and s == H36M_VALID_SUBJECT))
-    train, valid, test = [], [], []
+    split_of = {s: "train" for s in H36M_TRAIN_SUBJECTS}
+    split_of[H36M_TEST_SUBJECT] = "test"
+    if validation:
+        split_of[H36M_VALID_SUBJECT] = "valid"
+    splits = {"train": [], "valid": [], "test": []}
+    order = {a: i for i, a in enumerate(H36M_ACTIONS)}
     for sdir in subjects:
         name = sdir.name
-        if name not in train_subjects and name != H36M_TEST_SUBJECT and not (validation and name == H36M_VALID_SUBJECT):
+        if name not in split_of:
             continue
         found = {}
         for f in sorted(sdir.iterdir()):
@@ -210,18 +214,13 @@ def load_h36m(root, *, validation: bool = False, actions: Sequence[str] | None =
                 if (action, 3 - sub) not in found:
                     raise ValueError(f"{sdir / f'{action}_{3 - sub}.txt'}: missing (the test protocol draws from "
                                      f"both sub-sequences of {action!r})")
-        order = {a: i for i, a in enumerate(H36M_ACTIONS)}
+        split = split_of[name]
         for (action, sub), f in sorted(found.items(), key=lambda kv: (order[kv[0][0]], kv[0][1])):
             motion = read_expmap(f, layout="h36m")
             meta = dict(action=action, subaction=sub, subject=name, path=os.fspath(f))
-            if name == H36M_TEST_SUBJECT:
-                test += _decimate(motion, stride, (0,), meta)
-            elif validation and name == H36M_VALID_SUBJECT:
-                valid += _decimate(motion, stride, range(stride), meta)
-            else:
-                train += _decimate(motion, stride, range(stride), meta)
+            splits[split] += _decimate(motion, stride, (0,) if split == "test" else range(stride), meta)
     return PredictionData(dataset="h36m", skeleton=h36m_skeleton(), frame_time=stride / 50.0,
-                          train=tuple(train), valid=tuple(valid), test=tuple(test))
+                          train=tuple(splits["train"]), valid=tuple(splits["valid"]), test=tuple(splits["test"]))
 
 
 def load_cmu(root, *, stride: int = 2, drop_reference_frame: bool = True, frame_time: float = 1.0 / 120.0
@@ -254,6 +253,9 @@ def load_cmu(root, *, stride: int = 2, drop_reference_frame: bool = True, frame_
     base = Path(root)
     if not base.is_dir():
         raise ValueError(f"root: {os.fspath(root)!r} is not a directory (expected {{train,test}}/{{action}}/…)")
+    if not (base / "train").is_dir() and not (base / "test").is_dir():
+        raise ValueError(f"{base}: no 'train' or 'test' folder "
+                         f"(expected {{train,test}}/{{action}}/{{action}}_{{k}}.txt)")
     splits = {}
     for split in ("train", "test"):
         sdir = base / split
@@ -277,8 +279,6 @@ def load_cmu(root, *, stride: int = 2, drop_reference_frame: bool = True, frame_
                     meta = dict(action=adir.name, subaction=int(m.group(1)), subject="cmu", path=os.fspath(f))
                     seqs += _decimate(motion, stride, (0,) if split == "test" else range(stride), meta)
         splits[split] = tuple(sorted(seqs, key=lambda s: (s.action, s.subaction, s.phase)))
-    if not (base / "train").is_dir() and not (base / "test").is_dir():
-        raise ValueError(f"{base}: no 'train' or 'test' folder (expected {{train,test}}/{{action}}/{{action}}_{{k}}.txt)")
     return PredictionData(dataset="cmu", skeleton=cmu_asf_skeleton(), frame_time=frame_time * stride,
                           train=splits["train"], valid=(), test=splits["test"])
 
@@ -432,9 +432,9 @@ def euler_errors(pred, target, *, drop_joints: Sequence[int] = (0,), wrap: bool 
                  mask_constant: bool = False) -> np.ndarray:
     """Per-window, per-frame Euler-angle error of the published evaluation.
 
-    ``e[n, k] = ‖ E(pred[n, k]) − E(target[n, k]) ‖₂`` over the ``3 · (J − len(drop_joints))`` zyx Euler angles
-    (:func:`refimpl.euler_from_quat`, order ``"zyx"``) of the joints kept (joint 0, the global rotation, is
-    dropped).
+    ``e[n, k] = ‖ E(pred[n, k]) − E(target[n, k]) ‖₂`` over the ``3 · (J − len(drop_joints))`` zyx Euler
+    angles (:func:`refimpl.euler_from_quat`, order ``"zyx"``) of the joints kept (joint 0, the global rotation,
+    is dropped).
 
     Parameters
     ----------
@@ -460,13 +460,13 @@ def euler_errors(pred, target, *, drop_joints: Sequence[int] = (0,), wrap: bool 
         raise ValueError(f"pred: expected shape {target.shape} (as target), got {pred.shape}")
     J = target.shape[2]
     keep = np.setdiff1d(np.arange(J), np.asarray(drop_joints, dtype=int))
-    d = euler_from_quat(pred[:, :, keep], "zyx") - euler_from_quat(target[:, :, keep], "zyx")  # (N, K, J', 3)
+    gt = euler_from_quat(target[:, :, keep], "zyx")                           # (N, K, J', 3)
+    d = euler_from_quat(pred[:, :, keep], "zyx") - gt                         # (N, K, J', 3)
     if wrap:
         d = np.mod(d + np.pi, 2 * np.pi) - np.pi
     d = d.reshape(d.shape[0], d.shape[1], -1)                                  # (N, K, 3J')
     if mask_constant:
-        gt = euler_from_quat(target[:, :, keep], "zyx").reshape(d.shape)
-        d = d * (np.std(gt, axis=1, keepdims=True) > 1e-4)
+        d = d * (np.std(gt.reshape(d.shape), axis=1, keepdims=True) > 1e-4)
     return np.sqrt(np.sum(d * d, axis=-1))
 
 
