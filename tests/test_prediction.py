@@ -370,6 +370,7 @@ def test_json_schema_and_table(tmp_path, h36m_dir):
     assert all(len(v) == 9 and all(isinstance(x, float) for x in v) for v in doc["actions"].values())
     np.testing.assert_allclose(doc["average"], np.mean([doc["actions"]["walking"], doc["actions"]["eating"]], axis=0))
     assert doc["windows_per_action"] == {"walking": 8, "eating": 8}
+    assert doc["data_frame_time_s"] == pytest.approx(0.04) and doc["frame_ms"] == 40.0
     assert [p.name for p in path.parent.iterdir()] == ["zv.json"]                       # no temporary left
     P.write_results_json(path, results)
     many = json.loads(path.read_text())
@@ -447,6 +448,7 @@ def test_table_in_the_spec_is_what_format_table_prints():
                for n in ("run. avg. 2", "zero-velocity")]
     assert P.format_table(results) == """\
 dataset cmu, protocol standard (4 samples per sequence, 4 windows per action)
+horizons at a nominal 40 ms per frame; the data has 16.7 ms per frame
 milliseconds     |    80 |   160 |   320 |   400 |   560 |  1000
 running
   run. avg. 2    |  0.70 |  1.13 |  1.44 |  1.48 |  1.54 |  1.53

@@ -348,9 +348,9 @@ def make_protocol(dataset: str = "h36m", dense: bool = False, samples_per_sequen
     """The evaluation protocol of a dataset.
 
     * ``"h36m"``: P = 50, K = 100, starts in ``[16, T − 150)``, horizons 80 … 4000 ms at 40 ms per frame.
-    * ``"cmu"`` (our adaptation, spec/prediction.md §4): the test trials are short (running: 81 decimated
-      frames), so K = 25 and starts in ``[0, T − 75)``; horizons 80 … 1000 ms at a *nominal* 40 ms per frame
-      (the CMU benchmark's convention; a decimated 120 fps trial really has 16.7 ms per frame).
+    * ``"cmu"`` (our adaptation, spec/prediction.md §5): the test trials are short (running: 81 decimated
+      frames), so K = 25 and starts in ``[0, T − 75)``; horizons 80 … 1000 ms at a *nominal* 40 ms per frame,
+      i.e. the same frame indices as the H3.6M columns (a decimated 120 fps trial really has 16.7 ms per frame).
 
     ``dense=False`` gives 4 samples per sequence (``"standard"``), ``dense=True`` 128 (``"dense"``);
     ``samples_per_sequence`` overrides the count (for the variance study of the paper's Fig. 7).
@@ -482,6 +482,9 @@ class PredictionResult:
     curves : dict action -> ndarray (K,)
         Mean error per predicted frame over the action's windows.
     windows_per_action : dict action -> int
+    frame_time : float
+        Real seconds per frame of the evaluated data (the horizon labels use ``protocol.frame_ms``; they differ
+        for the CMU adaptation).
     """
 
     dataset: str
@@ -489,6 +492,7 @@ class PredictionResult:
     method: str
     curves: dict
     windows_per_action: dict
+    frame_time: float
 
     @property
     def actions(self) -> dict:
@@ -565,7 +569,7 @@ def evaluate(method: Callable, data: PredictionData, protocol: Protocol, *, meth
             progress(f"{method_name} {action}: {counts[action]} windows, "
                      + " ".join(f"{v:.3f}" for v in curves[action][list(protocol.horizon_frames)]))
     return PredictionResult(dataset=data.dataset, protocol=protocol, method=method_name, curves=curves,
-                            windows_per_action=counts)
+                            windows_per_action=counts, frame_time=float(data.frame_time))
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -634,12 +638,17 @@ def format_table(results: Sequence[PredictionResult], decimals: int = 2) -> str:
     hs = [f"{h:g}" for h in first.protocol.horizons_ms]
     name_w = max(14, max(len(r.method) for r in results) + 4)
     col_w = max(decimals + 3, max(len(h) for h in hs))
+
     def row(label, values):
         return f"{label:<{name_w}}|" + "|".join(f" {v:>{col_w}} " for v in values)
+
     windows = sorted({n for r in results for n in r.windows_per_action.values()})
     lines = [f"dataset {first.dataset}, protocol {first.protocol.name} ({first.protocol.samples_per_sequence} "
-             f"samples per sequence, {'/'.join(map(str, windows))} windows per action)",
-             row("milliseconds", hs)]
+             f"samples per sequence, {'/'.join(map(str, windows))} windows per action)"]
+    if abs(first.frame_time * 1000 - first.protocol.frame_ms) > 1e-6:
+        lines.append(f"horizons at a nominal {first.protocol.frame_ms:g} ms per frame; the data has "
+                     f"{first.frame_time * 1000:.1f} ms per frame")
+    lines.append(row("milliseconds", hs))
     actions = list(dict.fromkeys(a for r in results for a in r.curves))
     for a in actions + ["average"]:
         lines.append(a)
@@ -653,8 +662,8 @@ def format_table(results: Sequence[PredictionResult], decimals: int = 2) -> str:
 def results_to_dict(result: PredictionResult) -> dict:
     """The JSON object of one result: ``{"dataset", "protocol", "method", "samples_per_sequence",
     "horizons_ms", "actions": {action: [error per horizon]}, "average": [...]}`` plus ``"horizon_frames"``
-    (0-based), ``"frame_ms"``, ``"prefix_length"``, ``"target_length"``, ``"seed"`` and
-    ``"windows_per_action"``."""
+    (0-based), ``"frame_ms"`` (the labels' ms per frame), ``"prefix_length"``, ``"target_length"``, ``"seed"``,
+    ``"windows_per_action"`` and ``"data_frame_time_s"`` (the data's real seconds per frame)."""
     p = result.protocol
     return {"dataset": result.dataset, "protocol": p.name, "method": result.method,
             "samples_per_sequence": int(p.samples_per_sequence),
@@ -662,7 +671,8 @@ def results_to_dict(result: PredictionResult) -> dict:
             "actions": result.actions, "average": result.average,
             "horizon_frames": list(p.horizon_frames), "frame_ms": float(p.frame_ms),
             "prefix_length": int(p.prefix_length), "target_length": int(p.target_length), "seed": int(p.seed),
-            "windows_per_action": dict(result.windows_per_action)}
+            "windows_per_action": dict(result.windows_per_action),
+            "data_frame_time_s": float(result.frame_time)}
 
 
 def write_results_json(path, results) -> None:
