@@ -1,0 +1,1 @@
+"""Tasks (layer 6): the data and evaluation of each benchmark, one module per task."""
