@@ -1,0 +1,1 @@
+"""Task pipelines (data sets and recipes built on the models): refimpl.tasks.locomotion, ..."""
