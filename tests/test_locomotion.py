@@ -208,3 +208,65 @@ def test_pace_training_runs_and_the_loss_falls():
                                    valid_data=data[:1])
     assert hist[-1]["train_l1"] < 0.5 * hist[0]["train_l1"]
     assert np.isfinite(hist[-1]["valid_l1"])
+
+
+_BN_STYLE = """HIERARCHY
+ROOT joint_Root
+{
+\tOFFSET 0.0 0.0 0.0
+\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+\tJOINT Hips
+\t{
+\t\tOFFSET 0.0 90.0 0.0
+\t\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+\t\tJOINT Spine
+\t\t{
+\t\t\tOFFSET 10.0 0.0 0.0
+\t\t\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+\t\t\tEnd Site
+\t\t\t{
+\t\t\t\tOFFSET 0.0 0.0 0.0
+\t\t\t}
+\t\t}
+\t}
+}
+MOTION
+Frames: 2
+Frame Time: 0.0333333
+0 0 0 0 0 0\t5 90 1 90 0 0\t10 0 0 0 0 0
+0 0 0 0 0 0\t6 91 3 90 0 0\t10 0 0 0 0 0
+"""
+
+
+def test_bandai_namco_convention_on_a_small_file(tmp_path):
+    path = tmp_path / "bn.bvh"
+    path.write_text(_BN_STYLE)
+    m = L.load_bandai_namco(path)
+    assert m.skeleton.names == ("Hips", "Spine", "Spine_end") and m.skeleton.parents.tolist() == [-1, 0, 1]
+    # the Hips position channels replace its OFFSET; Spine's channels (= its OFFSET) are not added twice
+    assert_close(m.root_positions, [[5.0, 90.0, 1.0], [6.0, 91.0, 3.0]])
+    assert_close(m.skeleton.offsets[1], [10.0, 0.0, 0.0])
+    pos = m.positions()
+    assert_close(pos[:, 1] - pos[:, 0], np.tile([0.0, 10.0, 0.0], (2, 1)), atol=1e-9)  # Zrotation 90°: x → y
+    bad = tmp_path / "bad.bvh"
+    bad.write_text(_BN_STYLE.replace("10 0 0 0 0 0\n0 0 0", "12 0 0 0 0 0\n0 0 0"))
+    with pytest.raises(ValueError, match="Spine"):
+        L.load_bandai_namco(bad)
+    with pytest.raises(ValueError, match="joint_Root"):
+        L.load_bandai_namco(SAMPLE_BVH)
+    short = tmp_path / "short.bvh"
+    short.write_text(_BN_STYLE.replace("Frames: 2", "Frames: 3"))
+    with pytest.raises(ValueError, match="3 frames"):
+        L.load_bandai_namco(short)
+
+
+def test_cmu_expmap_loader_gives_the_same_26_joints():
+    path = Path(__file__).resolve().parents[1] / "refimpl/data/sample/expmap/train/walking/walking_1.txt"
+    m = L.prepare_motion(L.load_cmu_expmap(path), L.CMU_RIG)
+    b = L.prepare_motion(L.load_cmu_bvh(SAMPLE_BVH), L.CMU_RIG)  # the same trial (CMU 02_01)
+    assert m.skeleton.names == b.skeleton.names and m.num_frames == b.num_frames
+    assert_close(m.root_positions, b.root_positions, atol=1e-3)
+    fm = L.build_sequences(m, L.CMU_RIG, mirror=False, all_phases=False)[0].features
+    fb = L.build_sequences(b, L.CMU_RIG, mirror=False, all_phases=False)[0].features
+    assert_close(fm[:, :6], fb[:, :6], atol=1e-3)
+    assert_close(fm[:, 6:], fb[:, 6:], atol=2e-2)  # the exp-map root agrees with the BVH to ~1e-2 only
