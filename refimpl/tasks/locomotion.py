@@ -105,8 +105,8 @@ _CMU_KEEP = ("Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBa
              "RightLeg", "RightFoot", "RightToeBase", "LowerBack", "Spine", "Neck", "Neck1", "Head",
              "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "LeftHandIndex1",
              "RightShoulder", "RightArm", "RightForeArm", "RightHand", "RightHandIndex1")
-_CMU_PAIRS = tuple((n, "R" + n[1:] if n.startswith("L") and not n.startswith("Left") and n != "LowerBack"
-                    else n.replace("Left", "Right")) for n in _CMU_KEEP if n.startswith(("Left", "LHip")))
+_CMU_PAIRS = (("LHipJoint", "RHipJoint"),) + tuple(
+    (n, n.replace("Left", "Right")) for n in _CMU_KEEP if n.startswith("Left"))
 
 #: CMU (cgspeed BVH, 31 joints + End Sites, or the 38-joint ASF skeleton of the exp-map files) → QuaterNet's 26
 #: joints (Spine1, the finger bases and thumbs and the End Sites removed; quaternet_reference_code.md §3.6).
