@@ -1,0 +1,1 @@
+"""Task protocols (data, splits, windows, evaluation) built on the models: one module per task."""
