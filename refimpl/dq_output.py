@@ -1,14 +1,14 @@
-"""The dual-quaternion output path of a network and its losses (Andreou et al. §5.2, Eq. 8, 12, 13, 16; spec/acrnn.md §4).
+"""The dual-quaternion output path of a network and its losses (Andreou et al. §5.2; spec/acrnn.md §3).
 
 A network that predicts current dual quaternions (acRNN, the long-term QuaterNet) is trained through one path::
 
-    raw (..., J, 8)  ──────────────────────────────────────────►  L_reg   (Eq. 16, on the raw output)
-        │ Eq. 13 normalisation per joint (dq_normalize_forward)
+    raw (..., J, 8) ─────────────────────────────► L_reg  (Eq. 16, on the raw output)
+        │ Eq. 13 normalisation per joint
         ▼
-    unit current DQs ──► translations (Eq. 8) ──────────────────►  L_pos
-                     ──► current → local (Eq. 12), translation ─►  L_offset
-                     ──► current → local rotations (Eq. 12) ────►  L_quat  (local, the default "quat")
-                     ──► current rotations ─────────────────────►  L_quat  (current, "quat_current")
+    unit current DQs ─► translations (Eq. 8) ────► L_pos
+                     ─► local (Eq. 12), Eq. 8 ───► L_offset
+                     ─► local rotations (Eq. 12) ► L_quat (local, the default "quat")
+                     ─► current rotations ───────► L_quat (current, "quat_current")
 
 ``total = Σ_name weights[name] · L_name`` over any subset of the five names (the paper's ablation); the
 defaults are acRNN's Appendix B weights without the MSE (:data:`DQ_TERMS`, from

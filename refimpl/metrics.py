@@ -25,7 +25,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from refimpl.nn.params import check_float_array
-from refimpl.representations import positions_from_frames
+from refimpl.representations import REPRESENTATIONS, decode, positions_from_frames
 from refimpl.skeleton import Skeleton
 from refimpl.transitions import TransitionDataset, split_pose
 
@@ -161,7 +161,7 @@ def format_table(results: Mapping[str, dict], frames: tuple[int, ...] = (1, 5, 1
 NPSS_VARIANTS = ("power", "real")
 
 
-def root_zeroed_positions(representation: str, skeleton: Skeleton, frames) -> np.ndarray:
+def root_zeroed_positions(representation: str, skeleton: Skeleton, frames, source: str = "fk") -> np.ndarray:
     """Joint positions implied by frame vectors with the root position set to 0 (the paper ignores the root).
 
     Parameters
@@ -170,13 +170,25 @@ def root_zeroed_positions(representation: str, skeleton: Skeleton, frames) -> np
     skeleton : Skeleton with J joints
     frames : ndarray (..., 3 + D·J)
         De-standardised frames.
+    source : {"fk", "stored"}
+        ``"fk"`` (default; the paper: "computed using Forward Kinematics", and the DQ evaluation code decodes
+        current DQs to local rotations first): forward kinematics of the decoded local rotations with the
+        skeleton's offsets, for every representation with an inverse; ``"positions"`` has none and uses its stored
+        positions. ``"stored"``: :func:`refimpl.representations.positions_from_frames` (stored positions of the
+        ``+positions`` representations, Eq. 8 translations of dual quaternions).
 
     Returns
     -------
     ndarray (..., J, 3)
     """
+    if source not in ("fk", "stored"):
+        raise ValueError(f"source: expected 'fk' or 'stored', got {source!r}")
     x = np.array(frames, dtype=np.float64)
     x[..., :3] = 0.0
+    rep = REPRESENTATIONS.get(representation)
+    if source == "fk" and rep is not None and rep.invertible:
+        rot, root = decode(representation, skeleton, x)
+        return skeleton.forward_kinematics(rot, root)
     return positions_from_frames(representation, skeleton, x)
 
 

@@ -92,6 +92,17 @@ def test_mean_joint_error_and_root_zeroed_positions():
     frames = encode("dual_quaternions", skel, rot, root)
     pos = metrics.root_zeroed_positions("dual_quaternions", skel, frames)
     np.testing.assert_allclose(pos, skel.forward_kinematics(rot, np.zeros((5, 3))), atol=1e-12)
+    np.testing.assert_allclose(metrics.root_zeroed_positions("dual_quaternions", skel, frames, "stored"), pos,
+                               atol=1e-12)
+    # a network's DQ output with a wrong bone length: FK (default) keeps the skeleton's, Eq. 8 does not
+    stretched = frames.copy()
+    stretched[:, 3 + 8 * 3 + 4:] *= 2.0  # joint 3's dual part doubled: its translation doubles
+    np.testing.assert_allclose(metrics.root_zeroed_positions("dual_quaternions", skel, stretched), pos, atol=1e-12)
+    assert not np.allclose(metrics.root_zeroed_positions("dual_quaternions", skel, stretched, "stored"), pos)
+    p_frames = encode("positions", skel, rot, root)
+    np.testing.assert_allclose(metrics.root_zeroed_positions("positions", skel, p_frames), pos, atol=1e-12)
+    with pytest.raises(ValueError, match="source"):
+        metrics.root_zeroed_positions("positions", skel, p_frames, "ik")
     other = pos + np.array([0.0, 3.0, 4.0])
     assert metrics.mean_joint_error(other, pos) == pytest.approx(5.0)
     pred = pos + rng.standard_normal(pos.shape)
