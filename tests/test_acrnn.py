@@ -359,3 +359,22 @@ def test_dq_output_rejects_unknown_terms_and_shapes():
         dq_output_loss_forward(x, x, PARENTS, {"mse": 1.0})
     with pytest.raises(ValueError, match="raw, target"):
         dq_output_loss_forward(x, x[..., :4], PARENTS, DQ_TERMS)
+
+
+@pytest.mark.parametrize("rep", ["quaternions", "quaternions+positions"])
+def test_quaternion_terms_have_exact_gradients(rep):
+    rng = np.random.default_rng(17)
+    skel = _skeleton(rng)
+    F = frame_size(rep, len(PARENTS))
+    mean, std = 0.1 * rng.standard_normal(F), 0.5 + rng.random(F)
+    spec = acrnn.LossSpec(rep, {"mse": 0.5, "quat": 1.0, "fk": 0.25, "reg": 0.01}, mean, std, skel.parents,
+                          skel.offsets)
+    target = _frames(rep, rng, 2, 3, F, mean, std)
+    pred = rng.standard_normal(target.shape)
+    total, parts, cache = acrnn.loss_forward(pred, target, spec)
+    assert set(parts) == {"mse", "quat", "fk", "reg"}
+    check_gradients(lambda: acrnn.loss_forward(pred, target, spec)[0], {"pred": pred},
+                    {"pred": acrnn.loss_backward(1.0, cache)}, max_entries=60)
+    # at the target the geometric terms vanish
+    _, at_target, _ = acrnn.loss_forward(target, target, spec)
+    assert max(at_target.values()) < 1e-12
