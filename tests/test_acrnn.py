@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
 
 from refimpl.dq_output import DQ_TERMS, dq_output_loss_backward, dq_output_loss_forward
 from refimpl.dualquat import dq_from_quat_translation, dq_inv, dq_mul, dq_normalize, translation_from_dq
@@ -15,6 +16,7 @@ from refimpl.nn.params import count_parameters as count_arrays
 from refimpl.quat import quat_normalize
 from refimpl.representations import REPRESENTATIONS, frame_size
 from refimpl.skeleton import Skeleton
+from refimpl.strategies import unit_dual_quaternions
 
 PARENTS = (-1, 0, 1, 1, 3)
 
@@ -378,3 +380,8 @@ def test_quaternion_terms_have_exact_gradients(rep):
     # at the target the geometric terms vanish
     _, at_target, _ = acrnn.loss_forward(target, target, spec)
     assert max(at_target.values()) < 1e-12
+
+
+@given(unit_dual_quaternions((3, len(PARENTS))))
+def test_l_reg_vanishes_on_random_unit_dual_quaternions(dq):
+    assert dq_output_loss_forward(dq, dq, PARENTS, {"reg": 1.0})[0] < 1e-24

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, strategies as st
 
 from refimpl import metrics
 from refimpl.quat import quat_normalize
@@ -122,3 +123,19 @@ def test_mean_acceleration_against_a_loop_and_constant_velocity():
     assert cmp["gt"] == 0.0 and cmp["abs_diff"] == pytest.approx(cmp["pred"])
     with pytest.raises(ValueError, match="3 frames"):
         metrics.mean_acceleration(p[:, :2])
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 3), st.integers(2, 12), st.integers(1, 4), st.integers(0, 11))
+def test_npss_properties_hold_for_random_sequences(seed, N, T, D, shift):
+    rng = np.random.default_rng(seed)
+    gt = rng.standard_normal((N, T, D))
+    pred = rng.standard_normal((N, T, D))
+    for variant in metrics.NPSS_VARIANTS:
+        assert metrics.npss(gt, gt, variant) == 0.0
+        value = metrics.npss(gt, pred, variant)
+        assert 0.0 <= value <= T  # each EMD term is at most T − 1 + 1
+    # the power spectrum of a circularly shifted sequence is the same: invariance of the original NPSS
+    s = shift % T
+    assert metrics.npss(np.roll(gt, s, axis=1), np.roll(pred, s, axis=1)) == pytest.approx(metrics.npss(gt, pred),
+                                                                                             abs=1e-12)
+    assert metrics.npss(gt, np.roll(gt, s, axis=1)) == pytest.approx(0.0, abs=1e-12)
