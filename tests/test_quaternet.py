@@ -47,6 +47,8 @@ def test_paper_sizes_names_and_counts():
     assert (lt.input_size, lt.gru_input_size, lt.output_size) == (112, 136, 106)
     assert count_parameters(st) == 9_526_128
     assert count_parameters(lt) == 9_529_246
+    for J in (22, 26, 31):  # spec/quaternet.md §2: per-joint growth 4 (3H + H + 1) with the long-term extras
+        assert count_parameters(QuaterNetConfig.long_term(num_joints=J)) == 9_529_246 + 4 * 4001 * (J - 26)
     # the hand arithmetic of spec/quaternet.md §2
     assert count_parameters(st) == 3 * 1000 * (128 + 1000) + 6000 + 3 * 1000 * 2000 + 6000 + 2000 + 128 * 1001
     ss, sl = param_shapes(st), param_shapes(lt)
