@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.losses import quat_norm_loss_backward, quat_norm_loss_forward
@@ -286,3 +288,29 @@ def test_input_validation():
     with pytest.raises(ValueError, match="dy"):
         backward(np.ones((2, 3, 8)), None, cache)
     assert QuaterNetConfig(**QuaterNetConfig.long_term().to_dict()) == QuaterNetConfig.long_term()
+
+
+_configs = st.builds(QuaterNetConfig, num_joints=st.integers(1, 2), num_outputs=st.integers(0, 2),
+                     num_controls=st.integers(0, 2), velocity=st.booleans(), hidden_size=st.integers(1, 4),
+                     num_layers=st.integers(1, 3), controls_hidden=st.integers(1, 3),
+                     negative_slope=st.sampled_from([0.0, 0.05, 0.3]))
+
+
+@given(_configs, st.integers(1, 3), st.integers(1, 4), st.integers(1, 3), st.integers(0, 2**31 - 1))
+def test_property_forward_step_oracle_and_vjp(cfg, P, T, B, seed):
+    """Hypothesis over configs and lengths: forward == per-step oracle; the VJP identity on every param/input."""
+    rng = np.random.default_rng(seed)
+    params = init_params(cfg, rng)
+    prefix, future = _frames(rng, cfg, B, P), _frames(rng, cfg, B, T)
+    mask = rng.random(T - 1) < 0.5
+    y, pre, _ = forward(params, prefix, future, mask, cfg)
+    assert_close(y, _forward_per_step(params, prefix, future, mask, cfg), **TOL_EXACT)
+
+    def fn():
+        return forward(params, prefix, future, mask, cfg)[:2]
+
+    def vjp(ws):
+        g, dp, df = backward(ws[0], ws[1], forward(params, prefix, future, mask, cfg)[2], input_grads=True)
+        return dict(g, prefix=dp, future=df)
+
+    check_vjp(fn, dict(params, prefix=prefix, future=future), vjp, rtol=1e-5, atol=1e-9)

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.models.quaternet_cnn import (QuaterNetCNNConfig, _forward_naive, backward, backward_scheduled,
@@ -237,3 +239,42 @@ def test_float32_and_validation():
     with pytest.raises(ValueError, match="dy"):
         backward(np.ones((2, 5, 8)), None, forward(params, x, cfg)[2])
     assert QuaterNetCNNConfig(**QuaterNetCNNConfig().to_dict()) == QuaterNetCNNConfig()
+
+
+
+@st.composite
+def _cnn_configs(draw):
+    n = draw(st.integers(2, 4))
+    ks = tuple(draw(st.integers(1, 3)) for _ in range(n))
+    ds = tuple(draw(st.integers(1, 3)) for _ in range(n))
+    candidates = [(s, k) for k in range(1, n - 1) for s in range(k)]  # C -> C layers only
+    skips = tuple(draw(st.lists(st.sampled_from(candidates), unique=True, max_size=2))) if candidates else ()
+    return QuaterNetCNNConfig(num_joints=draw(st.integers(1, 2)), channels=draw(st.integers(1, 4)), kernel_sizes=ks,
+                              dilations=ds, skips=skips, activation=draw(st.sampled_from(["relu", "leaky_relu",
+                                                                                          "tanh", "none"])),
+                              negative_slope=0.2, velocity=draw(st.booleans()))
+
+
+@given(_cnn_configs(), st.integers(1, 9), st.integers(0, 2**31 - 1))
+def test_property_naive_causal_vjp(cfg, T, seed):
+    """Hypothesis over layer counts, widths, dilations, skips, activations: forward == per-frame loop; outputs
+    before a changed frame unchanged; step() == forward per frame; the VJP identity on every param and x."""
+    rng = np.random.default_rng(seed)
+    params = init_params(cfg, rng)
+    x = _frames(rng, cfg, 2, T)
+    y, _, _ = forward(params, x, cfg)
+    assert_close(y, _forward_naive(params, x, cfg), **TOL_EXACT)
+    t = int(rng.integers(T))
+    x2 = x.copy()
+    x2[:, t] = _frames(rng, cfg, 2, 1)[:, 0]
+    assert np.array_equal(forward(params, x2, cfg)[0][:, :t], y[:, :t])
+    assert_close(step(params, x[:, :t + 1], cfg), y[:, t], **TOL_EXACT)
+
+    def fn():
+        return forward(params, x, cfg)[:2]
+
+    def vjp(ws):
+        g, d = backward(ws[0], ws[1], forward(params, x, cfg)[2], input_grads=True)
+        return dict(g, x=d)
+
+    check_vjp(fn, dict(params, x=x), vjp, rtol=1e-5, atol=1e-9)

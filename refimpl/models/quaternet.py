@@ -307,7 +307,9 @@ def _input_backward(dg, cache, config: QuaterNetConfig, grads: dict) -> np.ndarr
 
 
 def _head_forward(params, top, x, config: QuaterNetConfig):
-    """``o = fc(top)``, ``y = [normalize(Δ ⊗ q_in) or normalize(Δ) | τ]``; returns ``(y (B, G), pre (B, 4J), cache)``.
+    """``o = fc(top)``, ``y = [normalize(Δ ⊗ q_in) or normalize(Δ) | τ]``.
+
+    Returns ``(y (B, G), pre (B, 4J), cache)``.
 
     ``x (B, F)`` is the frame fed at this step (its quaternions are ``q_in`` in velocity mode)."""
     B, R = top.shape[0], config.rotation_size

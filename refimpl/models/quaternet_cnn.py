@@ -116,7 +116,8 @@ class QuaterNetCNNConfig:
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"QuaterNetCNNConfig.activation: expected one of {ACTIVATIONS}, got {self.activation!r}")
         if not 0.0 <= float(self.negative_slope) < 1.0:
-            raise ValueError(f"QuaterNetCNNConfig.negative_slope: expected a value in [0, 1), got {self.negative_slope}")
+            raise ValueError("QuaterNetCNNConfig.negative_slope: expected a value in [0, 1), "
+                             f"got {self.negative_slope}")
         if not isinstance(self.velocity, (bool, np.bool_)):
             raise ValueError(f"QuaterNetCNNConfig.velocity: expected a bool, got {self.velocity!r}")
         if not (np.isfinite(self.eps) and self.eps > 0):
