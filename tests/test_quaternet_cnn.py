@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.models.quaternet_cnn import (QuaterNetCNNConfig, _forward_naive, backward, backward_scheduled,
                                           check_params, count_parameters, forward, forward_scheduled, init_params,
-                                          param_shapes, predict, step)
+                                          init_stream_state, param_shapes, predict, step, stream_step)
 from refimpl.quat import quat_mul, quat_normalize
 from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
 
@@ -278,3 +278,34 @@ def test_property_naive_causal_vjp(cfg, T, seed):
         return dict(g, x=d)
 
     check_vjp(fn, dict(params, x=x), vjp, rtol=1e-5, atol=1e-9)
+
+
+@pytest.mark.parametrize("cfg", CONFIGS)
+def test_stream_step_equals_forward(cfg):
+    """spec/quaternet.md §5.4: the incremental per-layer-buffer step over a sequence == the vectorised forward,
+    from the zero state (= causal padding); a free-running stream == predict()."""
+    rng = np.random.default_rng(8)
+    params = init_params(cfg, rng)
+    x = _frames(rng, cfg, 2, 2 * cfg.receptive_field + 1)
+    y, _, _ = forward(params, x, cfg)
+    state = init_stream_state(params, 2, cfg)
+    assert [b.shape[1] for b in state] == [(k - 1) * d for k, d in zip(cfg.kernel_sizes, cfg.dilations)]
+    for t in range(x.shape[1]):
+        s_old = [b.copy() for b in state]
+        out, state2 = stream_step(params, state, x[:, t], cfg)
+        assert all(np.array_equal(a, b) for a, b in zip(state, s_old))  # not modified in place
+        state = state2
+        assert_close(out, y[:, t], **TOL_EXACT, name=f"t={t}")
+    prefix = x[:, :5]
+    state = init_stream_state(params, 2, cfg)
+    for t in range(5):
+        out, state = stream_step(params, state, prefix[:, t], cfg)
+    outs = [out]
+    for _ in range(3):
+        out, state = stream_step(params, state, out, cfg)
+        outs.append(out)
+    assert_close(np.stack(outs, axis=1), predict(params, prefix, 4, cfg), **TOL_EXACT)
+    with pytest.raises(ValueError, match="state"):
+        stream_step(params, state[:-1], x[:, 0], cfg)
+    with pytest.raises(ValueError, match=r"state\[0\]"):
+        stream_step(params, (np.zeros((3, 1, 8)),) + tuple(state[1:]), x[:, 0], cfg)

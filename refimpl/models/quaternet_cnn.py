@@ -23,8 +23,9 @@ Scheduled sampling (:func:`forward_scheduled`, :func:`backward_scheduled`) build
 the CNN ("the gradient flows only across the first term", as in Bengio et al. 2015) the fed-back predictions are
 treated as constants: no gradient reaches a prediction through the later inputs it was fed into.
 
-Online use: :func:`step` (the prediction from a window of the latest frames; only the last R are read) and
-:func:`predict` (prefix -> k frames, built on :func:`step`).
+Online use: :func:`step` (the prediction from a window of the latest frames; only the last R are read),
+:func:`predict` (prefix -> k frames, built on :func:`step`), and the incremental :func:`init_stream_state` /
+:func:`stream_step` (per-layer buffers of past inputs: one new output per layer and frame).
 
 Shape legend: B batch, T time, P prefix frames, J joints, C channels, K taps, N layers, R receptive field.
 """
@@ -45,6 +46,7 @@ from refimpl.nn.quat_layers import (qmul_velocity_backward, qmul_velocity_forwar
 __all__ = [
     "ACTIVATIONS", "QuaterNetCNNConfig", "param_shapes", "count_parameters", "init_params", "check_params",
     "forward", "backward", "forward_scheduled", "backward_scheduled", "step", "predict",
+    "init_stream_state", "stream_step",
 ]
 
 #: Activations the config accepts (applied after every layer but the last).
@@ -382,6 +384,62 @@ def predict(params: Mapping[str, np.ndarray], prefix, k: int,
         out.append(y)
         window = np.concatenate([window, y[:, None]], axis=1)[:, -R:]
     return np.stack(out, axis=1)
+
+
+def init_stream_state(params: Mapping[str, np.ndarray], batch_size: int,
+                      config: QuaterNetCNNConfig = QuaterNetCNNConfig()) -> tuple[np.ndarray, ...]:
+    """Zero state for :func:`stream_step`: per layer k the last ``(K_k − 1) d_k`` inputs, ``(B, (K_k−1) d_k, C_in)``.
+
+    Zeros are exactly the causal zero padding of every layer at the start of a sequence."""
+    dtype = check_params(params, config)
+    if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) or batch_size < 1:
+        raise ValueError(f"batch_size: expected a positive integer, got {batch_size!r}")
+    return tuple(np.zeros((int(batch_size), (taps - 1) * d, c_in), dtype=dtype)
+                 for (c_in, _), taps, d in zip(config.layer_channels, config.kernel_sizes, config.dilations))
+
+
+def stream_step(params: Mapping[str, np.ndarray], state, x, config: QuaterNetCNNConfig = QuaterNetCNNConfig()):
+    """Incremental online step: one frame ``x (B, 4J)`` in, the prediction of the next frame out (§5.4).
+
+    Each layer computes its one new output from its buffered past inputs (``state``, from
+    :func:`init_stream_state` or the previous call): ``N`` frame-layer evaluations per frame instead of the
+    window step's ``N·R``. Repeated over a sequence it gives exactly :func:`forward`'s outputs.
+
+    Returns
+    -------
+    y : ndarray (B, 4J)
+    state : tuple of ndarray
+        The updated buffers (new arrays; the input state is not modified).
+    """
+    dtype = check_params(params, config)
+    R = config.rotation_size
+    x = check_float_array(x, "x", (None, R), context=f"4J = {R} from the config")
+    if x.dtype != dtype:
+        raise ValueError(f"x: expected dtype {dtype} (the parameters' dtype), got {x.dtype}")
+    B, n = x.shape[0], config.num_layers
+    if not isinstance(state, (tuple, list)) or len(state) != n:
+        raise ValueError(f"state: expected a tuple of {n} buffers (init_stream_state), got {type(state).__name__}")
+    new_state, acts = [], []
+    a = x
+    for k, ((c_in, _), taps, d) in enumerate(zip(config.layer_channels, config.kernel_sizes, config.dilations)):
+        buf = check_float_array(state[k], f"state[{k}]", (B, (taps - 1) * d, c_in))
+        full = np.concatenate([buf, a[:, None]], axis=1)  # (B, (K-1) d + 1, C_in), oldest first
+        w = params[f"convs.{k}.weight"]  # (C_out, C_in, K)
+        z = params[f"convs.{k}.bias"] + sum(full[:, j * d] @ w[:, :, j].T for j in range(taps))  # (B, C_out)
+        new_state.append(full[:, 1:])
+        if k < n - 1:
+            z = _act_forward(z, config)[0]
+        for s, kk in config.skips:
+            if kk == k:
+                z = z + acts[s]
+        acts.append(z)
+        a = z
+    J = config.num_joints
+    if config.velocity:
+        q = qmul_velocity_forward(a.reshape(B, J, 4), x.reshape(B, J, 4), config.eps)[0]
+    else:
+        q = quat_normalize_forward(a.reshape(B, J, 4), config.eps)[0]
+    return q.reshape(B, R), tuple(new_state)
 
 
 # ----------------------------------------------------------------------------------------------------------------
