@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.losses import quat_norm_loss_backward, quat_norm_loss_forward
-from refimpl.models.quaternet import (QuaterNetConfig, _forward_per_step, backward, check_params, count_parameters,
+from refimpl.models.quaternet import (QuaterNetConfig, _backward_per_step, _forward_per_step, backward, check_params, count_parameters,
                                       forward, init_params, init_state, param_shapes, predict, step)
 from refimpl.quat import quat_mul, quat_normalize
 from refimpl.schedules import scheduled_sampling_mask
@@ -314,3 +314,22 @@ def test_property_forward_step_oracle_and_vjp(cfg, P, T, B, seed):
         return dict(g, prefix=dp, future=df)
 
     check_vjp(fn, dict(params, prefix=prefix, future=future), vjp, rtol=1e-5, atol=1e-9)
+
+
+@pytest.mark.parametrize("cfg", CONFIGS)
+def test_backward_equals_per_step_oracle(cfg):
+    """spec/quaternet.md §3.2: the vectorised-prefix backward == every frame back-propagated one step at a time."""
+    rng = np.random.default_rng(9)
+    params = init_params(cfg, rng)
+    prefix, future = _frames(rng, cfg, 2, 4), _frames(rng, cfg, 2, 5)
+    mask = np.array([False, True, False, False])
+    y, pre, cache = forward(params, prefix, future, mask, cfg)
+    dy, dpre = rng.standard_normal(y.shape), rng.standard_normal(pre.shape)
+    for dp in (dpre, None):
+        grads, dprefix, dfuture = backward(dy, dp, cache, input_grads=True)
+        g2, dprefix2, dfuture2 = _backward_per_step(dy, dp, params, prefix, future, mask, cfg)
+        assert set(g2) == set(grads)
+        for k in grads:
+            assert_close(grads[k], g2[k], **TOL_EXACT, name=k)
+        assert_close(dprefix, dprefix2, **TOL_EXACT, name="dprefix")
+        assert_close(dfuture, dfuture2, **TOL_EXACT, name="dfuture")

@@ -585,3 +585,46 @@ def _forward_per_step(params, prefix, future, mask, config: QuaterNetConfig = Qu
         y, h = step(params, h, x, config)
         ys.append(y)
     return np.stack(ys, axis=1)
+
+
+def _backward_per_step(dy, dpre, params, prefix, future, mask, config: QuaterNetConfig = QuaterNetConfig()):
+    """Slow oracle of :func:`backward`: forward and backward of every frame, prefix included, one step at a time
+    (:func:`_frame_forward` / :func:`_frame_backward`, no vectorised prefix). Returns ``(grads, dprefix, dfuture)``."""
+    B, P, _ = prefix.shape
+    T = future.shape[1]
+    G = config.output_size
+    h = np.repeat(params["h0"], B, axis=1)
+    caches, fed_back = [], []
+    y = None
+    for s in range(P + T - 1):  # frame s of the fed sequence; from s = P - 1 on its output is a prediction
+        i = s - P
+        if s < P:
+            x = prefix[:, s]
+        elif mask[i]:
+            x = future[:, i]
+        else:
+            x = np.concatenate([y, future[:, i, G:]], axis=1)
+        y, _, h, c = _frame_forward(params, x, h, config)
+        caches.append(c)
+        fed_back.append(s >= P and not mask[i])
+    grads: dict = {}
+    dprefix = np.zeros_like(prefix)
+    dfuture = np.zeros_like(future)
+    dh, carry = None, None
+    for s in range(P + T - 2, -1, -1):
+        t = s - (P - 1)  # index of the prediction this frame makes (< 0: none)
+        d = np.zeros((B, G), dtype=prefix.dtype) if t < 0 else dy[:, t].copy()
+        if carry is not None:
+            d += carry
+        dp = None if (t < 0 or dpre is None) else dpre[:, t]
+        dx, dh = _frame_backward(d, dp, dh, caches[s], config, grads)
+        carry = None
+        if s < P:
+            dprefix[:, s] = dx
+        elif fed_back[s]:
+            carry = dx[:, :G]
+            dfuture[:, s - P, G:] = dx[:, G:]
+        else:
+            dfuture[:, s - P] = dx
+    grads["h0"] = dh.sum(axis=1, keepdims=True)
+    return grads, dprefix, dfuture
