@@ -36,6 +36,7 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.models._shared import accumulate_grads, check_param_dict
 from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init, gru_step_backward, gru_step_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
@@ -226,24 +227,7 @@ def check_params(params: Mapping[str, np.ndarray], config: QuaterNetConfig = Qua
         Naming the missing, unexpected or mis-shaped parameter.
     """
     _check_config(config)
-    shapes = param_shapes(config)
-    extra = sorted(set(params) - set(shapes))
-    if extra:
-        raise ValueError(f"params: unexpected parameter(s) {extra} for this config (expected {sorted(shapes)})")
-    dtype = None
-    for name, shape in shapes.items():
-        if name not in params:
-            raise ValueError(f"params: missing parameter {name!r} (expected shape {shape})")
-        a = params[name]
-        if not isinstance(a, np.ndarray) or a.shape != shape:
-            raise ValueError(f"params[{name!r}]: expected shape {shape}, got {np.shape(a)}")
-        if dtype is None:
-            dtype = a.dtype
-        elif a.dtype != dtype:
-            raise ValueError(f"params[{name!r}]: expected dtype {dtype} like the other parameters, got {a.dtype}")
-    if dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
-        raise ValueError(f"params: expected float32 or float64 arrays, got {dtype}")
-    return dtype
+    return check_param_dict(params, param_shapes(config))
 
 
 def _check_frames(x, name: str, config: QuaterNetConfig, dtype, batch=None, ndim: int = 3) -> np.ndarray:
@@ -266,15 +250,6 @@ def _check_mask(mask, steps: int) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------------------------
 # building blocks: controls block, output head, one frame
 # ----------------------------------------------------------------------------------------------------------------
-
-def _accumulate(total: dict, g: Mapping[str, np.ndarray]) -> None:
-    """``total[k] += g[k]`` (first occurrence copied)."""
-    for k, v in g.items():
-        if k in total:
-            total[k] += v
-        else:
-            total[k] = np.array(v, copy=True)
-
 
 def _input_forward(params, x, config: QuaterNetConfig):
     """GRU input ``g = [x[..., :G] | controls block (x[..., G:])]`` over any leading axes (x (..., F))."""
@@ -301,8 +276,8 @@ def _input_backward(dg, cache, config: QuaterNetConfig, grads: dict) -> np.ndarr
     d, g2 = linear_backward(d, l2)
     d = leaky_relu_backward(d, r1)
     dx[..., G:], g1 = linear_backward(d, l1)
-    _accumulate(grads, g2)
-    _accumulate(grads, g1)
+    accumulate_grads(grads, g2)
+    accumulate_grads(grads, g1)
     return dx
 
 
@@ -340,7 +315,7 @@ def _head_backward(dy, dpre, cache, config: QuaterNetConfig, grads: dict):
         do[:, :R] += dpre
     do[:, R:] = dy[:, R:]
     dtop, g = linear_backward(do, lc)
-    _accumulate(grads, g)
+    accumulate_grads(grads, g)
     return dtop, dqin
 
 
@@ -562,7 +537,7 @@ def backward(dy, dpre, cache, input_grads: bool = False):
     dtops = np.zeros((B, P, config.hidden_size), dtype=dtype)
     dtops[:, -1] = dtop
     dg, dh0, g = gru_backward(dtops, dh, gc)
-    _accumulate(grads, g)
+    accumulate_grads(grads, g)
     grads["h0"] = dh0.sum(axis=1, keepdims=True)
     dprefix = _input_backward(dg, ic, config, grads)
     if dqin is not None:

@@ -36,6 +36,7 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.models._shared import check_param_dict
 from refimpl.nn.activations import (leaky_relu_backward, leaky_relu_forward, relu_backward, relu_forward,
                                     tanh_backward, tanh_forward)
 from refimpl.nn.conv1d import conv1d_causal_backward, conv1d_causal_forward, conv1d_init
@@ -190,24 +191,7 @@ def _check_config(config) -> QuaterNetCNNConfig:
 def check_params(params: Mapping[str, np.ndarray], config: QuaterNetCNNConfig = QuaterNetCNNConfig()) -> np.dtype:
     """Validate names, shapes and the one float dtype of ``params`` (extra entries refused); return the dtype."""
     _check_config(config)
-    shapes = param_shapes(config)
-    extra = sorted(set(params) - set(shapes))
-    if extra:
-        raise ValueError(f"params: unexpected parameter(s) {extra} for this config (expected {sorted(shapes)})")
-    dtype = None
-    for name, shape in shapes.items():
-        if name not in params:
-            raise ValueError(f"params: missing parameter {name!r} (expected shape {shape})")
-        a = params[name]
-        if not isinstance(a, np.ndarray) or a.shape != shape:
-            raise ValueError(f"params[{name!r}]: expected shape {shape}, got {np.shape(a)}")
-        if dtype is None:
-            dtype = a.dtype
-        elif a.dtype != dtype:
-            raise ValueError(f"params[{name!r}]: expected dtype {dtype} like the other parameters, got {a.dtype}")
-    if dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
-        raise ValueError(f"params: expected float32 or float64 arrays, got {dtype}")
-    return dtype
+    return check_param_dict(params, param_shapes(config))
 
 
 def _check_frames(x, name: str, config: QuaterNetCNNConfig, dtype, batch=None) -> np.ndarray:
