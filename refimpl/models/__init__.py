@@ -5,5 +5,7 @@ Each module holds a frozen dataclass config (defaults = the paper's sizes or our
 forward/backward pair and a ``step`` for online use (the function the ONNX exporter translates).
 
 Modules: ``refimpl.models.qtg`` (Quaternion Transition Generator, Geleijn et al. 2021; spec/qtg.md).
+``refimpl.models.quaternet`` (QuaterNet recurrent pose network, short- and long-term; spec/quaternet.md §1-§4),
+``refimpl.models.quaternet_cnn`` (QuaterNet convolutional pose network, our reconstruction; spec/quaternet.md §5).
 Import from the submodules; this package re-exports nothing, so the model modules stay independent.
 """
