@@ -59,8 +59,8 @@ from deploy.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step  # n
 from deploy.qtg_compact import export_qtg_rollout_compact  # noqa: E402
 from deploy.runtime import make_session  # noqa: E402
 from deploy.validate import validate_model  # noqa: E402
-from refimpl.models.qtg import (QTGConfig, init_params, init_state, prepare_inference, rollout_forward,  # noqa: E402
-                                rollout_inference, step)
+from refimpl.models.qtg import QTGConfig, init_params, init_state, step  # noqa: E402
+from refimpl.models.qtg_fast import prepare_inference, rollout_forward, rollout_inference  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.nn.gru import gru_init, gru_step_forward  # noqa: E402
 from refimpl.quat import quat_normalize  # noqa: E402

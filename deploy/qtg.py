@@ -11,7 +11,7 @@ model          inputs → outputs                                           tran
 ``step``       ``pose``, ``latent_prev``, ``hidden``, ``target_latent`` →   ``refimpl.models.qtg.step``
                ``pose_next (B, P)``, ``latent_prev_next (B, Z)``,
                ``hidden_next (L, B, H)``
-``rollout``    ``past``, ``target`` → ``poses (B, T, P)``                  ``refimpl.models.qtg.rollout_forward``
+``rollout``    ``past``, ``target`` → ``poses (B, T, P)``                  ``refimpl.models.qtg_fast.rollout_forward``
 =============  =========================================================  =====================================
 
 A game loop runs ``init`` once per transition and then ``step`` once per frame, feeding ``*_next`` back as the
@@ -308,7 +308,7 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
                        mode: str = "scan", dtype=np.float32, opset: int = OPSET, primitive: bool | None = None,
                        normalization=None, normalize_in_graph: bool = True, skeleton=None,
                        frame_rate: float = 30.0, metadata: Mapping | None = None) -> onnx.ModelProto:
-    """The ``rollout`` model: a whole transition (``refimpl.models.qtg.rollout_forward``) in one graph.
+    """The ``rollout`` model: a whole transition (``refimpl.models.qtg_fast.rollout_forward``) in one graph.
 
     Parameters
     ----------
@@ -386,3 +386,12 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
           "outputs": _io(("poses", ["B", T, P], "p_1 ... p_T, the generated transition"))}
     meta = _metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g, f"float.{mode}", metadata, T=T)
     return g.model(metadata=meta, doc_string=f"QTG rollout: {T} frames, {mode}", producer_version=EXPORTER_VERSION)
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+check_normalization = _check_normalization
+check_params_kernel = _check_params
+io = _io
+metadata = _metadata
+pose_in = _pose_in
+pose_out = _pose_out

@@ -1,7 +1,7 @@
 """Deployment variant of the QTG rollout: rearranged weights, fewer nodes, optionally int8 or int4 weights.
 
 The plain export (``deploy/qtg.py``) translates ``refimpl.models.qtg.step`` node for node. This variant computes
-the same function (``spec/deploy.md`` §5.4) with the algebra of ``refimpl.models.qtg.prepare_inference``
+the same function (``spec/deploy.md`` §5.4) with the algebra of ``refimpl.models.qtg_fast.prepare_inference``
 (``spec/qtg.md`` §6), arranged for onnxruntime, where at batch 1 every node costs a dispatch on top of the
 weight bytes it reads (measured on the development VM: ~0.55 µs per element-wise node, ~1.4 µs per
 ``MatMulNBits`` plus ~0.044 µs per 1000 int8 weights):
@@ -53,9 +53,10 @@ import onnx
 from refimpl.models.qtg import QTGConfig
 
 from deploy.graph import OPSET, GraphBuilder
-from deploy.gru import _gru_gates
+from deploy.gru import gru_gates as _gru_gates
 from deploy.metadata import EXPORTER_VERSION
-from deploy.qtg import _check_normalization, _check_params, _io, _metadata, _pose_in, _pose_out
+from deploy.qtg import (check_normalization as _check_normalization, check_params_kernel as _check_params, io as _io,
+                        metadata as _metadata, pose_in as _pose_in, pose_out as _pose_out)
 from deploy.quantize import WEIGHT_FORMATS, WeightMatmul
 
 __all__ = ["export_qtg_rollout_compact"]

@@ -16,7 +16,8 @@ from deploy.metadata import FORMAT, read_metadata
 from deploy.qtg import ROLLOUT_MODES, export_qtg_init, export_qtg_rollout, export_qtg_step
 from deploy.runtime import QTGRuntime
 from deploy.validate import run_onnxruntime, run_reference, validate_model
-from refimpl.models.qtg import QTGConfig, QTGState, init_params, init_state, rollout_forward, step
+from refimpl.models.qtg import QTGConfig, QTGState, init_params, init_state, step
+from refimpl.models.qtg_fast import rollout_forward
 from refimpl.skeletons import cmu_skeleton
 from refimpl.testing import TOL_EXACT, TOL_ORT_ROLLOUT, TOL_ORT_STEP, assert_close
 from refimpl.transitions import TransitionSource, load_source, make_windows, normalize_poses

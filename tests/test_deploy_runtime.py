@@ -12,7 +12,8 @@ from deploy.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
 from deploy.runtime import QTGRuntime, load_model, make_session, make_session_options
 from refimpl.bvh import read_bvh
 from refimpl.checkpoint import save_checkpoint
-from refimpl.models.qtg import QTGConfig, init_params, rollout_forward
+from refimpl.models.qtg import QTGConfig, init_params
+from refimpl.models.qtg_fast import rollout_forward
 from refimpl.testing import TOL_ORT_ROLLOUT, assert_close
 from refimpl.transitions import make_windows
 

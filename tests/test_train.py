@@ -9,8 +9,8 @@ import pytest
 
 from refimpl.checkpoint import load_checkpoint
 from refimpl.models.qtg import QTGConfig
-from refimpl.train import (OptimConfig, TrainConfig, TrainingDiverged, format_duration, qtg_adapter,
-                           train, train_qtg)
+from refimpl.recipes.qtg import PAPER_OPTIM, qtg_adapter, train_qtg
+from refimpl.train import OptimConfig, TrainConfig, TrainingDiverged, format_duration, train
 
 TINY = QTGConfig(pose_size=11, encoder_sizes=(6, 4), gru_hidden=5, decoder_sizes=(6,), transition_length=3)
 
@@ -45,7 +45,7 @@ def _adapter(nan_at=None, nan_in="loss", noise=True):
     return dataclasses.replace(base, get_batch=get_batch, loss_and_grads=loss_and_grads)
 
 
-OPT = OptimConfig(lr=1e-2, clip_norm=1.0, lr_decay=0.9)
+OPT = OptimConfig(lr=1e-2, betas=PAPER_OPTIM.betas, clip_norm=1.0, lr_decay=0.9)
 
 
 def _cfg(tmp_path, steps, **kw):
@@ -193,7 +193,8 @@ def test_train_qtg_reduces_the_loss(tmp_path):
     poses = np.cumsum(0.1 * rng.standard_normal((16, 7, 11)), axis=1)
     ds = TransitionDataset(poses=poses, skeleton_index=np.zeros(16, int), skeletons=(), source_index=np.zeros(16, int),
                            sources=(), root_mean=np.zeros(3), root_std=np.ones(3))
-    res = train_qtg(ds, 40, config=TINY, optim=OptimConfig(lr=3e-3), batch_size=8, dtype=np.float32,
+    res = train_qtg(ds, 40, config=TINY, optim=OptimConfig(lr=3e-3, betas=PAPER_OPTIM.betas), batch_size=8,
+                    dtype=np.float32,
                     checkpoint_path=str(tmp_path / "q.npz"), progress=None)
     assert res.params["enc.0.weight"].dtype == np.float32
     assert np.mean(res.losses[-5:]) < 0.8 * np.mean(res.losses[:5])
