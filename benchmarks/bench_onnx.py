@@ -55,8 +55,8 @@ import onnxruntime as ort  # noqa: E402
 
 from deploy.graph import GraphBuilder  # noqa: E402
 from deploy.gru import gru_step  # noqa: E402
-from deploy.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step  # noqa: E402
-from deploy.qtg_compact import export_qtg_rollout_compact  # noqa: E402
+from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step  # noqa: E402
+from deploy.models.qtg_compact import export_qtg_rollout_compact  # noqa: E402
 from deploy.runtime import make_session  # noqa: E402
 from deploy.validate import validate_model  # noqa: E402
 from refimpl.models.qtg import QTGConfig, init_params, init_state, step  # noqa: E402
@@ -361,7 +361,7 @@ def _model_params(args, cfg):
         print(f"note: no sample data ({exc}); accuracy on random contexts only", file=sys.stderr)
         train = None
     if args.checkpoint:
-        from deploy.cli import load_qtg_checkpoint
+        from deploy.models.qtg_io import load_qtg_checkpoint
         params, ck_cfg, _ = load_qtg_checkpoint(args.checkpoint)
         if ck_cfg != cfg:
             raise SystemExit("--checkpoint: only the default QTGConfig is benchmarked")

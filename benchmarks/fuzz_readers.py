@@ -854,7 +854,7 @@ def onnx_seeds() -> list[tuple[str, bytes]]:
     import onnx
     from onnx import TensorProto, helper
 
-    from deploy.qtg import export_qtg_step
+    from deploy.models.qtg import export_qtg_step
     from refimpl.models.qtg import QTGConfig, init_params
 
     cfg = QTGConfig(pose_size=11, encoder_sizes=(8, 4), gru_hidden=6, decoder_sizes=(8,), transition_length=3)

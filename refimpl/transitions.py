@@ -44,8 +44,12 @@ __all__ = [
     "CMU_22_JOINTS", "SALSA_22_JOINTS", "CMU_UNIT_CM", "SALSA_UNIT_CM",
     "TransitionSource", "TransitionDataset", "subset_22", "scale_skeleton", "heading_from_root", "make_windows",
     "window_to_world", "declared_rate", "load_source", "build_transition_datasets", "sample_sources",
-    "shared_sources",
+    "shared_sources", "SAMPLE_DIR",
 ]
+
+#: The embedded CMU sample (see its README.md): the default data of ``refimpl train``, ``eval`` and ``demo``.
+SAMPLE_DIR = Path(__file__).resolve().parent / "data" / "sample"
+
 
 # ----------------------------------------------------------------------------------------------------------------
 # pose layout and normalisation
@@ -418,7 +422,7 @@ def sample_sources(root: str | Path | None = None):
     -------
     train, test : list of TransitionSource
     """
-    root = Path(__file__).resolve().parent / "data" / "sample" if root is None else Path(root)
+    root = SAMPLE_DIR if root is None else Path(root)
     train, test = [], []
     for split, out in (("train", train), ("test", test)):
         for action, label in (("walking", "walk"), ("running", "run")):

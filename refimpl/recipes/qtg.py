@@ -30,7 +30,7 @@ from refimpl.transitions import denormalize_poses, join_pose, normalize_poses, s
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "parse_overrides", "make_config", "qtg_adapter", "make_adapter", "train_qtg", "qtg_method",
-           "make_method", "export_inputs"]
+           "make_method", "export_inputs", "reference_outputs"]
 
 NAME = "qtg"
 SUMMARY = "Quaternion Transition Generator (Geleijn et al., IEEE VR 2021): 2 past + 2 target poses -> T frames"
@@ -222,3 +222,14 @@ def export_inputs(model) -> dict:
             "training": {"checkpoint_step": model.meta.get("step"), "root_mean": [float(v) for v in model.root_mean],
                          "root_std": [float(v) for v in model.root_std]}}
     return {"normalization": model.pose_normalization, "metadata": meta, "T": model.transition_length}
+
+
+def reference_outputs(model, past, target, T: int) -> np.ndarray:
+    """The NumPy outputs an exported QTG must reproduce: raw (de-standardised) poses ``(B, T, P)`` from
+    :func:`refimpl.models.qtg_fast.rollout_forward` in the parameters' dtype, before any quaternion
+    normalisation (``refimpl export``'s check, :func:`refimpl.services.verify_onnx`)."""
+    dtype = next(iter(model.params.values())).dtype
+    pn = normalize_poses(np.asarray(past, np.float64), model.root_mean, model.root_std).astype(dtype)
+    tn = normalize_poses(np.asarray(target, np.float64), model.root_mean, model.root_std).astype(dtype)
+    ref, _ = rollout_forward(model.params, pn, tn, T, model.config)
+    return denormalize_poses(ref.astype(np.float64), model.root_mean, model.root_std)  # (B, T, P)
