@@ -850,7 +850,7 @@ CHECKPOINT_MUTATORS: dict[str, Callable] = {
 # ------------------------------------------------------------------------------------------------------------
 
 def onnx_seeds() -> list[tuple[str, bytes]]:
-    """A tiny exported QTG ``step`` model (deploy.qtg) and an Identity model carrying the same metadata."""
+    """A tiny exported QTG ``step`` model (deploy.models.qtg) and an Identity model carrying the same metadata."""
     import onnx
     from onnx import TensorProto, helper
 

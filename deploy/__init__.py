@@ -12,7 +12,7 @@ Requires the ``deploy`` extra: ``pip install 'refimpl[deploy]'``.
 from . import (graph as _graph, linear as _linear, activations as _activations, recurrent as _recurrent,
                gru as _gru, lstm as _lstm, conv1d as _conv1d, quat as _quat, kinematics as _kinematics,
                features as _features, metadata as _metadata, quantize as _quantize, validate as _validate,
-               runtime as _runtime)
+               session as _session, runtime as _runtime)
 from .models import qtg as _qtg, qtg_compact as _qtg_compact, qtg_io as _qtg_io
 from .graph import *  # noqa: F401,F403
 from .linear import *  # noqa: F401,F403
@@ -27,11 +27,12 @@ from .features import *  # noqa: F401,F403
 from .metadata import *  # noqa: F401,F403
 from .quantize import *  # noqa: F401,F403
 from .validate import *  # noqa: F401,F403
+from .session import *  # noqa: F401,F403
 from .runtime import *  # noqa: F401,F403
 from .models.qtg import *  # noqa: F401,F403
 from .models.qtg_compact import *  # noqa: F401,F403
 from .models.qtg_io import *  # noqa: F401,F403
 
 __all__ = [n for m in (_graph, _linear, _activations, _recurrent, _gru, _lstm, _conv1d, _quat, _kinematics,
-                       _features, _metadata, _quantize, _validate, _runtime, _qtg, _qtg_compact, _qtg_io)
+                       _features, _metadata, _quantize, _validate, _session, _runtime, _qtg, _qtg_compact, _qtg_io)
            for n in m.__all__]

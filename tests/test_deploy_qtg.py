@@ -331,7 +331,7 @@ def test_compact_quantized_equals_numpy_with_dequantized_weights(name, weights, 
     """spec/deploy.md §5.4: with float32 compute (MatMulNBits accuracy_level 1) the int8/int4 graph equals the
     rearranged NumPy rollout with the dequantised matrices to float32 rounding — which matrices are quantised,
     their layout and biases; the deployed int8-activation form (accuracy_level 4) stays close to it."""
-    import deploy.qtg_compact as qc
+    import deploy.models.qtg_compact as qc
     from deploy.quantize import WeightMatmul, quantize_blocks
 
     config = TINY[name]
