@@ -200,3 +200,20 @@ def test_train_qtg_reduces_the_loss(tmp_path):
     assert np.mean(res.losses[-5:]) < 0.8 * np.mean(res.losses[:5])
     arrays, meta = load_checkpoint(tmp_path / "q.npz")
     assert meta["model_config"]["dtype"] == "float32" and meta["step"] == 40
+
+
+def test_resume_keeps_the_log_files_mode(tmp_path):
+    """spec/qtg.md §10: a resumed run rewrites loss.csv atomically (refimpl.atomic) with the usual permissions
+    (0o666 & ~umask), not a temporary file's 0o600."""
+    import os
+
+    umask = os.umask(0o022)
+    try:
+        kw = dict(batch_size=2, seed=0, checkpoint_path=str(tmp_path / "c.npz"), log_path=str(tmp_path / "loss.csv"))
+        train(_adapter(), OPT, TrainConfig(steps=2, **kw), progress=None)
+        train(_adapter(), OPT, TrainConfig(steps=4, **kw), resume=True, progress=None)
+        assert os.stat(tmp_path / "loss.csv").st_mode & 0o777 == 0o644
+        rows = (tmp_path / "loss.csv").read_text().splitlines()
+        assert rows[0].startswith("step,") and [r.split(",")[0] for r in rows[1:]] == ["1", "2", "3", "4"]
+    finally:
+        os.umask(umask)
