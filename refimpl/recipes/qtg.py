@@ -25,6 +25,7 @@ from refimpl.errors import UsageError
 from refimpl.losses import mae_loss_backward, mae_loss_forward
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import prepare_inference, rollout_backward, rollout_forward, rollout_inference
+from refimpl.optim import QTG_ADAM
 from refimpl.train import ModelAdapter, OptimConfig, StepInfo, TrainConfig, TrainResult, default_progress, train
 from refimpl.transitions import denormalize_poses, join_pose, normalize_poses, split_pose
 
@@ -40,8 +41,8 @@ REPRESENTATIONS = ("quat",)
 CONFIG_TYPE = QTGConfig
 #: Key of the exporter in ``deploy.models.EXPORTERS``.
 EXPORTER = "qtg"
-#: The paper's optimiser: Adam, learning rate 1e-4, β = (0.5, 0.9); no clipping, no decay.
-PAPER_OPTIM = OptimConfig(lr=1e-4, betas=(0.5, 0.9))
+#: The paper's optimiser (:data:`refimpl.optim.QTG_ADAM`: Adam, lr 1e-4, β = (0.5, 0.9)); no clipping, no decay.
+PAPER_OPTIM = OptimConfig(**QTG_ADAM)
 #: The paper's batch size.
 PAPER_BATCH = 32
 
