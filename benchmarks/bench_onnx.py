@@ -367,7 +367,7 @@ def _model_params(args, cfg):
             raise SystemExit("--checkpoint: only the default QTGConfig is benchmarked")
         return {k: np.asarray(v, np.float64) for k, v in params.items()}, f"checkpoint {args.checkpoint}", data
     if args.train_steps > 0 and train is not None:
-        from refimpl.train import train_qtg
+        from refimpl.recipes.qtg import train_qtg
         with tempfile.TemporaryDirectory() as d:
             res = train_qtg(train, args.train_steps, config=cfg, dtype=np.float32, progress=None,
                             checkpoint_path=str(Path(d) / "ck.npz"), checkpoint_every=10 ** 9)

@@ -22,7 +22,6 @@ Shape legend in ``io``: symbolic dimension names (``"B"`` batch) or integers.
 """
 from __future__ import annotations
 
-import json
 import math
 from typing import Any, Mapping
 

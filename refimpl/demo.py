@@ -36,7 +36,8 @@ from refimpl.services import (SAMPLE_DIR, blas_threads, evaluate_model, export_o
                               train_model, verify_onnx)
 from refimpl.tasks.transition import make_transition, print_results, render_transition, with_end_sites, write_results
 
-__all__ = ["run_demo", "DemoResult", "DEMO_CONFIG", "DEMO_STEPS", "DEMO_BATCH", "DEMO_LR", "QUICK_CONFIG", "QUICK_STEPS"]
+__all__ = ["run_demo", "DemoResult", "DEMO_CONFIG", "DEMO_STEPS", "DEMO_BATCH", "DEMO_LR", "QUICK_CONFIG",
+           "QUICK_STEPS"]
 
 #: Network of the full demo (QTGConfig fields; the paper-sized default is 256/128/256 with 0.64 M parameters).
 DEMO_CONFIG = dict(encoder_sizes=(128, 64), gru_hidden=128, decoder_sizes=(128,))

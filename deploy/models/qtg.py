@@ -1,4 +1,6 @@
-"""ONNX export of QTG (``refimpl/models/qtg.py``; the ``qtg`` entry of ``deploy.models.EXPORTERS``): an init model, a step model and a whole-transition rollout model.
+"""ONNX export of QTG (``refimpl/models/qtg.py``): an init model, a step model and a whole-transition rollout model.
+
+Its entry of the exporter table ``deploy.models.EXPORTERS["qtg"]`` is ``deploy/models/qtg_io.py``.
 
 The exporter translates the NumPy model's functions one to one (``spec/deploy.md`` §5):
 
@@ -378,5 +380,6 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
     io = {"inputs": io_entries(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
                         ("target", ["B", 2, P], "g1 = p_{T+1}, g2 = p_{T+2}: the two poses after it")),
           "outputs": io_entries(("poses", ["B", T, P], "p_1 ... p_T, the generated transition"))}
-    meta = qtg_metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g, f"float.{mode}", metadata, T=T)
+    meta = qtg_metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g, f"float.{mode}",
+                        metadata, T=T)
     return g.model(metadata=meta, doc_string=f"QTG rollout: {T} frames, {mode}", producer_version=EXPORTER_VERSION)

@@ -14,7 +14,6 @@ import numpy as np
 
 from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
-from refimpl.nn.params import accumulate_grads
 
 __all__ = ["mlp_init", "mlp_forward", "mlp_backward"]
 

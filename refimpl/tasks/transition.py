@@ -233,7 +233,8 @@ def _protocol_line(ds, model=None) -> str:
 
 def print_results(results: Mapping[str, dict], test_ds, model=None, *,
                   curve: bool = True) -> None:
-    """Print :func:`refimpl.services.evaluate_model` results as the paper's comparison: protocol line, table, per-frame curve."""
+    """Print :func:`refimpl.services.evaluate_model` results as the paper's comparison: protocol line, table,
+    per-frame curve."""
     _say(_protocol_line(test_ds, model))
     _say("")
     _say("Mean joint-position error per joint per frame (cm), by motion category and at transition frames fK:")
@@ -245,7 +246,8 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
 
 
 def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=None, csv_path=None) -> None:
-    """Write :func:`refimpl.services.evaluate_model` results as JSON (everything) and / or CSV (the per-frame curves)."""
+    """Write :func:`refimpl.services.evaluate_model` results as JSON (everything) and / or CSV (the per-frame
+    curves)."""
     if json_path:
         atomic_write_text(Path(json_path), _results_json(results), make_parents=True)
     if csv_path:
