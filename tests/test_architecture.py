@@ -16,7 +16,7 @@ LAYERS = {
     1: ["refimpl.quat", "refimpl.dualquat"],
     2: ["refimpl.skeleton"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.expmap", "refimpl.skeletons", "refimpl.preprocess",
-        "refimpl.representations", "refimpl.strategies"],
+        "refimpl.representations", "refimpl.strategies", "refimpl.splines"],  # splines: announced, not landed
     4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses"],
     5: ["refimpl.models", "refimpl.models.*"],
     6: ["refimpl.optim", "refimpl.schedules", "refimpl.checkpoint", "refimpl.train", "refimpl.rigs",
