@@ -55,12 +55,12 @@ import onnxruntime as ort  # noqa: E402
 
 from deploy.graph import GraphBuilder  # noqa: E402
 from deploy.gru import gru_step  # noqa: E402
-from deploy.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step  # noqa: E402
-from deploy.qtg_compact import export_qtg_rollout_compact  # noqa: E402
+from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step  # noqa: E402
+from deploy.models.qtg_compact import export_qtg_rollout_compact  # noqa: E402
 from deploy.runtime import make_session  # noqa: E402
 from deploy.validate import validate_model  # noqa: E402
-from refimpl.models.qtg import (QTGConfig, init_params, init_state, prepare_inference, rollout_forward,  # noqa: E402
-                                rollout_inference, step)
+from refimpl.models.qtg import QTGConfig, init_params, init_state, step  # noqa: E402
+from refimpl.models.qtg_fast import prepare_inference, rollout_forward, rollout_inference  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.nn.gru import gru_init, gru_step_forward  # noqa: E402
 from refimpl.quat import quat_normalize  # noqa: E402
@@ -361,13 +361,13 @@ def _model_params(args, cfg):
         print(f"note: no sample data ({exc}); accuracy on random contexts only", file=sys.stderr)
         train = None
     if args.checkpoint:
-        from deploy.cli import load_qtg_checkpoint
+        from deploy.models.qtg_io import load_qtg_checkpoint
         params, ck_cfg, _ = load_qtg_checkpoint(args.checkpoint)
         if ck_cfg != cfg:
             raise SystemExit("--checkpoint: only the default QTGConfig is benchmarked")
         return {k: np.asarray(v, np.float64) for k, v in params.items()}, f"checkpoint {args.checkpoint}", data
     if args.train_steps > 0 and train is not None:
-        from refimpl.train import train_qtg
+        from refimpl.recipes.qtg import train_qtg
         with tempfile.TemporaryDirectory() as d:
             res = train_qtg(train, args.train_steps, config=cfg, dtype=np.float32, progress=None,
                             checkpoint_path=str(Path(d) / "ck.npz"), checkpoint_every=10 ** 9)

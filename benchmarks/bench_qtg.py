@@ -34,7 +34,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from refimpl.models.qtg import (QTGConfig, count_parameters, init_params, macs_per_frame,  # noqa: E402
-                                prepare_inference, rollout_forward, rollout_inference, rtn_macs_per_frame)
+                                rtn_macs_per_frame)
+from refimpl.models.qtg_fast import prepare_inference, rollout_forward, rollout_inference  # noqa: E402
 
 try:
     from threadpoolctl import threadpool_info, threadpool_limits

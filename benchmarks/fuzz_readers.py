@@ -850,11 +850,11 @@ CHECKPOINT_MUTATORS: dict[str, Callable] = {
 # ------------------------------------------------------------------------------------------------------------
 
 def onnx_seeds() -> list[tuple[str, bytes]]:
-    """A tiny exported QTG ``step`` model (deploy.qtg) and an Identity model carrying the same metadata."""
+    """A tiny exported QTG ``step`` model (deploy.models.qtg) and an Identity model carrying the same metadata."""
     import onnx
     from onnx import TensorProto, helper
 
-    from deploy.qtg import export_qtg_step
+    from deploy.models.qtg import export_qtg_step
     from refimpl.models.qtg import QTGConfig, init_params
 
     cfg = QTGConfig(pose_size=11, encoder_sizes=(8, 4), gru_hidden=6, decoder_sizes=(8,), transition_length=3)

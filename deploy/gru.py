@@ -29,9 +29,12 @@ import numpy as np
 
 from deploy.graph import GraphBuilder
 from deploy.quantize import WEIGHT_FORMATS, WeightMatmul
-from deploy.recurrent import (GRU_PERM, _check_layer_shapes, _concat_layers, _input_projection,
-                              _merge_directions, _onnx_layer_weights, _primitive_layer_weights,
-                              _scan_recurrence, _split_layers, _squeeze0, _time_major, _unsqueeze0)
+from deploy.recurrent import (GRU_PERM, check_layer_shapes as _check_layer_shapes, concat_layers as _concat_layers,
+                              input_projection as _input_projection, merge_directions as _merge_directions,
+                              onnx_layer_weights as _onnx_layer_weights,
+                              primitive_layer_weights as _primitive_layer_weights, scan_recurrence as _scan_recurrence,
+                              split_layers as _split_layers, squeeze0 as _squeeze0, time_major as _time_major,
+                              unsqueeze0 as _unsqueeze0)
 
 __all__ = ["gru", "gru_step", "gru_onnx_weights"]
 
@@ -289,3 +292,7 @@ def _primitive_layer(g, seq, h0_layer, params, prefix, layer, dirs, lname, wl):
     y = ys[0] if dirs == 1 else g.node("Concat", ys, f"{lname}.y", axis=-1)     # (T, B, D·H)
     hn = hs[0] if dirs == 1 else g.node("Concat", hs, f"{lname}.h_n", axis=0)   # (D, B, H)
     return y, hn
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+gru_gates = _gru_gates

@@ -24,9 +24,12 @@ from typing import Mapping
 import numpy as np
 
 from deploy.graph import GraphBuilder
-from deploy.recurrent import (LSTM_PERM, _check_layer_shapes, _concat_layers, _input_projection,
-                              _merge_directions, _onnx_layer_weights, _primitive_layer_weights,
-                              _scan_recurrence, _split_layers, _squeeze0, _time_major, _unsqueeze0)
+from deploy.recurrent import (LSTM_PERM, check_layer_shapes as _check_layer_shapes, concat_layers as _concat_layers,
+                              input_projection as _input_projection, merge_directions as _merge_directions,
+                              onnx_layer_weights as _onnx_layer_weights,
+                              primitive_layer_weights as _primitive_layer_weights, scan_recurrence as _scan_recurrence,
+                              split_layers as _split_layers, squeeze0 as _squeeze0, time_major as _time_major,
+                              unsqueeze0 as _unsqueeze0)
 
 __all__ = ["lstm", "lstm_step", "lstm_onnx_weights"]
 

@@ -22,7 +22,6 @@ Shape legend in ``io``: symbolic dimension names (``"B"`` batch) or integers.
 """
 from __future__ import annotations
 
-import json
 import math
 from typing import Any, Mapping
 
@@ -31,15 +30,12 @@ import onnx
 
 from refimpl._parsing import json_loads_strict
 
-__all__ = ["EXPORTER_VERSION", "FORMAT", "QTG_PAPER", "skeleton_metadata", "read_metadata",
-           "qtg_representation"]
+from deploy.graph import IR_VERSION, OPSET, ir_version_for
+
+__all__ = ["EXPORTER_VERSION", "FORMAT", "skeleton_metadata", "read_metadata", "io_entries", "build_metadata"]
 
 EXPORTER_VERSION = "0.1.0"
 FORMAT = "refimpl.deploy/1"
-QTG_PAPER = ("Geleijn, Radziszewski, van Straaten, Galvan Debarba: Lightweight Quaternion Transition Generation "
-             "with Neural Networks. IEEE VR 2021 (abstracts and workshops)")
-
-
 def skeleton_metadata(skeleton) -> dict | None:
     """``{"names", "parents", "offsets"}`` (plain lists) from a ``refimpl.skeleton.Skeleton``, or ``None``."""
     if skeleton is None:
@@ -47,17 +43,6 @@ def skeleton_metadata(skeleton) -> dict | None:
     return {"names": [str(n) for n in skeleton.names],
             "parents": [int(p) for p in skeleton.parents],
             "offsets": [[float(v) for v in row] for row in np.asarray(skeleton.offsets, dtype=np.float64)]}
-
-
-def qtg_representation(pose_size: int) -> dict:
-    """Layout of a QTG pose vector: root translation (3) then ``(P − 3) / 4`` local joint quaternions (w, x, y, z)."""
-    joints = (pose_size - 3) // 4
-    return {"name": "qtg_pose", "size": int(pose_size),
-            "fields": [{"name": "root_translation", "start": 0, "size": 3,
-                        "meaning": "root translation relative to the window's first pose, z-normalised"},
-                       {"name": "joint_rotations", "start": 3, "size": 4 * joints, "joints": joints,
-                        "quaternion": "(w, x, y, z), Hamilton, local to the parent joint, not normalised"}]}
-
 
 
 def _finite_float(text: str) -> float:
@@ -90,13 +75,59 @@ def read_metadata(model: onnx.ModelProto | str | bytes) -> dict[str, Any]:
     return out
 
 
-def _io_entry(name: str, shape, meaning: str) -> dict:
-    return {"name": name, "shape": list(shape), "meaning": meaning}
+def io_entries(*entries) -> list[dict]:
+    """``[(name, shape, meaning), ...]`` -> the ``io`` metadata list ``[{"name", "shape", "meaning"}, ...]``."""
+    return [{"name": n, "shape": list(shape), "meaning": m} for n, shape, m in entries]
 
 
-def _merge(base: dict, extra: Mapping[str, Any] | None) -> dict:
-    out = dict(base)
+def build_metadata(g, *, name: str, role: str, config: Mapping[str, Any], io: Mapping[str, Any],
+                   representation: Mapping[str, Any], normalization=None, in_graph: bool = False, skeleton=None,
+                   frame_rate: float = 30.0, source_paper: str = "", variant: str = "float",
+                   extra: Mapping[str, Any] | None = None, T: int | None = None) -> dict:
+    """The metadata of an exported model (every key of the module docstring, in that order, then ``extra``).
+
+    Parameters
+    ----------
+    g : GraphBuilder
+        The graph's builder (opset and dtype go to ``exporter``).
+    name, role : str
+        ``model.name`` (the exporter's key, ``deploy.models.EXPORTERS``) and ``model.role``.
+    config : dict
+        The network's config (JSON-friendly).
+    io : dict ``{"inputs": [...], "outputs": [...]}`` (:func:`io_entries`)
+    representation : dict
+        The pose layout.
+    normalization : (mean (P,), std (P,)) or None
+    in_graph : bool
+        Whether the graph standardises inside (raw poses in and out).
+    skeleton : Skeleton or None
+    frame_rate : float
+    source_paper : str
+    variant : str
+        ``exporter.variant`` (``"float"``, ``"float.scan"``, ``"compact.int8"``, ...).
+    extra : dict, optional
+        More keys (they replace the standard ones of the same name).
+    T : int, optional
+        ``model.transition_length``, for models with a fixed number of frames.
+    """
+    model = {"name": name, "role": role, "config": dict(config)}
+    if T is not None:
+        model["transition_length"] = int(T)
+    meta = {
+        "format": FORMAT,
+        "model": model,
+        "io": io,
+        "representation": representation,
+        "normalization": None if normalization is None else {
+            "mean": [float(v) for v in normalization[0]], "std": [float(v) for v in normalization[1]],
+            "in_graph": bool(in_graph)},
+        "skeleton": skeleton_metadata(skeleton),
+        "frame_rate": float(frame_rate),
+        "source_paper": source_paper,
+        "exporter": {"name": "refimpl.deploy", "version": EXPORTER_VERSION, "opset": g.opset,
+                     "ir_version": IR_VERSION if g.opset == OPSET else ir_version_for(g.opset),
+                     "dtype": g.dtype.name, "variant": variant},
+    }
     for k, v in (extra or {}).items():
-        out[k] = v
-    json.dumps(out, allow_nan=False)  # fail early on non-JSON values
-    return out
+        meta[k] = v
+    return meta

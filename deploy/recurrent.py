@@ -169,3 +169,17 @@ def _squeeze0(g, x, name):
 
 def _unsqueeze0(g, x, name):
     return g.node("Unsqueeze", [x, g.ints([0])], name)                   # (B, H) -> (1, B, H)
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+check_layer_shapes = _check_layer_shapes
+concat_layers = _concat_layers
+input_projection = _input_projection
+merge_directions = _merge_directions
+onnx_layer_weights = _onnx_layer_weights
+primitive_layer_weights = _primitive_layer_weights
+scan_recurrence = _scan_recurrence
+split_layers = _split_layers
+squeeze0 = _squeeze0
+time_major = _time_major
+unsqueeze0 = _unsqueeze0

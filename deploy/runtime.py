@@ -1,10 +1,7 @@
-"""Running exported models with onnxruntime: validated loading, metadata, a step loop and a rollout.
+"""Running exported models with onnxruntime: validated loading and metadata (:class:`DeployedModel`), the
+generic runtime every model's ``Runtime`` (``deploy/models/``) is built on.
 
-Session settings (``spec/deploy.md`` §7): CPU execution provider; ``intra_op_num_threads`` configurable (default 1:
-batch-1 steps are latency-bound and a second thread mostly adds synchronisation); ``inter_op_num_threads = 1``
-with sequential execution; ``session.intra_op.allow_spinning = "0"`` so that several sessions (init, step,
-rollout) driven alternately do not fight over the cores with spinning worker threads; full graph
-optimisation.
+Sessions come from :mod:`deploy.session` (the project's settings, ``spec/deploy.md`` §7).
 
 Every model is validated before use (``deploy.validate.validate_model``: checker, strict shape inference, IR
 version) and its metadata decoded with ``json.loads`` (never executed).
@@ -13,7 +10,6 @@ Shape legend: B batch, T frames, P pose size, Z latent size, H hidden size, L la
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Mapping
 
@@ -21,64 +17,13 @@ import numpy as np
 import onnx
 
 from deploy.metadata import read_metadata
+from deploy.session import make_session, make_session_options  # noqa: F401  (their home before deploy.session)
+from deploy.validate import validate_model
 
-__all__ = ["make_session_options", "make_session", "DeployedModel", "load_model", "QTGRuntime"]
+__all__ = ["DeployedModel", "load_model"]
 
 _NP_FROM_ORT = {"tensor(float)": np.float32, "tensor(double)": np.float64, "tensor(int64)": np.int64,
                 "tensor(bool)": np.bool_}
-
-
-def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all"):
-    """``onnxruntime.SessionOptions`` with the project's settings (module docstring).
-
-    Parameters
-    ----------
-    intra_op_threads : int
-        Threads inside one operator (``>= 1``).
-    optimization : {"all", "extended", "basic", "disabled"}
-        Graph optimisation level.
-    """
-    import onnxruntime as ort
-
-    if not isinstance(intra_op_threads, (int, np.integer)) or intra_op_threads < 1:
-        raise ValueError(f"intra_op_threads: expected a positive integer, got {intra_op_threads!r}")
-    levels = {"all": ort.GraphOptimizationLevel.ORT_ENABLE_ALL,
-              "extended": ort.GraphOptimizationLevel.ORT_ENABLE_EXTENDED,
-              "basic": ort.GraphOptimizationLevel.ORT_ENABLE_BASIC,
-              "disabled": ort.GraphOptimizationLevel.ORT_DISABLE_ALL}
-    if optimization not in levels:
-        raise ValueError(f"optimization: expected one of {sorted(levels)}, got {optimization!r}")
-    so = ort.SessionOptions()
-    so.intra_op_num_threads = int(intra_op_threads)
-    so.inter_op_num_threads = 1
-    so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-    so.graph_optimization_level = levels[optimization]
-    so.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    so.add_session_config_entry("session.inter_op.allow_spinning", "0")
-    so.log_severity_level = 3
-    return so
-
-
-def make_session(model: onnx.ModelProto | bytes | str | os.PathLike, *, intra_op_threads: int = 1,
-                 optimization: str = "all"):
-    """An ``onnxruntime.InferenceSession`` on the CPU provider with :func:`make_session_options` (no validation).
-
-    Raises
-    ------
-    ValueError
-        When onnxruntime refuses the model (unsupported opset or operator, malformed file, ...).
-    """
-    import onnxruntime as ort
-
-    if isinstance(model, onnx.ModelProto):
-        model = model.SerializeToString()
-    elif isinstance(model, os.PathLike):
-        model = os.fspath(model)
-    options = make_session_options(intra_op_threads, optimization=optimization)
-    try:
-        return ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
-    except Exception as exc:  # onnxruntime raises its own Fail/InvalidGraph/NotImplemented classes
-        raise ValueError(f"model: onnxruntime refused it: {exc}") from exc
 
 
 def _load_proto(model) -> onnx.ModelProto:
@@ -130,8 +75,6 @@ class DeployedModel:
     """
 
     def __init__(self, model, *, intra_op_threads: int = 1, validate: bool = True):
-        from deploy.validate import validate_model
-
         proto = _load_proto(model)
         if validate:
             validate_model(proto)
@@ -182,77 +125,3 @@ class DeployedModel:
 def load_model(path, *, intra_op_threads: int = 1, validate: bool = True) -> DeployedModel:
     """Load ``path`` (or a ModelProto / bytes) as a :class:`DeployedModel` (validated unless ``validate=False``)."""
     return DeployedModel(path, intra_op_threads=intra_op_threads, validate=validate)
-
-
-class QTGRuntime:
-    """QTG inference from exported ``init``/``step``/``rollout`` models (any subset), as a game loop would use them.
-
-    Parameters
-    ----------
-    init, step, rollout : path, ModelProto, DeployedModel or None
-        The exported models (``deploy.qtg``). ``transition`` needs ``rollout`` or both ``init`` and ``step``.
-    intra_op_threads : int
-    """
-
-    def __init__(self, init=None, step=None, rollout=None, *, intra_op_threads: int = 1):
-        def load(m):
-            if m is None or isinstance(m, DeployedModel):
-                return m
-            return load_model(m, intra_op_threads=intra_op_threads)
-
-        self.init_model, self.step_model, self.rollout_model = load(init), load(step), load(rollout)
-        for m, role in ((self.init_model, "init"), (self.step_model, "step"), (self.rollout_model, "rollout")):
-            if m is not None and m.role != role:
-                raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
-
-    @classmethod
-    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QTGRuntime":
-        """Load ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx`` from ``directory`` (those present)."""
-        d = Path(directory)
-        files = {k: d / f"qtg_{k}.onnx" for k in ("init", "step", "rollout")}
-        found = {k: (p if p.is_file() else None) for k, p in files.items()}
-        if not any(found.values()):
-            raise ValueError(f"directory: no qtg_init/step/rollout.onnx in {str(d)!r}")
-        return cls(**found, intra_op_threads=intra_op_threads)
-
-    def start(self, past, target) -> dict[str, np.ndarray]:
-        """Run ``init``: the state ``{"pose", "latent_prev", "hidden", "target_latent"}`` for :meth:`step`."""
-        if self.init_model is None:
-            raise ValueError("start: no init model loaded")
-        out = self.init_model.run(past=past, target=target)
-        return {"pose": out["pose"], "latent_prev": out["latent_prev"], "hidden": out["hidden"],
-                "target_latent": out["target_latent"]}
-
-    def step(self, state: Mapping[str, np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Run ``step`` once: ``(pose_next (B, P), next state)``."""
-        if self.step_model is None:
-            raise ValueError("step: no step model loaded")
-        out = self.step_model.run(pose=state["pose"], latent_prev=state["latent_prev"], hidden=state["hidden"],
-                                  target_latent=state["target_latent"])
-        new = {"pose": out["pose_next"], "latent_prev": out["latent_prev_next"], "hidden": out["hidden_next"],
-               "target_latent": state["target_latent"]}
-        return out["pose_next"], new
-
-    def transition(self, past, target, T: int | None = None, *, use_rollout: bool = True) -> np.ndarray:
-        """A whole transition ``(B, T, P)``: one rollout call, or ``init`` + ``T`` step calls (host loop).
-
-        ``T`` defaults to the rollout model's length (or the config's ``transition_length``); the rollout model
-        is used only when its baked-in length equals ``T``.
-        """
-        meta = (self.rollout_model or self.step_model or self.init_model).metadata.get("model", {})
-        default_T = meta.get("transition_length") or meta.get("config", {}).get("transition_length")
-        T = default_T if T is None else T
-        if not isinstance(T, (int, np.integer)) or T < 1:
-            raise ValueError(f"T: expected a positive integer, got {T!r}")
-        if use_rollout and self.rollout_model is not None:
-            rT = self.rollout_model.metadata.get("model", {}).get("transition_length")
-            if rT == T:
-                return self.rollout_model.run(past=past, target=target)["poses"]
-        if self.init_model is None or self.step_model is None:
-            raise ValueError(f"transition: T={T} needs a rollout model of that length or init + step models")
-        state = self.start(past, target)
-        poses = []
-        for _ in range(int(T)):
-            pose, state = self.step(state)
-            poses.append(pose)
-        return np.stack(poses, axis=1)                                   # (B, T, P)

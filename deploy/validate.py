@@ -56,7 +56,7 @@ def run_reference(model: onnx.ModelProto, feeds: Mapping[str, np.ndarray]) -> li
 def run_onnxruntime(model: onnx.ModelProto | bytes, feeds: Mapping[str, np.ndarray], *,
                     intra_op_threads: int = 1) -> list[np.ndarray]:
     """Outputs of onnxruntime's CPU execution provider (one throw-away session; see ``deploy.runtime``)."""
-    from deploy.runtime import make_session
+    from deploy.session import make_session
 
     session = make_session(model, intra_op_threads=intra_op_threads)
     return session.run(None, dict(feeds))

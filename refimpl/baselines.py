@@ -15,17 +15,17 @@ Shape legend: B batch, T transition frames, P pose size (3 + 4 J), J joints, K s
 """
 from __future__ import annotations
 
-from typing import Callable, Mapping
+from typing import Callable
 
 import numpy as np
 
-from refimpl.models.qtg import QTGConfig, prepare_inference, rollout_inference
 from refimpl.nn.params import check_float_array
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_slerp
-from refimpl.transitions import denormalize_poses, join_pose, normalize_poses, split_pose
+from refimpl.transitions import join_pose, split_pose
 
 __all__ = [
-    "quintic_inertialization", "inertialize", "interpolate", "qtg_method", "method_registry", "METHOD_NAMES",
+    "quintic_inertialization", "inertialize", "interpolate", "method_registry", "METHOD_NAMES", "check_context",
+    "check_length",
 ]
 
 METHOD_NAMES = ("qtg", "inertialization", "interpolation")
@@ -117,7 +117,8 @@ def _unit_quats(q, name):
     return q / n
 
 
-def _check_pair(past, target):
+def check_context(past, target):
+    """Validate a transition's context: ``past (B, 2, P)`` and ``target (B, 2, P)`` with ``P = 3 + 4 J``."""
     past = check_float_array(past, "past", (None, 2, None))
     P = past.shape[-1]
     if (P - 3) % 4 != 0 or P < 7:
@@ -126,7 +127,8 @@ def _check_pair(past, target):
     return past, target
 
 
-def _check_T(T):
+def check_length(T):
+    """Validate a transition length ``T`` (a positive integer); returns it as ``int``."""
     if not isinstance(T, (int, np.integer)) or T < 1:
         raise ValueError(f"T: expected a positive integer number of frames, got {T!r}")
     return int(T)
@@ -163,8 +165,8 @@ def inertialize(past, target, T: int, dt: float = 1.0 / 30.0, blend_time: float 
     -------
     ndarray (B, T, P), float64 (or the inputs' dtype)
     """
-    past, target = _check_pair(past, target)
-    T = _check_T(T)
+    past, target = check_context(past, target)
+    T = check_length(T)
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt: expected a positive frame time, got {dt!r}")
     t1 = (T + 1) * dt if blend_time is None else float(blend_time)
@@ -298,8 +300,8 @@ def interpolate(past, target, T: int) -> np.ndarray:
     -------
     ndarray (B, T, P)
     """
-    past, target = _check_pair(past, target)
-    T = _check_T(T)
+    past, target = check_context(past, target)
+    T = check_length(T)
     alphas = np.arange(1, T + 1, dtype=past.dtype) / past.dtype.type(T + 1)  # (T,)
     return _interpolate_at(past[:, 1], target[:, 0], alphas)
 
@@ -308,30 +310,6 @@ def interpolate(past, target, T: int) -> np.ndarray:
 # the common interface
 # ----------------------------------------------------------------------------------------------------------------
 
-def qtg_method(params: Mapping[str, np.ndarray], config: QTGConfig, root_mean, root_std) -> Callable:
-    """Wrap a trained QTG as ``f(past, target, T) -> poses`` in un-normalised pose space.
-
-    ``f`` z-normalises the root translation of the inputs with ``root_mean``/``root_std`` (the training
-    statistics), runs the network (:func:`refimpl.models.qtg.rollout_inference` in the parameters' dtype),
-    de-normalises the output's root translation and normalises its joint quaternions to unit length.
-    """
-    model = prepare_inference(params, config)
-    dtype = model.dtype
-    mean = np.asarray(root_mean, dtype=np.float64)
-    std = np.asarray(root_std, dtype=np.float64)
-
-    def qtg(past, target, T):
-        past, target = _check_pair(past, target)
-        pn = normalize_poses(past.astype(np.float64), mean, std).astype(dtype)
-        tn = normalize_poses(target.astype(np.float64), mean, std).astype(dtype)
-        out = rollout_inference(model, pn, tn, _check_T(T)).astype(np.float64)  # (B, T, P)
-        root, quats = split_pose(denormalize_poses(out, mean, std))
-        quats = quats / np.maximum(np.sqrt(np.sum(quats * quats, axis=-1, keepdims=True)), 1e-12)
-        return join_pose(root, quats)
-
-    return qtg
-
-
 def method_registry(qtg: Callable | None = None, dt: float = 1.0 / 30.0,
                     blend_time: float | None = None) -> dict[str, Callable]:
     """The transition methods evaluated side by side, as ``name -> f(past, target, T) -> poses``.
@@ -339,7 +317,7 @@ def method_registry(qtg: Callable | None = None, dt: float = 1.0 / 30.0,
     Parameters
     ----------
     qtg : callable, optional
-        From :func:`qtg_method`; left out of the registry when None.
+        The network's method (QTG: :func:`refimpl.recipes.qtg.qtg_method`); left out of the registry when None.
     dt, blend_time : float
         Passed to :func:`inertialize`.
 

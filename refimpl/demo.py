@@ -31,11 +31,13 @@ from typing import Callable
 
 import numpy as np
 
-from refimpl.cli import (
-    SAMPLE_DIR, blas_threads, evaluate_model, export_onnx, load_trained, make_transition, onnx_method,
-    print_results, render_transition, train_model, verify_onnx, with_end_sites, write_results, MODELS)
+from refimpl.registry import MODELS
+from refimpl.services import (SAMPLE_DIR, blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
+                              train_model, verify_onnx)
+from refimpl.tasks.transition import make_transition, print_results, render_transition, with_end_sites, write_results
 
-__all__ = ["run_demo", "DemoResult", "DEMO_CONFIG", "DEMO_STEPS", "DEMO_BATCH", "DEMO_LR", "QUICK_CONFIG", "QUICK_STEPS"]
+__all__ = ["run_demo", "DemoResult", "DEMO_CONFIG", "DEMO_STEPS", "DEMO_BATCH", "DEMO_LR", "QUICK_CONFIG",
+           "QUICK_STEPS"]
 
 #: Network of the full demo (QTGConfig fields; the paper-sized default is 256/128/256 with 0.64 M parameters).
 DEMO_CONFIG = dict(encoder_sizes=(128, 64), gru_hidden=128, decoder_sizes=(128,))
@@ -62,7 +64,7 @@ class DemoResult:
     results : dict
         :func:`refimpl.metrics.evaluate_methods` output on the held-out windows.
     verify : dict or None
-        :func:`refimpl.cli.verify_onnx` output (None when ONNX was skipped).
+        :func:`refimpl.services.verify_onnx` output (None when ONNX was skipped).
     skipped : list of str
         Steps skipped, with the reason.
     elapsed_s : float
@@ -122,7 +124,7 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
     spec = MODELS["qtg"]
     n_steps = steps if steps is not None else (QUICK_STEPS if quick else DEMO_STEPS)
     sizes = QUICK_CONFIG if quick else DEMO_CONFIG
-    if onnx and (why := _missing("deploy.qtg") or _missing("onnxruntime")):
+    if onnx and (why := _missing("deploy.models.qtg_io") or _missing("onnxruntime")):
         skipped.append(f"ONNX export / verification / generation: {why} (pip install 'refimpl[deploy]')")
         onnx = False
     if render and (why := _missing("matplotlib")):
@@ -146,7 +148,7 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
         if (train_dir / stale).is_file():
             (train_dir / stale).unlink()
     overrides = [f"{k}={','.join(map(str, v)) if isinstance(v, tuple) else v}" for k, v in sizes.items()]
-    config = spec.make_config(train_ds.poses.shape[-1], _T, overrides)
+    config = spec.make_config(train_ds, overrides)
     from refimpl.models.qtg import count_parameters
 
     say(f"[2/7] train: QTG {sizes} ({count_parameters(config):,} parameters), {n_steps} steps of batch "
@@ -205,9 +207,7 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
     from refimpl.bvh import write_bvh
 
     say("[6/7] generate: transitions written as BVH (22 joints, centimetres, 30 fps)")
-    methods = {"qtg": spec.make_method(model)}
-    if onnx:
-        methods["qtg_onnx"] = onnx_method(onnx_dir)
+    methods = network_methods(model, onnx_dir=onnx_dir if onnx else None)  # qtg (NumPy), qtg_onnx
     walk = next(s for s in test_src if s.label == "walk")
     run = next(s for s in test_src if s.label == "run")
     skel, walk_clips = load_source(walk)

@@ -20,10 +20,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import (_as_float, _atan_ratio, _check_rotation_matrix, _check_scalar, _finite_output,
-                          _hemisphere_sign, _zeros_of,
-                          _matrix_from_quat, _prescaled,
-                          _quat_conj, _quat_from_matrix, _quat_mul, _quat_norm, _quat_rotate, _sin_over_x)
+from refimpl.quat import (as_float as _as_float, atan_ratio as _atan_ratio,
+                          check_rotation_matrix as _check_rotation_matrix, hemisphere_sign as _hemisphere_sign,
+                          matrix_from_quat_kernel as _matrix_from_quat, prescaled as _prescaled,
+                          quat_conj_kernel as _quat_conj, quat_from_matrix_kernel as _quat_from_matrix,
+                          quat_mul_kernel as _quat_mul, quat_norm_kernel as _quat_norm,
+                          quat_rotate_kernel as _quat_rotate, sin_over_x as _sin_over_x,
+                          check_scalar as _check_scalar, finite_output as _finite_output,
+                          zeros_of as _zeros_of)
 
 __all__ = [
     "dq_identity", "dq_mul", "dq_conj", "dq_conj_dual", "dq_conj_combined", "dq_inv", "dq_norm", "dq_is_unit",
@@ -498,3 +502,7 @@ def dq_blend(weights, dqs) -> np.ndarray:
     sign = _hemisphere_sign(pr, dqs[..., :4])[..., 0]  # (..., K)
     acc = np.sum((weights * sign)[..., None] * dqs, axis=-2)  # (..., 8)
     return _dq_normalize(_dq_prescaled(acc, "weights, dqs", "blended real part"))
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+dq_from_quat_translation_kernel = _dq_from_quat_translation

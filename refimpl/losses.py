@@ -36,25 +36,14 @@ from types import MappingProxyType
 
 import numpy as np
 
-from refimpl.nn.kinematics_layers import (
-    _check_parents,
-    forward_kinematics_backward,
-    forward_kinematics_forward,
-    offsets_from_dq_backward,
-    offsets_from_dq_forward,
-    positions_from_dq_backward,
-    positions_from_dq_forward,
-)
-from refimpl.nn.quat_layers import (
-    _as_float_array,
-    _normalize,
-    _normalize_backward,
-    _quat_conj,
-    _quat_mul,
-    _quat_mul_backward,
-    euler_from_quat_backward,
-    euler_from_quat_forward,
-)
+from refimpl.nn.kinematics_layers import (check_parents as _check_parents, forward_kinematics_backward,
+                                          forward_kinematics_forward, offsets_from_dq_backward, offsets_from_dq_forward,
+                                          positions_from_dq_backward, positions_from_dq_forward)
+from refimpl.nn.quat_layers import (as_float_array as _as_float_array, normalize as _normalize,
+                                    normalize_backward as _normalize_backward, quat_conj_kernel as _quat_conj,
+                                    quat_mul_backward_kernel as _quat_mul_backward, euler_from_quat_backward,
+                                    euler_from_quat_forward)
+from refimpl.quat import quat_mul_kernel as _quat_mul
 
 __all__ = [
     "WEIGHTS_ACRNN_DQ", "WEIGHT_ACRNN_QUAT_FK", "WEIGHTS_QUATERNET_DQ",

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from refimpl.skeleton import Skeleton, _check_unit
+from refimpl.skeleton import Skeleton, check_unit as _check_unit
 
 __all__ = ["Motion"]
 

@@ -914,3 +914,21 @@ def quat_wxyz_from_xyzw(q) -> np.ndarray:
     """``(x, y, z, w) → (w, x, y, z)`` (spec/conventions.md)."""
     q = _as_float(q, "q", (4,))
     return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+as_float = _as_float
+atan_ratio = _atan_ratio
+check_rotation_matrix = _check_rotation_matrix
+hemisphere_sign = _hemisphere_sign
+matrix_from_quat_kernel = _matrix_from_quat
+prescaled = _prescaled
+quat_conj_kernel = _quat_conj
+quat_from_matrix_kernel = _quat_from_matrix
+quat_mul_kernel = _quat_mul
+quat_norm_kernel = _quat_norm
+quat_rotate_kernel = _quat_rotate
+sin_over_x = _sin_over_x
+check_scalar = _check_scalar
+finite_output = _finite_output
+zeros_of = _zeros_of

@@ -756,3 +756,8 @@ def random_rotate_about_up(rotations, root_positions, rng: np.random.Generator, 
     angle = float(rng.uniform(low, high))
     rot, pos = rotate_about_up(rotations, root_positions, angle, up=up)
     return rot, pos, angle
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+as_float_array = _as_float_array
+check_unit = _check_unit

@@ -18,8 +18,8 @@ import numpy as np
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from refimpl.dualquat import _dq_from_quat_translation
-from refimpl.quat import EULER_ORDERS, TAIT_BRYAN_ORDERS, _matrix_from_quat
+from refimpl.dualquat import dq_from_quat_translation_kernel as _dq_from_quat_translation
+from refimpl.quat import EULER_ORDERS, TAIT_BRYAN_ORDERS, matrix_from_quat_kernel as _matrix_from_quat
 
 __all__ = [
     "small_shapes", "unit_quaternions", "quaternions", "translations", "unit_dual_quaternions", "angles",

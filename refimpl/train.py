@@ -30,10 +30,8 @@ import csv
 import dataclasses
 import io
 import math
-import os
 import signal
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -41,12 +39,13 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from refimpl.atomic import atomic_write_text
 from refimpl.checkpoint import load_checkpoint, rng_from_json, rng_state_to_json, save_checkpoint
 from refimpl.optim import adam_init, adam_step, clip_grad_norm, exponential_lr
 
 __all__ = [
     "ModelAdapter", "OptimConfig", "TrainConfig", "TrainContext", "StepInfo", "TrainResult", "TrainingDiverged",
-    "train", "format_duration", "qtg_adapter", "train_qtg",
+    "train", "format_duration", "default_progress",
 ]
 
 _FORMAT = "refimpl.train/1"
@@ -88,12 +87,13 @@ class ModelAdapter:
 class OptimConfig:
     """Adam with optional global-norm clipping and per-epoch exponential LR decay.
 
-    ``lr_epoch = lr · lr_decay^epoch`` (:func:`refimpl.optim.exponential_lr`). Defaults: QTG's Adam
-    (lr 1e-4, β = (0.5, 0.9)), no clipping, no decay.
+    ``lr_epoch = lr · lr_decay^epoch`` (:func:`refimpl.optim.exponential_lr`). Defaults: Adam's own (Kingma & Ba;
+    lr 1e-3, β = (0.9, 0.999)), no clipping, no decay. A model's paper values are named constants of its recipe
+    (``refimpl.recipes.qtg.PAPER_OPTIM``: lr 1e-4, β = (0.5, 0.9)).
     """
 
-    lr: float = 1e-4
-    betas: tuple[float, float] = (0.5, 0.9)
+    lr: float = 1e-3
+    betas: tuple[float, float] = (0.9, 0.999)
     eps: float = 1e-8
     weight_decay: float = 0.0
     clip_norm: float | None = None
@@ -232,21 +232,7 @@ def _truncate_csv(path: Path, max_step: int) -> None:
     keep = [rows[0]] + [r for r in rows[1:] if r and int(r[0]) <= max_step]
     buf = io.StringIO()
     csv.writer(buf).writerows(keep)
-    _atomic_write_text(path, buf.getvalue())
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=str(path.parent), prefix=path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write_text(path, buf.getvalue())
 
 
 class _CsvLog:
@@ -304,7 +290,8 @@ class _DeferSigint:
         return False
 
 
-def _default_progress(line: str) -> None:
+def default_progress(line: str) -> None:
+    """The default ``progress`` of :func:`train`: print the line to stderr."""
     print(line, file=sys.stderr, flush=True)
 
 
@@ -314,7 +301,7 @@ def _default_progress(line: str) -> None:
 
 def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, resume: bool = True,
           callback: Callable[[StepInfo], None] | None = None,
-          progress: Callable[[str], None] | None = _default_progress) -> TrainResult:
+          progress: Callable[[str], None] | None = default_progress) -> TrainResult:
     """Train ``adapter``'s model with Adam (spec/qtg.md §10).
 
     Parameters
@@ -482,92 +469,3 @@ def _jsonable(x):
     if isinstance(x, np.generic):
         return x.item()
     return x
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# QTG
-# ----------------------------------------------------------------------------------------------------------------
-
-def qtg_adapter(train_poses, config=None, dtype=np.float32, validation_poses=None, name: str = "qtg") -> ModelAdapter:
-    """A :class:`ModelAdapter` for QTG on normalised windows (spec/qtg.md §10.2).
-
-    Parameters
-    ----------
-    train_poses : ndarray (N, 2 + T + 2, P)
-        NORMALISED windows (``TransitionDataset.normalized()``).
-    config : QTGConfig, optional
-    dtype : float32 or float64
-        Training dtype (parameters and batches).
-    validation_poses : ndarray (M, 2 + T + 2, P), optional
-        Normalised windows; ``validate`` returns their MAE (``val_mae``).
-
-    Notes
-    -----
-    Loss: ``mean |p_pred − p_gt|`` over the B·T·P values of the generated transition (MAE, paper), in the
-    normalised pose space.
-    """
-    from refimpl.losses import mae_loss_backward, mae_loss_forward
-    from refimpl.models.qtg import QTGConfig, init_params, rollout_backward, rollout_forward
-
-    config = QTGConfig() if config is None else config
-    poses = np.ascontiguousarray(train_poses, dtype=dtype)
-    if poses.ndim != 3 or poses.shape[1] < 5 or poses.shape[2] != config.pose_size:
-        raise ValueError(f"train_poses: expected shape (N, 2 + T + 2, {config.pose_size}), got {poses.shape}")
-    T = poses.shape[1] - 4
-
-    def get_batch(idx, ctx):
-        return poses[idx]  # (B, W, P)
-
-    def loss_and_grads(params, batch):
-        pred, cache = rollout_forward(params, batch[:, :2], batch[:, -2:], T, config)
-        loss, lcache = mae_loss_forward(pred, batch[:, 2:-2])
-        return loss, rollout_backward(mae_loss_backward(1.0, lcache), cache)
-
-    validate = None
-    if validation_poses is not None:
-        vposes = np.ascontiguousarray(validation_poses, dtype=dtype)
-
-        def validate(params):
-            total = 0.0
-            for i in range(0, len(vposes), 512):
-                b = vposes[i:i + 512]
-                pred, _ = rollout_forward(params, b[:, :2], b[:, -2:], T, config)
-                total += float(np.abs(pred - b[:, 2:-2]).astype(np.float64).sum())
-            return {"val_mae": total / vposes[:, 2:-2].size}
-
-    return ModelAdapter(name=name, num_examples=len(poses),
-                        init_params=lambda rng: init_params(config, rng, dtype=dtype),
-                        get_batch=get_batch, loss_and_grads=loss_and_grads, validate=validate,
-                        config=dict(config.to_dict(), dtype=np.dtype(dtype).name, transition_length=T))
-
-
-def train_qtg(train_data, steps: int, *, config=None, optim: OptimConfig = OptimConfig(), batch_size: int = 32,
-              seed: int = 0, dtype=np.float32, checkpoint_path: str | None = None, checkpoint_every: int = 1000,
-              log_path: str | None = None, validation_data=None, validate_every: int | None = None,
-              progress: Callable[[str], None] | None = _default_progress, resume: bool = True,
-              callback: Callable[[StepInfo], None] | None = None) -> TrainResult:
-    """Train QTG on a :class:`refimpl.transitions.TransitionDataset` (paper: MAE, Adam 1e-4, β = (0.5, 0.9),
-    batch 32).
-
-    Parameters
-    ----------
-    train_data : TransitionDataset
-        Its ``normalized()`` windows are the training examples.
-    steps : int
-    validation_data : TransitionDataset, optional
-        Normalised with ``train_data``'s statistics; its MAE is logged every ``validate_every`` steps.
-    Other parameters as :class:`TrainConfig` / :func:`train`.
-
-    Returns
-    -------
-    TrainResult
-    """
-    from refimpl.transitions import normalize_poses
-
-    vposes = None
-    if validation_data is not None:
-        vposes = normalize_poses(validation_data.poses, train_data.root_mean, train_data.root_std)
-    adapter = qtg_adapter(train_data.normalized(), config=config, dtype=dtype, validation_poses=vposes)
-    tc = TrainConfig(steps=steps, batch_size=batch_size, seed=seed, checkpoint_path=checkpoint_path,
-                     checkpoint_every=checkpoint_every, log_path=log_path, validate_every=validate_every)
-    return train(adapter, optim, tc, resume=resume, callback=callback, progress=progress)

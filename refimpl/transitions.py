@@ -26,47 +26,29 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable
 
 import numpy as np
 
 from refimpl.bvh import read_bvh
 from refimpl.expmap import read_expmap
 from refimpl.nn.params import check_float_array
+from refimpl.preprocess import denormalize_features, normalize_features
 from refimpl.quat import quat_conj, quat_fix, quat_mul, quat_rotate
-from refimpl.skeleton import Skeleton, remove_joints
+from refimpl.rigs import (CMU_22_JOINTS, CMU_UNIT_CM, SALSA_22_JOINTS, SALSA_UNIT_CM, heading_from_root,
+                          scale_skeleton, subset_22)
+from refimpl.skeleton import Skeleton
 
 __all__ = [
-    "pose_size", "split_pose", "join_pose", "normalize_poses", "denormalize_poses",
+    "pose_size", "split_pose", "join_pose", "pose_statistics", "normalize_poses", "denormalize_poses",
     "CMU_22_JOINTS", "SALSA_22_JOINTS", "CMU_UNIT_CM", "SALSA_UNIT_CM",
     "TransitionSource", "TransitionDataset", "subset_22", "scale_skeleton", "heading_from_root", "make_windows",
-    "load_source", "build_transition_datasets", "sample_sources", "shared_sources",
+    "window_to_world", "declared_rate", "load_source", "build_transition_datasets", "sample_sources",
+    "shared_sources", "SAMPLE_DIR",
 ]
 
-CMU_UNIT_CM = 2.54 / 0.45  # 5.6444 cm per CMU ASF length unit (CMU mocap FAQ)
-SALSA_UNIT_CM = 1.0  # the acRNN salsa BVH files are in centimetres
-
-#: 22 joints kept from the CMU 31-joint cgspeed BVH / 38-joint ASF skeletons, in skeleton order.
-#: Removed: LHipJoint, RHipJoint (rotation always 0 in the data: exact), the hand chains LeftFingerBase,
-#: LeftHandIndex1/LFingers, LThumb and right counterparts (subtrees below the kept hands: exact), the End
-#: Sites (exact), and Neck, whose rotation is pushed into Neck1 (``remove_joints``; approximate w.r.t. the
-#: 31-joint skeleton: Neck has zero offset, so only Neck1/Head move, by at most |o_Neck1|·angle(Neck)).
-#: This mirrors the common 22-joint (LaFAN1/Holden) layout: hips, 2 × 4 leg joints, 3 spine, neck, head,
-#: 2 × 4 arm joints.
-CMU_22_JOINTS = (
-    "Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "RightUpLeg", "RightLeg", "RightFoot",
-    "RightToeBase", "LowerBack", "Spine", "Spine1", "Neck1", "Head", "LeftShoulder", "LeftArm", "LeftForeArm",
-    "LeftHand", "RightShoulder", "RightArm", "RightForeArm", "RightHand",
-)
-
-#: 22 joints kept from the 43-joint (57 with End Sites) DAZ-style salsa skeleton. Removed: the fingers
-#: (subtrees below the hands), rightEye and the End Sites — all exact (leaves or subtrees). The body has 21
-#: joints (a 5-joint spine chain, 2 × 4 leg and 2 × 4 arm joints), so a 22nd is needed: ``leftEye``, a leaf
-#: with zero rotation in the data that marks the head's orientation.
-SALSA_22_JOINTS = (
-    "hip", "abdomen", "chest", "neck", "head", "leftEye", "rCollar", "rShldr", "rForeArm", "rHand", "lCollar",
-    "lShldr", "lForeArm", "lHand", "rButtock", "rThigh", "rShin", "rFoot", "lButtock", "lThigh", "lShin", "lFoot",
-)
+#: The embedded CMU sample (see its README.md): the default data of ``refimpl train``, ``eval`` and ``demo``.
+SAMPLE_DIR = Path(__file__).resolve().parent / "data" / "sample"
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -106,8 +88,22 @@ def _check_stats(mean, std):
     return mean, std
 
 
+def pose_statistics(root_mean, root_std, pose_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Whole-pose statistics ``(mean (P,), std (P,))`` from the root's: root values, then 0 / 1 for quaternions.
+
+    With them, :func:`refimpl.preprocess.normalize_features` is :func:`normalize_poses` (the one normalisation
+    API: ``(x − mean) / std`` over the last axis; ``(q − 0) / 1 = q`` exactly).
+    """
+    mean, std = _check_stats(root_mean, root_std)
+    full_mean, full_std = np.zeros(int(pose_size)), np.ones(int(pose_size))
+    full_mean[:3], full_std[:3] = mean, std
+    return full_mean, full_std
+
+
 def normalize_poses(poses, root_mean, root_std) -> np.ndarray:
     """z-normalise the root translation: ``(r − mean) / std`` per axis; quaternions unchanged (a copy).
+
+    :func:`refimpl.preprocess.normalize_features` with :func:`pose_statistics`.
 
     Parameters
     ----------
@@ -116,88 +112,22 @@ def normalize_poses(poses, root_mean, root_std) -> np.ndarray:
     """
     poses = check_float_array(poses, "poses", (..., None))
     split_pose(poses)
-    mean, std = _check_stats(root_mean, root_std)
-    out = poses.copy()
-    out[..., :3] = (out[..., :3] - mean) / std
-    return out
+    mean, std = pose_statistics(root_mean, root_std, poses.shape[-1])
+    return normalize_features(poses, mean, std)
 
 
 def denormalize_poses(poses, root_mean, root_std) -> np.ndarray:
-    """Inverse of :func:`normalize_poses`: ``r = r_n · std + mean`` (a copy)."""
+    """Inverse of :func:`normalize_poses`: ``r = r_n · std + mean`` (a copy;
+    :func:`refimpl.preprocess.denormalize_features`)."""
     poses = check_float_array(poses, "poses", (..., None))
     split_pose(poses)
-    mean, std = _check_stats(root_mean, root_std)
-    out = poses.copy()
-    out[..., :3] = out[..., :3] * std + mean
-    return out
+    mean, std = pose_statistics(root_mean, root_std, poses.shape[-1])
+    return denormalize_features(poses, mean, std)
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# skeleton subsets and windows
+# windows
 # ----------------------------------------------------------------------------------------------------------------
-
-def subset_22(skeleton: Skeleton, rotations, keep: Sequence[str]):
-    """Keep the joints named in ``keep`` (all others removed with :func:`refimpl.skeleton.remove_joints`).
-
-    Removed joints push their rotation into their children (``offsets="compose"``), so positions of the kept
-    joints are exact whenever the removed joints' rotations are the identity or the removed joints lie below
-    every kept joint.
-
-    Parameters
-    ----------
-    skeleton : Skeleton
-    rotations : ndarray (F, J, 4)
-    keep : sequence of str
-        Joint names, in the skeleton's index order, the root first.
-
-    Returns
-    -------
-    skeleton : Skeleton with ``len(keep)`` joints
-    rotations : ndarray (F, len(keep), 4)
-    """
-    idx = [skeleton.index(n) for n in keep]
-    if idx != sorted(idx) or idx[0] != 0:
-        raise ValueError(f"keep: expected names in skeleton order starting with the root, got {list(keep)}")
-    drop = [j for j in range(skeleton.num_joints) if j not in set(idx)]
-    skel, rot = remove_joints(skeleton, rotations, drop, offsets="compose")
-    return skel, rot
-
-
-def scale_skeleton(skeleton: Skeleton, factor: float) -> Skeleton:
-    """The same skeleton with every offset multiplied by ``factor`` (unit conversion)."""
-    if not (np.isfinite(factor) and factor > 0):
-        raise ValueError(f"factor: expected a positive number, got {factor!r}")
-    return Skeleton(skeleton.parents, skeleton.offsets * float(factor), names=skeleton.names,
-                    end_sites=skeleton.end_sites, joints_left=skeleton.joints_left,
-                    joints_right=skeleton.joints_right)
-
-
-def heading_from_root(root_rotations, up: str = "y") -> np.ndarray:
-    """Heading quaternion: the twist of each root rotation about the ``up`` axis, ``normalise(w, 0, y, 0)``.
-
-    Parameters
-    ----------
-    root_rotations : ndarray (..., 4)
-    up : {"x", "y", "z"}
-
-    Returns
-    -------
-    ndarray (..., 4)
-        Unit rotations about ``up``; the identity where the twist is undefined (``w = y = 0``).
-    """
-    q = check_float_array(root_rotations, "root_rotations", (..., 4))
-    a = {"x": 1, "y": 2, "z": 3}.get(up)
-    if a is None:
-        raise ValueError(f"up: expected 'x', 'y' or 'z', got {up!r}")
-    h = np.zeros_like(q)
-    h[..., 0] = q[..., 0]
-    h[..., a] = q[..., a]
-    n = np.sqrt(h[..., 0] ** 2 + h[..., a] ** 2)  # (...)
-    ok = n > 1e-9
-    h = np.where(ok[..., None], h / np.where(ok, n, 1.0)[..., None], np.array([1.0, 0, 0, 0], dtype=q.dtype))
-    return h
-
-
 def make_windows(rotations, root_positions, length: int = 34, stride: int = 1, up: str = "y",
                  relative_heading: bool = True) -> np.ndarray:
     """Cut a clip into root-relative windows of ``length`` poses (spec/qtg.md §8.2).
@@ -248,6 +178,35 @@ def make_windows(rotations, root_positions, length: int = 34, stride: int = 1, u
     return join_pose(wp, wr)
 
 
+def window_to_world(poses, heading, origin) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`make_windows`' root-relative transform, for poses generated in a window's frame.
+
+    ``root_k = R(h) root'_k + r_0``; ``q_root,k = h ⊗ q'_root,k``; then every quaternion is normalised to unit
+    length (generated poses are not unit).
+
+    Parameters
+    ----------
+    poses : ndarray (F, P)
+        Poses relative to the window's first pose.
+    heading : ndarray (4,)
+        ``h`` = :func:`heading_from_root` of the window's first root rotation.
+    origin : ndarray (3,)
+        ``r_0``, the window's first root position.
+
+    Returns
+    -------
+    root_positions : ndarray (F, 3)
+    rotations : ndarray (F, J, 4), unit
+    """
+    root_rel, quats = split_pose(np.asarray(poses, dtype=np.float64))  # (F, 3), (F, J, 4)
+    h = np.asarray(heading, dtype=np.float64)
+    pos = quat_rotate(h[None], root_rel) + np.asarray(origin, dtype=np.float64)  # (F, 3)
+    rot = np.array(quats, copy=True)
+    rot[:, 0] = quat_mul(h[None], rot[:, 0])
+    rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+    return pos, rot
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # sources and datasets
 # ----------------------------------------------------------------------------------------------------------------
@@ -275,6 +234,13 @@ class TransitionSource:
     fps: float
     label: str
     frames: tuple[float, float] = (0.0, 1.0)
+
+
+def declared_rate(frame_time: float) -> float:
+    """Frames per second from a file's declared frame time, snapped to the nearest integer within 0.1 %
+    (``Frame Time: .0083333`` is 120 fps, not 120.00048)."""
+    fps = 1.0 / frame_time
+    return float(round(fps)) if abs(fps - round(fps)) <= 1e-3 * fps else fps
 
 
 _KINDS = {"cmu_bvh": (CMU_22_JOINTS, CMU_UNIT_CM), "cmu_expmap": (CMU_22_JOINTS, CMU_UNIT_CM),
@@ -456,7 +422,7 @@ def sample_sources(root: str | Path | None = None):
     -------
     train, test : list of TransitionSource
     """
-    root = Path(__file__).resolve().parent / "data" / "sample" if root is None else Path(root)
+    root = SAMPLE_DIR if root is None else Path(root)
     train, test = [], []
     for split, out in (("train", train), ("test", test)):
         for action, label in (("walking", "walk"), ("running", "run")):

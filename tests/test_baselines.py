@@ -7,9 +7,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from refimpl.baselines import (METHOD_NAMES, _inertialization_coefficients, _inertialize_naive, inertialize,
-                               interpolate, method_registry, qtg_method, quintic_inertialization)
-from refimpl.models.qtg import QTGConfig, init_params, rollout_forward
+                               interpolate, method_registry, quintic_inertialization)
+from refimpl.models.qtg import QTGConfig, init_params
+from refimpl.models.qtg_fast import rollout_forward
 from refimpl.quat import quat_angle, quat_from_axis_angle, quat_mul, quat_normalize
+from refimpl.recipes.qtg import qtg_method
 from refimpl.testing import TOL_EXACT, assert_close, assert_quat_close
 from refimpl.transitions import denormalize_poses, join_pose, normalize_poses, split_pose
 

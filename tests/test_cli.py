@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from refimpl.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, main, source_for_file
+from refimpl.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, main
+from refimpl.tasks.transition import source_for_file
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "refimpl" / "data" / "sample"
@@ -272,7 +273,8 @@ def test_import_is_light_and_module_entry_point():
 
 def test_source_for_file_and_resolve_data(tmp_path):
     """spec/cli.md §2: file kinds from the joints, rates snapped, the four split rules."""
-    from refimpl.cli import BadInputError, resolve_data
+    from refimpl.errors import BadInputError
+    from refimpl.tasks.transition import resolve_data
 
     s = source_for_file(WALK_BVH)
     assert (s.kind, s.fps) == ("cmu_bvh", 120.0)
@@ -314,7 +316,7 @@ def _oracle(window):
 
 def test_make_transition_round_trip():
     """spec/cli.md §7: window transform and its inverse are exact — an oracle method reproduces the truth."""
-    from refimpl.cli import make_transition
+    from refimpl.tasks.transition import make_transition
     from refimpl.transitions import load_source, make_windows
 
     skel, clips = load_source(source_for_file(WALK_TXT))
@@ -330,7 +332,7 @@ def test_make_transition_round_trip():
 
 def test_align_target_continues_the_source():
     """spec/cli.md §7: --align continue turns the target to the source's heading and keeps its height."""
-    from refimpl.cli import _align_target, _heading
+    from refimpl.tasks.transition import _align_target, _heading
     from refimpl.quat import quat_angle
     from refimpl.transitions import load_source
 
@@ -350,7 +352,7 @@ def test_align_target_continues_the_source():
 def test_with_end_sites_keeps_joints_and_round_trips(tmp_path):
     """spec/cli.md §7: End Sites are added below leaves; the original joints do not move; BVH round trip."""
     from refimpl.bvh import read_bvh, write_bvh
-    from refimpl.cli import with_end_sites
+    from refimpl.tasks.transition import with_end_sites
     from refimpl.motion import Motion
     from refimpl.transitions import load_source
 
@@ -372,7 +374,7 @@ def test_with_end_sites_keeps_joints_and_round_trips(tmp_path):
 def test_blas_threads_limits_the_pool():
     """spec/cli.md §1: --blas-threads N limits OpenBLAS inside the command and restores it after."""
     threadpoolctl = pytest.importorskip("threadpoolctl")
-    from refimpl.cli import blas_threads
+    from refimpl.services import blas_threads
 
     before = [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
     with blas_threads(1):

@@ -7,8 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from refimpl.cli import EXIT_OK, load_trained, main
+from refimpl.cli import EXIT_OK, main
 from refimpl.demo import QUICK_STEPS, run_demo
+from refimpl.services import load_trained
 
 
 def _png_ok(path) -> None:
@@ -26,7 +27,7 @@ def _onnxruntime_available() -> bool:
     try:
         import onnxruntime  # noqa: F401
 
-        import deploy.qtg  # noqa: F401
+        import deploy.models.qtg  # noqa: F401
     except ImportError:
         return False
     return True

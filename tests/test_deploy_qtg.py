@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 
 from deploy.metadata import FORMAT, read_metadata
-from deploy.qtg import ROLLOUT_MODES, export_qtg_init, export_qtg_rollout, export_qtg_step
-from deploy.runtime import QTGRuntime
+from deploy.models.qtg import ROLLOUT_MODES, export_qtg_init, export_qtg_rollout, export_qtg_step
+from deploy.models.qtg_io import QTGRuntime
 from deploy.validate import run_onnxruntime, run_reference, validate_model
-from refimpl.models.qtg import QTGConfig, QTGState, init_params, init_state, rollout_forward, step
+from refimpl.models.qtg import QTGConfig, QTGState, init_params, init_state, step
+from refimpl.models.qtg_fast import rollout_forward
 from refimpl.skeletons import cmu_skeleton
 from refimpl.testing import TOL_EXACT, TOL_ORT_ROLLOUT, TOL_ORT_STEP, assert_close
 from refimpl.transitions import TransitionSource, load_source, make_windows, normalize_poses
@@ -261,7 +262,7 @@ TINY = {f"L{L}_dec{len(d)}_enc{len(e)}": dataclasses.replace(SMALL, gru_layers=L
 def _compact_numpy(params, config, past, target, T, mat=lambda w: w):
     """float64 NumPy of the compact graph's arithmetic (spec/deploy.md §5.4), every weight matrix through ``mat``
     (identity: exact algebra; ``quantize_blocks(w)[2]``: the weights an int8/int4 graph multiplies with)."""
-    from deploy.qtg_compact import _prepare
+    from deploy.models.qtg_compact import _prepare
 
     prep, H, L = _prepare(params, config), config.gru_hidden, config.gru_layers
     p, n_enc, n_dec = prep["p"], len(config.encoder_sizes), len(config.decoder_sizes) + 1
@@ -297,7 +298,7 @@ def _compact_numpy(params, config, past, target, T, mat=lambda w: w):
 
 
 def _compact(params, config, **kw):
-    from deploy.qtg_compact import export_qtg_rollout_compact
+    from deploy.models.qtg_compact import export_qtg_rollout_compact
 
     model = export_qtg_rollout_compact(params, config, **kw)
     validate_model(model)
@@ -330,7 +331,7 @@ def test_compact_quantized_equals_numpy_with_dequantized_weights(name, weights, 
     """spec/deploy.md §5.4: with float32 compute (MatMulNBits accuracy_level 1) the int8/int4 graph equals the
     rearranged NumPy rollout with the dequantised matrices to float32 rounding — which matrices are quantised,
     their layout and biases; the deployed int8-activation form (accuracy_level 4) stays close to it."""
-    import deploy.qtg_compact as qc
+    import deploy.models.qtg_compact as qc
     from deploy.quantize import WeightMatmul, quantize_blocks
 
     config = TINY[name]
@@ -440,7 +441,7 @@ def test_compact_rollout(opset, weights, max_err):
 
 def test_compact_bad_arguments():
     """spec/deploy.md §5.4: bad weights format, length, parameters raise ValueError."""
-    from deploy.qtg_compact import export_qtg_rollout_compact
+    from deploy.models.qtg_compact import export_qtg_rollout_compact
 
     params = _params()
     with pytest.raises(ValueError, match="weights"):

@@ -6,13 +6,15 @@ import onnx
 import pytest
 
 import refimpl
-from deploy.cli import _to_world, export_qtg_dir, load_qtg_checkpoint, main
+from deploy.cli import main
 from deploy.graph import GraphBuilder, save_model
-from deploy.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
-from deploy.runtime import QTGRuntime, load_model, make_session, make_session_options
+from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
+from deploy.models.qtg_io import QTGRuntime, export_qtg_dir, load_qtg_checkpoint
+from deploy.runtime import load_model, make_session, make_session_options
 from refimpl.bvh import read_bvh
 from refimpl.checkpoint import save_checkpoint
-from refimpl.models.qtg import QTGConfig, init_params, rollout_forward
+from refimpl.models.qtg import QTGConfig, init_params
+from refimpl.models.qtg_fast import rollout_forward
 from refimpl.testing import TOL_ORT_ROLLOUT, assert_close
 from refimpl.transitions import make_windows
 
@@ -175,15 +177,15 @@ def test_export_dir_compact(tmp_path, capsys):
 
 
 def test_to_world_inverts_make_windows():
-    """spec/deploy.md §8: the CLI's world transform undoes make_windows' root-relative transform exactly."""
+    """spec/deploy.md §8: window_to_world (deploy run, refimpl generate) undoes make_windows' transform exactly."""
     from refimpl.quat import quat_normalize
-    from refimpl.transitions import CMU_22_JOINTS, heading_from_root, subset_22
+    from refimpl.transitions import CMU_22_JOINTS, heading_from_root, subset_22, window_to_world
 
     motion = read_bvh(SAMPLE_BVH)
     skel, rot = subset_22(motion.skeleton, np.asarray(motion.rotations)[::4], CMU_22_JOINTS)
     pos = np.asarray(motion.root_positions)[::4]
     w = make_windows(rot[20:29], pos[20:29], length=9)[0]                # (9, 91)
-    new_pos, new_rot = _to_world(w, heading_from_root(rot[20, 0]), pos[20])
+    new_pos, new_rot = window_to_world(w, heading_from_root(rot[20, 0]), pos[20])
     assert_close(skel.forward_kinematics(new_rot, new_pos), skel.forward_kinematics(rot[20:29], pos[20:29]),
                  rtol=0, atol=1e-9, name="positions")
     assert np.allclose(np.abs(np.sum(quat_normalize(new_rot) * rot[20:29], -1)), 1.0)

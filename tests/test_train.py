@@ -9,8 +9,8 @@ import pytest
 
 from refimpl.checkpoint import load_checkpoint
 from refimpl.models.qtg import QTGConfig
-from refimpl.train import (OptimConfig, TrainConfig, TrainingDiverged, format_duration, qtg_adapter,
-                           train, train_qtg)
+from refimpl.recipes.qtg import PAPER_OPTIM, qtg_adapter, train_qtg
+from refimpl.train import OptimConfig, TrainConfig, TrainingDiverged, format_duration, train
 
 TINY = QTGConfig(pose_size=11, encoder_sizes=(6, 4), gru_hidden=5, decoder_sizes=(6,), transition_length=3)
 
@@ -45,7 +45,7 @@ def _adapter(nan_at=None, nan_in="loss", noise=True):
     return dataclasses.replace(base, get_batch=get_batch, loss_and_grads=loss_and_grads)
 
 
-OPT = OptimConfig(lr=1e-2, clip_norm=1.0, lr_decay=0.9)
+OPT = OptimConfig(lr=1e-2, betas=PAPER_OPTIM.betas, clip_norm=1.0, lr_decay=0.9)
 
 
 def _cfg(tmp_path, steps, **kw):
@@ -193,9 +193,27 @@ def test_train_qtg_reduces_the_loss(tmp_path):
     poses = np.cumsum(0.1 * rng.standard_normal((16, 7, 11)), axis=1)
     ds = TransitionDataset(poses=poses, skeleton_index=np.zeros(16, int), skeletons=(), source_index=np.zeros(16, int),
                            sources=(), root_mean=np.zeros(3), root_std=np.ones(3))
-    res = train_qtg(ds, 40, config=TINY, optim=OptimConfig(lr=3e-3), batch_size=8, dtype=np.float32,
+    res = train_qtg(ds, 40, config=TINY, optim=OptimConfig(lr=3e-3, betas=PAPER_OPTIM.betas), batch_size=8,
+                    dtype=np.float32,
                     checkpoint_path=str(tmp_path / "q.npz"), progress=None)
     assert res.params["enc.0.weight"].dtype == np.float32
     assert np.mean(res.losses[-5:]) < 0.8 * np.mean(res.losses[:5])
     arrays, meta = load_checkpoint(tmp_path / "q.npz")
     assert meta["model_config"]["dtype"] == "float32" and meta["step"] == 40
+
+
+def test_resume_keeps_the_log_files_mode(tmp_path):
+    """spec/qtg.md §10: a resumed run rewrites loss.csv atomically (refimpl.atomic) with the usual permissions
+    (0o666 & ~umask), not a temporary file's 0o600."""
+    import os
+
+    umask = os.umask(0o022)
+    try:
+        kw = dict(batch_size=2, seed=0, checkpoint_path=str(tmp_path / "c.npz"), log_path=str(tmp_path / "loss.csv"))
+        train(_adapter(), OPT, TrainConfig(steps=2, **kw), progress=None)
+        train(_adapter(), OPT, TrainConfig(steps=4, **kw), resume=True, progress=None)
+        assert os.stat(tmp_path / "loss.csv").st_mode & 0o777 == 0o644
+        rows = (tmp_path / "loss.csv").read_text().splitlines()
+        assert rows[0].startswith("step,") and [r.split(",")[0] for r in rows[1:]] == ["1", "2", "3", "4"]
+    finally:
+        os.umask(umask)

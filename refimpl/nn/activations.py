@@ -124,3 +124,7 @@ def sigmoid_backward(dy: np.ndarray, cache) -> np.ndarray:
     y = cache
     dy = _check_dy(dy, y.shape)
     return dy * y * (1 - y)
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+sigmoid = _sigmoid

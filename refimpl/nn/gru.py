@@ -38,8 +38,8 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.nn.activations import _sigmoid
-from refimpl.nn.linear import _matmul_wt
+from refimpl.nn.activations import sigmoid as _sigmoid
+from refimpl.nn.linear import matmul_wt as _matmul_wt
 from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["gru_forward", "gru_backward", "gru_step_forward", "gru_step_backward", "gru_init"]
@@ -610,3 +610,9 @@ def _gru_backward_naive(dy, dh_n, x, h0, params, prefix, num_layers=1, bidirecti
             grads[param_name(prefix, f"bias_hh_{sfx}")] = np.concatenate([g["b_hr"], g["b_hz"], g["b_hn"]])
         d_above = d_inp
     return d_above, dh0, grads
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+cell_backward = _cell_backward
+cell_forward = _cell_forward
+input_gates = _input_gates

@@ -29,7 +29,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.nn.quat_layers import _as_float_array, _check_grad, _quat_conj, _quat_mul, _unbroadcast
+from refimpl.nn.quat_layers import (as_float_array as _as_float_array, check_grad as _check_grad,
+                                    quat_conj_kernel as _quat_conj, unbroadcast as _unbroadcast)
+from refimpl.quat import quat_mul_kernel as _quat_mul
 
 __all__ = [
     "forward_kinematics_forward", "forward_kinematics_backward",
@@ -517,3 +519,7 @@ def offsets_from_dq_backward(doffsets, cache):
     g = np.array(_check_grad(doffsets, loc.shape[:-1] + (3,), "doffsets"))
     g[..., 0, :] = 0.0
     return local_dq_from_current_backward(_translation_backward(g, loc), lcache)
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+check_parents = _check_parents

@@ -125,3 +125,7 @@ def linear_init(rng: np.random.Generator, in_features: int, out_features: int, p
     if bias:
         out[param_name(prefix, "bias")] = init_uniform(rng, (out_features,), bound, dtype)
     return out
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+matmul_wt = _matmul_wt

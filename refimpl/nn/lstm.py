@@ -44,8 +44,8 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.nn.activations import _sigmoid
-from refimpl.nn.linear import _matmul_wt
+from refimpl.nn.activations import sigmoid as _sigmoid
+from refimpl.nn.linear import matmul_wt as _matmul_wt
 from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["lstm_forward", "lstm_backward", "lstm_step_forward", "lstm_step_backward", "lstm_init"]

@@ -22,7 +22,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 __all__ = [
-    "param_name", "subdict", "merge_grads", "count_parameters",
+    "param_name", "subdict", "merge_grads", "accumulate_grads", "count_parameters",
     "init_uniform", "init_normal", "fan_in_bound",
     "check_float_array", "check_same_dtype", "get_param",
 ]
@@ -69,6 +69,17 @@ def merge_grads(*dicts: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
             else:
                 out[k] = g
     return out
+
+
+def accumulate_grads(total: dict, grads: Mapping[str, np.ndarray]) -> dict:
+    """``total[k] += grads[k]`` in place (a key seen for the first time is copied), for parameters used at every
+    step of a sequence; returns ``total``."""
+    for k, v in grads.items():
+        if k in total:
+            total[k] += v
+        else:
+            total[k] = np.array(v, copy=True)
+    return total
 
 
 def count_parameters(params: Mapping[str, np.ndarray] | Iterable[np.ndarray]) -> int:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import _quat_mul  # the Hamilton-product kernel (broadcasting, keeps float32)
+from refimpl.quat import quat_mul_kernel as _quat_mul  # the Hamilton-product kernel (broadcasting, keeps float32)
 
 __all__ = [
     "EULER_ORDERS",
@@ -445,3 +445,13 @@ def euler_from_quat_backward(dangles, cache):
         dq[..., i2] += 2.0 * s2 * q[..., j2] * ga_num
         dq[..., j2] += 2.0 * s2 * q[..., i2] * ga_num
     return dq
+
+
+# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
+as_float_array = _as_float_array
+check_grad = _check_grad
+normalize = _normalize
+normalize_backward = _normalize_backward
+quat_conj_kernel = _quat_conj
+quat_mul_backward_kernel = _quat_mul_backward
+unbroadcast = _unbroadcast

@@ -1,5 +1,7 @@
 """ONNX export of QTG (``refimpl/models/qtg.py``): an init model, a step model and a whole-transition rollout model.
 
+Its entry of the exporter table ``deploy.models.EXPORTERS["qtg"]`` is ``deploy/models/qtg_io.py``.
+
 The exporter translates the NumPy model's functions one to one (``spec/deploy.md`` §5):
 
 =============  =========================================================  =====================================
@@ -11,7 +13,7 @@ model          inputs → outputs                                           tran
 ``step``       ``pose``, ``latent_prev``, ``hidden``, ``target_latent`` →   ``refimpl.models.qtg.step``
                ``pose_next (B, P)``, ``latent_prev_next (B, Z)``,
                ``hidden_next (L, B, H)``
-``rollout``    ``past``, ``target`` → ``poses (B, T, P)``                  ``refimpl.models.qtg.rollout_forward``
+``rollout``    ``past``, ``target`` → ``poses (B, T, P)``                  ``refimpl.models.qtg_fast.rollout_forward``
 =============  =========================================================  =====================================
 
 A game loop runs ``init`` once per transition and then ``step`` once per frame, feeding ``*_next`` back as the
@@ -43,19 +45,33 @@ from refimpl.models.qtg import QTGConfig, param_shapes
 
 from deploy.activations import leaky_relu
 from deploy.features import destandardize, standardize
-from deploy.graph import OPSET, GraphBuilder, IR_VERSION, ir_version_for
+from deploy.graph import OPSET, GraphBuilder
 from deploy.gru import gru_step
 from deploy.linear import linear
-from deploy.metadata import EXPORTER_VERSION, FORMAT, QTG_PAPER, qtg_representation, skeleton_metadata
+from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
 from deploy.recurrent import tiled_state
 
-__all__ = ["export_qtg_init", "export_qtg_step", "export_qtg_rollout", "ROLLOUT_MODES"]
+__all__ = ["export_qtg_init", "export_qtg_step", "export_qtg_rollout", "ROLLOUT_MODES", "QTG_PAPER",
+           "qtg_representation"]
 
 ROLLOUT_MODES = ("scan", "loop", "unrolled")
 
+QTG_PAPER = ("Geleijn, Radziszewski, van Straaten, Galvan Debarba: Lightweight Quaternion Transition Generation "
+             "with Neural Networks. IEEE VR 2021 (abstracts and workshops)")
+
+
+def qtg_representation(pose_size: int) -> dict:
+    """Layout of a QTG pose vector: root translation (3) then ``(P − 3) / 4`` local joint quaternions (w, x, y, z)."""
+    joints = (pose_size - 3) // 4
+    return {"name": "qtg_pose", "size": int(pose_size),
+            "fields": [{"name": "root_translation", "start": 0, "size": 3,
+                        "meaning": "root translation relative to the window's first pose, z-normalised"},
+                       {"name": "joint_rotations", "start": 3, "size": 4 * joints, "joints": joints,
+                        "quaternion": "(w, x, y, z), Hamilton, local to the parent joint, not normalised"}]}
+
 
 # ------------------------------------------------------------------------------------------------- checks
-def _check_params(params: Mapping[str, np.ndarray], config: QTGConfig) -> None:
+def check_params(params: Mapping[str, np.ndarray], config: QTGConfig) -> None:
     if not isinstance(config, QTGConfig):
         raise ValueError(f"config: expected a QTGConfig, got {type(config).__name__}")
     for key, shape in param_shapes(config).items():
@@ -68,7 +84,7 @@ def _check_params(params: Mapping[str, np.ndarray], config: QTGConfig) -> None:
             raise ValueError(f"params[{key!r}]: expected finite floating values")
 
 
-def _check_normalization(normalization, config: QTGConfig):
+def check_normalization(normalization, config: QTGConfig):
     """``(mean (P,), std (P,))`` float64 from ``(mean, std)`` of shape ``(P,)`` or root-only ``(3,)``.
 
     Root-only statistics (``refimpl.transitions``: ``root_mean``, ``root_std``) are padded with mean 0 and std 1
@@ -153,32 +169,12 @@ def _zero_hidden(g, like, config, *, name):
 
 
 # ---------------------------------------------------------------------------------------------- metadata
-def _metadata(config, role, io, normalization, in_graph, skeleton, frame_rate, g, variant, extra, T=None):
-    model = {"name": "qtg", "role": role, "config": config.to_dict()}
-    if T is not None:
-        model["transition_length"] = int(T)
-    meta = {
-        "format": FORMAT,
-        "model": model,
-        "io": io,
-        "representation": qtg_representation(config.pose_size),
-        "normalization": None if normalization is None else {
-            "mean": [float(v) for v in normalization[0]], "std": [float(v) for v in normalization[1]],
-            "in_graph": bool(in_graph)},
-        "skeleton": skeleton_metadata(skeleton),
-        "frame_rate": float(frame_rate),
-        "source_paper": QTG_PAPER,
-        "exporter": {"name": "refimpl.deploy", "version": EXPORTER_VERSION, "opset": g.opset,
-                     "ir_version": IR_VERSION if g.opset == OPSET else ir_version_for(g.opset),
-                     "dtype": g.dtype.name, "variant": variant},
-    }
-    for k, v in (extra or {}).items():
-        meta[k] = v
-    return meta
-
-
-def _io(*entries):
-    return [{"name": n, "shape": list(s), "meaning": m} for n, s, m in entries]
+def qtg_metadata(config, role, io, normalization, in_graph, skeleton, frame_rate, g, variant, extra, T=None):
+    """:func:`deploy.metadata.build_metadata` of a QTG model (name ``qtg``, its pose layout and paper)."""
+    return build_metadata(g, name="qtg", role=role, config=config.to_dict(), io=io,
+                          representation=qtg_representation(config.pose_size), normalization=normalization,
+                          in_graph=in_graph, skeleton=skeleton, frame_rate=frame_rate, source_paper=QTG_PAPER,
+                          variant=variant, extra=extra, T=T)
 
 
 def _builder(name, dtype, opset, primitive):
@@ -189,14 +185,14 @@ def _context_inputs(g, norm, P: int):
     """Graph inputs ``past (B, 2, P)``, ``target (B, 2, P)`` and their normalised forms."""
     past = g.input("past", ["B", 2, P])
     target = g.input("target", ["B", 2, P])
-    return past, target, _pose_in(g, past, norm, name="past_norm"), _pose_in(g, target, norm, name="target_norm")
+    return past, target, pose_in(g, past, norm, name="past_norm"), pose_in(g, target, norm, name="target_norm")
 
 
-def _pose_in(g, x, norm, *, name):
+def pose_in(g, x, norm, *, name):
     return x if norm is None else standardize(g, x, norm[0], norm[1], name=name, wname="pose_norm")
 
 
-def _pose_out(g, x, norm, *, name):
+def pose_out(g, x, norm, *, name):
     return x if norm is None else destandardize(g, x, norm[0], norm[1], name=name, wname="pose_norm")
 
 
@@ -237,8 +233,8 @@ def export_qtg_init(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
         Inputs ``past (B, 2, P)``, ``target (B, 2, P)``; outputs ``latent_prev (B, Z)``, ``pose (B, P)``,
         ``hidden (L, B, H)``, ``target_latent (B, 2, Z)``.
     """
-    _check_params(params, config)
-    stats = _check_normalization(normalization, config)
+    check_params(params, config)
+    stats = check_normalization(normalization, config)
     norm = stats if normalize_in_graph else None
     P, Z, H, L = config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
     g = _builder("qtg_init", dtype, opset, primitive)
@@ -246,16 +242,16 @@ def export_qtg_init(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
     latent_prev, pose, _, _, tl = _encode_context(g, past_n, target_n, params, config, name="init")
     hidden = _zero_hidden(g, past, config, name="init.hidden")
     g.output(latent_prev, "latent_prev", ["B", Z])
-    g.output(_pose_out(g, pose, norm, name="pose_raw") if norm is not None else pose, "pose", ["B", P])
+    g.output(pose_out(g, pose, norm, name="pose_raw") if norm is not None else pose, "pose", ["B", P])
     g.output(hidden, "hidden", [L, "B", H])
     g.output(tl, "target_latent", ["B", 2, Z])
-    io = {"inputs": _io(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
+    io = {"inputs": io_entries(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
                         ("target", ["B", 2, P], "g1 = p_{T+1}, g2 = p_{T+2}: the two poses after it")),
-          "outputs": _io(("latent_prev", ["B", Z], "E(p_{-1}); feed to step"),
+          "outputs": io_entries(("latent_prev", ["B", Z], "E(p_{-1}); feed to step"),
                          ("pose", ["B", P], "p_0; feed to step"),
                          ("hidden", [L, "B", H], "GRU state s_0 = 0; feed to step"),
                          ("target_latent", ["B", 2, Z], "[E(g1), E(g2)]; feed to every step unchanged"))}
-    meta = _metadata(config, "init", io, stats, norm is not None, skeleton, frame_rate, g, "float", metadata)
+    meta = qtg_metadata(config, "init", io, stats, norm is not None, skeleton, frame_rate, g, "float", metadata)
     return g.model(metadata=meta, doc_string="QTG init: context encodings and zero GRU state",
                    producer_version=EXPORTER_VERSION)
 
@@ -274,8 +270,8 @@ def export_qtg_step(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
         Inputs ``pose (B, P)``, ``latent_prev (B, Z)``, ``hidden (L, B, H)``, ``target_latent (B, 2, Z)``;
         outputs ``pose_next (B, P)``, ``latent_prev_next (B, Z)``, ``hidden_next (L, B, H)``.
     """
-    _check_params(params, config)
-    stats = _check_normalization(normalization, config)
+    check_params(params, config)
+    stats = check_normalization(normalization, config)
     norm = stats if normalize_in_graph else None
     P, Z, H, L = config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
     g = _builder("qtg_step", dtype, opset, primitive)
@@ -287,19 +283,19 @@ def export_qtg_step(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
     e1 = g.node("Squeeze", [e1, g.ints([1])], "e1")                               # (B, Z)
     e2 = g.node("Squeeze", [e2, g.ints([1])], "e2")                               # (B, Z)
     e21 = g.node("Sub", [e2, e1], "e21")                                          # (B, Z)
-    pose_n = _pose_in(g, pose, norm, name="pose_norm")
+    pose_n = pose_in(g, pose, norm, name="pose_norm")
     pose_next, z, hidden_new = _step(g, latent_prev, pose_n, hidden, e1, e21, params, config, name="step")
-    g.output(_pose_out(g, pose_next, norm, name="pose_next_raw"), "pose_next", ["B", P])
+    g.output(pose_out(g, pose_next, norm, name="pose_next_raw"), "pose_next", ["B", P])
     g.output(z, "latent_prev_next", ["B", Z])
     g.output(hidden_new, "hidden_next", [L, "B", H])
-    io = {"inputs": _io(("pose", ["B", P], "p_t (from init, then pose_next)"),
+    io = {"inputs": io_entries(("pose", ["B", P], "p_t (from init, then pose_next)"),
                         ("latent_prev", ["B", Z], "z_{t-1} (from init, then latent_prev_next)"),
                         ("hidden", [L, "B", H], "GRU state s_t (from init, then hidden_next)"),
                         ("target_latent", ["B", 2, Z], "[E(g1), E(g2)] from init")),
-          "outputs": _io(("pose_next", ["B", P], "p_{t+1}, the generated frame"),
+          "outputs": io_entries(("pose_next", ["B", P], "p_{t+1}, the generated frame"),
                          ("latent_prev_next", ["B", Z], "z_t = E(p_t)"),
                          ("hidden_next", [L, "B", H], "s_{t+1}"))}
-    meta = _metadata(config, "step", io, stats, norm is not None, skeleton, frame_rate, g, "float", metadata)
+    meta = qtg_metadata(config, "step", io, stats, norm is not None, skeleton, frame_rate, g, "float", metadata)
     return g.model(metadata=meta, doc_string="QTG step: one generated frame, state in -> state out",
                    producer_version=EXPORTER_VERSION)
 
@@ -308,7 +304,7 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
                        mode: str = "scan", dtype=np.float32, opset: int = OPSET, primitive: bool | None = None,
                        normalization=None, normalize_in_graph: bool = True, skeleton=None,
                        frame_rate: float = 30.0, metadata: Mapping | None = None) -> onnx.ModelProto:
-    """The ``rollout`` model: a whole transition (``refimpl.models.qtg.rollout_forward``) in one graph.
+    """The ``rollout`` model: a whole transition (``refimpl.models.qtg_fast.rollout_forward``) in one graph.
 
     Parameters
     ----------
@@ -324,8 +320,8 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
     onnx.ModelProto
         Inputs ``past (B, 2, P)``, ``target (B, 2, P)``; output ``poses (B, T, P)`` (``p_1 … p_T``).
     """
-    _check_params(params, config)
-    stats = _check_normalization(normalization, config)
+    check_params(params, config)
+    stats = check_normalization(normalization, config)
     norm = stats if normalize_in_graph else None
     T = config.transition_length if T is None else T
     if not isinstance(T, (int, np.integer)) or T < 1:
@@ -380,9 +376,10 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
             outs = g.node("Scan", carried + [ticks], "rollout", body=body.graph(), num_scan_inputs=1,
                           outputs=("latent_prev", "pose", "hidden", "poses_tm"))
         out = g.node("Transpose", [outs[-1]], "poses_n", perm=[1, 0, 2])         # (B, T, P)
-    g.output(_pose_out(g, out, norm, name="poses_raw"), "poses", ["B", T, P])
-    io = {"inputs": _io(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
+    g.output(pose_out(g, out, norm, name="poses_raw"), "poses", ["B", T, P])
+    io = {"inputs": io_entries(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
                         ("target", ["B", 2, P], "g1 = p_{T+1}, g2 = p_{T+2}: the two poses after it")),
-          "outputs": _io(("poses", ["B", T, P], "p_1 ... p_T, the generated transition"))}
-    meta = _metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g, f"float.{mode}", metadata, T=T)
+          "outputs": io_entries(("poses", ["B", T, P], "p_1 ... p_T, the generated transition"))}
+    meta = qtg_metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g, f"float.{mode}",
+                        metadata, T=T)
     return g.model(metadata=meta, doc_string=f"QTG rollout: {T} frames, {mode}", producer_version=EXPORTER_VERSION)

@@ -1,7 +1,7 @@
 """Deployment variant of the QTG rollout: rearranged weights, fewer nodes, optionally int8 or int4 weights.
 
 The plain export (``deploy/qtg.py``) translates ``refimpl.models.qtg.step`` node for node. This variant computes
-the same function (``spec/deploy.md`` §5.4) with the algebra of ``refimpl.models.qtg.prepare_inference``
+the same function (``spec/deploy.md`` §5.4) with the algebra of ``refimpl.models.qtg_fast.prepare_inference``
 (``spec/qtg.md`` §6), arranged for onnxruntime, where at batch 1 every node costs a dispatch on top of the
 weight bytes it reads (measured on the development VM: ~0.55 µs per element-wise node, ~1.4 µs per
 ``MatMulNBits`` plus ~0.044 µs per 1000 int8 weights):
@@ -53,9 +53,9 @@ import onnx
 from refimpl.models.qtg import QTGConfig
 
 from deploy.graph import OPSET, GraphBuilder
-from deploy.gru import _gru_gates
-from deploy.metadata import EXPORTER_VERSION
-from deploy.qtg import _check_normalization, _check_params, _io, _metadata, _pose_in, _pose_out
+from deploy.gru import gru_gates as _gru_gates
+from deploy.metadata import EXPORTER_VERSION, io_entries
+from deploy.models.qtg import check_normalization, check_params, pose_in, pose_out, qtg_metadata
 from deploy.quantize import WEIGHT_FORMATS, WeightMatmul
 
 __all__ = ["export_qtg_rollout_compact"]
@@ -132,10 +132,10 @@ def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConf
         Bad ``params`` / ``config`` / ``normalization`` (as ``export_qtg_rollout``), ``weights`` not one of
         :data:`deploy.quantize.WEIGHT_FORMATS`, ``T`` not a positive integer.
     """
-    _check_params(params, config)
+    check_params(params, config)
     if weights not in WEIGHT_FORMATS:
         raise ValueError(f"weights: expected one of {WEIGHT_FORMATS}, got {weights!r}")
-    stats = _check_normalization(normalization, config)
+    stats = check_normalization(normalization, config)
     norm = stats if normalize_in_graph else None
     T = config.transition_length if T is None else T
     if not isinstance(T, (int, np.integer)) or T < 1:
@@ -151,7 +151,7 @@ def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConf
     past, target = g.input("past", ["B", 2, P]), g.input("target", ["B", 2, P])
 
     # once per transition: E(p_{-1}), E(p_0), E(g1), E(g2) in one pass; k = (W2 - W3) e1 + W3 e2 + b
-    ctx = _pose_in(g, g.node("Concat", [past, target], "init.ctx", axis=1), norm, name="init.ctx_norm")  # (B, 4, P)
+    ctx = pose_in(g, g.node("Concat", [past, target], "init.ctx", axis=1), norm, name="init.ctx_norm")  # (B, 4, P)
     ctx = g.node("Reshape", [ctx, g.ints([-1, P])], "init.rows")                    # (4B, P) rows b-major
     lat = _mlp(g, W, ctx, p, "enc", n_enc, slope, False, "init.enc")               # (4B, Z)
     lat = g.node("Reshape", [lat, g.ints([-1, 4 * Z])], "init.lat")                 # (B, 4Z) [z_-1|z_0|e1|e2]
@@ -197,11 +197,11 @@ def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConf
         poses.append(pose)
     flat = poses[0] if T == 1 else g.node("Concat", poses, "poses_flat", axis=-1)  # (B, T·P)
     out = g.node("Reshape", [flat, g.ints([0, T, P])], "poses_n")                   # (B, T, P)
-    g.output(_pose_out(g, out, norm, name="poses_raw"), "poses", ["B", T, P])
-    io = {"inputs": _io(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
+    g.output(pose_out(g, out, norm, name="poses_raw"), "poses", ["B", T, P])
+    io = {"inputs": io_entries(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
                         ("target", ["B", 2, P], "g1 = p_{T+1}, g2 = p_{T+2}: the two poses after it")),
-          "outputs": _io(("poses", ["B", T, P], "p_1 ... p_T, the generated transition"))}
-    meta = _metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g,
+          "outputs": io_entries(("poses", ["B", T, P], "p_1 ... p_T, the generated transition"))}
+    meta = qtg_metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g,
                      f"compact.{weights}", metadata, T=T)
     return g.model(metadata=meta, doc_string=f"QTG rollout, compact variant, {weights} weights, {T} frames",
                    producer_version=EXPORTER_VERSION)

@@ -1,0 +1,161 @@
+"""QTG's entry of the exporter table (``deploy.models.EXPORTERS["qtg"]``): checkpoints in, model folders out,
+and the runtime that drives the exported models.
+
+* :func:`load_qtg_checkpoint` — ``(params, config, meta)`` from a ``refimpl train`` checkpoint or a state dict;
+* :func:`export_qtg_dir` — ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx`` (validated, atomic);
+* :class:`QTGRuntime` — ``init`` + ``step`` (a game loop) or one ``rollout`` call, in onnxruntime.
+
+The table's generic names: :data:`load_checkpoint`, :data:`export_dir`, :data:`Runtime`.
+
+Shape legend: B batch, T frames, P pose size.
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from refimpl.checkpoint import load_checkpoint as _read_checkpoint, load_state_dict_npz
+from refimpl.models.qtg import QTGConfig
+
+from deploy.graph import OPSET, save_model
+from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
+from deploy.models.qtg_compact import export_qtg_rollout_compact
+from deploy.quantize import WEIGHT_FORMATS
+from deploy.runtime import DeployedModel, load_model
+from deploy.validate import validate_model
+
+__all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime"]
+
+
+def load_qtg_checkpoint(path):
+    """``(params, config, meta)`` from a QTG checkpoint (``refimpl.checkpoint``) or a plain state-dict ``.npz``.
+
+    Parameters are the arrays named ``param.<name>`` (training checkpoints) or all arrays (state dicts); the
+    config comes from ``meta["model_config"]`` (unknown keys ignored), else ``QTGConfig()``.
+    """
+    try:
+        arrays, meta = _read_checkpoint(path)
+    except ValueError as exc:
+        if "not a refimpl checkpoint" not in str(exc):
+            raise
+        arrays, meta = load_state_dict_npz(path), {}
+    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")} or dict(arrays)
+    fields = {f.name for f in dataclasses.fields(QTGConfig)}
+    cfg = {k: v for k, v in (meta.get("model_config") or {}).items() if k in fields}
+    return params, QTGConfig(**cfg), meta
+
+
+def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None, opset=None, dtype=np.float32,
+                   mode: str = "scan", T: int | None = None, metadata=None,
+                   compact: str | None = None) -> dict[str, Path]:
+    """Export, validate and atomically write ``qtg_init/step/rollout.onnx`` into ``out_dir``; return the paths.
+
+    ``compact`` (``"float32"``, ``"int8"`` or ``"int4"``; float32 graphs only) writes the rollout model as the
+    compact deployment variant with those weights (``deploy.qtg_compact``, ``spec/deploy.md`` §5.4) instead of
+    the ``mode`` translation; the init and step models are unchanged.
+    """
+    if compact is not None:
+        if compact not in WEIGHT_FORMATS:
+            raise ValueError(f"compact: expected one of {WEIGHT_FORMATS} or None, got {compact!r}")
+        if np.dtype(dtype) != np.float32:
+            raise ValueError(f"compact: the compact rollout is a float32 graph, got dtype {np.dtype(dtype)}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    kw = dict(dtype=dtype, opset=OPSET if opset is None else opset, normalization=normalization,
+              skeleton=skeleton, metadata=metadata)
+    if compact is None:
+        rollout = export_qtg_rollout(params, config, T=T, mode=mode, **kw)
+    else:
+        rollout = export_qtg_rollout_compact(params, config, T=T, weights=compact, opset=kw["opset"],
+                                             normalization=normalization, skeleton=skeleton, metadata=metadata)
+    models = {"init": export_qtg_init(params, config, **kw), "step": export_qtg_step(params, config, **kw),
+              "rollout": rollout}
+    paths = {}
+    for role, m in models.items():
+        validate_model(m)
+        paths[role] = out / f"qtg_{role}.onnx"
+        save_model(m, paths[role])
+    return paths
+
+
+class QTGRuntime:
+    """QTG inference from exported ``init``/``step``/``rollout`` models (any subset), as a game loop would use them.
+
+    Parameters
+    ----------
+    init, step, rollout : path, ModelProto, DeployedModel or None
+        The exported models (``deploy.qtg``). ``transition`` needs ``rollout`` or both ``init`` and ``step``.
+    intra_op_threads : int
+    """
+
+    def __init__(self, init=None, step=None, rollout=None, *, intra_op_threads: int = 1):
+        def load(m):
+            if m is None or isinstance(m, DeployedModel):
+                return m
+            return load_model(m, intra_op_threads=intra_op_threads)
+
+        self.init_model, self.step_model, self.rollout_model = load(init), load(step), load(rollout)
+        for m, role in ((self.init_model, "init"), (self.step_model, "step"), (self.rollout_model, "rollout")):
+            if m is not None and m.role != role:
+                raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
+
+    @classmethod
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QTGRuntime":
+        """Load ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx`` from ``directory`` (those present)."""
+        d = Path(directory)
+        files = {k: d / f"qtg_{k}.onnx" for k in ("init", "step", "rollout")}
+        found = {k: (p if p.is_file() else None) for k, p in files.items()}
+        if not any(found.values()):
+            raise ValueError(f"directory: no qtg_init/step/rollout.onnx in {str(d)!r}")
+        return cls(**found, intra_op_threads=intra_op_threads)
+
+    def start(self, past, target) -> dict[str, np.ndarray]:
+        """Run ``init``: the state ``{"pose", "latent_prev", "hidden", "target_latent"}`` for :meth:`step`."""
+        if self.init_model is None:
+            raise ValueError("start: no init model loaded")
+        out = self.init_model.run(past=past, target=target)
+        return {"pose": out["pose"], "latent_prev": out["latent_prev"], "hidden": out["hidden"],
+                "target_latent": out["target_latent"]}
+
+    def step(self, state: Mapping[str, np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Run ``step`` once: ``(pose_next (B, P), next state)``."""
+        if self.step_model is None:
+            raise ValueError("step: no step model loaded")
+        out = self.step_model.run(pose=state["pose"], latent_prev=state["latent_prev"], hidden=state["hidden"],
+                                  target_latent=state["target_latent"])
+        new = {"pose": out["pose_next"], "latent_prev": out["latent_prev_next"], "hidden": out["hidden_next"],
+               "target_latent": state["target_latent"]}
+        return out["pose_next"], new
+
+    def transition(self, past, target, T: int | None = None, *, use_rollout: bool = True) -> np.ndarray:
+        """A whole transition ``(B, T, P)``: one rollout call, or ``init`` + ``T`` step calls (host loop).
+
+        ``T`` defaults to the rollout model's length (or the config's ``transition_length``); the rollout model
+        is used only when its baked-in length equals ``T``.
+        """
+        meta = (self.rollout_model or self.step_model or self.init_model).metadata.get("model", {})
+        default_T = meta.get("transition_length") or meta.get("config", {}).get("transition_length")
+        T = default_T if T is None else T
+        if not isinstance(T, (int, np.integer)) or T < 1:
+            raise ValueError(f"T: expected a positive integer, got {T!r}")
+        if use_rollout and self.rollout_model is not None:
+            rT = self.rollout_model.metadata.get("model", {}).get("transition_length")
+            if rT == T:
+                return self.rollout_model.run(past=past, target=target)["poses"]
+        if self.init_model is None or self.step_model is None:
+            raise ValueError(f"transition: T={T} needs a rollout model of that length or init + step models")
+        state = self.start(past, target)
+        poses = []
+        for _ in range(int(T)):
+            pose, state = self.step(state)
+            poses.append(pose)
+        return np.stack(poses, axis=1)                                   # (B, T, P)
+
+
+#: The exporter table's names for this model.
+load_checkpoint = load_qtg_checkpoint
+export_dir = export_qtg_dir
+Runtime = QTGRuntime

@@ -1,0 +1,557 @@
+"""QTG's fast paths (spec/qtg.md §4, §6): the fused training rollout and the in-place inference rollout.
+
+Same network and equations as the readable reference :mod:`refimpl.models.qtg` (config, parameters,
+:func:`~refimpl.models.qtg.step`), rearranged for speed; tests/test_qtg.py checks both against the reference
+step and the oracles there (``_rollout_naive``, ``_rollout_backward_per_step``) to ``TOL_EXACT``.
+
+* Training: :func:`rollout_forward` / :func:`rollout_backward`. The rollout keeps every layer's inputs time-major
+  (``_Record``); the reverse loop propagates only the input and state cotangents and keeps the pre-activation
+  cotangents, and each weight gradient is then ONE matrix product over the stacked rows of all steps
+  (``_weight_grads``). Gradients flow through the fed-back poses, the carried latents, the GRU state and the
+  target encodings (BPTT, no detaching).
+* Inference: :func:`prepare_inference` folds, transposes and bias-augments the weights once;
+  :func:`rollout_inference` runs the steps with buffers allocated once per call and written in place.
+
+Kernels from the layers' kernel tier: :func:`refimpl.nn.linear.matmul_wt`, :func:`refimpl.nn.gru.input_gates`,
+:func:`refimpl.nn.gru.cell_forward`, :func:`refimpl.nn.gru.cell_backward` (no checks; the public functions
+here validate at their boundary with :func:`refimpl.models.qtg.check_params` and friends).
+
+Shape legend: B batch, T transition frames, P pose size, Z latent size, H GRU hidden size, L GRU layers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, NamedTuple
+
+import numpy as np
+
+from refimpl.models.qtg import QTGConfig, QTGState, check_context, check_length, check_params
+from refimpl.nn.gru import cell_backward as _cell_backward, cell_forward as _cell_forward, input_gates as _input_gates
+from refimpl.nn.linear import matmul_wt as _matmul_wt
+from refimpl.nn.params import check_float_array
+
+__all__ = ["QTGInference", "rollout_forward", "rollout_backward", "prepare_inference", "rollout_inference"]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the training path: time-major records of a rollout, per-step kernels (spec/qtg.md §3, §4)
+# ----------------------------------------------------------------------------------------------------------------
+
+class _Weights(NamedTuple):
+    """The parameters a rollout reads, looked up once (the arrays of ``params``, PyTorch layouts, no copies)."""
+
+    enc: tuple  # ((W (n_{i+1}, n_i), b (n_{i+1},)), ...): encoder layers, LeakyReLU after each
+    gru: tuple  # ((W_ih (3H, I_k), W_hh (3H, H), b_ih (3H,), b_hh (3H,)), ...): one per GRU layer
+    vel: tuple  # (W_v (Z, H), b_v (Z,)): velocity head, linear
+    dec: tuple  # ((W (m_{j+1}, m_j), b), ...): decoder layers, LeakyReLU after each but the last
+    slope: np.floating  # LeakyReLU negative slope, in the parameters' dtype
+
+
+def _gather_weights(params: Mapping[str, np.ndarray], config: QTGConfig) -> _Weights:
+    def dense(prefix, n):
+        return tuple((params[f"{prefix}.{i}.weight"], params[f"{prefix}.{i}.bias"]) for i in range(n))
+
+    gru = tuple(tuple(params[f"gru.{name}_l{k}"] for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"))
+                for k in range(config.gru_layers))
+    slope = params["vel.weight"].dtype.type(config.negative_slope)
+    return _Weights(dense("enc", len(config.encoder_sizes)), gru, (params["vel.weight"], params["vel.bias"]),
+                    dense("dec", len(config.decoder_sizes) + 1), slope)
+
+
+class _Record(NamedTuple):
+    """Every layer's input at every step of a rollout, time-major (the cache :func:`rollout_backward` reads).
+
+    Encoder arrays are stacked in blocks of B rows: block 0 ``g1``, block 1 ``g2``, block 2 ``p_{-1}`` (the
+    context, encoded once), block ``3 + t`` the pose ``p_t`` that step t encodes. ``enc[0]`` has one more block,
+    ``T + 3``, for the last generated pose ``p_T``. So ``enc[-1]`` holds ``e1, e2, z_{-1}, z_0 … z_{T-1}``: step t
+    reads ``z_{t-1}`` from block ``2 + t`` and writes ``z_t`` into block ``3 + t``, and its decoder writes
+    ``p_{t+1}`` into block ``4 + t`` of ``enc[0]``, the next step's input. With the context blocks first, the rows
+    of every encoder layer's weight gradient (context and all steps) are one contiguous ``((T + 3) B, n)`` slice.
+    A LeakyReLU's derivative is read from its output (``y > 0`` iff its input ``> 0``, for ``0 <= slope``), i.e.
+    from the next layer's input: no masks are stored.
+    """
+
+    enc: list  # enc[i] (T + 3, B, n_i): input of encoder layer i (enc[0] has T + 4 blocks); enc[-1]: latents
+    gru_x: np.ndarray  # (T, B, 3Z): x_t = [z_t − z_{t−1} | e1 − z_t | e2 − e1]
+    hidden: np.ndarray  # (T + 1, L, B, H): s_t of every layer, s_0 = 0
+    gates: np.ndarray  # (L, T, B, 3H): [r | u | W_hn s_t + b_hn] (refimpl.nn.gru._cell_forward)
+    cand: np.ndarray  # (L, T, B, H): the candidate state n
+    dec: list  # dec[j] (T, B, m_j): input of decoder layer j; dec[0] = z_t + v_t
+
+
+def _new_record(B: int, T: int, config: QTGConfig, dtype) -> _Record:
+    Z, H, L = config.latent_size, config.gru_hidden, config.gru_layers
+    hidden = np.empty((T + 1, L, B, H), dtype=dtype)  # (T + 1, L, B, H)
+    hidden[0] = 0
+    return _Record(
+        enc=[np.empty((T + (4 if i == 0 else 3), B, n), dtype=dtype)
+             for i, n in enumerate((config.pose_size,) + config.encoder_sizes)],
+        gru_x=np.empty((T, B, 3 * Z), dtype=dtype), hidden=hidden,
+        gates=np.empty((L, T, B, 3 * H), dtype=dtype), cand=np.empty((L, T, B, H), dtype=dtype),
+        dec=[np.empty((T, B, m), dtype=dtype) for m in (Z,) + config.decoder_sizes])
+
+
+def _dense(x, weight, bias, slope, out):
+    """``out = x Wᵀ + b`` (x (N, I), out (N, O)), then LeakyReLU in place unless ``slope`` is None.
+
+    ``max(a, slope a)`` equals ``a`` for ``a > 0`` and ``slope a`` otherwise, since ``0 <= slope < 1``."""
+    _matmul_wt(x, weight, out=out)
+    out += bias
+    if slope is not None:
+        np.maximum(out, out * slope, out=out)
+    return out
+
+
+def _leaky_backward(dy, y, slope, out):
+    """``out = dy`` where the LeakyReLU output ``y > 0``, ``slope dy`` elsewhere (its input cotangent).
+
+    Computed as ``dy · max([y > 0], slope)``: the factor is exactly 1 or ``slope`` (``out`` must not be ``dy``)."""
+    np.greater(y, 0, out=out)
+    np.maximum(out, slope, out=out)
+    return np.multiply(out, dy, out=out)
+
+
+def _encode_context(w: _Weights, rec: _Record, past, target) -> None:
+    """Blocks 0-3 of ``rec.enc[0]`` = ``g1, g2, p_{-1}, p_0``; one encoder pass over blocks 0-2 (3B rows)."""
+    B = past.shape[0]
+    rec.enc[0][0:2] = target.transpose(1, 0, 2)  # g1, g2
+    rec.enc[0][2:4] = past.transpose(1, 0, 2)  # p_{-1}, p_0
+    x = rec.enc[0][:3].reshape(3 * B, past.shape[2])  # (3B, P)
+    for i, (weight, bias) in enumerate(w.enc):
+        x = _dense(x, weight, bias, w.slope, rec.enc[i + 1][:3].reshape(3 * B, weight.shape[0]))
+
+
+def _init_forward(params, past, target, config, T: int = 0):
+    """Record of a ``T``-step rollout with its context encoded: ``(state, target_latent, (weights, record))``."""
+    w = _gather_weights(params, config)
+    rec = _new_record(past.shape[0], T, config, past.dtype)
+    _encode_context(w, rec, past, target)
+    latents = rec.enc[-1]  # (T + 3, B, Z)
+    state = QTGState(latents[2], rec.enc[0][3], rec.hidden[0])  # (z_{-1}, p_0, 0): views of the record
+    return state, np.ascontiguousarray(latents[:2].transpose(1, 0, 2)), (w, rec)
+
+
+def _step_into(w: _Weights, rec: _Record, t: int) -> np.ndarray:
+    """Step t of the rollout held in ``rec`` (spec/qtg.md §3).
+
+    Reads ``p_t``, ``z_{t-1}``, ``s_t`` and the target latents from ``rec``, writes every layer's output of the
+    step into it and returns ``p_{t+1}`` (B, P), a view of block ``4 + t`` of ``rec.enc[0]``.
+    """
+    x = rec.enc[0][3 + t]  # p_t (B, P)
+    for i, (weight, bias) in enumerate(w.enc):
+        x = _dense(x, weight, bias, w.slope, rec.enc[i + 1][3 + t])
+    latents = rec.enc[-1]
+    z, z_prev, e1, e2 = x, latents[2 + t], latents[0], latents[1]  # (B, Z) each
+    Z = z.shape[1]
+    x_t = rec.gru_x[t]  # (B, 3Z)
+    np.subtract(z, z_prev, out=x_t[:, :Z])
+    np.subtract(e1, z, out=x_t[:, Z:2 * Z])
+    np.subtract(e2, e1, out=x_t[:, 2 * Z:])
+    inp = x_t
+    for k, (w_ih, w_hh, b_ih, b_hh) in enumerate(w.gru):
+        H = w_hh.shape[1]
+        gi = _input_gates(inp, w_ih, b_ih, b_hh, H)  # (B, 3H)
+        _cell_forward(gi, rec.hidden[t, k], w_hh, None, b_hh[2 * H:], rec.gates[k, t], rec.cand[k, t],
+                      rec.hidden[t + 1, k])
+        inp = rec.hidden[t + 1, k]  # s_{t+1} of layer k (B, H)
+    h = _dense(inp, *w.vel, None, rec.dec[0][t])  # v_t (B, Z)
+    h += z  # z_t + v_t
+    last = len(w.dec) - 1
+    for j, (weight, bias) in enumerate(w.dec):
+        h = _dense(h, weight, bias, None if j == last else w.slope,
+                   rec.enc[0][4 + t] if j == last else rec.dec[j + 1][t])
+    return h  # p_{t+1} (B, P)
+
+
+class _Cotangents(NamedTuple):
+    """Per-step cotangents of every layer's pre-activations, time-major; each pairs with a :class:`_Record` array
+    for the weight gradients formed after the reverse loop."""
+
+    enc: list  # enc[i] (T + 3, B, n_{i+1}): encoder layer i (blocks as in _Record); pairs with rec.enc[i]
+    gru_in: np.ndarray  # (L, T, B, 3H): [da_r | da_u | da_n], pairs with the layer's input (x_t or s_{t+1} below)
+    gru_hh: np.ndarray  # (L, T, B, 3H): [da_r | da_u | r da_n], pairs with rec.hidden[:-1] (s_t)
+    vel: np.ndarray  # (T, B, Z): cotangent of z_t + v_t (the velocity head's output); pairs with s_{t+1} (top)
+    dec: list  # dec[j] (T, B, m_{j+1}): decoder layer j; the last one is the total cotangent of p_{t+1}
+
+
+def _new_cotangents(B: int, T: int, config: QTGConfig, dtype) -> _Cotangents:
+    Z, H, L = config.latent_size, config.gru_hidden, config.gru_layers
+    return _Cotangents(
+        enc=[np.empty((T + 3, B, n), dtype=dtype) for n in config.encoder_sizes],
+        gru_in=np.empty((L, T, B, 3 * H), dtype=dtype), gru_hh=np.empty((L, T, B, 3 * H), dtype=dtype),
+        vel=np.empty((T, B, Z), dtype=dtype),
+        dec=[np.empty((T, B, m), dtype=dtype) for m in config.decoder_sizes + (config.pose_size,)])
+
+
+def _step_backward(w: _Weights, rec: _Record, cot: _Cotangents, t: int, dhidden, dlatent, tmp, need_dpose: bool):
+    """Backward of step t (spec/qtg.md §4): only the sequential input and state cotangents, no weight gradients.
+
+    On entry ``cot.dec[-1][t]`` holds the total cotangent of ``p_{t+1}``, ``dhidden`` (L, B, H) that of
+    ``s_{t+1}``, and ``dlatent`` (B, Z) or None that of ``z_t`` from step t + 1. Writes the step's pre-activation
+    cotangents into ``cot``, overwrites ``dhidden`` with the cotangent of ``s_t`` (``tmp`` (B, H) is scratch) and
+    returns ``(dz_{t-1} (B, Z), dp_t (B, P) or None unless need_dpose)``.
+    """
+    last = len(w.dec) - 1
+    dy = cot.dec[last][t]  # (B, P)
+    for j in range(last, -1, -1):
+        if j < last:
+            dy = _leaky_backward(dy, rec.dec[j + 1][t], w.slope, cot.dec[j][t])
+        dy = np.matmul(dy, w.dec[j][0], out=cot.vel[t] if j == 0 else None)  # (B, m_j)
+    dzv = dy  # (B, Z): d(z_t + v_t) = dv_t
+    d_out = dzv @ w.vel[0]  # (B, H): ds_{t+1} (top layer) from the velocity head
+    for k in range(len(w.gru) - 1, -1, -1):
+        w_ih, w_hh = w.gru[k][:2]
+        dh = dhidden[k]  # (B, H)
+        dh += d_out
+        _cell_backward(dh, rec.hidden[t, k], rec.gates[k, t], rec.cand[k, t], w_hh, cot.gru_in[k, t],
+                       cot.gru_hh[k, t], tmp)
+        if k > 0:
+            d_out = cot.gru_in[k, t] @ w_ih  # (B, H): cotangent of the output of layer k − 1
+    Z = dzv.shape[1]
+    # dx_t[vel], dx_t[off] only; e1 and e2 get Σ_t dx_t, formed once after the loop
+    dx = cot.gru_in[0, t] @ w.gru[0][0][:, :2 * Z]  # (B, 2Z)
+    dx_vel, dx_off = dx[:, :Z], dx[:, Z:]  # (B, Z) each
+    dz = dzv + dx_vel  # dz_t = d(z_t + v_t) + dx_t[vel] − dx_t[off] (+ from step t + 1)
+    dz -= dx_off
+    if dlatent is not None:
+        dz += dlatent
+    dy = dz
+    for i in range(len(w.enc) - 1, -1, -1):
+        da = _leaky_backward(dy, rec.enc[i + 1][3 + t], w.slope, cot.enc[i][3 + t])  # (B, n_{i+1})
+        dy = da @ w.enc[i][0] if i > 0 or need_dpose else None  # (B, n_i)
+    return -dx_vel, dy
+
+
+def _weight_grads(w: _Weights, rec: _Record, cot: _Cotangents) -> dict[str, np.ndarray]:
+    """Every parameter's gradient, formed once per rollout: ONE product over all stacked rows per weight.
+
+    ``dW = Σ_rows da ⊗ x`` over the T·B step rows (and the 3B context rows for the encoder), ``db = Σ_rows da``.
+    """
+    def rows(a):
+        return a.reshape(-1, a.shape[-1])
+
+    grads: dict[str, np.ndarray] = {}
+
+    def dense(name, da, x):
+        da = rows(da)  # (N, O)
+        grads[f"{name}.weight"] = da.T @ rows(x)  # (O, I)
+        grads[f"{name}.bias"] = da.sum(axis=0)  # (O,)
+
+    T = rec.gru_x.shape[0]
+    for i in range(len(w.enc)):
+        dense(f"enc.{i}", cot.enc[i], rec.enc[i][:T + 3])
+    for k in range(len(w.gru)):
+        dgi, dgh = rows(cot.gru_in[k]), rows(cot.gru_hh[k])  # (T B, 3H)
+        x = rec.gru_x if k == 0 else rec.hidden[1:, k - 1]  # (T, B, I_k)
+        grads[f"gru.weight_ih_l{k}"] = dgi.T @ rows(x)
+        grads[f"gru.weight_hh_l{k}"] = dgh.T @ rows(rec.hidden[:-1, k])
+        grads[f"gru.bias_ih_l{k}"] = dgi.sum(axis=0)
+        grads[f"gru.bias_hh_l{k}"] = dgh.sum(axis=0)
+    dense("vel", cot.vel, rec.hidden[1:, -1])
+    for j in range(len(w.dec)):
+        dense(f"dec.{j}", cot.dec[j], rec.dec[j])
+    return grads
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# rollout: forward and backward
+# ----------------------------------------------------------------------------------------------------------------
+
+def rollout_forward(params: Mapping[str, np.ndarray], past, target, T: int | None = None,
+                    config: QTGConfig = QTGConfig()):
+    """Generate a whole transition, feeding each decoded pose back (spec/qtg.md §3).
+
+    Parameters
+    ----------
+    params : dict
+    past : ndarray (B, 2, P)
+        ``p_{-1}, p_0`` (normalised pose space: root translation z-normalised, quaternions raw).
+    target : ndarray (B, 2, P)
+        ``g1 = p_{T+1}, g2 = p_{T+2}``.
+    T : int, optional
+        Frames to generate (default ``config.transition_length``).
+    config : QTGConfig
+
+    Returns
+    -------
+    poses : ndarray (B, T, P)
+        ``p_1 … p_T``.
+    cache : dict
+        For :func:`rollout_backward` (every layer's input at every step, time-major; it references ``params``,
+        which must not be modified before the backward).
+    """
+    dtype = check_params(params, config)
+    past, target = check_context(past, target, config, dtype)
+    T = check_length(T, config)
+    _, _, (w, rec) = _init_forward(params, past, target, config, T)
+    for t in range(T):
+        _step_into(w, rec, t)
+    B = past.shape[0]
+    poses = np.ascontiguousarray(rec.enc[0][4:].transpose(1, 0, 2))  # (B, T, P), not a view of the cache
+    return poses, {"weights": w, "record": rec, "config": config, "shape": (B, T, config.pose_size)}
+
+
+def rollout_backward(dposes, cache, *, input_grads: bool = False):
+    """Backpropagation through the whole rollout (BPTT through all steps; spec/qtg.md §4).
+
+    The reverse loop over the steps propagates only the input and state cotangents (they are sequential) and
+    keeps every layer's pre-activation cotangents; after the loop, each weight gradient is ONE matrix product
+    over the stacked rows of all steps (for the encoder, also the context rows), each bias gradient one sum.
+
+    Parameters
+    ----------
+    dposes : ndarray (B, T, P)
+        Cotangent of the generated poses (e.g. from ``mae_loss_backward``), finite, in the parameters' dtype.
+    cache : dict
+        From :func:`rollout_forward` (not modified: it can be back-propagated again).
+    input_grads : bool
+        Also return the gradients with respect to ``past`` and ``target``.
+
+    Returns
+    -------
+    grads : dict
+        One array per parameter, same names, shapes and dtype as the parameters.
+    dpast, dtarget : ndarray (B, 2, P)
+        Only when ``input_grads``.
+    """
+    shape, w, rec, config = cache["shape"], cache["weights"], cache["record"], cache["config"]
+    dtype = rec.gru_x.dtype
+    dposes = check_float_array(dposes, "dposes", shape)
+    if dposes.dtype != dtype:
+        raise ValueError(f"dposes: expected dtype {dtype} (the parameters' dtype), got {dposes.dtype}")
+    B, T, P = shape
+    Z, H, L = config.latent_size, config.gru_hidden, config.gru_layers
+    cot = _new_cotangents(B, T, config, dtype)
+    dhidden = np.zeros((L, B, H), dtype=dtype)  # cotangent of s_{t+1}, then of s_t
+    tmp = np.empty((B, H), dtype=dtype)
+    dlatent = None  # cotangent of z_t from its use as step t+1's z_{t-1}
+    dpose = None  # cotangent of p_{t+1} from its use as step t+1's input pose
+    for t in range(T - 1, -1, -1):
+        dp = cot.dec[-1][t]  # (B, P): total cotangent of p_{t+1}
+        if dpose is None:
+            dp[...] = dposes[:, t]
+        else:
+            np.add(dposes[:, t], dpose, out=dp)
+        dlatent, dpose = _step_backward(w, rec, cot, t, dhidden, dlatent, tmp, need_dpose=t > 0 or input_grads)
+    # the context latents e1, e2 (used by every x_t) and z_{-1} (step 0), back through the initial encoder pass
+    dx = cot.gru_in[0].sum(axis=0) @ w.gru[0][0]  # (B, 3Z): Σ_t dx_t = (Σ_t [da_r | da_u | da_n]_t) W_ih
+    dy = np.concatenate([dx[:, Z:2 * Z] - dx[:, 2 * Z:], dx[:, 2 * Z:], dlatent])  # (3B, Z): de1, de2, dz_{-1}
+    for i in range(len(w.enc) - 1, -1, -1):
+        n = w.enc[i][0].shape[0]
+        da = _leaky_backward(dy, rec.enc[i + 1][:3].reshape(3 * B, n), w.slope, cot.enc[i][:3].reshape(3 * B, n))
+        dy = da @ w.enc[i][0] if i > 0 or input_grads else None  # (3B, n_i)
+    grads = _weight_grads(w, rec, cot)
+    if not input_grads:
+        return grads
+    dctx = dy.reshape(3, B, P)  # g1, g2, p_{-1}
+    dpast = np.stack([dctx[2], dpose], axis=1)  # (B, 2, P)
+    return grads, dpast, np.ascontiguousarray(dctx[:2].transpose(1, 0, 2))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# lean inference path (no caches; weights folded, transposed and bias-augmented once; buffers reused per step)
+# ----------------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class QTGInference:
+    """Weights rearranged for fast inference by :func:`prepare_inference` (read-only arrays; spec/qtg.md §6).
+
+    Matrices are stored transposed and, where a bias follows, *bias-augmented*: ``A = [Wᵀ ; bᵀ]``
+    ``(in + 1, out)``, so that ``[x | 1] A = x Wᵀ + b``. With ``W_ih = [W1 | W2 | W3]`` the column blocks of the
+    first GRU layer's input weight (acting on the three parts of ``x_t``), and every ``r, z`` gate column
+    pre-multiplied by ½:
+
+    * ``enc``, ``dec``: the encoder and decoder layers, ``(n_i + 1, n_{i+1})`` each.
+    * ``z_product`` ``(Z, 6H)``: ``[(W1 − W2)ᵀ | W1ᵀ]``.
+    * ``target_product`` ``(2Z + 1, 3H)``: ``[W2ᵀ ; W3ᵀ ; b_ih0ᵀ]`` (``b_ih0`` is ``b_ih`` with ``b_hr, b_hz``
+      added), for the constant target term ``k = W2 e1 + W3 (e2 − e1) + b_ih0`` of a transition.
+    * ``upper_ih``, ``lower_hh``: ``W_ih`` of layers 1 … L−1 (bias row ``b_ih + [b_hr, b_hz, 0]``) and ``W_hh``
+      of layers 0 … L−2 (bias row ``[0, 0, b_hn]``).
+    * ``h_product`` ``(H + 1, 3H + Z)``: the top layer's ``[W_hhᵀ | W_vᵀ]``, bias row ``[0, 0, b_hn | b_v]``:
+      one product of the new state gives the velocity ``v_t`` and the next step's ``W_hh s``.
+    """
+
+    config: QTGConfig
+    enc: tuple
+    z_product: np.ndarray
+    target_product: np.ndarray
+    upper_ih: tuple
+    lower_hh: tuple
+    h_product: np.ndarray
+    dec: tuple
+
+    @property
+    def dtype(self) -> np.dtype:
+        """The dtype of every weight (that of the parameters given to :func:`prepare_inference`)."""
+        return self.z_product.dtype
+
+
+def prepare_inference(params: Mapping[str, np.ndarray], config: QTGConfig = QTGConfig()) -> QTGInference:
+    """Rearrange ``params`` for :func:`rollout_inference` (transposed, bias-augmented, contiguous; same dtype).
+
+    Exact rewrites (spec/qtg.md §6):
+
+    1. ``W_ih x_t + b_ih = (W1 − W2) z_t + c_t`` with ``c_t = k − W1 z_{t−1}``: one product of ``z_t`` gives this
+       step's ``(W1 − W2) z_t`` and the next step's ``W1 z_t``.
+    2. One product of the top layer's new state ``s`` gives ``W_v s + b_v`` and the next step's
+       ``W_hh s + (0, 0, b_hn)`` (``b_hr, b_hz`` are in ``k``).
+    3. ``σ(a) = ½ + ½ tanh(a/2)``: the ``r, z`` columns are halved (exact in binary floating point).
+    4. Biases ride in an extra weight row, multiplied by a constant 1 column of the input buffers.
+    """
+    dtype = check_params(params, config)
+    Z, H, L = config.latent_size, config.gru_hidden, config.gru_layers
+
+    def ro(a):
+        a = np.ascontiguousarray(a, dtype=dtype)
+        a.setflags(write=False)
+        return a
+
+    def aug(wT, b):  # [Wᵀ ; bᵀ] (in + 1, out)
+        return ro(np.concatenate([wT, np.asarray(b)[None, :]], axis=0))
+
+    def half_rz(a):  # a (..., 3H) with gate blocks r | z | n along the last axis: halve r and z
+        a = np.array(a, copy=True)
+        a[..., :2 * H] *= 0.5
+        return a
+
+    def b_hh_n(layer):  # [0, 0, b_hn]
+        return np.concatenate([np.zeros(2 * H, dtype=dtype), params[f"gru.bias_hh_l{layer}"][2 * H:]])
+
+    def b_ih_rz(layer):  # b_ih + [b_hr, b_hz, 0]
+        b = params[f"gru.bias_ih_l{layer}"].copy()
+        b[:2 * H] += params[f"gru.bias_hh_l{layer}"][:2 * H]
+        return half_rz(b)
+
+    def dense(prefix, n):
+        return tuple(aug(params[f"{prefix}.{i}.weight"].T, params[f"{prefix}.{i}.bias"]) for i in range(n))
+
+    w_ih = params["gru.weight_ih_l0"]  # (3H, 3Z)
+    w1, w2, w3 = w_ih[:, :Z], w_ih[:, Z:2 * Z], w_ih[:, 2 * Z:]
+    top = L - 1
+    return QTGInference(
+        config=config,
+        enc=dense("enc", len(config.encoder_sizes)),
+        z_product=ro(np.concatenate([half_rz((w1 - w2).T), half_rz(w1.T)], axis=1)),
+        target_product=aug(half_rz(np.concatenate([w2.T, w3.T], axis=0)), b_ih_rz(0)),
+        upper_ih=tuple(aug(half_rz(params[f"gru.weight_ih_l{k}"].T), b_ih_rz(k)) for k in range(1, L)),
+        lower_hh=tuple(aug(half_rz(params[f"gru.weight_hh_l{k}"].T), b_hh_n(k)) for k in range(L - 1)),
+        h_product=aug(np.concatenate([half_rz(params[f"gru.weight_hh_l{top}"].T), params["vel.weight"].T], axis=1),
+                      np.concatenate([b_hh_n(top), params["vel.bias"]])),
+        dec=dense("dec", len(config.decoder_sizes) + 1))
+
+
+def _augmented(B: int, n: int, dtype) -> tuple[np.ndarray, np.ndarray]:
+    """A buffer ``(B, n + 1)`` whose last column is 1, and the view of its first ``n`` columns."""
+    a = np.empty((B, n + 1), dtype=dtype)
+    a[:, n] = 1
+    return a, a[:, :n]
+
+
+def rollout_inference(model: QTGInference, past, target, T: int | None = None) -> np.ndarray:
+    """Same result as :func:`rollout_forward` (up to rounding), without caches, for deployment and benchmarks.
+
+    Parameters
+    ----------
+    model : QTGInference
+        From :func:`prepare_inference`.
+    past, target : ndarray (B, 2, P)
+        Same dtype as the model's weights.
+    T : int, optional
+
+    Returns
+    -------
+    poses : ndarray (B, T, P)
+
+    Notes
+    -----
+    Every per-step array is allocated once per call, with its views, and written in place (``out=``); the
+    inputs of the dense layers carry a constant 1 column so that the bias rows of the augmented weights add
+    the biases. Per step (default sizes): 6 matrix products and 19 element-wise calls (spec/qtg.md §6).
+    """
+    if not isinstance(model, QTGInference):
+        raise ValueError(f"model: expected a QTGInference from prepare_inference, got {type(model).__name__}")
+    config, dtype = model.config, model.dtype
+    past, target = check_context(past, target, config, dtype)
+    T = check_length(T, config)
+    B, P, Z, H, L = past.shape[0], config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
+    H2, H3 = 2 * H, 3 * H
+    matmul, maximum, multiply, add, subtract, tanh = np.matmul, np.maximum, np.multiply, np.add, np.subtract, np.tanh
+    slope = dtype.type(config.negative_slope)
+
+    def encode_(x):  # context poses only
+        for a in model.enc:
+            x = matmul(x, a[:-1])
+            add(x, a[-1], out=x)
+            maximum(x, multiply(x, slope), out=x)
+        return x
+
+    ctx = encode_(np.concatenate([past[:, 0], target[:, 0], target[:, 1]], axis=0))  # (3B, Z)
+    z_prev, e1, e2 = ctx[:B], ctx[B:2 * B], ctx[2 * B:]
+    targets = np.concatenate([e1, e2 - e1, np.ones((B, 1), dtype=dtype)], axis=1)  # (B, 2Z + 1)
+    k = targets @ model.target_product  # (B, 3H): k = W2 e1 + W3 (e2 − e1) + b_ih0, constant over the transition
+    c = k - z_prev @ model.z_product[:, H3:]  # (B, 3H): c_t = k − W1 z_{t−1}
+
+    # buffers and their views, allocated once; the loop only calls NumPy kernels with out=
+    frames = np.empty((T + 1, B, P + 1), dtype=dtype)  # [p_t | 1], t = 0 … T
+    frames[..., P] = 1
+    frames[0, :, :P] = past[:, 1]
+    layers = []  # (augmented weight, pre-activation, scratch, output view, next input) of the LeakyReLU layers
+    n_enc = len(model.enc)
+    dense_in = [_augmented(B, a.shape[0] - 1, dtype) for a in model.enc[1:] + model.dec]
+    z = np.empty((B, Z), dtype=dtype)
+    for i, a in enumerate(model.enc + model.dec[:-1]):
+        nxt, dst = (z, z) if i == n_enc - 1 else dense_in[i]
+        layers.append((a, np.empty((B, a.shape[1]), dtype=dtype), np.empty((B, a.shape[1]), dtype=dtype), dst, nxt))
+    enc_layers, dec_layers = layers[:n_enc], layers[n_enc:]
+    dec_first = dense_in[n_enc - 1]  # [z_t + v_t | 1] and its first Z columns
+    dec_last = model.dec[-1]
+    slopes = {m: np.full((B, m), slope, dtype=dtype) for m in {lay[1].shape[1] for lay in layers}}
+    zz = np.empty((B, 6 * H), dtype=dtype)  # [(W1 − W2) z_t | W1 z_t] (r, z halved)
+    zz_a, zz_b = zz[:, :H3], zz[:, H3:]
+    hs = [_augmented(B, H, dtype) for _ in range(L)]  # GRU states [s | 1], start at 0
+    for h_aug, _ in hs:
+        h_aug[:, :H] = 0
+    gi = [np.empty((B, H3), dtype=dtype) for _ in range(L)]
+    gh = [np.empty((B, H3), dtype=dtype) for _ in range(L - 1)]
+    hm = np.empty((B, model.h_product.shape[1]), dtype=dtype)  # [W_hh s + (0, 0, b_hn) | W_v s + b_v], top layer
+    hm[...] = model.h_product[-1]  # s = 0: the bias row
+    gh.append(hm[:, :H3])
+    velocity = hm[:, H3:]
+    n, d = np.empty((B, H), dtype=dtype), np.empty((B, H), dtype=dtype)
+    half = np.full((B, H2), 0.5, dtype=dtype)
+    cells = [(g_i[:, :H2], g_h[:, :H2], g_h[:, H2:], g_i[:, H2:], g_i[:, :H], g_i[:, H:H2], h_aug, h)
+             for g_i, g_h, (h_aug, h) in zip(gi, gh, hs)]
+
+    def dense(x, lays):  # LeakyReLU dense layers (0 <= slope < 1: max(a, slope a)); returns the last buffer
+        for a, pre, tmp, dst, nxt in lays:
+            matmul(x, a, out=pre)
+            multiply(pre, slopes[pre.shape[1]], out=tmp)
+            maximum(pre, tmp, out=dst)
+            x = nxt
+        return x
+
+    for t in range(T):
+        dense(frames[t], enc_layers)  # z_t = E(p_t)
+        matmul(z, model.z_product, out=zz)
+        add(zz_a, c, out=gi[0])  # W_ih x_t + b_ih (+ b_hr, b_hz), r and z halved
+        subtract(k, zz_b, out=c)  # c_{t+1} = k − W1 z_t
+        for layer, (rz, gh_rz, gh_n, gi_n, r, u, h_aug, h) in enumerate(cells):
+            if layer:
+                matmul(hs[layer - 1][0], model.upper_ih[layer - 1], out=gi[layer])
+            if layer < L - 1:
+                matmul(h_aug, model.lower_hh[layer], out=gh[layer])
+            add(rz, gh_rz, out=rz)  # halved pre-activations of r | u
+            tanh(rz, out=rz)
+            multiply(rz, half, out=rz)
+            add(rz, half, out=rz)  # r | u = ½ + ½ tanh(a/2) = σ(a)
+            multiply(gh_n, r, out=n)  # r (W_hn s + b_hn)
+            add(n, gi_n, out=n)
+            tanh(n, out=n)
+            subtract(h, n, out=d)
+            multiply(d, u, out=d)
+            add(d, n, out=h)  # s' = n + u (s − n) = (1 − u) n + u s
+        matmul(hs[-1][0], model.h_product, out=hm)  # v_t and the next step's W_hh s (top layer)
+        add(velocity, z, out=dec_first[1])  # z_t + v_t
+        x = dense(dec_first[0], dec_layers)
+        matmul(x, dec_last, out=frames[t + 1, :, :P])  # p_{t+1}
+    return np.ascontiguousarray(frames[1:, :, :P].transpose(1, 0, 2))  # (B, T, P)

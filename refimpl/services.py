@@ -1,0 +1,262 @@
+"""The work behind ``refimpl``'s commands and its demo (spec/cli.md): train, load, evaluate, export, verify.
+
+Both :mod:`refimpl.cli` and :mod:`refimpl.demo` call these; they know models only through
+:mod:`refimpl.registry` (a :class:`~refimpl.registry.ModelSpec` from the model's recipe) and tasks only through
+the task module the spec names. ``deploy`` (onnx, onnxruntime) is imported lazily, inside the functions that need
+it, and its absence is a :class:`~refimpl.errors.MissingDependency` with the install hint.
+
+Shape legend: B batch, T transition frames, P pose size.
+"""
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
+from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
+from refimpl.transitions import SAMPLE_DIR
+
+__all__ = ["SAMPLE_DIR", "blas_threads", "read_motion", "load_trained", "train_model", "network_methods",
+           "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata"]
+
+
+@contextlib.contextmanager
+def blas_threads(n: int | None):
+    """Limit the BLAS thread pool to ``n`` threads inside the block (threadpoolctl, when installed).
+
+    QTG-sized matrices are small: one thread is the fastest setting, and much faster than two on a busy
+    machine. ``None`` or 0 leaves the library default.
+    """
+    if not n:
+        yield
+        return
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        yield
+        return
+    with threadpool_limits(limits=int(n), user_api="blas"):
+        yield
+
+
+def read_motion(path, *, fps: float | None = None, layout: str = "cmu"):
+    """Read a ``.bvh`` or exp-map ``.txt`` file into a :class:`~refimpl.motion.Motion`.
+
+    Raises
+    ------
+    BadInputError
+        Missing, unreadable or malformed file, or an unknown suffix.
+    """
+    from refimpl.bvh import read_bvh
+    from refimpl.expmap import read_expmap
+
+    p = existing_file(path)
+    frame_time = None if fps is None else 1.0 / fps
+    with reading(p):
+        if p.suffix.lower() == ".bvh":
+            return read_bvh(p, frame_time=frame_time)
+        if p.suffix.lower() == ".txt":
+            return read_expmap(p, layout=layout, frame_time=frame_time)
+    raise BadInputError(f"{p}: unknown motion file type {p.suffix!r} (expected .bvh or an exp-map .txt)")
+
+
+def load_trained(path) -> TrainedModel:
+    """Read a checkpoint written by ``refimpl train`` (or :func:`train_model`).
+
+    Raises
+    ------
+    BadInputError
+        Missing or damaged file, not a training checkpoint, unknown model, or missing task statistics
+        (transition: no normalisation statistics).
+    """
+    from refimpl.checkpoint import load_checkpoint
+
+    p = existing_file(path)
+    with reading(p):
+        arrays, meta = load_checkpoint(p)
+    if meta.get("format") != "refimpl.train/1":
+        raise BadInputError(f"{p}: not a refimpl training checkpoint (format {meta.get('format')!r})")
+    spec = MODELS.get(meta.get("model"))
+    if spec is None:
+        raise BadInputError(f"{p}: unknown model {meta.get('model')!r}; known: {sorted(MODELS)}")
+    cfg = dict(meta.get("model_config") or {})
+    task_of(spec).check_checkpoint(cfg, p)
+    names = {f.name for f in dataclasses.fields(spec.config_type)}
+    try:
+        config = spec.config_type(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in cfg.items()
+                                     if k in names})
+    except (TypeError, ValueError) as exc:
+        raise BadInputError(f"{p}: bad model config in the checkpoint: {exc}") from exc
+    params = {k[len("param."):]: np.asarray(v) for k, v in arrays.items() if k.startswith("param.")}
+    return TrainedModel(spec=spec, config=config, params=params,
+                        root_mean=np.asarray(cfg["root_mean"], dtype=np.float64),
+                        root_std=np.asarray(cfg["root_std"], dtype=np.float64),
+                        fps=float(cfg.get("fps", 30.0)),
+                        transition_length=int(cfg.get("transition_length", config.transition_length)),
+                        meta=meta, path=str(p))
+
+
+def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: int, batch_size: int = 32,
+                lr: float | None = None, betas=None, clip_norm: float | None = None, seed: int = 0,
+                dtype=np.float32, resume: bool = False, checkpoint_every: int = 500,
+                validate_every: int | None = None, progress_every: int = 100,
+                progress: Callable[[str], None] | None = None):
+    """Train ``spec``'s network into ``out_dir`` (``checkpoint.npz``, ``loss.csv``, ``loss_val.csv``).
+
+    ``lr`` and ``betas`` default to the recipe's paper values (``spec.optim``; QTG: 1e-4, (0.5, 0.9)). The
+    checkpoint's model config also holds what the task needs later (transition: the training windows' root
+    statistics, frame rate and T), so that ``eval``, ``export`` and ``generate`` need nothing else.
+
+    Returns
+    -------
+    TrainResult
+    """
+    from refimpl.train import TrainConfig, train
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    extra = dict(task_of(spec).checkpoint_extra(train_ds), representation=spec.representations[0])
+    adapter = spec.make_adapter(train_ds, val_ds, config, dtype, extra)
+    optim = dataclasses.replace(spec.optim, lr=spec.optim.lr if lr is None else lr,
+                                betas=tuple(spec.optim.betas if betas is None else betas), clip_norm=clip_norm)
+    tc = TrainConfig(steps=steps, batch_size=batch_size, seed=seed, checkpoint_path=str(out_dir / "checkpoint.npz"),
+                     checkpoint_every=checkpoint_every, log_path=str(out_dir / "loss.csv"),
+                     progress_every=progress_every, validate_every=validate_every)
+    kw = {} if progress is None else {"progress": progress}
+    return train(adapter, optim, tc, resume=resume, **kw)
+
+
+def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict:
+    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``)."""
+    methods = {}
+    if model is not None:
+        methods[model.spec.name] = model.spec.make_method(model)
+    if onnx_dir is not None:
+        name = model.spec.name if model is not None else _onnx_model_name(onnx_dir)
+        methods[f"{name}_onnx"] = onnx_method(onnx_dir)
+    return methods
+
+
+def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition") -> dict:
+    """The task's protocol on ``test_ds`` for the network (NumPy, and onnxruntime from ``onnx_dir``) and the
+    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`)."""
+    mod = task_of(model.spec if model is not None else task)
+    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps))
+
+
+def _deploy_models(what: str):
+    try:
+        import deploy.models
+    except ImportError as exc:
+        raise MissingDependency(f"{what} {DEPLOY_HINT} ({exc})") from exc
+    return deploy.models
+
+
+def _onnx_model_name(onnx_dir) -> str:
+    d = Path(onnx_dir)
+    if not d.is_dir():
+        raise BadInputError(f"{d}: no such folder of ONNX models")
+    models = _deploy_models("the ONNX backend")
+    with reading(d):
+        return models.model_name_of_dir(d)
+
+
+def _open_runtime(onnx_dir, intra_op_threads: int = 1):
+    d = Path(onnx_dir)
+    if not d.is_dir():
+        raise BadInputError(f"{d}: no such folder of ONNX models")
+    models = _deploy_models("the ONNX backend")
+    with reading(d):
+        return models.runtime_for_dir(d, intra_op_threads=intra_op_threads)
+
+
+def onnx_method(onnx_dir, intra_op_threads: int = 1) -> Callable:
+    """``f(past, target, T) -> poses`` running the exported models of ``onnx_dir`` in onnxruntime.
+
+    The runtime is the one of the model named in the files' metadata (``deploy.models.runtime_for_dir``). The
+    models standardise inside the graph (exported by :func:`export_onnx`), so ``f`` takes and returns raw poses
+    like the NumPy methods; output quaternions are normalised to unit length.
+    """
+    from refimpl.transitions import join_pose, split_pose
+
+    runtime = _open_runtime(onnx_dir, intra_op_threads)
+
+    def network_onnx(past, target, T):
+        out = np.asarray(runtime.transition(np.asarray(past, np.float32), np.asarray(target, np.float32), int(T)),
+                         dtype=np.float64)  # (B, T, P)
+        root, quats = split_pose(out)
+        quats = quats / np.maximum(np.linalg.norm(quats, axis=-1, keepdims=True), 1e-12)
+        return join_pose(root, quats)
+
+    return network_onnx
+
+
+def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
+    """Export ``model`` with its exporter (``deploy.models.EXPORTERS[spec.exporter]``) to validated ONNX files
+    ``<name>_<role>.onnx`` in ``out_dir`` (QTG: ``init``, ``step``, ``rollout``; standardisation inside the graphs,
+    so they take and return raw poses).
+
+    ``options``: ``mode`` (rollout graph: ``unrolled``, ``loop``, ``scan``; default ``unrolled``), ``dtype``
+    (default float32), ``T`` (default: the model's).
+
+    Returns
+    -------
+    dict role -> Path
+    """
+    if model.spec.exporter is None:
+        raise UsageError(f"model {model.spec.name!r} has no ONNX exporter")
+    entry = _deploy_models("ONNX export").exporter(model.spec.exporter)
+    kw = dict(model.spec.export_inputs(model)) if model.spec.export_inputs is not None else {}
+    mode, dtype, T = options.pop("mode", "unrolled"), options.pop("dtype", np.float32), options.pop("T", None)
+    if T:
+        kw["T"] = T
+    return entry.export_dir(model.params, model.config, Path(out_dir), dtype=dtype, mode=mode, **kw, **options)
+
+
+def verify_onnx(model: TrainedModel, onnx_dir, past, target, T: int | None = None) -> dict:
+    """Compare onnxruntime with the NumPy model on raw context poses ``past, target (B, 2, P)``.
+
+    Both paths produce raw (de-standardised) poses before any quaternion normalisation: NumPy the recipe's
+    ``reference_outputs`` (QTG: :func:`refimpl.models.qtg_fast.rollout_forward` in the parameters' dtype),
+    onnxruntime the ``rollout`` model and the ``init`` + ``step`` loop.
+
+    Returns
+    -------
+    dict ``{"rollout": max |Δ|, "step_loop": max |Δ|, "ok": bool}``; ``ok`` against
+    :data:`refimpl.testing.TOL_ORT_ROLLOUT`.
+    """
+    from refimpl.testing import TOL_ORT_ROLLOUT
+
+    T = int(T or model.transition_length)
+    ref = model.spec.recipe.reference_outputs(model, past, target, T)  # (B, T, P)
+    runtime = _open_runtime(onnx_dir)
+    out = {}
+    ok = True
+    for key, use_rollout in (("rollout", True), ("step_loop", False)):
+        if (use_rollout and runtime.rollout_model is None) or (not use_rollout and runtime.step_model is None):
+            continue
+        got = np.asarray(runtime.transition(np.asarray(past, np.float32), np.asarray(target, np.float32), T,
+                                            use_rollout=use_rollout), dtype=np.float64)
+        diff = np.abs(got - ref)
+        out[key] = float(diff.max())
+        ok &= bool(np.all(diff <= TOL_ORT_ROLLOUT["atol"] + TOL_ORT_ROLLOUT["rtol"] * np.abs(ref)))
+    out["ok"] = ok
+    return out
+
+
+def onnx_metadata(onnx_dir) -> dict:
+    """The metadata of the first ``*_rollout.onnx`` (else ``*_step.onnx``) model in ``onnx_dir``."""
+    d = Path(onnx_dir)
+    files = sorted(d.glob("*_rollout.onnx")) + sorted(d.glob("*_step.onnx"))
+    if not files:
+        raise BadInputError(f"{d}: no exported *_rollout.onnx / *_step.onnx models")
+    try:
+        from deploy.metadata import read_metadata
+    except ImportError as exc:
+        raise MissingDependency(f"the ONNX backend {DEPLOY_HINT}") from exc
+    with reading(files[0]):
+        return read_metadata(str(files[0]))
