@@ -506,3 +506,5 @@ def dq_blend(weights, dqs) -> np.ndarray:
 
 # Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
 dq_from_quat_translation_kernel = _dq_from_quat_translation
+dq_conj_kernel = _dq_conj
+dq_mul_kernel = _dq_mul

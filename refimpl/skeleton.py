@@ -31,9 +31,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from refimpl.dualquat import (_dq_conj, _dq_from_quat_translation, _dq_mul, dq_from_quat_translation, dq_mul,
-                              translation_from_dq)
-from refimpl.quat import (_check_scalar, _finite_output, _quat_mul, _quat_rotate, matrix_from_quat,
+from refimpl.dualquat import (dq_conj_kernel as _dq_conj, dq_from_quat_translation_kernel as _dq_from_quat_translation,
+                              dq_mul_kernel as _dq_mul, dq_from_quat_translation, dq_mul, translation_from_dq)
+from refimpl.quat import (check_scalar as _check_scalar, finite_output as _finite_output,
+                          quat_mul_kernel as _quat_mul, quat_rotate_kernel as _quat_rotate, matrix_from_quat,
                           quat_from_axis_angle, quat_mul, quat_rotate)
 
 __all__ = [

@@ -16,10 +16,10 @@ LAYERS = {
     1: ["refimpl.quat", "refimpl.dualquat"],
     2: ["refimpl.skeleton"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.expmap", "refimpl.skeletons", "refimpl.preprocess",
-        "refimpl.representations", "refimpl.strategies", "refimpl.splines"],  # splines: announced, not landed
-    4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses"],
+        "refimpl.representations", "refimpl.strategies", "refimpl.splines"],
+    4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.schedules"],
     5: ["refimpl.models", "refimpl.models.*"],
-    6: ["refimpl.optim", "refimpl.schedules", "refimpl.checkpoint", "refimpl.train", "refimpl.rigs",
+    6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.train", "refimpl.rigs",
         "refimpl.transitions", "refimpl.baselines", "refimpl.metrics"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.tasks", "refimpl.tasks.*",
         "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services"],

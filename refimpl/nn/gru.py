@@ -616,3 +616,5 @@ def _gru_backward_naive(dy, dh_n, x, h0, params, prefix, num_layers=1, bidirecti
 cell_backward = _cell_backward
 cell_forward = _cell_forward
 input_gates = _input_gates
+gru_forward_naive = _gru_forward_naive
+gru_backward_naive = _gru_backward_naive
