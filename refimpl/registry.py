@@ -91,32 +91,42 @@ class TrainedModel:
     spec : ModelSpec
     config : the model's config dataclass
     params : dict name -> ndarray
-    root_mean, root_std : ndarray (3,)
-        Root-translation statistics of the training windows (the network's input normalisation).
-    fps : float
-        Frame rate of the training windows.
-    transition_length : int
-        T the network was trained for.
     meta : dict
         The checkpoint's metadata.
     path : str
+    extra : dict
+        The checkpoint's whole model config (the network's fields and what its task stored beside them:
+        statistics, representation, frame rate), for tasks and recipes that need more than the fields below.
+    root_mean, root_std : ndarray (3,) or None
+        Transition task: root-translation statistics of the training windows (the network's input
+        normalisation). None for other tasks.
+    fps : float or None
+        Frame rate of the training data, when the task stores it.
+    transition_length : int or None
+        Transition task: T the network was trained for.
+
+    The task module fills the optional fields (``trained_fields(model_config, config)``).
     """
 
     spec: ModelSpec
     config: Any
     params: dict
-    root_mean: np.ndarray
-    root_std: np.ndarray
-    fps: float
-    transition_length: int
-    meta: dict
+    meta: dict = dataclasses.field(default_factory=dict)
     path: str = ""
+    extra: dict = dataclasses.field(default_factory=dict)
+    root_mean: np.ndarray | None = None
+    root_std: np.ndarray | None = None
+    fps: float | None = None
+    transition_length: int | None = None
 
     @property
     def pose_normalization(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(mean (P,), std (P,))`` over the whole pose vector: root statistics, then 0 / 1 for quaternions."""
+        """Transition task: ``(mean (P,), std (P,))`` over the whole pose vector: root statistics, then 0 / 1 for
+        quaternions."""
         from refimpl.transitions import pose_statistics
 
+        if self.root_mean is None:
+            raise ValueError(f"model {self.spec.name!r} has no pose normalisation (not a transition model)")
         return pose_statistics(self.root_mean, self.root_std, self.config.pose_size)
 
 

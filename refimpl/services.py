@@ -92,12 +92,9 @@ def load_trained(path) -> TrainedModel:
     except (TypeError, ValueError) as exc:
         raise BadInputError(f"{p}: bad model config in the checkpoint: {exc}") from exc
     params = {k[len("param."):]: np.asarray(v) for k, v in arrays.items() if k.startswith("param.")}
-    return TrainedModel(spec=spec, config=config, params=params,
-                        root_mean=np.asarray(cfg["root_mean"], dtype=np.float64),
-                        root_std=np.asarray(cfg["root_std"], dtype=np.float64),
-                        fps=float(cfg.get("fps", 30.0)),
-                        transition_length=int(cfg.get("transition_length", config.transition_length)),
-                        meta=meta, path=str(p))
+    task = task_of(spec)
+    fields = task.trained_fields(cfg, config) if hasattr(task, "trained_fields") else {}
+    return TrainedModel(spec=spec, config=config, params=params, meta=meta, path=str(p), extra=cfg, **fields)
 
 
 def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: int, batch_size: int = 32,
@@ -175,24 +172,17 @@ def _open_runtime(onnx_dir, intra_op_threads: int = 1):
 
 
 def onnx_method(onnx_dir, intra_op_threads: int = 1) -> Callable:
-    """``f(past, target, T) -> poses`` running the exported models of ``onnx_dir`` in onnxruntime.
+    """The network of the exported models in ``onnx_dir``, run in onnxruntime, in its task's method interface
+    (transition: ``f(past, target, T) -> poses``; :func:`refimpl.tasks.transition.onnx_method`).
 
-    The runtime is the one of the model named in the files' metadata (``deploy.models.runtime_for_dir``). The
-    models standardise inside the graph (exported by :func:`export_onnx`), so ``f`` takes and returns raw poses
-    like the NumPy methods; output quaternions are normalised to unit length.
+    The runtime is the one of the model named in the files' metadata (``deploy.models.runtime_for_dir``); the
+    task is the one that model is registered for.
     """
-    from refimpl.transitions import join_pose, split_pose
-
-    runtime = _open_runtime(onnx_dir, intra_op_threads)
-
-    def network_onnx(past, target, T):
-        out = np.asarray(runtime.transition(np.asarray(past, np.float32), np.asarray(target, np.float32), int(T)),
-                         dtype=np.float64)  # (B, T, P)
-        root, quats = split_pose(out)
-        quats = quats / np.maximum(np.linalg.norm(quats, axis=-1, keepdims=True), 1e-12)
-        return join_pose(root, quats)
-
-    return network_onnx
+    name = _onnx_model_name(onnx_dir)
+    spec = MODELS.get(name)
+    if spec is None:
+        raise BadInputError(f"{onnx_dir}: exported model {name!r} is not a known model; known: {sorted(MODELS)}")
+    return task_of(spec).onnx_method(_open_runtime(onnx_dir, intra_op_threads))
 
 
 def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
@@ -217,35 +207,19 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     return entry.export_dir(model.params, model.config, Path(out_dir), dtype=dtype, mode=mode, **kw, **options)
 
 
-def verify_onnx(model: TrainedModel, onnx_dir, past, target, T: int | None = None) -> dict:
-    """Compare onnxruntime with the NumPy model on raw context poses ``past, target (B, 2, P)``.
-
-    Both paths produce raw (de-standardised) poses before any quaternion normalisation: NumPy the recipe's
-    ``reference_outputs`` (QTG: :func:`refimpl.models.qtg_fast.rollout_forward` in the parameters' dtype),
-    onnxruntime the ``rollout`` model and the ``init`` + ``step`` loop.
+def verify_onnx(model: TrainedModel, onnx_dir, *inputs, **options) -> dict:
+    """Compare onnxruntime with the NumPy model on the recipe's inputs (``recipe.verify_onnx(model, runtime,
+    *inputs, **options)``; QTG: raw context poses ``past, target (B, 2, P)`` and ``T``,
+    :func:`refimpl.recipes.qtg.verify_onnx`).
 
     Returns
     -------
-    dict ``{"rollout": max |Δ|, "step_loop": max |Δ|, "ok": bool}``; ``ok`` against
-    :data:`refimpl.testing.TOL_ORT_ROLLOUT`.
+    dict ``{<graph>: max |Δ|, ..., "ok": bool}``
     """
-    from refimpl.testing import TOL_ORT_ROLLOUT
-
-    T = int(T or model.transition_length)
-    ref = model.spec.recipe.reference_outputs(model, past, target, T)  # (B, T, P)
-    runtime = _open_runtime(onnx_dir)
-    out = {}
-    ok = True
-    for key, use_rollout in (("rollout", True), ("step_loop", False)):
-        if (use_rollout and runtime.rollout_model is None) or (not use_rollout and runtime.step_model is None):
-            continue
-        got = np.asarray(runtime.transition(np.asarray(past, np.float32), np.asarray(target, np.float32), T,
-                                            use_rollout=use_rollout), dtype=np.float64)
-        diff = np.abs(got - ref)
-        out[key] = float(diff.max())
-        ok &= bool(np.all(diff <= TOL_ORT_ROLLOUT["atol"] + TOL_ORT_ROLLOUT["rtol"] * np.abs(ref)))
-    out["ok"] = ok
-    return out
+    verify = getattr(model.spec.recipe, "verify_onnx", None)
+    if verify is None:
+        raise UsageError(f"model {model.spec.name!r} has no ONNX check")
+    return verify(model, _open_runtime(onnx_dir), *inputs, **options)
 
 
 def onnx_metadata(onnx_dir) -> dict:

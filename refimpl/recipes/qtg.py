@@ -234,3 +234,30 @@ def reference_outputs(model, past, target, T: int) -> np.ndarray:
     tn = normalize_poses(np.asarray(target, np.float64), model.root_mean, model.root_std).astype(dtype)
     ref, _ = rollout_forward(model.params, pn, tn, T, model.config)
     return denormalize_poses(ref.astype(np.float64), model.root_mean, model.root_std)  # (B, T, P)
+
+
+def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
+    """Compare an exported QTG's onnxruntime outputs with :func:`reference_outputs` on raw context poses
+    ``past, target (B, 2, P)``: the ``rollout`` model and the ``init`` + ``step`` loop.
+
+    Returns
+    -------
+    dict ``{"rollout": max |Δ|, "step_loop": max |Δ|, "ok": bool}``; ``ok`` against
+    :data:`refimpl.testing.TOL_ORT_ROLLOUT`.
+    """
+    from refimpl.testing import TOL_ORT_ROLLOUT
+
+    T = int(T or model.transition_length)
+    ref = reference_outputs(model, past, target, T)  # (B, T, P)
+    out = {}
+    ok = True
+    for key, use_rollout in (("rollout", True), ("step_loop", False)):
+        if (use_rollout and runtime.rollout_model is None) or (not use_rollout and runtime.step_model is None):
+            continue
+        got = np.asarray(runtime.transition(np.asarray(past, np.float32), np.asarray(target, np.float32), T,
+                                            use_rollout=use_rollout), dtype=np.float64)
+        diff = np.abs(got - ref)
+        out[key] = float(diff.max())
+        ok &= bool(np.all(diff <= TOL_ORT_ROLLOUT["atol"] + TOL_ORT_ROLLOUT["rtol"] * np.abs(ref)))
+    out["ok"] = ok
+    return out

@@ -37,11 +37,12 @@ from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_rotate
 from refimpl.skeleton import Skeleton
 from refimpl.transitions import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                  build_transition_datasets, declared_rate, heading_from_root, join_pose, load_source,
-                                 make_windows, sample_sources, shared_sources, window_to_world)
+                                 make_windows, sample_sources, shared_sources, split_pose, window_to_world)
 
 __all__ = [
     "NAME", "add_train_options", "resolve_data", "source_for_file", "build_datasets", "train_datasets",
-    "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "methods", "evaluate",
+    "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
+    "methods", "evaluate",
     "print_results", "write_results", "Transition", "make_transition", "with_end_sites", "render_transition",
     "clip_for", "random_context",
 ]
@@ -173,6 +174,31 @@ def check_checkpoint(model_config: Mapping, path) -> None:
     if "root_mean" not in model_config or "root_std" not in model_config:
         raise BadInputError(f"{path}: the checkpoint has no normalisation statistics (root_mean/root_std); "
                             "train it with `refimpl train`")
+
+
+def trained_fields(model_config: Mapping, config) -> dict:
+    """The :class:`~refimpl.registry.TrainedModel` fields of this task from a checkpoint's model config: root
+    statistics, frame rate and T."""
+    return {"root_mean": np.asarray(model_config["root_mean"], dtype=np.float64),
+            "root_std": np.asarray(model_config["root_std"], dtype=np.float64),
+            "fps": float(model_config.get("fps", 30.0)),
+            "transition_length": int(model_config.get("transition_length", config.transition_length))}
+
+
+def onnx_method(runtime) -> Callable:
+    """``f(past, target, T) -> poses`` running an exported transition model's runtime (``runtime.transition``).
+
+    The models standardise inside the graph, so ``f`` takes and returns raw poses like the NumPy methods; output
+    quaternions are normalised to unit length.
+    """
+    def network_onnx(past, target, T):
+        out = np.asarray(runtime.transition(np.asarray(past, np.float32), np.asarray(target, np.float32), int(T)),
+                         dtype=np.float64)  # (B, T, P)
+        root, quats = split_pose(out)
+        quats = quats / np.maximum(np.linalg.norm(quats, axis=-1, keepdims=True), 1e-12)
+        return join_pose(root, quats)
+
+    return network_onnx
 
 
 # ----------------------------------------------------------------------------------------------------------------
