@@ -308,8 +308,9 @@ def simplify_translations(motion: Motion, tolerance: float = TRANSLATION_TOLERAN
                           varying: str = "keep") -> Motion:
     """Rotations + root trajectory from a motion with per-frame translations (spec/data.md §2.1).
 
-    1. While the root has exactly one child and that child's translation varies (beyond ``tolerance``),
-       :func:`reroot_at_child` (the root motion is on the child of a static root, as in Bandai Namco);
+    1. While the root is static (position and rotation constant within ``tolerance``) and has exactly one
+       child whose translation varies (beyond ``tolerance``), :func:`reroot_at_child` (the root motion is on
+       the child of a static root, as in Bandai Namco; only a constant point is dropped);
     2. :func:`fold_constant_translations` (Blender exports: constant translations with float noise).
 
     Parameters
@@ -331,7 +332,9 @@ def simplify_translations(motion: Motion, tolerance: float = TRANSLATION_TOLERAN
     while True:
         skel = motion.skeleton
         kids = skel.children[0]
-        if (len(kids) == 1 and kids[0] in motion.translated_joints
+        static_root = (_spread_ok(motion.root_positions.astype(np.float64), tol)
+                       and _spread_ok(motion.rotations[:, 0, :].astype(np.float64), tol))
+        if (static_root and len(kids) == 1 and kids[0] in motion.translated_joints
                 and not _spread_ok(motion.translations[:, kids[0], :].astype(np.float64), tol)):
             motion = reroot_at_child(motion)
         else:

@@ -359,8 +359,16 @@ Frame Time: 0.1
     raw = read_bvh(_write(tmp_path, varying), translations="keep")
     assert raw.translated_joint_names == ("a",)
     assert_close(raw.translations[:, 1], [[0.5, 0, 0], [0.7, 0, 0]], atol=0)
-    # the only child of the root moves: re-rooted at it, same world positions, no translations left
+    # the root rotates (not static): no re-rooting, the varying translation is kept per frame
     auto = read_bvh(_write(tmp_path, varying))
+    assert auto.translated_joint_names == ("a",)
+    assert_close(auto.positions(), raw.positions(), atol=0)
+    with pytest.raises(ValueError, match=r"joint 'a' has translations that vary"):
+        read_bvh(_write(tmp_path, varying), translations="rotations")
+    # a static root whose only child moves: re-rooted at it, same world positions, no translations left
+    static = varying.replace("90 0.5", "0 0.5").replace("45 0.7", "0 0.7")
+    raw = read_bvh(_write(tmp_path, static), translations="keep")
+    auto = read_bvh(_write(tmp_path, static), translations="rotations")
     assert auto.skeleton.names == ("a",) and auto.translated_joints == ()
     assert_close(auto.positions()[:, 0], raw.positions()[:, 1], atol=1e-12)
     m2 = read_bvh(_write(tmp_path, varying.replace("JOINT a", "JOINT b\n{\nOFFSET 0 1 0\n}\nJOINT a")),
