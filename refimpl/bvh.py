@@ -318,16 +318,14 @@ def _read_text(path) -> str:
     return text
 
 
+_MOTION_LINE_RE = re.compile(r"^[^\S\n]*motion[^\S\n]*$", re.IGNORECASE | re.MULTILINE)
+
+
 def _split_sections(text: str, where: str):
-    """Return (all lines, index of the ``MOTION`` line or None)."""
+    """Return (all lines, index of the first ``MOTION`` line or None); one regex scan, no per-line loop."""
     lines = text.split("\n")
-    motion_at = None
-    for i, line in enumerate(lines):
-        s = line.strip()
-        if s.upper() == "MOTION":
-            motion_at = i
-            break
-    return lines, motion_at
+    m = _MOTION_LINE_RE.search(text)
+    return lines, (None if m is None else text.count("\n", 0, m.start()))
 
 
 def _parse_header(text: str, where: str):

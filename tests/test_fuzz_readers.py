@@ -107,7 +107,8 @@ def _fuzz_one(name, data, tmpdir: Path, exclude=(), check_memory=False):
     mutators = sorted(k for k in t.mutators if k not in exclude)
     mname = d.choice(mutators)
     payload, expectation = F.mutate(t, seed, mname, d)
-    ref = _reference(name, seed_name, str(tmpdir)) if expectation in ("same", "reject_or_same") else None
+    ref = (_reference(name, seed_name, str(tmpdir)) if expectation in ("same", "reject_or_same", "same_positions")
+           else None)
     if check_memory and not tracemalloc.is_tracing():
         tracemalloc.start()
     try:
