@@ -9,22 +9,26 @@ Reading
   Zrotation`` (each at most once). Rotations are in degrees and compose in the listed order,
   ``R = R_c0 · R_c1 · R_c2`` (so ``Zrotation Xrotation Yrotation`` is Euler order ``"zxy"``); missing rotation
   axes are 0.
-* Root position = ROOT ``OFFSET`` + position channels (missing ones 0).
-* Position channels on a non-root joint: the joint's translation is ``OFFSET + channels``. A ``Motion`` has
-  one offset per joint, so when the channel values are constant over the file (within 1e-9 relative) they are
-  folded into the offset; otherwise ``ValueError`` unless ``nonroot_translation="mean"`` (fold the mean and
-  drop the variation, which is lossy).
+* Position channels replace the OFFSET (as Blender's importer reads them): a joint with position channels has
+  their values (missing axes 0) as its local translation, the ROOT as its world position (its OFFSET when it
+  has none). Non-root joints with position channels become per-frame ``Motion.translations``; by default
+  (``translations="auto"``) the motion is then simplified (:func:`refimpl.motion.simplify_translations`:
+  re-rooted at the moving only child of a static root, constant translations folded into the offsets).
 * End Sites become joints with identity rotation, named ``<parent>_end`` and listed in
   ``Skeleton.end_sites``; a JOINT without CHANNELS gets identity rotation too.
 * The quaternions of every joint are made continuous over time (``quat_fix``).
 * ``frame_time`` overrides the declared ``Frame Time`` (the CMU salsa files declare 120 fps but are 60 fps).
-* Malformed input raises ``ValueError("<file>:<line>: <problem>")``. The numbers are parsed in one NumPy call
-  on the motion block; nothing is allocated from the declared frame count before the data has been counted.
+* Malformed input raises ``ValueError("<file>:<line>: <problem>")``: each frame line must hold exactly the
+  declared number of values; NUL bytes, duplicate joint names and files beyond ``MAX_JOINTS``, ``MAX_DEPTH``
+  or ``MAX_FRAME_VALUES`` are refused. The hierarchy is tokenised lazily (a hostile one stops at its first
+  error), the numbers are parsed in one NumPy call on the motion block; nothing is allocated from the declared
+  frame count before the data has been counted.
 
 Writing
 -------
 ``write_bvh`` emits the standard syntax (tab indentation, ``End Site`` blocks, ROOT with 6 channels
-``Xposition Yposition Zposition`` + rotations, other joints 3 rotation channels, End Sites none) in the
+``Xposition Yposition Zposition`` + rotations, other joints 3 rotation channels or 6 by ``position_channels``,
+End Sites none) in the
 per-joint Euler orders requested, numbers in fixed-point with ``precision`` decimals, written atomically
 (temporary file, fsync, ``os.replace``).
 
