@@ -94,6 +94,13 @@ class BvhHeader:
         return sum(len(c) for c in self.channels)
 
     @property
+    def translated_joint_names(self) -> tuple:
+        """Names of the non-root joints with position channels (per-frame translations in the file, before
+        :func:`read_bvh` folds or re-roots them; ``Motion.translated_joint_names`` lists what is left)."""
+        return tuple(self.skeleton.names[j] for j, c in enumerate(self.channels)
+                     if j > 0 and any(x.endswith("position") for x in c))
+
+    @property
     def rotation_orders(self) -> tuple:
         """Per joint, the Euler order of its rotation channels (``"zxy"``; ``""`` when it has none).
 

@@ -43,6 +43,7 @@ def test_blender_exported_file_opens_by_default():
     m = read_bvh(BLENDER_SAMPLE)
     assert m.translated_joints == () and m.num_frames == 20
     assert read_bvh(BLENDER_SAMPLE, translations="keep").translated_joint_names == tuple(six[1:])
+    assert header.translated_joint_names == tuple(six[1:])
     orig = read_bvh(CMU)
     idx = [m.skeleton.names.index(n) for n in orig.skeleton.names]
     err = np.abs(m.positions()[:, idx] - orig.positions()[1:21])
