@@ -333,14 +333,28 @@ _MOTION_LINE_RE = re.compile(r"^[^\S\n]*motion[^\S\n]*$", re.IGNORECASE | re.MUL
 
 
 def _split_sections(text: str, where: str):
-    """Return (all lines, index of the first ``MOTION`` line or None); one regex scan, no per-line loop."""
+    """Return (all lines, index of the first ``MOTION`` line or None, its offset in ``text`` or ``len(text)``);
+    one regex scan, no per-line loop."""
     lines = text.split("\n")
     m = _MOTION_LINE_RE.search(text)
-    return lines, (None if m is None else text.count("\n", 0, m.start()))
+    return lines, (None if m is None else text.count("\n", 0, m.start())), (len(text) if m is None else m.start())
+
+
+_NODE_LINE_RE = re.compile(r"^[^\S\n]*(?:root|joint|end[^\S\n]+site)\b", re.IGNORECASE | re.MULTILINE)
+
+
+def _check_joint_count(text: str, end: int, where: str) -> None:
+    """Fast path of the ``MAX_JOINTS`` limit: one regex scan of ``text[:end]`` counting the lines that open a
+    node (the parser checks the exact count too; this lets a huge hierarchy fail before it is parsed)."""
+    for k, m in enumerate(_NODE_LINE_RE.finditer(text, 0, end), start=1):
+        if k > MAX_JOINTS:
+            raise ValueError(f"{where}:{text.count(chr(10), 0, m.start()) + 1}: more than MAX_JOINTS = "
+                             f"{MAX_JOINTS} joints (End Sites included)")
 
 
 def _parse_header(text: str, where: str):
-    lines, motion_at = _split_sections(text, where)
+    lines, motion_at, motion_pos = _split_sections(text, where)
+    _check_joint_count(text, motion_pos, where)
     # the MOTION line is part of the token stream so that a hierarchy cut short before it is reported there
     toks = _Tokens(lines if motion_at is None else lines[:motion_at + 1], where)
     if toks.peek() is None:

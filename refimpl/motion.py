@@ -98,13 +98,14 @@ class Motion:
 
     def _set_translations(self, rot: np.ndarray) -> None:
         skel, num = self.skeleton, self.skeleton.num_joints
-        movable = [j for j in range(1, num) if j not in set(skel.end_sites)]
         given = self.translated_joints
         if self.translations is None:
             if given:
                 raise ValueError(f"translated_joints: {tuple(given)} given without translations")
             object.__setattr__(self, "translated_joints", ())
             return
+        ends = set(skel.end_sites)
+        movable = [j for j in range(1, num) if j not in ends]
         if given is None:
             joints = tuple(movable)
         else:

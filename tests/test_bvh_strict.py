@@ -98,12 +98,19 @@ def test_bvh_truncated_inside_last_row(tmp_path):
 
 # -- pathological hierarchies: refused fast ----------------------------------------------------------------
 
+LIMIT = rf":40002: more than MAX_JOINTS = {MAX_JOINTS} joints"  # the 10001st node line: counted before parsing
+
+
 @pytest.mark.parametrize("kind,n,message", [
-    ("siblings-same-name", 120_000, r":10: duplicate joint name 'A' \(first on line 6\)"),
-    ("nested-same-name", 200_000, r":9: duplicate joint name 'A'"),
-    ("nested", 200_000, rf"nesting deeper than MAX_DEPTH = {MAX_DEPTH}"),
-    ("siblings-end-sites", 12_000, r"duplicate joint name 'A'"),
-    ("siblings-unique", 12_000, rf"more than MAX_JOINTS = {MAX_JOINTS} joints"),
+    ("siblings-same-name", 120_000, LIMIT),
+    ("siblings-same-name", 5_000, r":10: duplicate joint name 'A' \(first on line 6\)"),
+    ("nested-same-name", 200_000, r":30003: more than MAX_JOINTS"),
+    ("nested-same-name", 5_000, r":9: duplicate joint name 'A'"),
+    ("nested", 200_000, r":30003: more than MAX_JOINTS"),
+    ("nested", 1_500, rf"nesting deeper than MAX_DEPTH = {MAX_DEPTH}"),
+    ("siblings-end-sites", 12_000, r"more than MAX_JOINTS"),
+    ("siblings-end-sites", 2_000, r":15: duplicate joint name 'A'"),
+    ("siblings-unique", 12_000, LIMIT),
 ])
 def test_pathological_hierarchies_fail_fast(tmp_path, kind, n, message):
     path = _w(tmp_path, F.pathological_bvh(kind, n))
