@@ -332,12 +332,9 @@ def _read_text(path) -> str:
 _MOTION_LINE_RE = re.compile(r"^[^\S\n]*motion[^\S\n]*$", re.IGNORECASE | re.MULTILINE)
 
 
-def _split_sections(text: str, where: str):
-    """Return (all lines, index of the first ``MOTION`` line or None, its offset in ``text`` or ``len(text)``);
-    one regex scan, no per-line loop."""
-    lines = text.split("\n")
-    m = _MOTION_LINE_RE.search(text)
-    return lines, (None if m is None else text.count("\n", 0, m.start())), (len(text) if m is None else m.start())
+def _split_sections(text: str, motion):
+    """Return (all lines, index of the ``MOTION`` line found by ``_MOTION_LINE_RE`` or None)."""
+    return text.split("\n"), (None if motion is None else text.count("\n", 0, motion.start()))
 
 
 _NODE_LINE_RE = re.compile(r"^[^\S\n]*(?:root|joint|end[^\S\n]+site)\b", re.IGNORECASE | re.MULTILINE)
@@ -353,8 +350,9 @@ def _check_joint_count(text: str, end: int, where: str) -> None:
 
 
 def _parse_header(text: str, where: str):
-    lines, motion_at, motion_pos = _split_sections(text, where)
-    _check_joint_count(text, motion_pos, where)
+    m = _MOTION_LINE_RE.search(text)
+    _check_joint_count(text, len(text) if m is None else m.start(), where)  # before any per-line object exists
+    lines, motion_at = _split_sections(text, m)
     # the MOTION line is part of the token stream so that a hierarchy cut short before it is reported there
     toks = _Tokens(lines if motion_at is None else lines[:motion_at + 1], where)
     if toks.peek() is None:
