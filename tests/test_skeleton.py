@@ -439,8 +439,9 @@ def _read_any(path: Path):
 
 
 def test_three_fks_agree_on_every_shared_file(shared_data):
-    """spec/kinematics.md §2-3: quaternion FK = matrix FK = current DQ + root on every real file."""
-    files = _all_real_files(shared_data)
+    """spec/kinematics.md §2-3: quaternion FK = matrix FK = current DQ + root on every real CMU file (the 830 Bandai
+    Namco files carry per-joint translations; tests/test_bvh_oracle.py checks their FK against an independent reader)."""
+    files = [p for p in _all_real_files(shared_data) if p.relative_to(shared_data).parts[0] != "bandai_namco_locomotion"]
     assert len(files) == 11 + 12
     for path in files:
         _check_three_fks(_read_any(path))
