@@ -80,6 +80,10 @@ MEM_PER_BYTE = 64
 
 ALLOWED = (ValueError, OSError)
 
+#: a file that must be refused (expectation "reject") and is smaller than 16 MB is refused within this time
+#: (issue #18: pathological hierarchies fail fast); measured with the memory tracer on, which slows parsing
+SLOW_REJECT_SECONDS = 2.0
+
 
 # ------------------------------------------------------------------------------------------------------------
 # drawers: where the random choices come from
@@ -412,10 +416,10 @@ def m_encoding(data, d):
     if enc == "cp1252-names":
         return text.replace("Hips", "Hips\u20ac").replace("J0", "J\u20ac").encode("cp1252", "replace"), "any"
     if enc == "nul-bytes":
-        return b"\x00".join(data[i:i + 1] for i in range(len(data))), "any"
+        return b"\x00".join(data[i:i + 1] for i in range(len(data))), "reject" if len(data) > 1 else "any"
     if enc == "nul-inside":
         i = d.integer(0, len(data))
-        return data[:i] + b"\x00" * d.integer(1, 4) + data[i:], "any"
+        return data[:i] + b"\x00" * d.integer(1, 4) + data[i:], "reject"
     if enc == "invalid-utf8":
         i = d.integer(0, len(data))
         return data[:i] + d.choice([b"\xff", b"\xc3\x28", b"\xed\xa0\x80", b"\xf8\x88\x80\x80\x80"]) + data[i:], "any"
@@ -549,6 +553,153 @@ def m_expmap_width(data, d):
     return b"".join(lines), exp
 
 
+# --- families of issue #18 and #16: strict frame lines, NUL bytes, truncated rows, pathological hierarchies,
+# --- Blender-style 6-channel files
+
+def _data_line_indices(lines: list[bytes]) -> list[int]:
+    """Indices of the frame lines: after ``Frame Time:`` in a BVH, every non-blank line in an exp-map file."""
+    start = 0
+    for i, ln in enumerate(lines):
+        if ln.lstrip().lower().startswith(b"frame time"):
+            start = i + 1
+            break
+    return [i for i in range(start, len(lines)) if lines[i].strip()]
+
+
+def _split_values(body: bytes) -> list[re.Match]:
+    return list(re.finditer(rb"[^\s,]+", body))
+
+
+def m_move_value(data, d):
+    """Move the last value of one frame line to the start of the next (total count unchanged): must be refused
+    (each frame line holds exactly the declared number of values)."""
+    lines = data.splitlines(keepends=True)
+    rows = _data_line_indices(lines)
+    if len(rows) < 2:
+        return data, "any"
+    k = d.integer(0, len(rows) - 2)
+    a, b = rows[k], rows[k + 1]
+    body, nl = lines[a].rstrip(b"\r\n"), lines[a][len(lines[a].rstrip(b"\r\n")):]
+    vals = _split_values(body)
+    if len(vals) < 2:
+        return data, "any"
+    last = vals[-1]
+    sep = b"," if b"," in body else b" "
+    lines[a] = body[:vals[-2].end()] + nl
+    lines[b] = last.group() + sep + lines[b].lstrip(b" \t")
+    if d.boolean():  # the other direction: first value of the next line appended to this one
+        lines = data.splitlines(keepends=True)
+        body_b = lines[b]
+        vals_b = _split_values(body_b)
+        first = vals_b[0]
+        rest = body_b[first.end():].lstrip(b" \t,")
+        lines[a] = body + sep + first.group() + nl
+        lines[b] = rest
+    return b"".join(lines), "reject"
+
+
+def m_nul(data, d):
+    """One NUL byte (or a few) anywhere: must be refused."""
+    i = d.integer(0, len(data))
+    return data[:i] + d.choice([b"\x00", b"\x00\x00", b"0\x00"]) + data[i:], "reject"
+
+
+def m_truncate_row(data, d):
+    """Cut inside a frame line, before its last value (the file ends there): must be refused."""
+    lines = data.splitlines(keepends=True)
+    rows = _data_line_indices(lines)
+    if not rows:
+        return data, "any"
+    k = d.choice(rows)
+    vals = _split_values(lines[k])
+    if len(vals) < 2:
+        return data, "any"
+    cut = d.integer(vals[0].end(), vals[-1].start() - 1)  # at least the first value kept, the last one lost
+    return b"".join(lines[:k]) + lines[k][:cut], "reject"
+
+
+def pathological_bvh(kind: str, n: int) -> bytes:
+    """Small but hostile hierarchies (issue #18): ``n`` siblings all named ``A``, ``n`` nested JOINT blocks
+    (uniquely named or all ``A``), ``n`` same-named siblings each with an End Site, or ``n`` uniquely named
+    siblings. Each must be refused (duplicate names, ``MAX_DEPTH``, ``MAX_JOINTS``) in bounded time."""
+    head = _ROOT_HEAD
+    if kind == "siblings-same-name":
+        body = "JOINT A\n{\nOFFSET 0 1 0\n}\n" * n
+    elif kind == "nested-same-name":
+        body = "JOINT A\n{\nOFFSET 0 1 0\n" * n + "}\n" * n
+    elif kind == "nested":
+        body = "".join(f"JOINT A{i}\n{{\nOFFSET 0 1 0\n" for i in range(n)) + "}\n" * n
+    elif kind == "siblings-end-sites":
+        body = "JOINT A\n{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Yrotation Xrotation\nEnd Site\n{\nOFFSET 0 1 0\n}\n}\n" * n
+    else:  # siblings-unique
+        body = "".join(f"JOINT S{i}\n{{\nOFFSET 0 1 0\n}}\n" for i in range(n))
+    return (head + body + "}\nMOTION\nFrames: 1\nFrame Time: 0.01\n0 0 0 0 0 0\n").encode()
+
+
+def m_pathological(data, d):
+    kind = d.choice(["siblings-same-name", "nested", "nested-same-name", "siblings-end-sites", "siblings-unique"])
+    n = {"siblings-same-name": d.choice([120_000, 5_000]), "nested": d.choice([200_000, 20_000, 1_500]),
+         "nested-same-name": d.choice([200_000, 20_000]),
+         "siblings-end-sites": d.choice([12_000, 2_000]), "siblings-unique": d.choice([20_000, 12_000])}[kind]
+    return pathological_bvh(kind, n), "reject"
+
+
+def blender_style(data: bytes, noise: float, seed: int = 0) -> bytes | None:
+    """The BVH ``data`` rewritten as Blender exports it: ``CHANNELS 6`` (position + rotation) on every joint
+    with rotation channels only, the position channels holding the OFFSET plus uniform noise of amplitude
+    ``noise`` (Blender's float noise). Same motion. None if ``data`` is not a valid BVH."""
+    from refimpl.bvh import read_bvh_header
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "seed.bvh"
+        path.write_bytes(data)
+        try:
+            header = read_bvh_header(path)
+        except ValueError:
+            return None
+    rng = random.Random(seed)
+    text = data.decode("utf-8-sig").replace("\r\n", "\n").replace("\r", "\n")
+    lines = text.split("\n")
+    chans = header.channels
+    widen = [j for j, c in enumerate(chans) if j > 0 and c and all(x.endswith("rotation") for x in c)]
+    # CHANNELS lines in file order correspond to the joints with channels, in joint order
+    with_channels = [j for j, c in enumerate(chans) if c]
+    k = 0
+    for i, ln in enumerate(lines):
+        m = re.match(r"(\s*)CHANNELS\s+(\d+)\s*(.*)$", ln, re.IGNORECASE)
+        if m is None:
+            continue
+        if int(m.group(2)) == 0:
+            continue
+        j = with_channels[k]
+        k += 1
+        if j in widen:
+            lines[i] = f"{m.group(1)}CHANNELS {int(m.group(2)) + 3} Xposition Yposition Zposition {m.group(3)}"
+    start = next(i for i, ln in enumerate(lines) if ln.strip().lower().startswith("frame time")) + 1
+    offsets = header.skeleton.offsets
+    for i in range(start, len(lines)):
+        vals = lines[i].split()
+        if not vals:
+            continue
+        out, col = [], 0
+        for j, c in enumerate(chans):
+            if j in widen:
+                out += [f"{v + rng.uniform(-noise, noise):.6f}" for v in offsets[j]]
+            out += vals[col:col + len(c)]
+            col += len(c)
+        lines[i] = " ".join(out)
+    return "\n".join(lines).encode()
+
+
+def m_blender_style(data, d):
+    """Blender-style 6-channel file of a valid seed: must read by default to the seed's world positions, with no
+    per-frame translation left (the noise folded into the offsets)."""
+    out = blender_style(data, d.choice([0.0, 1e-6, 1e-5]), d.integer(0, 1000))
+    if out is None:
+        return data, "any"
+    return out, "same_positions"
+
+
 TEXT_MUTATORS: dict[str, Callable] = {
     "truncate": m_truncate, "truncate-line": m_truncate_line, "nonfinite": m_nonfinite,
     "non-number": m_non_number, "lenient-number": m_lenient_number, "delete-number": m_delete_number,
@@ -556,11 +707,13 @@ TEXT_MUTATORS: dict[str, Callable] = {
     "swap-lines": m_swap_lines, "insert-junk": m_insert_junk, "overwrite-junk": m_overwrite_junk,
     "bitflip": m_bitflip, "all-junk": m_all_junk, "empty": m_empty, "encoding": m_encoding,
     "line-endings": m_line_endings, "long-token": m_long_token, "splice": m_splice,
+    "move-value": m_move_value, "nul": m_nul, "truncate-row": m_truncate_row,
 }
 BVH_MUTATORS: dict[str, Callable] = dict(TEXT_MUTATORS, **{
     "frames-count": m_frames_count, "channels-count": m_channels_count, "channel-name": m_channel_name,
     "frame-time": m_frame_time, "keyword": m_keyword, "brace": m_brace, "whitespace": m_whitespace,
     "huge-frames": m_huge_frames_little_data, "deep": m_deep, "wide": m_wide,
+    "pathological": m_pathological, "blender-style": m_blender_style,
 })
 EXPMAP_MUTATORS: dict[str, Callable] = dict(TEXT_MUTATORS, **{"row-width": m_expmap_width})
 
@@ -1123,6 +1276,9 @@ def run_case(target: Target, data: bytes, expectation: str, path: Path, referenc
         if not isinstance(exc, ALLOWED):
             return Outcome(kind, kind, msg, peak, seconds)
         names_file = path.name in str(exc) if isinstance(exc, ValueError) else None
+        if expectation == "reject" and seconds > SLOW_REJECT_SECONDS and len(data) < 16 * 2**20:
+            return Outcome(kind, "SlowReject", f"{seconds:.2f} s > {SLOW_REJECT_SECONDS} s; {msg}", peak, seconds,
+                           names_file)
         if check_memory and peak > limit:
             return Outcome(kind, "MemoryBound", f"peak {peak} B > {limit} B; {msg}", peak, seconds, names_file)
         return Outcome(kind, None, msg, peak, seconds, names_file)
@@ -1136,6 +1292,13 @@ def run_case(target: Target, data: bytes, expectation: str, path: Path, referenc
             return Outcome("ok", "AcceptedMalformed", "a malformed file was accepted", peak, seconds)
     if expectation == "same" and target.compare and reference is not None and not same_result(result, reference):
         return Outcome("ok", "ChangedByNeutralEdit", "the result differs from the unmodified file's", peak, seconds)
+    if expectation == "same_positions" and reference is not None:
+        a, b = result.positions(), reference.positions()
+        scale = max(1.0, float(np.max(np.abs(b)))) if b.size else 1.0
+        left = getattr(result, "translated_joints", ())
+        if left or a.shape != b.shape or not np.allclose(a, b, rtol=0, atol=1e-4 * scale):
+            return Outcome("ok", "ChangedByNeutralEdit", "the Blender-style rewrite reads to other positions or "
+                           f"keeps per-frame translations {left}", peak, seconds)
     if expectation == "reject_or_same" and reference is not None and not same_result(result, reference):
         return Outcome("ok", "AcceptedCorrupted", "a damaged file was accepted with content differing from the "
                        "original", peak, seconds)

@@ -9,22 +9,26 @@ Reading
   Zrotation`` (each at most once). Rotations are in degrees and compose in the listed order,
   ``R = R_c0 · R_c1 · R_c2`` (so ``Zrotation Xrotation Yrotation`` is Euler order ``"zxy"``); missing rotation
   axes are 0.
-* Root position = ROOT ``OFFSET`` + position channels (missing ones 0).
-* Position channels on a non-root joint: the joint's translation is ``OFFSET + channels``. A ``Motion`` has
-  one offset per joint, so when the channel values are constant over the file (within 1e-9 relative) they are
-  folded into the offset; otherwise ``ValueError`` unless ``nonroot_translation="mean"`` (fold the mean and
-  drop the variation, which is lossy).
+* Position channels replace the OFFSET (as Blender's importer reads them): a joint with position channels has
+  their values (missing axes 0) as its local translation, the ROOT as its world position (its OFFSET when it
+  has none). Non-root joints with position channels become per-frame ``Motion.translations``; by default
+  (``translations="auto"``) the motion is then simplified (:func:`refimpl.motion.simplify_translations`:
+  re-rooted at the moving only child of a static root, constant translations folded into the offsets).
 * End Sites become joints with identity rotation, named ``<parent>_end`` and listed in
   ``Skeleton.end_sites``; a JOINT without CHANNELS gets identity rotation too.
 * The quaternions of every joint are made continuous over time (``quat_fix``).
 * ``frame_time`` overrides the declared ``Frame Time`` (the CMU salsa files declare 120 fps but are 60 fps).
-* Malformed input raises ``ValueError("<file>:<line>: <problem>")``. The numbers are parsed in one NumPy call
-  on the motion block; nothing is allocated from the declared frame count before the data has been counted.
+* Malformed input raises ``ValueError("<file>:<line>: <problem>")``: each frame line must hold exactly the
+  declared number of values; NUL bytes, duplicate joint names and files beyond ``MAX_JOINTS``, ``MAX_DEPTH``
+  or ``MAX_FRAME_VALUES`` are refused. The hierarchy is tokenised lazily (a hostile one stops at its first
+  error), the numbers are parsed in one NumPy call on the motion block; nothing is allocated from the declared
+  frame count before the data has been counted.
 
 Writing
 -------
 ``write_bvh`` emits the standard syntax (tab indentation, ``End Site`` blocks, ROOT with 6 channels
-``Xposition Yposition Zposition`` + rotations, other joints 3 rotation channels, End Sites none) in the
+``Xposition Yposition Zposition`` + rotations, other joints 3 rotation channels or 6 by ``position_channels``,
+End Sites none) in the
 per-joint Euler orders requested, numbers in fixed-point with ``precision`` decimals, written atomically
 (temporary file, fsync, ``os.replace``).
 
@@ -44,11 +48,18 @@ import numpy as np
 from refimpl._parsing import locate_bad_row
 from refimpl.atomic import atomic_write_text
 
-from refimpl.motion import Motion
+from refimpl.motion import TRANSLATION_TOLERANCE, Motion, simplify_translations
 from refimpl.quat import euler_from_quat, quat_fix, quat_from_euler
 from refimpl.skeleton import Skeleton
 
-__all__ = ["BvhHeader", "read_bvh", "read_bvh_header", "write_bvh"]
+__all__ = ["BvhHeader", "read_bvh", "read_bvh_header", "write_bvh", "MAX_JOINTS", "MAX_DEPTH", "MAX_FRAME_VALUES"]
+
+#: most joints (End Sites included) a BVH hierarchy may declare
+MAX_JOINTS = 10_000
+#: deepest nesting of ROOT/JOINT/End Site blocks (the ROOT is level 1)
+MAX_DEPTH = 1_000
+#: most numbers held per file: frames × max(channels per frame, 4 · joints) (800 MB of float64)
+MAX_FRAME_VALUES = 100_000_000
 
 _CHANNEL_NAMES = {f"{a}{kind}".lower(): f"{a.upper()}{kind}" for a in "xyz" for kind in ("position", "rotation")}
 _FRAMES_RE = re.compile(r"^\s*frames\s*:\s*(\S*)\s*$", re.IGNORECASE)
@@ -83,6 +94,13 @@ class BvhHeader:
         return sum(len(c) for c in self.channels)
 
     @property
+    def translated_joint_names(self) -> tuple:
+        """Names of the non-root joints with position channels (per-frame translations in the file, before
+        :func:`read_bvh` folds or re-roots them; ``Motion.translated_joint_names`` lists what is left)."""
+        return tuple(self.skeleton.names[j] for j, c in enumerate(self.channels)
+                     if j > 0 and any(x.endswith("position") for x in c))
+
+    @property
     def rotation_orders(self) -> tuple:
         """Per joint, the Euler order of its rotation channels (``"zxy"``; ``""`` when it has none).
 
@@ -96,48 +114,62 @@ class BvhHeader:
 # ---------------------------------------------------------------------------------------------------------
 
 class _Tokens:
-    """Whitespace tokens of the hierarchy lines, each with its 1-based line number."""
+    """Whitespace tokens of the hierarchy lines, each with its 1-based line number, split lazily (one line at
+    a time, so a huge hierarchy stops at the first error or limit without tokenising the rest)."""
 
     def __init__(self, lines: list[str], where: str):
         self.where = where
-        self.items: list[tuple[str, int, int]] = []  # (token, line number, position within its line)
         self.lines = lines
-        for n, line in enumerate(lines, start=1):
-            for k, tok in enumerate(line.split()):
-                self.items.append((tok, n, k))
-        self.pos = 0
+        self._line = 0           # index of the next line to split
+        self._buf: list[str] = []  # tokens of the current line not yet consumed
+        self._buf_line = 0       # 1-based line number of the tokens in _buf
+        self.prev_line = 1       # line of the last token consumed
 
     def error(self, line: int, msg: str) -> ValueError:
         return ValueError(f"{self.where}:{line}: {msg}")
 
+    def _fill(self) -> bool:
+        while not self._buf:
+            if self._line >= len(self.lines):
+                return False
+            self._buf = self.lines[self._line].split()
+            self._buf.reverse()
+            self._line += 1
+            self._buf_line = self._line
+        return True
+
     def last_line(self) -> int:
-        return self.items[-1][1] if self.items else 1
+        return max(self.prev_line, 1)
 
     def peek(self) -> tuple[str, int] | None:
-        if self.pos >= len(self.items):
+        if not self._fill():
             return None
-        tok, line, _ = self.items[self.pos]
-        return tok, line
+        return self._buf[-1], self._buf_line
 
     def next(self, expected: str) -> tuple[str, int]:
-        if self.pos >= len(self.items):
+        if not self._fill():
             raise self.error(self.last_line(), f"unexpected end of file, expected {expected} "
                                                "(truncated hierarchy)")
-        tok, line, _ = self.items[self.pos]
-        self.pos += 1
+        tok, line = self._buf.pop(), self._buf_line
+        self.prev_line = line
         return tok, line
+
+    def more_on_line(self, line: int) -> str | None:
+        """The next token if it is on ``line`` (without consuming it)."""
+        if self._buf and self._buf_line == line:
+            return self._buf[-1]
+        return None
 
     def rest_of_line(self) -> tuple[str, int]:
         """Join the remaining tokens of the current line (a joint name); a trailing ``{`` is left unread."""
-        if self.pos >= len(self.items):
-            raise self.error(self.last_line(), "unexpected end of file, expected a joint name")
-        line = self.items[self.pos][1]
-        if self.items[self.pos - 1][1] != line:  # name must be on the keyword's line
-            raise self.error(self.items[self.pos - 1][1], "missing joint name after ROOT/JOINT")
+        line = self.prev_line
+        if not self._buf or self._buf_line != line:  # name must be on the keyword's line
+            if self.peek() is None:
+                raise self.error(self.last_line(), "unexpected end of file, expected a joint name")
+            raise self.error(line, "missing joint name after ROOT/JOINT")
         toks = []
-        while self.pos < len(self.items) and self.items[self.pos][1] == line and self.items[self.pos][0] != "{":
-            toks.append(self.items[self.pos][0])
-            self.pos += 1
+        while self._buf and self._buf[-1] != "{":
+            toks.append(self._buf.pop())
         if not toks:
             raise self.error(line, "missing joint name after ROOT/JOINT")
         return " ".join(toks), line
@@ -172,10 +204,20 @@ def _parse_hierarchy(toks: _Tokens):
     # stack of (joint index, is_end_site, has_offset, line of its opening keyword)
     stack: list[list] = []
 
+    seen: dict[str, int] = {}  # file joint name -> line
+
     def open_node(parent: int, end_site: bool, name: str, line: int):
         brace = toks.next("'{'")
         if brace[0] != "{":
             raise toks.error(brace[1], f"expected '{{' after {'End Site' if end_site else name!r}, got {brace[0]!r}")
+        if len(names) >= MAX_JOINTS:
+            raise toks.error(line, f"more than MAX_JOINTS = {MAX_JOINTS} joints (End Sites included)")
+        if len(stack) >= MAX_DEPTH:
+            raise toks.error(line, f"nesting deeper than MAX_DEPTH = {MAX_DEPTH} levels")
+        if not end_site:
+            if name in seen:
+                raise toks.error(line, f"duplicate joint name {name!r} (first on line {seen[name]})")
+            seen[name] = line
         parents.append(parent)
         offsets.append((0.0, 0.0, 0.0))
         names.append(name)
@@ -221,8 +263,8 @@ def _parse_hierarchy(toks: _Tokens):
                 chans.append(canon)
             if len(set(chans)) != len(chans):
                 raise toks.error(line, f"CHANNELS for {names[j]!r} repeats a channel: {' '.join(chans)}")
-            if n and any(t[1] == line for t in toks.items[toks.pos:toks.pos + 1]):
-                extra = toks.items[toks.pos][0]
+            extra = toks.more_on_line(line) if n else None
+            if extra is not None:
                 raise toks.error(line, f"CHANNELS {n} for {names[j]!r} lists more than {n} channel names "
                                        f"(found {extra!r})")
             channels[j] = tuple(chans)
@@ -280,26 +322,40 @@ def _read_text(path) -> str:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{os.fspath(path)}: not a UTF-8/ASCII text file ({exc})") from None
-    return text.replace("\r\n", "\n").replace("\r", "\n")
+    text = text.replace("\r\n", "\n").replace("\r", "\n")
+    nul = text.find("\x00")
+    if nul >= 0:
+        raise ValueError(f"{os.fspath(path)}:{text.count(chr(10), 0, nul) + 1}: NUL byte (not a text file)")
+    return text
 
 
-def _split_sections(text: str, where: str):
-    """Return (all lines, index of the ``MOTION`` line or None)."""
-    lines = text.split("\n")
-    motion_at = None
-    for i, line in enumerate(lines):
-        s = line.strip()
-        if s.upper() == "MOTION":
-            motion_at = i
-            break
-    return lines, motion_at
+_MOTION_LINE_RE = re.compile(r"^[^\S\n]*motion[^\S\n]*$", re.IGNORECASE | re.MULTILINE)
+
+
+def _split_sections(text: str, motion):
+    """Return (all lines, index of the ``MOTION`` line found by ``_MOTION_LINE_RE`` or None)."""
+    return text.split("\n"), (None if motion is None else text.count("\n", 0, motion.start()))
+
+
+_NODE_LINE_RE = re.compile(r"^[^\S\n]*(?:root|joint|end[^\S\n]+site)\b", re.IGNORECASE | re.MULTILINE)
+
+
+def _check_joint_count(text: str, end: int, where: str) -> None:
+    """Fast path of the ``MAX_JOINTS`` limit: one regex scan of ``text[:end]`` counting the lines that open a
+    node (the parser checks the exact count too; this lets a huge hierarchy fail before it is parsed)."""
+    for k, m in enumerate(_NODE_LINE_RE.finditer(text, 0, end), start=1):
+        if k > MAX_JOINTS:
+            raise ValueError(f"{where}:{text.count(chr(10), 0, m.start()) + 1}: more than MAX_JOINTS = "
+                             f"{MAX_JOINTS} joints (End Sites included)")
 
 
 def _parse_header(text: str, where: str):
-    lines, motion_at = _split_sections(text, where)
+    m = _MOTION_LINE_RE.search(text)
+    _check_joint_count(text, len(text) if m is None else m.start(), where)  # before any per-line object exists
+    lines, motion_at = _split_sections(text, m)
     # the MOTION line is part of the token stream so that a hierarchy cut short before it is reported there
     toks = _Tokens(lines if motion_at is None else lines[:motion_at + 1], where)
-    if not toks.items:
+    if toks.peek() is None:
         raise ValueError(f"{where}:1: empty file (expected HIERARCHY)")
     parents, offsets, names, channels, end_flags = _parse_hierarchy(toks)
     nxt = toks.peek()
@@ -309,10 +365,7 @@ def _parse_header(text: str, where: str):
         if nxt[0].upper() == "ROOT":
             raise toks.error(nxt[1], "a second ROOT: files with several skeletons are not supported")
         raise toks.error(nxt[1], f"unexpected {nxt[0]!r} after the hierarchy (expected MOTION)")
-    names = _unique_names(names, end_flags)
-    if len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})
-        raise ValueError(f"{where}: duplicate joint names {dup}")
+    names = _unique_names(names, end_flags)  # file names are unique (checked while parsing)
     # Frames: and Frame Time: on the next non-empty lines
     i = motion_at + 1
     values = []
@@ -365,7 +418,8 @@ def read_bvh_header(path) -> BvhHeader:
 
 
 def _parse_motion(header: BvhHeader, lines: list[str], first: int, where: str) -> np.ndarray:
-    """Numbers of the motion block as ``(T, C)`` float64, checked against the header."""
+    """Numbers of the motion block as ``(T, C)`` float64, checked line by line against the header: every
+    non-blank line after ``Frame Time`` is one frame of exactly ``C`` numbers."""
     data_lines = [ln for ln in lines[first:] if ln.strip()]
     c = header.num_channels
     if len(data_lines) != header.num_frames:
@@ -374,19 +428,29 @@ def _parse_motion(header: BvhHeader, lines: list[str], first: int, where: str) -
             last -= 1
         raise ValueError(f"{where}:{last}: Frames: declares {header.num_frames} frames but the file has "
                          f"{len(data_lines)} frame lines")
+    per_frame = max(c, 4 * header.skeleton.num_joints)
+    if len(data_lines) * per_frame > MAX_FRAME_VALUES:
+        raise ValueError(f"{where}:{first + 1}: {len(data_lines)} frames × {per_frame} numbers per frame "
+                         f"(max(channels, 4 · joints)) exceeds MAX_FRAME_VALUES = {MAX_FRAME_VALUES}")
     if c == 0:
         return np.zeros((len(data_lines), 0))
+    rows = [ln.split() for ln in data_lines]
+    if any(len(r) != c for r in rows):                                     # a value moved across lines too
+        raise locate_bad_row(lines, first, c, where, unit="frame", expected="numbers (the channels of the hierarchy)")
     try:
-        flat = np.array(" ".join(data_lines).split(), dtype=np.float64)   # one call for the whole block
+        flat = np.array([t for r in rows for t in r], dtype=np.float64)    # one conversion for the block
     except ValueError:
         raise locate_bad_row(lines, first, c, where, unit="frame", expected="numbers (the channels of the hierarchy)") from None
-    if flat.size != len(data_lines) * c or not np.all(np.isfinite(flat)):
+    if not np.all(np.isfinite(flat)):
         raise locate_bad_row(lines, first, c, where, unit="frame", expected="numbers (the channels of the hierarchy)")
     return flat.reshape(len(data_lines), c)                                # (T, C)
 
 
-def read_bvh(path, frame_time: float | None = None, name: str | None = None,
-             nonroot_translation: str = "error") -> Motion:
+_TRANSLATION_MODES = ("auto", "keep", "rotations", "mean")
+
+
+def read_bvh(path, frame_time: float | None = None, name: str | None = None, translations: str = "auto",
+             tolerance: float = TRANSLATION_TOLERANCE) -> Motion:
     """Read a BVH file into a :class:`~refimpl.motion.Motion`.
 
     Parameters
@@ -396,24 +460,35 @@ def read_bvh(path, frame_time: float | None = None, name: str | None = None,
         Seconds per frame; overrides the declared ``Frame Time`` (use ``1/60`` for the CMU salsa files).
     name : str, optional
         Motion name; default the file stem.
-    nonroot_translation : {"error", "mean"}
-        What to do with position channels of non-root joints whose values vary over time (constant ones are
-        always folded into the offset).
+    translations : {"auto", "keep", "rotations", "mean"}
+        Position channels on non-root joints (they replace the joint's OFFSET, spec/data.md §2.1):
+
+        * ``"keep"``: the motion as written: every such joint keeps per-frame translations
+          (``Motion.translated_joints``);
+        * ``"auto"`` (default): :func:`~refimpl.motion.simplify_translations` of that: re-root at the moving
+          only child of the root, fold translations constant within ``tolerance`` into the offsets, keep
+          the others per frame (same world positions);
+        * ``"rotations"``: as ``"auto"`` but ``ValueError`` if a translation still varies (the result is
+          rotations + root trajectory only);
+        * ``"mean"``: as ``"auto"``, varying translations folded as their mean (lossy).
+    tolerance : float
+        Relative tolerance of "constant" (default ``TRANSLATION_TOLERANCE`` = 1e-4).
 
     Returns
     -------
     Motion
         Rotations ``(T, J, 4)`` float64 (End Sites identity, continuous over time), root positions
-        ``(T, 3)`` = ROOT OFFSET + position channels.
+        ``(T, 3)`` = ROOT position channels (its OFFSET if it has none), optional per-frame translations.
 
     Raises
     ------
     ValueError
-        ``"<file>:<line>: <problem>"`` for malformed files (truncated hierarchy, bad channel lists, missing
-        MOTION, bad Frames / Frame Time, fewer or more numbers than declared, non-numeric or non-finite values).
+        ``"<file>:<line>: <problem>"`` for malformed files (truncated hierarchy, bad channel lists, duplicate
+        joint names, limits exceeded, missing MOTION, bad Frames / Frame Time, a frame line without exactly
+        the declared number of values, non-numeric or non-finite values, NUL bytes).
     """
-    if nonroot_translation not in ("error", "mean"):
-        raise ValueError(f"nonroot_translation: expected 'error' or 'mean', got {nonroot_translation!r}")
+    if translations not in _TRANSLATION_MODES:
+        raise ValueError(f"translations: expected one of {_TRANSLATION_MODES}, got {translations!r}")
     if frame_time is not None:
         try:
             ok = math.isfinite(float(frame_time)) and float(frame_time) > 0
@@ -458,27 +533,29 @@ def read_bvh(path, frame_time: float | None = None, name: str | None = None,
     if num_frames:
         rotations = quat_fix(rotations)
 
-    offsets = skel.offsets.copy()
-    root_positions = np.broadcast_to(offsets[0], (num_frames, 3)).copy()
+    # position channels replace the OFFSET (missing axes 0, as Blender's importer)
+    root_positions = np.broadcast_to(skel.offsets[0], (num_frames, 3)).copy()
+    moved = [j for j, _ in pos_cols if j != 0]
+    local = None
+    if moved:
+        local = np.broadcast_to(skel.offsets, (num_frames, num_joints, 3)).copy()   # (T, J, 3)
     for j, pcols in pos_cols:
         values = padded[:, pcols]                                          # (T, 3)
         if j == 0:
-            root_positions += values
-            continue
-        if num_frames == 0:
-            continue
-        spread = float(np.max(np.ptp(values, axis=0)))
-        if spread > 1e-9 * max(1.0, float(np.max(np.abs(values)))) and nonroot_translation == "error":
-            raise ValueError(f"{where}: joint {skel.names[j]!r} has position channels that vary over time "
-                             f"(spread {spread:.3g}); a Motion keeps one offset per joint. Pass "
-                             "nonroot_translation='mean' to fold their mean into the offset")
-        offsets[j] = offsets[j] + values.mean(axis=0)
-    if pos_cols and any(j != 0 for j, _ in pos_cols):
-        skel = Skeleton(skel.parents, offsets, names=skel.names, end_sites=skel.end_sites,
-                        joints_left=skel.joints_left, joints_right=skel.joints_right)
-    return Motion(skeleton=skel, rotations=rotations, root_positions=root_positions,
-                  frame_time=header.frame_time if frame_time is None else float(frame_time),
-                  name=Path(where).stem if name is None else name)
+            root_positions = values
+        else:
+            local[:, j, :] = values
+    motion = Motion(skeleton=skel, rotations=rotations, root_positions=root_positions,
+                    frame_time=header.frame_time if frame_time is None else float(frame_time),
+                    name=Path(where).stem if name is None else name,
+                    translations=local, translated_joints=moved if moved else None)
+    if translations == "keep" or not moved:
+        return motion
+    varying = {"auto": "keep", "rotations": "error", "mean": "mean"}[translations]
+    try:
+        return simplify_translations(motion, tolerance, varying)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -509,7 +586,8 @@ def _fmt(v, precision: int) -> str:
     return f"{v:.{precision}f}"
 
 
-def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precision: int = 6) -> None:
+def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precision: int = 6,
+              position_channels: str = "auto") -> None:
     """Write a motion as a BVH file (atomically).
 
     Parameters
@@ -522,6 +600,11 @@ def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precisio
         ``Zrotation Yrotation Xrotation`` (CMU files).
     precision : int
         Decimals of every number (fixed point), 1..17.
+    position_channels : {"auto", "all", "root"}
+        Which joints get ``Xposition Yposition Zposition`` channels (before their rotation channels):
+        ``"auto"`` the root and the joints in ``motion.translated_joints`` (lossless); ``"all"`` every joint
+        but the End Sites (Blender and Bandai Namco style; the values are the per-frame translations or the
+        offsets); ``"root"`` the root only (``ValueError`` if the motion has per-frame translations).
 
     Notes
     -----
@@ -530,19 +613,30 @@ def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precisio
     ``<parent>_end``. The ROOT gets ``OFFSET = skeleton.offsets[0]`` and position channels
     ``root_positions − offsets[0]``;
     End Sites become ``End Site`` blocks (their rotation is not written); a leaf that is not an End Site is
-    written as a JOINT without children. Joint names must not contain whitespace.
+    written as a JOINT without children. Joint names must not contain whitespace. Position channels replace
+    the OFFSET (spec/data.md §2.1): the ROOT's hold ``root_positions``, another joint's its translation.
     """
     if not isinstance(motion, Motion):
         raise ValueError(f"motion: expected a Motion, got {type(motion).__name__}")
     if isinstance(precision, bool) or not isinstance(precision, (int, np.integer)) or not 1 <= precision <= 17:
         raise ValueError(f"precision: expected an int in 1..17, got {precision!r}")
+    if position_channels not in ("auto", "all", "root"):
+        raise ValueError(f"position_channels: expected 'auto', 'all' or 'root', got {position_channels!r}")
     skel = motion.skeleton
+    if position_channels == "root" and motion.translated_joints:
+        raise ValueError(f"position_channels: 'root' would drop the per-frame translations of "
+                         f"{list(motion.translated_joint_names)}; use 'auto' or 'all' (or "
+                         "refimpl.motion.simplify_translations first)")
     orders = _resolve_orders(order, skel)
     for n in skel.names:
         if any(ch.isspace() for ch in n) or n in ("{", "}"):
             raise ValueError(f"motion.skeleton.names: BVH joint names cannot contain whitespace, got {n!r}")
     ends = set(skel.end_sites)
     p = int(precision)
+    if position_channels == "all":
+        with_pos = {j for j in range(skel.num_joints) if j not in ends}
+    else:
+        with_pos = {0, *motion.translated_joints}
 
     out = ["HIERARCHY"]
     written: list[int] = []  # joints with channels in the order their CHANNELS lines appear (depth-first)
@@ -560,7 +654,7 @@ def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precisio
         out.append(offset_line(j, depth + 1))
         written.append(j)
         rot = " ".join(f"{a.upper()}rotation" for a in orders[j])
-        if j == 0:
+        if j in with_pos:
             out.append(ind + "\tCHANNELS 6 Xposition Yposition Zposition " + rot)
         else:
             out.append(ind + "\tCHANNELS 3 " + rot)
@@ -575,7 +669,8 @@ def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precisio
     out.append(f"Frame Time: {motion.frame_time:.10g}")
 
     rot = motion.rotations.astype(np.float64)
-    blocks = [motion.root_positions.astype(np.float64) - skel.offsets[0]]  # (T, 3)
+    local = (np.broadcast_to(skel.offsets, (num_frames,) + skel.offsets.shape) if motion.translations is None
+             else motion.translations).astype(np.float64)                  # (T, J, 3)
     by_order: dict[str, list[int]] = {}
     for j in range(skel.num_joints):
         if j not in ends:
@@ -583,8 +678,12 @@ def write_bvh(path, motion: Motion, order: str | Sequence[str] = "zyx", precisio
     angles = np.zeros((num_frames, skel.num_joints, 3))
     for o, joints in by_order.items():
         angles[:, joints, :] = np.rad2deg(euler_from_quat(rot[:, joints, :], o))
-    blocks.append(angles[:, written, :].reshape(num_frames, -1))         # (T, 3 J'), file order
-    data = np.concatenate(blocks, axis=1)                                  # (T, C)
+    blocks = []
+    for j in written:                                                      # file order
+        if j in with_pos:
+            blocks.append(motion.root_positions.astype(np.float64) if j == 0 else local[:, j, :])
+        blocks.append(angles[:, j, :])
+    data = np.concatenate(blocks, axis=1) if blocks else np.zeros((num_frames, 0))   # (T, C)
     data = np.where(np.abs(data) < 0.5 * 10.0 ** -p, 0.0, data)            # no "-0.000000"
     row_fmt = " ".join([f"%.{p}f"] * data.shape[1])
     out.extend(row_fmt % tuple(row) for row in data.tolist())

@@ -30,7 +30,10 @@ from refimpl.motion import Motion
 from refimpl.quat import quat_fix, quat_from_axis_angle
 from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
 
-__all__ = ["read_expmap", "EXPMAP_LAYOUTS"]
+__all__ = ["read_expmap", "EXPMAP_LAYOUTS", "MAX_EXPMAP_VALUES"]
+
+#: most numbers an exp-map file may hold (rows × values per row; 800 MB of float64)
+MAX_EXPMAP_VALUES = 100_000_000
 
 EXPMAP_LAYOUTS = {
     # layout: (values per row, default frame time in seconds, root position kept by default)
@@ -66,8 +69,9 @@ def read_expmap(path, layout: str = "cmu", frame_time: float | None = None, name
     Raises
     ------
     ValueError
-        Unknown layout, or ``"<file>:<line>: <problem>"`` for rows of the wrong width, non-numeric or
-        non-finite values, or an empty file.
+        Unknown layout, or ``"<file>:<line>: <problem>"`` for a line without exactly the layout's number of
+        values (each non-blank line is one frame), non-numeric or non-finite values, NUL bytes, an empty file,
+        more than ``MAX_EXPMAP_VALUES`` numbers.
     """
     if layout not in EXPMAP_LAYOUTS:
         raise ValueError(f"layout: expected one of {sorted(EXPMAP_LAYOUTS)}, got {layout!r}")
@@ -79,15 +83,24 @@ def read_expmap(path, layout: str = "cmu", frame_time: float | None = None, name
         raise ValueError(f"path: cannot read {where!r}: {exc}") from None
     except UnicodeDecodeError as exc:
         raise ValueError(f"{where}: not a UTF-8/ASCII text file ({exc})") from None
-    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-    rows = [ln for ln in lines if ln.strip()]
+    text = text.replace("\r\n", "\n").replace("\r", "\n")
+    nul = text.find("\x00")
+    if nul >= 0:
+        raise ValueError(f"{where}:{text.count(chr(10), 0, nul) + 1}: NUL byte (not a text file)")
+    lines = text.split("\n")
+    rows = [ln.replace(",", " ").split() for ln in lines]
+    rows = [r for r in rows if r]
     if not rows:
         raise ValueError(f"{where}:1: empty file (expected rows of {width} values)")
+    if len(rows) * width > MAX_EXPMAP_VALUES:
+        raise ValueError(f"{where}: {len(rows)} rows × {width} values exceed MAX_EXPMAP_VALUES = {MAX_EXPMAP_VALUES}")
+    if any(len(r) != width for r in rows):                                 # each line is one frame
+        raise locate_bad_row(lines, 0, width, where, commas=True)
     try:
-        flat = np.array(" ".join(rows).replace(",", " ").split(), dtype=np.float64)   # one call for all rows
+        flat = np.array([t for r in rows for t in r], dtype=np.float64)    # one conversion for all rows
     except ValueError:
         raise locate_bad_row(lines, 0, width, where, commas=True) from None
-    if flat.size != len(rows) * width or not np.all(np.isfinite(flat)):
+    if not np.all(np.isfinite(flat)):
         raise locate_bad_row(lines, 0, width, where, commas=True)
     values = flat.reshape(len(rows), width // 3, 3)                        # (T, 1 + J, 3)
 

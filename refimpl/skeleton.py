@@ -342,12 +342,14 @@ class Skeleton:
         return _world_rotations(self._levels, rot)
 
     @_finite_output
-    def forward_kinematics(self, rotations, root_positions) -> np.ndarray:
+    def forward_kinematics(self, rotations, root_positions, translations=None) -> np.ndarray:
         """Joint positions by quaternion forward kinematics (QuaterNet, quaternet_reference_code.md §3.2).
 
-        ``p[0] = root_position``; ``p[j] = p[p(j)] + R(q_world[p(j)]) · offset[j]`` with
-        ``q_world[j] = q_world[p(j)] ⊗ q[j]``. Joints are processed depth by depth (one vectorised step per
-        tree level), so batch and time are handled in one call.
+        ``p[0] = root_position``; ``p[j] = p[p(j)] + R(q_world[p(j)]) · t[j]`` with
+        ``q_world[j] = q_world[p(j)] ⊗ q[j]`` and ``t[j] = offset[j]`` (or ``translations[..., j, :]`` when
+        given: per-frame local translations, e.g. BVH position channels on non-root joints, spec/data.md §2).
+        Joints are processed depth by depth (one vectorised step per tree level), so batch and time are
+        handled in one call.
 
         Parameters
         ----------
@@ -355,28 +357,43 @@ class Skeleton:
             Local unit quaternions ``(w, x, y, z)``; not normalised here.
         root_positions : array_like, shape (..., 3)
             World position of the root per frame.
+        translations : array_like, shape (..., J, 3), optional
+            Local translation of every joint from its parent, in the parent's frame, replacing ``offsets``
+            (row 0 is ignored: the root is at ``root_positions``). Default: the skeleton's offsets.
 
         Returns
         -------
         ndarray, shape (..., J, 3): world positions; dtype of the inputs (float32 stays float32).
         """
         rot, pos = self._check_motion(rotations, root_positions, unit=True)
-        return _forward_kinematics(self._levels, self._offsets.astype(rot.dtype), rot, pos)
+        return _forward_kinematics(self._levels, self._translations(translations, rot), rot, pos)
+
+    def _translations(self, translations, rot: np.ndarray) -> np.ndarray:
+        """``offsets`` (J, 3) or the checked per-frame ``translations`` (..., J, 3), in ``rot``'s dtype."""
+        if translations is None:
+            return self._offsets.astype(rot.dtype)
+        tr = _as_float_array(translations, "translations")
+        if tr.shape != rot.shape[:-1] + (3,):
+            raise ValueError(f"translations: expected shape {rot.shape[:-1] + (3,)} to match rotations "
+                             f"{rot.shape}, got {tr.shape}")
+        return tr.astype(rot.dtype, copy=False)
 
     @_finite_output
-    def forward_kinematics_matrices(self, rotations, root_positions) -> np.ndarray:
+    def forward_kinematics_matrices(self, rotations, root_positions, translations=None) -> np.ndarray:
         """Joint positions by chaining 4x4 homogeneous matrices (an independent oracle for the quaternion FK).
 
         ``M_local[0] = [R(q[0]) | root_position]``, ``M_local[j] = [R(q[j]) | offset[j]]``,
         ``M_world[j] = M_world[p(j)] · M_local[j]`` (dual-quaternion paper Eq. 10-11 with the root translated);
-        the position of joint ``j`` is the translation column of ``M_world[j]``.
+        the position of joint ``j`` is the translation column of ``M_world[j]`` (``offset[j]`` replaced by
+        ``translations[..., j, :]`` when given).
 
         Parameters and returns as :meth:`forward_kinematics`.
         """
         rot, pos = self._check_motion(rotations, root_positions, unit=True)
+        off = self._translations(translations, rot)                         # (J, 3) or (..., J, 3)
         local = np.zeros(rot.shape[:-1] + (4, 4), dtype=rot.dtype)        # (..., J, 4, 4)
         local[..., :3, :3] = matrix_from_quat(rot)
-        local[..., :3, 3] = self._offsets.astype(rot.dtype)
+        local[..., :3, 3] = off
         local[..., 0, :3, 3] = pos
         local[..., 3, 3] = 1.0
         world = np.empty_like(local)
@@ -410,7 +427,8 @@ def _forward_kinematics(levels, offsets: np.ndarray, rot: np.ndarray, root_pos: 
     pos[..., 0, :] = root_pos
     for idx, par in levels:
         q_par = world[..., par, :]                                          # (..., n, 4)
-        pos[..., idx, :] = pos[..., par, :] + _quat_rotate(q_par, np.broadcast_to(offsets[idx], q_par.shape[:-1] + (3,)))
+        off = np.broadcast_to(offsets[..., idx, :], q_par.shape[:-1] + (3,))  # (..., n, 3)
+        pos[..., idx, :] = pos[..., par, :] + _quat_rotate(q_par, off)
         world[..., idx, :] = _quat_mul(q_par, rot[..., idx, :])
     return pos
 
@@ -424,7 +442,7 @@ def _forward_kinematics_naive(parents, offsets, rot, root_pos):
             world[..., j, :] = rot[..., j, :]
             pos[..., j, :] = root_pos
         else:
-            off = np.broadcast_to(offsets[j], pos.shape[:-2] + (3,))
+            off = np.broadcast_to(offsets[..., j, :], pos.shape[:-2] + (3,))
             pos[..., j, :] = pos[..., p, :] + quat_rotate(world[..., p, :], off)
             world[..., j, :] = quat_mul(world[..., p, :], rot[..., j, :])
     return pos

@@ -120,7 +120,7 @@ def test_channel_angles_match_hand_conversion():
     for j, chans in enumerate(header.channels):
         angles = {c[0].lower(): np.deg2rad(row[col + k]) for k, c in enumerate(chans) if c.endswith("rotation")}
         if j == 0:
-            assert_close(motion.root_positions[7], row[:3] + skel.offsets[0], atol=0)
+            assert_close(motion.root_positions[7], row[:3], atol=0)  # position channels replace the OFFSET
         if angles:
             order = header.rotation_orders[j]
             expected = quat_from_euler(np.array([angles[a] for a in order]), order)
@@ -295,12 +295,14 @@ def _write(tmp_path, text, name="f.bvh", newline="\n"):
 
 
 def test_small_file_by_hand(tmp_path):
-    """spec/data.md §2.1: root position = OFFSET + channels; per-joint orders; End Sites named <parent>_end."""
+    """spec/data.md §2.1: root position = its position channels (they replace the OFFSET); per-joint orders;
+    End Sites named <parent>_end."""
     m = read_bvh(_write(tmp_path, SMALL))
     s = m.skeleton
     assert s.names == ("Hips", "LeftLeg", "LeftLeg_end", "RightLeg", "RightLeg_end")
     assert s.end_sites == (2, 4) and s.joints_left == (1, 2) and s.joints_right == (3, 4)
-    assert_close(m.root_positions, [[1, 2, 3], [2, 4, 6]], atol=0)
+    assert_close(m.root_positions, [[0, 0, 0], [1, 2, 3]], atol=0)
+    assert_close(m.skeleton.offsets[0], [1, 2, 3], atol=0)
     assert m.frame_time == 0.5 and m.name == "f"
     d = np.deg2rad
     assert_quat_close(m.rotations[0, 0], quat_from_euler(d([10, 20, 30]), "zxy"), atol=1e-15)
@@ -348,17 +350,32 @@ Frame Time: 0.1
 45 0.5 0 0 -10 -20
 """
     m = read_bvh(_write(tmp_path, text))
-    assert_close(m.root_positions, [[7, 8, 9], [7, 8, 9]], atol=0)
-    assert_close(m.skeleton.offsets[1], [1.5, 0, 0], atol=0)
+    assert_close(m.root_positions, [[7, 8, 9], [7, 8, 9]], atol=0)  # no position channels: the OFFSET
+    assert_close(m.skeleton.offsets[1], [0.5, 0, 0], atol=0)       # channels replace the OFFSET (1 0 0)
+    assert m.translated_joints == ()
     assert_quat_close(m.rotations[0, 0], quat_from_euler(np.deg2rad([90, 0, 0]), "yxz"), atol=1e-15)
     assert_quat_close(m.rotations[1, 1], quat_from_euler(np.deg2rad([-10, -20, 0]), "zxy"), atol=1e-15)
     varying = text.replace("45 0.5 0 0", "45 0.7 0 0")
-    with pytest.raises(ValueError, match=r"joint 'a' has position channels that vary"):
-        read_bvh(_write(tmp_path, varying))
-    m2 = read_bvh(_write(tmp_path, varying), nonroot_translation="mean")
-    assert_close(m2.skeleton.offsets[1], [1.6, 0, 0], atol=1e-12)
-    with pytest.raises(ValueError, match="nonroot_translation"):
-        read_bvh(_write(tmp_path, text), nonroot_translation="keep")
+    raw = read_bvh(_write(tmp_path, varying), translations="keep")
+    assert raw.translated_joint_names == ("a",)
+    assert_close(raw.translations[:, 1], [[0.5, 0, 0], [0.7, 0, 0]], atol=0)
+    # the root rotates (not static): no re-rooting, the varying translation is kept per frame
+    auto = read_bvh(_write(tmp_path, varying))
+    assert auto.translated_joint_names == ("a",)
+    assert_close(auto.positions(), raw.positions(), atol=0)
+    with pytest.raises(ValueError, match=r"joint 'a' has translations that vary"):
+        read_bvh(_write(tmp_path, varying), translations="rotations")
+    # a static root whose only child moves: re-rooted at it, same world positions, no translations left
+    static = varying.replace("90 0.5", "0 0.5").replace("45 0.7", "0 0.7")
+    raw = read_bvh(_write(tmp_path, static), translations="keep")
+    auto = read_bvh(_write(tmp_path, static), translations="rotations")
+    assert auto.skeleton.names == ("a",) and auto.translated_joints == ()
+    assert_close(auto.positions()[:, 0], raw.positions()[:, 1], atol=1e-12)
+    m2 = read_bvh(_write(tmp_path, varying.replace("JOINT a", "JOINT b\n{\nOFFSET 0 1 0\n}\nJOINT a")),
+                  translations="mean")
+    assert_close(m2.skeleton.offsets[2], [0.6, 0, 0], atol=1e-12)
+    with pytest.raises(ValueError, match="translations"):
+        read_bvh(_write(tmp_path, text), translations="add")
 
 
 def test_zero_frames_and_frame_time_override_validation(tmp_path):
@@ -435,7 +452,7 @@ MALFORMED = [
     ("End without Site", SMALL.replace("End Site", "End Point", 1), r":10: expected 'End Site', got 'End Point'"),
     ("missing brace", SMALL.replace("ROOT Hips\n{", "ROOT Hips\n"), r":4: expected '\{' after 'Hips', got 'OFFSET'"),
     ("missing joint name", SMALL.replace("JOINT LeftLeg", "JOINT"), r":6: missing joint name"),
-    ("duplicate names", SMALL.replace("JOINT RightLeg", "JOINT LeftLeg"), r"duplicate joint names \['LeftLeg'"),
+    ("duplicate names", SMALL.replace("JOINT RightLeg", "JOINT LeftLeg"), r":15: duplicate joint name 'LeftLeg' \(first on line 6\)"),
     ("not utf-8", None, r"not a UTF-8"),
 ]
 
