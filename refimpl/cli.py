@@ -97,6 +97,15 @@ def _info_bvh(p: Path, args) -> None:
     for ch, count in groups.items():
         who = skel.names[header.channels.index(ch)] if count == 1 else f"{count} joints"
         _say(f"            {who}: {' '.join(ch)}")
+    in_file = header.translated_joint_names
+    _say(f"translations {len(in_file)} non-root joint(s) with position channels in the file"
+         + (f": {', '.join(in_file[:8])}{' ...' if len(in_file) > 8 else ''}" if in_file else ""))
+    if motion.skeleton.names[0] != skel.names[0]:
+        _say(f"            re-rooted at {motion.skeleton.names[0]!r} (the motion is on a child of the static root "
+             f"{skel.names[0]!r}; spec/data.md §2.1)")
+    kept = motion.translated_joint_names
+    if in_file:
+        _say(f"            after reading: {', '.join(kept) if kept else 'none varying (folded into the offsets)'}")
     pos = motion.positions()  # (T, J, 3)
     ext = pos.max(axis=(0, 1)) - pos.min(axis=(0, 1))
     _say(f"extent      x {ext[0]:.2f}  y {ext[1]:.2f}  z {ext[2]:.2f} (file units; root travel "

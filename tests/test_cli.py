@@ -113,6 +113,25 @@ def test_info_bvh(capsys):
     assert "Hips: Xposition Yposition Zposition Zrotation Yrotation Xrotation" in out
     assert "30 joints: Zrotation Yrotation Xrotation" in out
     assert "LeftToeBase_end (End Site)" in out
+    assert "translations 0 non-root joint(s) with position channels" in out
+
+
+def test_info_bvh_with_translations_and_static_root(capsys, tmp_path):
+    """spec/cli.md §info: a studio-style file (static root, motion and position channels on its child) shows the
+    translated joints and the re-rooting."""
+    bvh = tmp_path / "studio.bvh"
+    bvh.write_text(
+        "HIERARCHY\nROOT joint_Root\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        "  JOINT Hips\n  {\n    OFFSET 0 90 0\n    CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        "    JOINT Spine\n    {\n      OFFSET 0 10 0\n      CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        "      End Site\n      {\n        OFFSET 0 5 0\n      }\n    }\n  }\n}\n"
+        "MOTION\nFrames: 2\nFrame Time: 0.0333333\n"
+        "0 0 0 0 0 0 0 90 0 0 0 0 0 10 0 0 0 0\n0 0 0 0 0 0 5 90 0 0 0 10 0 10 0 0 0 0\n")
+    code, out, _ = _run(capsys, "info", str(bvh))
+    assert code == EXIT_OK
+    assert "translations 2 non-root joint(s) with position channels in the file: Hips, Spine" in out
+    assert "re-rooted at 'Hips'" in out
+    assert "none varying (folded into the offsets)" in out
 
 
 def test_info_expmap(capsys):
