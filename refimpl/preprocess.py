@@ -48,9 +48,10 @@ def downsample(motion: Motion, stride: int, phase: int = 0) -> Motion:
     stride = _positive_int(stride, "stride")
     if isinstance(phase, bool) or not isinstance(phase, (int, np.integer)) or not 0 <= phase < stride:
         raise ValueError(f"phase: expected an int in 0..{stride - 1}, got {phase!r}")
+    extra = {} if motion.translations is None else {"translations": motion.translations[phase::stride]}
     return dataclasses.replace(motion, rotations=motion.rotations[phase::stride],
                                root_positions=motion.root_positions[phase::stride],
-                               frame_time=motion.frame_time * stride)
+                               frame_time=motion.frame_time * stride, **extra)
 
 
 def fix_antipodal(motion: Motion) -> Motion:

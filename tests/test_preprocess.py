@@ -162,3 +162,19 @@ def test_statistics_of_real_expmap_data():
     assert zero_dims.size >= 33 + 8
     assert np.all(std[zero_dims] == 1.0) and np.all(mean[zero_dims] == 0.0)
     assert read_expmap(SAMPLE / "expmap" / "train" / "walking" / "walking_1.txt").num_frames == rows[-5].shape[0]
+
+
+def test_downsample_keeps_per_frame_translations():
+    """spec/data.md §2.1: a motion that keeps per-frame joint translations is downsampled with them."""
+    from refimpl import Motion, Skeleton
+    from refimpl.preprocess import downsample
+
+    sk = Skeleton([-1, 0], np.array([[0.0, 0, 0], [0, 1, 0]]))
+    T = 6
+    rot = np.tile(np.array([1.0, 0, 0, 0]), (T, 2, 1))
+    tr = np.zeros((T, 2, 3))
+    tr[:, 1, 1] = 1.0 + np.arange(T)
+    m = Motion(sk, rot, np.zeros((T, 3)), 1 / 30, translations=tr, translated_joints=(1,))
+    d = downsample(m, 2, phase=1)
+    np.testing.assert_array_equal(d.translations[:, 1, 1], [2.0, 4.0, 6.0])
+    np.testing.assert_allclose(d.positions()[:, 1, 1], [2.0, 4.0, 6.0])
