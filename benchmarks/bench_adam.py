@@ -4,7 +4,7 @@ Variants, interleaved in every round (order rotated between rounds, 0.15 s of se
 
 * ``numpy_2threads``: ``refimpl.optim.adam_step`` as called by training (2 threads for a model this size);
 * ``numpy_1thread``: the same with ``threads=1``;
-* ``numpy_block_131072``: the same with the previous default block of 131,072 elements (4ec2a6f);
+* ``numpy_block_32768``: the same with L2-sized blocks of 32,768 elements (p, g, m, v blocks = 512 KiB);
 * ``numpy_naive``: ``_adam_step_naive``, torch's formulas on whole arrays with temporaries (the oracle);
 * ``torch_fused``, ``torch_foreach``, ``torch_default``: ``torch.optim.Adam`` with ``fused=True``,
   ``foreach=True`` and the default (single-tensor loop on CPU), when ``torch`` is importable.
@@ -47,6 +47,9 @@ from refimpl.nn.gru import gru_init  # noqa: E402
 from refimpl.nn.linear import linear_init  # noqa: E402
 from refimpl.nn.params import count_parameters, init_normal  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from bench_gru_train import _timed  # noqa: E402
+
 LR = 1e-3
 SETTLE = 0.15
 BYTES_PER_PARAM = 28  # read p, g, m, v; write p, m, v (float32)
@@ -60,12 +63,6 @@ def quaternet_params():
     params["h0"] = init_normal(rng, (2, 1, 1000), 0.01, dtype=np.float32)
     grads = {k: (1e-3 * rng.standard_normal(v.shape)).astype(np.float32) for k, v in params.items()}
     return params, grads
-
-
-def _timed(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
 
 
 def stream_bandwidth(pool, n: int = 40_000_000) -> tuple:
@@ -159,7 +156,7 @@ def main(argv=None) -> int:
 
     variants = {"numpy_2threads": numpy_variant(params, grads, threads=2),
                 "numpy_1thread": numpy_variant(params, grads, threads=1),
-                "numpy_block_131072": numpy_variant(params, grads, threads=2, block=131072),
+                "numpy_block_32768": numpy_variant(params, grads, threads=2, block=32768),
                 "numpy_naive": naive_variant(params, grads)}
     if torch is not None:
         for name, kw in (("torch_fused", {"fused": True}), ("torch_foreach", {"foreach": True}),

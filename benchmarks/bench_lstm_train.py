@@ -52,6 +52,9 @@ from refimpl.nn.lstm import _lstm_forward_reference, lstm_backward, lstm_forward
 from refimpl.nn.params import count_parameters, merge_grads  # noqa: E402
 from refimpl.optim import ACRNN_ADAM, adam_init, adam_step  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from bench_gru_train import _timed, gemm_peak  # noqa: E402  (best-of-n 2048^3 GEMM; one timed call)
+
 B, T, I, H, L = 32, 100, 251, 1024, 3
 O = I  # acRNN's decoder maps back to the frame's features
 SETTLE = 0.15
@@ -70,21 +73,6 @@ def matmul_flops(t_len: int) -> int:
     return total
 
 
-def gemm_peak(n: int = 2048, reps: int = 3) -> float:
-    rng = np.random.default_rng(0)
-    a = rng.standard_normal((n, n)).astype(np.float32)
-    c = np.empty_like(a)
-    np.matmul(a, a, out=c)
-    best = min(_timed(lambda: np.matmul(a, a, out=c)) for _ in range(reps))
-    return 2 * n ** 3 / best / 1e9
-
-
-def _timed(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
-
-
 def make_numpy_model():
     rng = np.random.default_rng(0)
     params = lstm_init(rng, I, H, L, "rnn", dtype=np.float32)
@@ -94,7 +82,7 @@ def make_numpy_model():
     return params, x, target
 
 
-def numpy_loss_and_grads(params, x, target, skewed: bool, reference: bool, need_dx: bool = False):
+def numpy_loss_and_grads(params, x, target, skewed: bool, reference: bool):
     """Forward, MSE, backward. Returns (y, loss, grads, dx, seconds forward, seconds backward)."""
     t0 = time.perf_counter()
     zeros = np.zeros((L, x.shape[0], H), np.float32)
@@ -265,14 +253,14 @@ def main(argv=None) -> int:
     rounds = []
     names = list(variants)
     for r in range(args.rounds):
-        peak = gemm_peak()
+        peak = gemm_peak(np.float32, reps=3)
         time.sleep(SETTLE)
         order = names[r % len(names):] + names[:r % len(names)]
         row = {"gemm_peak_gflops": peak, "order": order}
         for name in order:
             row[name] = variants[name]()
             time.sleep(SETTLE)
-        peak_after = gemm_peak()
+        peak_after = gemm_peak(np.float32, reps=3)
         row["gemm_peak_after_gflops"] = peak_after
         limit = flop / (max(peak, peak_after) * 1e9)
         row["limit_s"] = limit

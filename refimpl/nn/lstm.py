@@ -156,6 +156,30 @@ def _cell_forward(gi, h, c, w_hh, whh_t, g, c_new, tc, h_new):
     np.multiply(g[:, 3 * hid:], tc, out=h_new)  # h' = o tanh(c')
 
 
+def _output_gate_backward(dh, dc, o, tc, do, tmp):
+    """``da_o = dh tanh(c') o (1 - o)`` into ``do`` and ``dc += dh o (1 - tanh(c')^2)`` (all (B, H); tmp scratch)."""
+    np.subtract(1, o, out=do)
+    do *= o
+    do *= tc
+    do *= dh
+    np.multiply(tc, tc, out=tmp)
+    np.subtract(1, tmp, out=tmp)
+    tmp *= o
+    tmp *= dh
+    dc += tmp
+
+
+def _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dg, w_hh):
+    """The end of a step's backward: ``da_g = dc i (1 - g^2)`` into ``dgg``; then ``dc_prev = dc f`` and
+    ``dh_prev = dg W_hh`` overwrite ``dc`` and ``dh`` (dg (B, 4H) must hold all four gate cotangents)."""
+    np.multiply(gg, gg, out=dgg)
+    np.subtract(1, dgg, out=dgg)
+    dgg *= i
+    dgg *= dc
+    dc *= f
+    np.matmul(dg, w_hh, out=dh)
+
+
 def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     """Back-propagate one LSTM step.
 
@@ -166,15 +190,7 @@ def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     hid = c.shape[1]
     i, f, gg, o = g[:, :hid], g[:, hid:2 * hid], g[:, 2 * hid:3 * hid], g[:, 3 * hid:]
     di, df, dgg, do = dg[:, :hid], dg[:, hid:2 * hid], dg[:, 2 * hid:3 * hid], dg[:, 3 * hid:]
-    np.subtract(1, o, out=do)  # da_o = dh tanh(c') o (1 - o)
-    do *= o
-    do *= tc
-    do *= dh
-    np.multiply(tc, tc, out=tmp)  # dc += dh o (1 - tanh(c')^2)
-    np.subtract(1, tmp, out=tmp)
-    tmp *= o
-    tmp *= dh
-    dc += tmp
+    _output_gate_backward(dh, dc, o, tc, do, tmp)  # da_o; dc += dh o (1 - tanh(c')^2)
     np.subtract(1, i, out=di)  # da_i = dc g i (1 - i)
     di *= i
     di *= gg
@@ -183,12 +199,7 @@ def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     df *= f
     df *= c
     df *= dc
-    np.multiply(gg, gg, out=dgg)  # da_g = dc i (1 - g^2)
-    np.subtract(1, dgg, out=dgg)
-    dgg *= i
-    dgg *= dc
-    dc *= f  # dc_prev = dc f
-    np.matmul(dg, w_hh, out=dh)  # dh_prev = dg W_hh
+    _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dg, w_hh)  # da_g; dc_prev = dc f; dh_prev = dg W_hh
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -263,26 +274,13 @@ def _layer_backward(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
         gt, dgt, tct = g[t], dg[t], tc[t]
         i, f, gg, o = gt[:, :hid], gt[:, hid:2 * hid], gt[:, 2 * hid:3 * hid], gt[:, 3 * hid:]
         dif, dgg, do = dgt[:, :2 * hid], dgt[:, 2 * hid:3 * hid], dgt[:, 3 * hid:]
-        np.subtract(1, o, out=do)  # da_o = dh tanh(c') o (1 - o)
-        do *= o
-        do *= tct
-        do *= dh
-        np.multiply(tct, tct, out=tmp)  # dc += dh o (1 - tanh(c')^2)
-        np.subtract(1, tmp, out=tmp)
-        tmp *= o
-        tmp *= dh
-        dc += tmp
+        _output_gate_backward(dh, dc, o, tct, do, tmp)  # da_o; dc += dh o (1 - tanh(c')^2)
         np.subtract(1, gt[:, :2 * hid], out=dif)  # [i (1 - i) | f (1 - f)]
         dif *= gt[:, :2 * hid]
         dif[:, :hid] *= gg  # da_i = dc g i (1 - i)
         dif[:, hid:] *= cs[t]  # da_f = dc c f (1 - f)
         dgt.reshape(batch, 4, hid)[:, :2] *= dc_b  # [da_i | da_f] *= dc (a view: dgt is C-contiguous)
-        np.multiply(gg, gg, out=dgg)  # da_g = dc i (1 - g^2)
-        np.subtract(1, dgg, out=dgg)
-        dgg *= i
-        dgg *= dc
-        dc *= f  # dc_prev = dc f
-        np.matmul(dgt, w_hh, out=dh)  # dh_prev = dg W_hh
+        _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dgt, w_hh)  # da_g; dc_prev = dc f; dh_prev = dg W_hh
     dg2 = dg.reshape(t_len * batch, 4 * hid)  # (T*B, 4H)
     dw_hh = dg2.T @ hs[:-1].reshape(t_len * batch, hid)  # (4H, H), one GEMM over all steps
     dw_ih = dg2.T @ xs.reshape(t_len * batch, in_size)  # (4H, I)
