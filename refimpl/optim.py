@@ -47,7 +47,7 @@ ACRNN_ADAM = MappingProxyType({"lr": 1e-4, "betas": (0.9, 0.999), "eps": 1e-8, "
 #: QTG (Geleijn et al.): Adam lr 1e-4, β1 = 0.5, β2 = 0.9.
 QTG_ADAM = MappingProxyType({"lr": 1e-4, "betas": (0.5, 0.9), "eps": 1e-8, "weight_decay": 0.0})
 
-_BLOCK = 1 << 17  # elements per block in adam_step (4 arrays + 1 scratch block of float32 ≈ 2.6 MB per thread)
+_BLOCK = 1 << 17  # elements per block in adam_step (spec/optim.md §1: L2-sized 2^15 blocks were not measurably faster)
 _THREAD_MIN_SIZE = 1 << 20  # adam_step uses two threads from this many parameter elements on (when threads=None)
 
 
@@ -121,27 +121,33 @@ def adam_init(params: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     return state
 
 
-def _adam_block(p, g, m, v, t, w1, b2, w2, eps_s, neg_step_s) -> None:
-    """One block of the update, in place (``t`` is scratch of the same size)."""
+def _adam_block(p, g, m, v, t, w1, b1, b2, w2, eps_s, neg_step_s) -> None:
+    """One block of the update, in place (``t`` is scratch of the same size; the scalars are of the arrays' dtype).
+
+    12 ufunc passes, the output always given positionally (no keyword parsing per call); with a block that fits
+    the core's L2 cache together with its scratch, only the first read of p, g, m, v and the final writes of
+    p, m, v reach memory.
+    """
+    sub, mul, add = np.subtract, np.multiply, np.add
     # m <- lerp(m, g, 1 - β1), as torch's lerp_: m + w (g - m) for w < 0.5, else g - (g - m)(1 - w)
-    np.subtract(g, m, out=t)
+    sub(g, m, t)
     if w1 < 0.5:
-        np.multiply(t, w1, out=t)
-        np.add(m, t, out=m)
+        mul(t, w1, t)
+        add(m, t, m)
     else:
-        np.multiply(t, 1.0 - w1, out=t)
-        np.subtract(g, t, out=m)
+        mul(t, b1, t)  # b1 = 1 - w1
+        sub(g, t, m)
     # v <- β2 v + (1 - β2) g²
-    np.multiply(g, g, out=t)
-    np.multiply(t, w2, out=t)
-    np.multiply(v, b2, out=v)
-    np.add(v, t, out=v)
+    mul(g, g, t)
+    mul(t, w2, t)
+    mul(v, b2, v)
+    add(v, t, v)
     # p <- p - lr/bc1 · m / (sqrt(v)/sqrt(bc2) + eps)  =  p + m / (sqrt(v) + eps·sqrt(bc2)) · (-lr sqrt(bc2)/bc1)
-    np.sqrt(v, out=t)
-    np.add(t, eps_s, out=t)
-    np.divide(m, t, out=t)
-    np.multiply(t, neg_step_s, out=t)
-    np.add(p, t, out=p)
+    np.sqrt(v, t)
+    add(t, eps_s, t)
+    np.divide(m, t, t)
+    mul(t, neg_step_s, t)
+    add(p, t, p)
 
 
 def adam_step(params: MutableMapping[str, np.ndarray], grads: Mapping[str, np.ndarray],
@@ -224,16 +230,22 @@ def adam_step(params: MutableMapping[str, np.ndarray], grads: Mapping[str, np.nd
         else:
             blocks.append((p, g, m, v))
 
+    scalars = {}  # dtype -> (w1, β1, β2, w2, eps_s, neg_step_s) as scalars of that dtype
+    for p in params.values():
+        if p.dtype not in scalars:
+            scalars[p.dtype] = tuple(p.dtype.type(c) for c in (1.0 - b1, 1.0 - (1.0 - b1), b2, 1.0 - b2, eps_s,
+                                                               neg_step_s))
+
     def run(first: int) -> None:  # blocks first, first + threads, ...; one scratch buffer per dtype and thread
         scratch: dict[np.dtype, np.ndarray] = {}
         for p, g, m, v in blocks[first::threads]:
             if p.ndim != 1:  # strided views: a full-size scratch
-                _adam_block(p, g, m, v, np.empty_like(p), 1.0 - b1, b2, 1.0 - b2, eps_s, neg_step_s)
+                _adam_block(p, g, m, v, np.empty_like(p), *scalars[p.dtype])
                 continue
             buf = scratch.get(p.dtype)
             if buf is None or buf.size < p.size:
                 buf = scratch[p.dtype] = np.empty(p.size, dtype=p.dtype)
-            _adam_block(p, g, m, v, buf[:p.size], 1.0 - b1, b2, 1.0 - b2, eps_s, neg_step_s)
+            _adam_block(p, g, m, v, buf[:p.size], *scalars[p.dtype])
 
     if threads == 1 or len(blocks) < 2:
         run(0)

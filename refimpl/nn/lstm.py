@@ -156,6 +156,30 @@ def _cell_forward(gi, h, c, w_hh, whh_t, g, c_new, tc, h_new):
     np.multiply(g[:, 3 * hid:], tc, out=h_new)  # h' = o tanh(c')
 
 
+def _output_gate_backward(dh, dc, o, tc, do, tmp):
+    """``da_o = dh tanh(c') o (1 - o)`` into ``do`` and ``dc += dh o (1 - tanh(c')^2)`` (all (B, H); tmp scratch)."""
+    np.subtract(1, o, out=do)
+    do *= o
+    do *= tc
+    do *= dh
+    np.multiply(tc, tc, out=tmp)
+    np.subtract(1, tmp, out=tmp)
+    tmp *= o
+    tmp *= dh
+    dc += tmp
+
+
+def _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dg, w_hh):
+    """The end of a step's backward: ``da_g = dc i (1 - g^2)`` into ``dgg``; then ``dc_prev = dc f`` and
+    ``dh_prev = dg W_hh`` overwrite ``dc`` and ``dh`` (dg (B, 4H) must hold all four gate cotangents)."""
+    np.multiply(gg, gg, out=dgg)
+    np.subtract(1, dgg, out=dgg)
+    dgg *= i
+    dgg *= dc
+    dc *= f
+    np.matmul(dg, w_hh, out=dh)
+
+
 def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     """Back-propagate one LSTM step.
 
@@ -166,15 +190,7 @@ def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     hid = c.shape[1]
     i, f, gg, o = g[:, :hid], g[:, hid:2 * hid], g[:, 2 * hid:3 * hid], g[:, 3 * hid:]
     di, df, dgg, do = dg[:, :hid], dg[:, hid:2 * hid], dg[:, 2 * hid:3 * hid], dg[:, 3 * hid:]
-    np.subtract(1, o, out=do)  # da_o = dh tanh(c') o (1 - o)
-    do *= o
-    do *= tc
-    do *= dh
-    np.multiply(tc, tc, out=tmp)  # dc += dh o (1 - tanh(c')^2)
-    np.subtract(1, tmp, out=tmp)
-    tmp *= o
-    tmp *= dh
-    dc += tmp
+    _output_gate_backward(dh, dc, o, tc, do, tmp)  # da_o; dc += dh o (1 - tanh(c')^2)
     np.subtract(1, i, out=di)  # da_i = dc g i (1 - i)
     di *= i
     di *= gg
@@ -183,20 +199,103 @@ def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     df *= f
     df *= c
     df *= dc
-    np.multiply(gg, gg, out=dgg)  # da_g = dc i (1 - g^2)
-    np.subtract(1, dgg, out=dgg)
-    dgg *= i
-    dgg *= dc
-    dc *= f  # dc_prev = dc f
-    np.matmul(dg, w_hh, out=dh)  # dh_prev = dg W_hh
+    _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dg, w_hh)  # da_g; dc_prev = dc f; dh_prev = dg W_hh
 
 
 # ----------------------------------------------------------------------------------------------------------
-# one layer over the whole sequence (time-major)
+# one layer over the whole sequence (time-major): the fast kernels (spec/layers.md §5.6)
 
 
 def _layer_forward(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
-    """xs (T, B, I). Returns hs, cs (T+1, B, H) (index 0 = initial state), g (T, B, 4H), tc (T, B, H)."""
+    """One layer over the sequence. xs (T, B, I). Returns hs, cs (T+1, B, H) (index 0 = initial state),
+    g (T, B, 4H) activated gates [i | f | g | o], tc (T, B, H) = tanh(c_t).
+
+    Same arithmetic as :func:`_layer_forward_reference`, with fewer passes over memory: the gate pre-activations
+    are accumulated in place into the buffer of the input projections (one GEMM for all steps, both biases
+    folded in), which then holds the activated gates (no second (T, B, 4H) array); the recurrent product of
+    every step goes into ONE reused (B, 4H) scratch that stays in cache; the floating-point error state is
+    set once per layer, not once per sigmoid call.
+    """
+    t_len, batch, in_size = xs.shape
+    hid = w_hh.shape[1]
+    dt = xs.dtype
+    g = _matmul_wt(xs.reshape(t_len * batch, in_size), w_ih)  # (T*B, 4H), one GEMM for all steps
+    g += b_ih + b_hh
+    g = g.reshape(t_len, batch, 4 * hid)  # pre-activations (input part), activated gates after the loop
+    whh_t = np.ascontiguousarray(w_hh.T)  # (H, 4H), transposed once per call
+    hs = np.empty((t_len + 1, batch, hid), dtype=dt)
+    cs = np.empty((t_len + 1, batch, hid), dtype=dt)
+    hs[0], cs[0] = h0, c0
+    tc = np.empty((t_len, batch, hid), dtype=dt)
+    rec = np.empty((batch, 4 * hid), dtype=dt)  # W_hh h_{t-1}, reused every step
+    with np.errstate(over="ignore"):  # exp(-a) -> inf for a < -88 (float32) gives sigmoid 0 exactly
+        for t in range(t_len):
+            gt = g[t]  # (B, 4H)
+            np.matmul(hs[t], whh_t, out=rec)
+            gt += rec
+            for s in (gt[:, :2 * hid], gt[:, 3 * hid:]):  # i, f | o: 1 / (1 + exp(-a)), in place
+                np.negative(s, out=s)
+                np.exp(s, out=s)
+                s += 1
+                np.reciprocal(s, out=s)
+            gg = gt[:, 2 * hid:3 * hid]
+            np.tanh(gg, out=gg)
+            c_new, tct = cs[t + 1], tc[t]
+            np.multiply(gt[:, hid:2 * hid], cs[t], out=c_new)  # c' = f c + i g
+            np.multiply(gt[:, :hid], gg, out=tct)
+            c_new += tct
+            np.tanh(c_new, out=tct)
+            np.multiply(gt[:, 3 * hid:], tct, out=hs[t + 1])  # h' = o tanh(c')
+    return hs, cs, g, tc
+
+
+def _layer_backward(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
+    """BPTT through one layer. dys (T', B, H) cotangents of the outputs h_1..h_T' (T' <= T: the skewed stack
+    passes the layer above's input cotangents shifted by one step, without a copy; may be a view); dh_last,
+    dc_last (B, H) or None. Returns dxs (T, B, I), dh0, dc0, dW_ih, dW_hh, db (the same for b_ih and b_hh).
+
+    Same arithmetic as :func:`_layer_backward_reference` up to the grouping of products: the sigmoid
+    derivatives of the contiguous [i | f] block are formed in one pass each, and [da_i | da_f] is multiplied by
+    ``dc`` in one broadcast pass (19 elementwise calls per step instead of 22); ``dW_hh``, ``dW_ih``, ``dx``
+    are one GEMM each over all steps, the bias gradient one matrix-vector product.
+    """
+    t_len, batch, in_size = xs.shape
+    hid = w_hh.shape[1]
+    dt = xs.dtype
+    n_dy = len(dys)
+    dg = np.empty((t_len, batch, 4 * hid), dtype=dt)
+    dh = np.zeros((batch, hid), dtype=dt) if dh_last is None else np.array(dh_last, dtype=dt)
+    dc = np.zeros((batch, hid), dtype=dt) if dc_last is None else np.array(dc_last, dtype=dt)
+    tmp = np.empty((batch, hid), dtype=dt)
+    dc_b = dc.reshape(batch, 1, hid)  # (B, 1, H) view of dc, broadcast over the [i | f] pair
+    for t in range(t_len - 1, -1, -1):
+        if t < n_dy:
+            dh += dys[t]
+        gt, dgt, tct = g[t], dg[t], tc[t]
+        i, f, gg, o = gt[:, :hid], gt[:, hid:2 * hid], gt[:, 2 * hid:3 * hid], gt[:, 3 * hid:]
+        dif, dgg, do = dgt[:, :2 * hid], dgt[:, 2 * hid:3 * hid], dgt[:, 3 * hid:]
+        _output_gate_backward(dh, dc, o, tct, do, tmp)  # da_o; dc += dh o (1 - tanh(c')^2)
+        np.subtract(1, gt[:, :2 * hid], out=dif)  # [i (1 - i) | f (1 - f)]
+        dif *= gt[:, :2 * hid]
+        dif[:, :hid] *= gg  # da_i = dc g i (1 - i)
+        dif[:, hid:] *= cs[t]  # da_f = dc c f (1 - f)
+        dgt.reshape(batch, 4, hid)[:, :2] *= dc_b  # [da_i | da_f] *= dc (a view: dgt is C-contiguous)
+        _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dgt, w_hh)  # da_g; dc_prev = dc f; dh_prev = dg W_hh
+    dg2 = dg.reshape(t_len * batch, 4 * hid)  # (T*B, 4H)
+    dw_hh = dg2.T @ hs[:-1].reshape(t_len * batch, hid)  # (4H, H), one GEMM over all steps
+    dw_ih = dg2.T @ xs.reshape(t_len * batch, in_size)  # (4H, I)
+    dxs = (dg2 @ w_ih).reshape(t_len, batch, in_size)  # (T, B, I)
+    db = np.ones(t_len * batch, dtype=dt) @ dg2  # (4H,) = sum over steps and batch, one GEMV
+    return dxs, dh, dc, dw_ih, dw_hh, db
+
+
+# ----------------------------------------------------------------------------------------------------------
+# one layer over the whole sequence (time-major): the readable reference kernels (spec/layers.md §5.6)
+
+
+def _layer_forward_reference(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
+    """Reference of :func:`_layer_forward` (one cell call per step). xs (T, B, I). Returns hs, cs (T+1, B, H)
+    (index 0 = initial state), g (T, B, 4H), tc (T, B, H)."""
     t_len, batch, in_size = xs.shape
     hid = w_hh.shape[1]
     gi = _matmul_wt(xs.reshape(t_len * batch, in_size), w_ih)  # (T*B, 4H), one GEMM for all steps
@@ -214,9 +313,10 @@ def _layer_forward(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
     return hs, cs, g, tc
 
 
-def _layer_backward(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
-    """BPTT through one layer. dys (T, B, H) cotangents of the outputs h_1..h_T (may be a view); dh_last,
-    dc_last (B, H) or None. Returns dxs (T, B, I), dh0, dc0, dW_ih, dW_hh, db (the same for b_ih and b_hh)."""
+def _layer_backward_reference(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
+    """Reference of :func:`_layer_backward`. dys (T', B, H) cotangents of the outputs h_1..h_T' (T' <= T; the
+    outputs after T' get none; may be a view); dh_last, dc_last (B, H) or None. Returns dxs (T, B, I), dh0, dc0,
+    dW_ih, dW_hh, db (the same for b_ih and b_hh)."""
     t_len, batch, in_size = xs.shape
     hid = w_hh.shape[1]
     dt = xs.dtype
@@ -225,7 +325,8 @@ def _layer_backward(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
     dc = np.zeros((batch, hid), dtype=dt) if dc_last is None else np.array(dc_last, dtype=dt)
     tmp = np.empty((batch, hid), dtype=dt)
     for t in range(t_len - 1, -1, -1):
-        dh += dys[t]
+        if t < len(dys):
+            dh += dys[t]
         _cell_backward(dh, dc, cs[t], g[t], tc[t], w_hh, dg[t], tmp)
     dg2 = dg.reshape(t_len * batch, 4 * hid)  # (T*B, 4H)
     dw_hh = dg2.T @ hs[:-1].reshape(t_len * batch, hid)  # (4H, H), one GEMM over all steps
@@ -276,18 +377,26 @@ def lstm_forward(x: np.ndarray, state: tuple, params: Mapping[str, np.ndarray], 
     if t_len < 1:
         raise ValueError(f"x: expected at least one time step (B, T >= 1, I), got {x.shape}")
     h0, c0 = _check_state(state, "state", ("h0", "c0"), (num_layers, batch, hid), x, "x", prefix, weights)
+    return _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed, reference=False)
+
+
+def _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed, reference):
+    """The layer loop of :func:`lstm_forward` (inputs checked), with the fast or the reference layer kernels."""
+    batch, t_len, in_size = x.shape
+    hid = h0.shape[-1]
+    layer_forward = _layer_forward_reference if reference else _layer_forward
     xs = np.array(x.transpose(1, 0, 2), order="C")  # (T, B, I), always a copy
     h_n = np.empty_like(h0)
     c_n = np.empty_like(c0)
     layers = []
     for k in range(num_layers):
-        hs, cs, g, tc = _layer_forward(xs, h0[k], c0[k], *weights[k])
+        hs, cs, g, tc = layer_forward(xs, h0[k], c0[k], *weights[k])
         layers.append((xs, hs, cs, g, tc))
         h_n[k], c_n[k] = hs[-1], cs[-1]
         xs = hs[:-1] if skewed else hs[1:]  # (T, B, H) contiguous views: the next layer's inputs
     y = np.array(hs[1:].transpose(1, 0, 2), order="C")  # (B, T, H)
     cache = dict(layers=layers, weights=weights, prefix=prefix, num_layers=num_layers, skewed=skewed,
-                 shape=(batch, t_len, in_size, hid))
+                 shape=(batch, t_len, in_size, hid), reference=reference)
     return y, (h_n, c_n), cache
 
 
@@ -324,7 +433,7 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
     batch, t_len, in_size, hid = cache["shape"]
     dt = layers[0][0].dtype
     if dy is None:
-        dys = np.zeros((t_len, batch, hid), dtype=dt)
+        dys = np.zeros((0, batch, hid), dtype=dt)  # no output cotangent at any step (the kernels read len(dys))
     else:
         dy = check_float_array(dy, "dy", (batch, t_len, hid))
         dys = dy.transpose(1, 0, 2)  # (T, B, H) view
@@ -340,11 +449,12 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
     dh0 = np.empty((num_layers, batch, hid), dtype=dt)
     dc0 = np.empty((num_layers, batch, hid), dtype=dt)
     grads = {}
+    layer_backward = _layer_backward_reference if cache.get("reference") else _layer_backward
     skew_dh0 = None  # skewed: cotangent of h0[k] through layer k+1's first input
     for k in range(num_layers - 1, -1, -1):
         xs, hs, cs, g, tc = layers[k]
         w_ih, w_hh, _, _ = weights[k]
-        dxs, dh0[k], dc0[k], dw_ih, dw_hh, db = _layer_backward(
+        dxs, dh0[k], dc0[k], dw_ih, dw_hh, db = layer_backward(
             dys, None if dh_n is None else dh_n[k], None if dc_n is None else dc_n[k],
             xs, hs, cs, g, tc, w_ih, w_hh)
         if skew_dh0 is not None:
@@ -356,12 +466,23 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
         if skewed and k > 0:
             # inputs were [h0[k-1], h_0, ..., h_{T-2}] of layer k-1
             skew_dh0 = dxs[0]
-            dys = np.zeros_like(dxs)
-            dys[:-1] = dxs[1:]
+            dys = dxs[1:]  # (T-1, B, H): cotangents of h_0 .. h_{T-2} of layer k-1; h_{T-1} gets none
         else:
             dys = dxs
     dx = np.ascontiguousarray(dys.transpose(1, 0, 2))  # (B, T, I)
     return dx, (dh0, dc0), grads
+
+
+def _lstm_forward_reference(x, state, params, prefix, num_layers=1, skewed=False):
+    """:func:`lstm_forward` with the readable reference layer kernels (``_layer_forward_reference``, one
+    ``_cell_forward`` call per step); its cache makes :func:`lstm_backward` use ``_layer_backward_reference``.
+    Kept beside the fast kernels under an equality test (tests/test_nn_lstm.py) and timed by
+    ``benchmarks/bench_lstm_train.py``."""
+    _check_layers(num_layers)
+    weights, in_size, hid = _all_weights(params, prefix, num_layers)
+    x = check_float_array(x, "x", (None, None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    h0, c0 = _check_state(state, "state", ("h0", "c0"), (num_layers, x.shape[0], hid), x, "x", prefix, weights)
+    return _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed, reference=True)
 
 
 # ----------------------------------------------------------------------------------------------------------
