@@ -52,7 +52,7 @@ from refimpl.registry import MODELS, TASKS, task_of
 from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
                               onnx_metadata, read_motion, train_model, verify_onnx)
 from refimpl.tasks import transition
-from refimpl.train import output_lock
+from refimpl.train import check_resumable, output_lock
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
 
@@ -148,6 +148,12 @@ def _info_npz(p: Path, args) -> None:
             if "not a refimpl checkpoint" not in str(exc):
                 raise
             arrays, meta = load_state_dict_npz(p), None
+    if meta is not None and (meta.get("format") == "refimpl.train/1" or "model" in meta):
+        from refimpl.checkpoint_schema import validate_trained
+
+        with reading(p):  # a training checkpoint must pass its schema (spec/robustness.md §9): exit 3 otherwise
+            validate_trained(arrays, meta, MODELS, str(p), task_of=task_of,
+                             expected_format=meta.get("format") if isinstance(meta.get("format"), str) else "")
     _say(f"file        {p}")
     if meta is None:
         n = sum(int(v.size) for v in arrays.values())
@@ -157,12 +163,6 @@ def _info_npz(p: Path, args) -> None:
         return
     params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
     other = {k: v for k, v in arrays.items() if not k.startswith("param.")}
-    if meta.get("format") == "refimpl.train/1" or "model" in meta:
-        from refimpl.checkpoint_schema import validate_trained
-
-        with reading(p):  # a training checkpoint must pass its schema (spec/robustness.md §9): exit 3 otherwise
-            validate_trained(arrays, meta, MODELS, str(p), task_of=task_of,
-                             expected_format=meta.get("format") if isinstance(meta.get("format"), str) else "")
     _say(f"format      refimpl checkpoint ({meta.get('format', 'no format tag')}), checksum OK")
     if "model" in meta:
         cfg = dict(meta.get("model_config") or {})
@@ -259,6 +259,8 @@ def cmd_train(args) -> int:
         raise BadInputError(f"{ckpt}: no checkpoint to resume (train without --resume first)")
     if args.resume:
         load_trained(ckpt)  # a damaged or crafted checkpoint is exit 3 before anything is read or written
+        with reading(ckpt):
+            check_resumable(ckpt)  # and so is a bad training state (optimiser moments, counters, permutation)
     with output_lock(out):  # a second trainer on the same --out stops here (spec/cli.md §train)
         return _train_locked(args, spec, task, rep, out, ckpt)
 

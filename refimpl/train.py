@@ -60,7 +60,7 @@ from refimpl.optim import adam_init, adam_step, clip_grad_norm, exponential_lr
 
 __all__ = [
     "ModelAdapter", "OptimConfig", "TrainConfig", "TrainContext", "StepInfo", "TrainResult", "TrainingDiverged",
-    "OutputLocked", "train", "format_duration", "default_progress", "output_lock", "remove_stale_temp_files",
+    "OutputLocked", "train", "check_resumable", "format_duration", "default_progress", "output_lock", "remove_stale_temp_files",
 ]
 
 _FORMAT = "refimpl.train/1"
@@ -349,6 +349,14 @@ def _load(path):
     params = {k[len("param."):]: np.array(v) for k, v in arrays.items() if k.startswith("param.")}
     opt = {k[len("optim."):]: np.array(v) for k, v in arrays.items() if k.startswith("optim.")}
     return params, opt, np.array(arrays["sampler.perm"]), meta
+
+
+def check_resumable(path) -> None:
+    """Raise ``ValueError`` (naming the file and the field) unless ``path`` is a complete, valid training state:
+    what :func:`train` checks on resume before the run's data and settings are known (the permutation's length
+    is checked against the data then)."""
+    params, opt, perm, meta = _load(path)
+    validate_training_state(params, opt, perm, meta, None, where=f"checkpoint {path}")
 
 
 def _truncate_csv(path: Path, max_step: int) -> None:
