@@ -574,6 +574,12 @@ def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, pe
                         raise TrainingDiverged(f"{adapter.name}: gradient of {k!r} is not finite at step {step + 1} "
                                                f"(epoch {epoch}); parameters left at step {step}"
                                                + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
+                for k, g in grads.items():
+                    if not math.isfinite(float(np.vdot(g, g))):  # Adam's second moment would overflow
+                        rng.bit_generator.state = rng_snapshot
+                        raise TrainingDiverged(f"{adapter.name}: the squares of the gradient of {k!r} overflow at "
+                                               f"step {step + 1} (epoch {epoch}); parameters left at step {step}"
+                                               + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
                 lr = exponential_lr(optim.lr, optim.lr_decay, epoch)
                 if optim.clip_norm is not None:
                     gnorm = clip_grad_norm(grads, optim.clip_norm)
