@@ -7,7 +7,8 @@ the *content* of a ``refimpl train`` checkpoint, generically for every registere
 * the metadata: ``format``, ``model`` (a string), ``model_config`` (a JSON object);
 * the model's config: every field present in ``model_config`` has the type its config dataclass declares
   (``int`` — not ``bool``, not ``1.5``; ``float`` — a finite number, not ``bool``; ``bool``; ``str``;
-  ``tuple[int, ...]`` — a list of such ints), then the dataclass itself checks the ranges;
+  ``tuple[int, ...]`` — a list of such ints), integers within ``±`` :data:`MAX_CONFIG_INT` and lists of at most
+  :data:`MAX_CONFIG_LIST` entries, then the dataclass itself checks the ranges;
 * the task's stored fields (:data:`TASK_FIELDS`, extended by a task module's ``CHECKPOINT_FIELDS``):
   ``fps`` > 0 and finite, ``root_mean`` 3 finite numbers, ``root_std`` 3 finite numbers > 0, ``transition_length``
   a positive int, ``dtype`` ``"float32"``/``"float64"``, ``representation`` a string;
@@ -30,8 +31,14 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["TASK_FIELDS", "validate_model_config", "expected_param_shapes", "validate_params",
+__all__ = ["TASK_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "validate_model_config", "expected_param_shapes", "validate_params",
            "validate_task_fields", "validate_trained", "validate_training_state"]
+
+#: Largest integer any config field (or entry of a size list) may hold, and the longest size list: bounds the
+#: work of computing the parameter shapes (``gru_layers = 10**30`` would loop for ever) before the parameters
+#: themselves are compared.
+MAX_CONFIG_INT = 1_000_000
+MAX_CONFIG_LIST = 1_000
 
 #: Largest integer a config field may hold when the parameter shapes have to be found by running the model's
 #: ``init_params`` (a recipe without ``param_shapes``): it bounds the memory of that fallback.
@@ -113,7 +120,15 @@ def validate_model_config(config_type: type, model_config, where: str = "checkpo
     for f in dataclasses.fields(config_type):
         if f.name not in model_config:
             continue
-        values[f.name] = _check_type(model_config[f.name], hints.get(f.name, Any), f"{where}: model_config.{f.name}")
+        name = f"{where}: model_config.{f.name}"
+        raw = model_config[f.name]
+        if isinstance(raw, (list, tuple)) and len(raw) > MAX_CONFIG_LIST:
+            raise ValueError(f"{name}: {len(raw)} entries, more than the limit {MAX_CONFIG_LIST}")
+        value = _check_type(raw, hints.get(f.name, Any), name)
+        for x in (value if isinstance(value, (list, tuple)) else (value,)):
+            if _is_int(x) and abs(x) > MAX_CONFIG_INT:
+                raise ValueError(f"{name}: {x} is beyond the limit {MAX_CONFIG_INT} for a size")
+        values[f.name] = value
     try:
         return config_type(**values)
     except (TypeError, ValueError, OverflowError) as exc:

@@ -103,7 +103,9 @@ CASES = {
     "layers 2 (params for 1)": (_cfg("gru_layers", 2), "gru.weight_ih_l1"),
     "layers 0": (_cfg("gru_layers", 0), "gru_layers"),
     "size negative": (_cfg("gru_hidden", -8), "gru_hidden"),
-    "size huge": (_cfg("gru_hidden", 10**30), "gru"),
+    "size huge": (_cfg("gru_hidden", 10**30), "model_config.gru_hidden"),
+    "layers huge": (_cfg("gru_layers", 10**30), "model_config.gru_layers"),  # looped for ever in param_shapes
+    "sizes long": (_cfg("encoder_sizes", [8] * 5000), "model_config.encoder_sizes"),
     "sizes string": (_cfg("encoder_sizes", "16,8"), "model_config.encoder_sizes"),
     "sizes bool entry": (_cfg("encoder_sizes", [16, True]), "model_config.encoder_sizes[1]"),
     "sizes float entry": (_cfg("encoder_sizes", [16, 8.5]), "model_config.encoder_sizes[1]"),
