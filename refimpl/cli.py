@@ -138,6 +138,13 @@ def _shape_rows(arrays: Mapping[str, np.ndarray]) -> list[str]:
     return [f"  {k.ljust(width)}  {str(tuple(v.shape)):>14}  {v.dtype}" for k, v in arrays.items()]
 
 
+def _seconds(x) -> str:
+    """``12.3 s`` for a number, else the stored value as text (metadata is data: never trusted to be a number)."""
+    if isinstance(x, (int, float)) and not isinstance(x, bool):
+        return f"{float(x):.1f} s"
+    return f"{x!r:.40}"
+
+
 def _info_npz(p: Path, args) -> None:
     from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
 
@@ -148,12 +155,12 @@ def _info_npz(p: Path, args) -> None:
             if "not a refimpl checkpoint" not in str(exc):
                 raise
             arrays, meta = load_state_dict_npz(p), None
-    if meta is not None and (meta.get("format") == "refimpl.train/1" or "model" in meta):
+    training = meta is not None and meta.get("format") == "refimpl.train/1"
+    if training:
         from refimpl.checkpoint_schema import validate_trained
 
         with reading(p):  # a training checkpoint must pass its schema (spec/robustness.md §9): exit 3 otherwise
-            validate_trained(arrays, meta, MODELS, str(p), task_of=task_of,
-                             expected_format=meta.get("format") if isinstance(meta.get("format"), str) else "")
+            validate_trained(arrays, meta, MODELS, str(p), task_of=task_of)
     _say(f"file        {p}")
     if meta is None:
         n = sum(int(v.size) for v in arrays.values())
@@ -164,12 +171,12 @@ def _info_npz(p: Path, args) -> None:
     params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
     other = {k: v for k, v in arrays.items() if not k.startswith("param.")}
     _say(f"format      refimpl checkpoint ({meta.get('format', 'no format tag')}), checksum OK")
-    if "model" in meta:
-        cfg = dict(meta.get("model_config") or {})
+    if training:  # other metadata (any JSON object) is printed as it is, below
+        cfg = dict(meta["model_config"])
         stats = {k: cfg.pop(k) for k in ("root_mean", "root_std") if k in cfg}
         _say(f"model       {meta['model']}")
         _say(f"progress    step {meta.get('step')} of {meta.get('steps_target')}, epoch {meta.get('epoch')}, "
-             f"trained for {meta.get('elapsed_s', 0.0):.1f} s")
+             f"trained for {_seconds(meta.get('elapsed_s', 0.0))}")
         _say(f"config      {json.dumps(cfg, sort_keys=True)}")
         if stats:
             _say(f"normalise   root mean {np.round(stats.get('root_mean', []), 3).tolist()} "
