@@ -142,10 +142,15 @@ META_KEYS = ("format", "model", "model_config")
 
 def _edit_param(arrays: dict, rng: random.Random, edit: str) -> str:
     names = sorted(k for k in arrays if k.startswith("param."))
+    if not names:
+        arrays["param.extra"] = np.zeros(3, np.float32)
+        return "param.extra:added"
     name = rng.choice(names)
     a = arrays[name]
+    if a.ndim == 0 or a.size == 0:  # already spoiled by a first edit: give the second one something to work on
+        a = np.zeros(3, a.dtype) if a.size == 0 else a.reshape(1)
     if edit in ("nan", "inf", "neg_inf"):
-        b = a.copy()
+        b = a.copy() if a.dtype.kind in "fc" else a.astype(np.float32)
         b.reshape(-1)[rng.randrange(b.size)] = {"nan": np.nan, "inf": np.inf, "neg_inf": -np.inf}[edit]
         arrays[name] = b
     elif edit == "grow":
@@ -178,12 +183,17 @@ def _edit_param(arrays: dict, rng: random.Random, edit: str) -> str:
 
 def mutate_checkpoint(content, rng: random.Random) -> tuple[dict, dict, str]:
     """One or two random edits of ``(arrays, meta)``; returns the edited copies and a description."""
+    with np.errstate(all="ignore"):  # casts of NaN/inf to integers in the generator itself
+        return _mutate_checkpoint(content, rng)
+
+
+def _mutate_checkpoint(content, rng):
     arrays, meta = copy.deepcopy(content[0]), copy.deepcopy(content[1])
     done = []
     for _ in range(1 if rng.random() < 0.8 else 2):
         r = rng.random()
         cfg = meta.get("model_config")
-        if r < 0.45 and isinstance(cfg, dict):
+        if r < 0.45 and isinstance(cfg, dict) and cfg:
             key = rng.choice(sorted(cfg))
             if rng.random() < 0.1:
                 del cfg[key]
