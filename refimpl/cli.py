@@ -52,6 +52,7 @@ from refimpl.registry import MODELS, TASKS, task_of
 from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
                               onnx_metadata, read_motion, train_model, verify_onnx)
 from refimpl.tasks import transition
+from refimpl.train import check_resumable, output_lock
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
 
@@ -146,6 +147,13 @@ def _shape_rows(arrays: Mapping[str, np.ndarray]) -> list[str]:
     return [f"  {k.ljust(width)}  {str(tuple(v.shape)):>14}  {v.dtype}" for k, v in arrays.items()]
 
 
+def _seconds(x) -> str:
+    """``12.3 s`` for a number, else the stored value as text (metadata is data: never trusted to be a number)."""
+    if isinstance(x, (int, float)) and not isinstance(x, bool):
+        return f"{float(x):.1f} s"
+    return f"{x!r:.40}"
+
+
 def _info_npz(p: Path, args) -> None:
     from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
 
@@ -156,6 +164,12 @@ def _info_npz(p: Path, args) -> None:
             if "not a refimpl checkpoint" not in str(exc):
                 raise
             arrays, meta = load_state_dict_npz(p), None
+    training = meta is not None and meta.get("format") == "refimpl.train/1"
+    if training:
+        from refimpl.checkpoint_schema import validate_trained
+
+        with reading(p):  # a training checkpoint must pass its schema (spec/robustness.md §9): exit 3 otherwise
+            validate_trained(arrays, meta, MODELS, str(p), task_of=task_of)
     _say(f"file        {p}")
     if meta is None:
         n = sum(int(v.size) for v in arrays.values())
@@ -166,12 +180,12 @@ def _info_npz(p: Path, args) -> None:
     params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
     other = {k: v for k, v in arrays.items() if not k.startswith("param.")}
     _say(f"format      refimpl checkpoint ({meta.get('format', 'no format tag')}), checksum OK")
-    if "model" in meta:
-        cfg = dict(meta.get("model_config") or {})
+    if training:  # other metadata (any JSON object) is printed as it is, below
+        cfg = dict(meta["model_config"])
         stats = {k: cfg.pop(k) for k in ("root_mean", "root_std") if k in cfg}
         _say(f"model       {meta['model']}")
         _say(f"progress    step {meta.get('step')} of {meta.get('steps_target')}, epoch {meta.get('epoch')}, "
-             f"trained for {meta.get('elapsed_s', 0.0):.1f} s")
+             f"trained for {_seconds(meta.get('elapsed_s', 0.0))}")
         _say(f"config      {json.dumps(cfg, sort_keys=True)}")
         if stats:
             _say(f"normalise   root mean {np.round(stats.get('root_mean', []), 3).tolist()} "
@@ -259,6 +273,15 @@ def cmd_train(args) -> int:
     ckpt = out / "checkpoint.npz"
     if args.resume and not ckpt.is_file():
         raise BadInputError(f"{ckpt}: no checkpoint to resume (train without --resume first)")
+    if args.resume:
+        load_trained(ckpt)  # a damaged or crafted checkpoint is exit 3 before anything is read or written
+        with reading(ckpt):
+            check_resumable(ckpt)  # and so is a bad training state (optimiser moments, counters, permutation)
+    with output_lock(out):  # a second trainer on the same --out stops here (spec/cli.md §train)
+        return _train_locked(args, spec, task, rep, out, ckpt)
+
+
+def _train_locked(args, spec, task, rep, out, ckpt) -> int:
     if ckpt.is_file() and not (args.resume or args.overwrite):
         raise UsageError(f"{ckpt} exists: pass --resume to continue it or --overwrite to start again")
     if args.overwrite:
@@ -289,7 +312,9 @@ def cmd_train(args) -> int:
          f"recent loss {last:.5g}, {result.elapsed_s:.1f} s")
     _say(f"checkpoint  {result.checkpoint_path}")
     _say(f"loss log    {out / 'loss.csv'}" + (f", {out / 'loss_val.csv'}" if args.validate_every else ""))
-    return 130 if result.interrupted else EXIT_OK
+    if result.interrupted:
+        return 128 + int(getattr(result, "signal", None) or 2)  # 130 for SIGINT / Ctrl-C, 143 for SIGTERM
+    return EXIT_OK
 
 
 def cmd_eval(args) -> int:
@@ -352,9 +377,7 @@ def cmd_generate(args) -> int:
         raise UsageError(f"--backend onnx runs the network; --method {args.method} is a NumPy baseline")
     fps, T_model = (model.fps, model.transition_length) if model else (30.0, 30)
     if args.backend == "onnx" and model is None:
-        meta = onnx_metadata(args.onnx)
-        fps = float(meta.get("frame_rate", 30.0))
-        T_model = int((meta.get("model") or {}).get("transition_length") or T_model)
+        fps, T_model = _onnx_rate_and_length(args.onnx, T_model)
     T = args.length or T_model
     target_path = args.target or args.source
     skel, src_clip, src = transition.clip_for(args.source, fps, args.fps)
@@ -388,6 +411,29 @@ def cmd_generate(args) -> int:
     if args.png or args.gif:
         transition.render_transition(tr, png=args.png, gif=args.gif)
     return EXIT_OK
+
+
+def _onnx_rate_and_length(onnx_dir, default_T: int) -> tuple[float, int]:
+    """Frame rate and T from the exported models' metadata, checked: a rate that is not a finite number > 0, or
+    a model entry / T of the wrong type, is a bad input file (exit 3), not a ZeroDivisionError later."""
+    meta = onnx_metadata(onnx_dir)
+    where = f"{onnx_dir}: metadata"
+    fps = meta.get("frame_rate", 30.0)
+    try:
+        ok = not isinstance(fps, bool) and isinstance(fps, (int, float)) and 0 < float(fps) < float("inf")
+    except OverflowError:  # an integer beyond the float range
+        ok = False
+    if not ok:
+        raise BadInputError(f"{where} frame_rate: expected a finite number > 0, got {fps!r}"[:300])
+    model_meta = meta.get("model", {})
+    if not isinstance(model_meta, dict):
+        raise BadInputError(f"{where} model: expected a JSON object, got {type(model_meta).__name__}")
+    T = model_meta.get("transition_length")
+    if T is None:
+        T = default_T
+    elif isinstance(T, bool) or not isinstance(T, int) or not 1 <= T <= 100_000:
+        raise BadInputError(f"{where} model.transition_length: expected an integer in [1, 100000], got {T!r}"[:300])
+    return float(fps), int(T)
 
 
 def _parse_slice(text: str | None, n: int) -> slice:

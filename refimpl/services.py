@@ -70,29 +70,24 @@ def load_trained(path) -> TrainedModel:
     Raises
     ------
     BadInputError
-        Missing or damaged file, not a training checkpoint, unknown model, or missing task statistics
-        (transition: no normalisation statistics).
+        Missing or damaged file, not a training checkpoint, unknown model, missing task statistics
+        (transition: no normalisation statistics), or content that fails the checkpoint schema
+        (:mod:`refimpl.checkpoint_schema`: a config field of the wrong type or range, ``fps`` or ``root_std``
+        not > 0, a parameter missing, unexpected, mis-shaped, of another dtype or not finite); the message
+        names the file and the field.
     """
     from refimpl.checkpoint import load_checkpoint
+    from refimpl.checkpoint_schema import validate_trained
 
     p = existing_file(path)
     with reading(p):
         arrays, meta = load_checkpoint(p)
-    if meta.get("format") != "refimpl.train/1":
-        raise BadInputError(f"{p}: not a refimpl training checkpoint (format {meta.get('format')!r})")
-    spec = MODELS.get(meta.get("model"))
-    if spec is None:
-        raise BadInputError(f"{p}: unknown model {meta.get('model')!r}; known: {sorted(MODELS)}")
-    cfg = dict(meta.get("model_config") or {})
-    task_of(spec).check_checkpoint(cfg, p)
-    names = {f.name for f in dataclasses.fields(spec.config_type)}
-    try:
-        config = spec.config_type(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in cfg.items()
-                                     if k in names})
-    except (TypeError, ValueError) as exc:
-        raise BadInputError(f"{p}: bad model config in the checkpoint: {exc}") from exc
-    params = {k[len("param."):]: np.asarray(v) for k, v in arrays.items() if k.startswith("param.")}
+        # the whole schema (spec/robustness.md §9) before anything is built: config types, task fields,
+        # every parameter's name, shape, dtype and finiteness against the config's shapes
+        spec, config, params, cfg = validate_trained(arrays, meta, MODELS, str(p), task_of=task_of)
     task = task_of(spec)
+    task.check_checkpoint(cfg, p)
+    params = {k: np.asarray(v) for k, v in params.items()}
     fields = task.trained_fields(cfg, config) if hasattr(task, "trained_fields") else {}
     return TrainedModel(spec=spec, config=config, params=params, meta=meta, path=str(p), extra=cfg, **fields)
 

@@ -19,17 +19,31 @@ epoch, position in the epoch, the Generator state, the schedule state (current l
 and the adapter's config. Resuming restores all of it, so ``k`` steps + resume + ``N − k`` steps gives
 bit-for-bit the parameters of ``N`` steps in one go (tested).
 
-Failure handling: a NaN/inf loss or gradient raises :class:`TrainingDiverged` before the parameters change,
-and the last checkpoint on disk is left as it was. ``KeyboardInterrupt`` (Ctrl-C, or raised by a callback)
-ends the run at a step boundary: the state after the last completed step is checkpointed and the result is
-returned with ``interrupted=True``.
+Failure handling (spec/robustness.md §10):
+
+* a NaN/inf loss or gradient raises :class:`TrainingDiverged` before the parameters change; parameters or Adam
+  state that become non-finite in an update (an absurd learning rate) raise it too, and nothing non-finite is
+  ever saved (every save checks first); the last checkpoint on disk is left as it was. NumPy's floating-point
+  warnings are silenced inside the loop (the trainer checks finiteness itself), so a divergence prints one
+  message and no ``RuntimeWarning`` lines;
+* ``KeyboardInterrupt`` (Ctrl-C, or raised by a callback), ``SIGINT`` and ``SIGTERM`` end the run at a step
+  boundary: the state after the last completed step is checkpointed and the result is returned with
+  ``interrupted=True`` and ``signal`` the signal number (2 or 15; None for a ``KeyboardInterrupt``);
+* the checkpoint is locked (:func:`output_lock`, a ``.<checkpoint name>.lock`` file beside it): a second
+  trainer of the same checkpoint stops with :class:`OutputLocked`; a lock left by a dead process is taken over;
+* temporary files of the atomic writer left beside the trainer's files by a killed run
+  (``.checkpoint.<12 hex>.tmp.npz``, ``.loss.<12 hex>.tmp.csv``) are removed when the next run starts (it holds
+  the lock, so no writer of those files is alive).
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import io
 import math
+import os
+import re
 import signal
 import sys
 import threading
@@ -41,11 +55,12 @@ import numpy as np
 
 from refimpl.atomic import atomic_write_text
 from refimpl.checkpoint import load_checkpoint, rng_from_json, rng_state_to_json, save_checkpoint
+from refimpl.checkpoint_schema import validate_training_state
 from refimpl.optim import adam_init, adam_step, clip_grad_norm, exponential_lr
 
 __all__ = [
     "ModelAdapter", "OptimConfig", "TrainConfig", "TrainContext", "StepInfo", "TrainResult", "TrainingDiverged",
-    "train", "format_duration", "default_progress",
+    "OutputLocked", "train", "check_resumable", "format_duration", "default_progress", "output_lock", "remove_stale_temp_files",
 ]
 
 _FORMAT = "refimpl.train/1"
@@ -53,7 +68,11 @@ _LOG_FIELDS = ("step", "epoch", "loss", "grad_norm", "lr", "elapsed_s")
 
 
 class TrainingDiverged(RuntimeError):
-    """A non-finite loss or gradient; the parameters were not updated and no checkpoint was written."""
+    """A non-finite loss, gradient, parameter or optimiser state; no checkpoint was written with it."""
+
+
+class OutputLocked(RuntimeError):
+    """Another live process holds the lock of the output (a second trainer writing the same checkpoint)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,6 +201,7 @@ class TrainResult:
     elapsed_s: float
     checkpoint_path: str | None
     validation: list
+    signal: int | None = None
 
 
 def format_duration(seconds: float) -> str:
@@ -192,6 +212,116 @@ def format_duration(seconds: float) -> str:
     h, rem = divmod(s, 3600)
     m, s = divmod(rem, 60)
     return f"{h}h{m:02d}m{s:02d}s" if h else (f"{m}m{s:02d}s" if m else f"{s}s")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# lock and stale temporary files
+# ----------------------------------------------------------------------------------------------------------------
+
+def _pid_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # it exists (another user's process)
+    return True
+
+
+def _lock_owner(path: Path) -> int:
+    try:
+        text = path.read_text(encoding="ascii", errors="replace").split()
+        return int(text[0]) if text else 0
+    except (OSError, ValueError):
+        return 0
+
+
+@contextlib.contextmanager
+def output_lock(folder, name: str = ".refimpl-train.lock"):
+    """Hold the lock file ``folder/name`` inside the block; :class:`OutputLocked` if a live process holds it.
+
+    POSIX: an exclusive ``fcntl.flock`` on the file (the kernel drops it when its process dies, so the lock of a
+    killed run is free at once; the file stays, holding the last owner's PID). Elsewhere: the file is created
+    exclusively and holds the PID; a file whose PID is not a live process (a stale lock) is taken over.
+    The folder is created if needed.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / name
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        fcntl = None
+    if fcntl is not None:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                owner = _lock_owner(path)
+                raise OutputLocked(f"{folder}: another trainer (PID {owner or '?'}) is writing here (lock file "
+                                   f"{path}); wait for it, stop it, or choose another output") from None
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+            try:
+                yield path
+            finally:
+                with contextlib.suppress(OSError):
+                    os.ftruncate(fd, 0)
+                fcntl.flock(fd, fcntl.LOCK_UN)
+        finally:
+            os.close(fd)
+        return
+    for _ in range(2):  # pragma: no cover - not POSIX
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            break
+        except FileExistsError:
+            owner = _lock_owner(path)
+            if _pid_alive(owner) and owner != os.getpid():
+                raise OutputLocked(f"{folder}: another trainer (PID {owner}) is writing here (lock file {path})")
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(path)  # stale: its process is gone
+    else:  # pragma: no cover
+        raise OutputLocked(f"{folder}: could not take the lock file {path}")
+    try:  # pragma: no cover
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+        os.close(fd)
+        yield path
+    finally:  # pragma: no cover
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+
+
+def remove_stale_temp_files(target) -> list[Path]:
+    """Remove the temporary files :mod:`refimpl.atomic` leaves beside ``target`` when its writer is killed.
+
+    Only names of the writer's exact pattern for this target (``.<stem>.<12 hex digits>.tmp<suffix>``) are
+    touched, and only regular files. Call it while holding the lock that excludes other writers of ``target``
+    (:func:`output_lock`): then no such file belongs to a live writer. Returns the removed paths.
+    """
+    target = Path(target)
+    pattern = re.compile(r"\." + re.escape(target.stem) + r"\.[0-9a-f]{12}\.tmp" + re.escape(target.suffix) + r"\Z")
+    removed = []
+    try:
+        entries = list(os.scandir(target.parent))
+    except OSError:
+        return removed
+    for e in entries:
+        if pattern.match(e.name) and e.is_file(follow_symlinks=False):
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(e.path)
+                removed.append(Path(e.path))
+    return removed
+
+
+def _first_non_finite(arrays: Mapping[str, np.ndarray]) -> str | None:
+    for k, a in arrays.items():
+        if not np.isfinite(a).all():
+            return k
+    return None
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -219,6 +349,14 @@ def _load(path):
     params = {k[len("param."):]: np.array(v) for k, v in arrays.items() if k.startswith("param.")}
     opt = {k[len("optim."):]: np.array(v) for k, v in arrays.items() if k.startswith("optim.")}
     return params, opt, np.array(arrays["sampler.perm"]), meta
+
+
+def check_resumable(path) -> None:
+    """Raise ``ValueError`` (naming the file and the field) unless ``path`` is a complete, valid training state:
+    what :func:`train` checks on resume before the run's data and settings are known (the permutation's length
+    is checked against the data then)."""
+    params, opt, perm, meta = _load(path)
+    validate_training_state(params, opt, perm, meta, None, where=f"checkpoint {path}")
 
 
 def _truncate_csv(path: Path, max_step: int) -> None:
@@ -265,28 +403,35 @@ def _fmt(v) -> str:
     return "" if v is None else str(v)
 
 
+#: Signals that stop a run at the next step boundary (with a checkpoint): Ctrl-C and the schedulers' stop.
+_STOP_SIGNALS = tuple(s for s in (getattr(signal, "SIGINT", None), getattr(signal, "SIGTERM", None)) if s is not None)
+
+
 class _DeferSigint:
-    """Turn Ctrl-C into a flag checked at step boundaries (main thread only); a second Ctrl-C raises at once."""
+    """Turn SIGINT / SIGTERM into a flag checked at step boundaries (main thread only); a second one raises
+    ``KeyboardInterrupt`` at once (the step in progress is dropped, the last completed one is saved)."""
 
     def __init__(self):
         self.requested = False
-        self.old = None
+        self.signum = None
+        self.old = {}
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            self.old = signal.getsignal(signal.SIGINT)
-
             def handler(signum, frame):
                 if self.requested:
                     raise KeyboardInterrupt
-                self.requested = True
+                self.requested, self.signum = True, signum
 
-            signal.signal(signal.SIGINT, handler)
+            for s in _STOP_SIGNALS:
+                self.old[s] = signal.getsignal(s)
+                signal.signal(s, handler)
         return self
 
     def __exit__(self, *exc):
-        if self.old is not None:
-            signal.signal(signal.SIGINT, self.old)
+        for s, old in self.old.items():
+            if old is not None:
+                signal.signal(s, old)
         return False
 
 
@@ -324,9 +469,14 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
     Raises
     ------
     TrainingDiverged
-        On a NaN/inf loss or gradient (parameters unchanged, checkpoint on disk untouched).
+        On a NaN/inf loss or gradient (parameters unchanged), or parameters / Adam state that became non-finite
+        in an update; the checkpoint on disk is the last good one.
+    OutputLocked
+        Another live process trains into the same checkpoint.
     ValueError
-        Bad configuration, or a checkpoint that does not match the adapter/optimiser/batch settings.
+        Bad configuration, or a checkpoint that is damaged, fails the training-state schema
+        (:func:`refimpl.checkpoint_schema.validate_training_state`) or does not match the
+        adapter/optimiser/batch settings.
     """
     if not isinstance(adapter, ModelAdapter):
         raise ValueError(f"adapter: expected a ModelAdapter, got {type(adapter).__name__}")
@@ -340,9 +490,22 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
     ckpt = Path(config.checkpoint_path) if config.checkpoint_path else None
     identity = {"model": adapter.name, "model_config": _jsonable(adapter.config), "optim": optim.to_dict(),
                 "batch_size": config.batch_size, "num_examples": N}
+    with contextlib.ExitStack() as stack:
+        if ckpt is not None:
+            stack.enter_context(output_lock(ckpt.parent, f".{ckpt.name}.lock"))
+            for target in (ckpt, config.log_path):
+                if target is not None:
+                    remove_stale_temp_files(target)
+                    if target is config.log_path:
+                        p = Path(target)
+                        remove_stale_temp_files(p.with_name(p.stem + "_val.csv"))
+        return _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, per_epoch, ckpt, identity)
 
+
+def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, per_epoch, ckpt, identity):
     if ckpt is not None and resume and ckpt.is_file():
         params, opt_state, perm, meta = _load(ckpt)
+        validate_training_state(params, opt_state, perm, meta, N, where=f"checkpoint {ckpt}")
         for key, value in identity.items():
             if _jsonable(meta.get(key)) != _jsonable(value):
                 raise ValueError(f"checkpoint {ckpt}: {key} {meta.get(key)!r} does not match this run's {value!r}")
@@ -372,6 +535,10 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
 
     def checkpoint():
         if ckpt is not None:
+            bad = _first_non_finite(params) or _first_non_finite(opt_state)
+            if bad is not None:  # never reached by the loop's checks; a last line of defence
+                raise TrainingDiverged(f"{adapter.name}: {bad!r} is not finite at step {step}; not saved, "
+                                       f"last checkpoint {ckpt} kept")
             ckpt.parent.mkdir(parents=True, exist_ok=True)
             _save(ckpt, params, opt_state, perm, meta_now())
 
@@ -380,8 +547,9 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
     t0 = time.perf_counter()
     t_rate, step_rate = t0, step
     start_step = step
+    stopped_by = None
     try:
-        with _DeferSigint() as sigint:
+        with _DeferSigint() as sigint, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             while step < config.steps:
                 rng_snapshot = rng.bit_generator.state
                 try:
@@ -406,6 +574,12 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
                         raise TrainingDiverged(f"{adapter.name}: gradient of {k!r} is not finite at step {step + 1} "
                                                f"(epoch {epoch}); parameters left at step {step}"
                                                + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
+                for k, g in grads.items():
+                    if not math.isfinite(float(np.vdot(g, g))):  # Adam's second moment would overflow
+                        rng.bit_generator.state = rng_snapshot
+                        raise TrainingDiverged(f"{adapter.name}: the squares of the gradient of {k!r} overflow at "
+                                               f"step {step + 1} (epoch {epoch}); parameters left at step {step}"
+                                               + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
                 lr = exponential_lr(optim.lr, optim.lr_decay, epoch)
                 if optim.clip_norm is not None:
                     gnorm = clip_grad_norm(grads, optim.clip_norm)
@@ -413,6 +587,12 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
                     gnorm = math.sqrt(math.fsum(float(np.vdot(g, g)) for g in grads.values()))
                 adam_step(params, grads, opt_state, lr, betas=optim.betas, eps=optim.eps,
                           weight_decay=optim.weight_decay)
+                bad = _first_non_finite(params) or _first_non_finite(opt_state)
+                if bad is not None:
+                    raise TrainingDiverged(
+                        f"{adapter.name}: {'parameter' if bad in params else 'Adam state'} {bad!r} became non-finite "
+                        f"in the update of step {step + 1} (epoch {epoch}, learning rate {lr:g}); nothing saved"
+                        + (f", last checkpoint {ckpt} kept" if ckpt is not None else ""))
                 step += 1
                 pos += 1
                 if pos == per_epoch:
@@ -448,6 +628,7 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
                 if sigint.requested:
                     interrupted = True
                     break
+        stopped_by = sigint.signum
     finally:
         log.close()
         val_log.close()
@@ -457,7 +638,8 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
                  f"{ckpt if ckpt is not None else '(none: no checkpoint_path)'}")
     return TrainResult(params=params, optim_state=opt_state, step=step, epoch=epoch, losses=losses,
                        interrupted=interrupted, elapsed_s=elapsed0 + time.perf_counter() - t0,
-                       checkpoint_path=None if ckpt is None else str(ckpt), validation=validation)
+                       checkpoint_path=None if ckpt is None else str(ckpt), validation=validation,
+                       signal=stopped_by if interrupted else None)
 
 
 def _jsonable(x):

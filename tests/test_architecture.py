@@ -19,7 +19,7 @@ LAYERS = {
         "refimpl.representations", "refimpl.strategies", "refimpl.splines"],
     4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.schedules"],
     5: ["refimpl.models", "refimpl.models.*"],
-    6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.train", "refimpl.rigs",
+    6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.train", "refimpl.rigs",
         "refimpl.transitions", "refimpl.baselines", "refimpl.metrics"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.tasks", "refimpl.tasks.*",
         "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services"],

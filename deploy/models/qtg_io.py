@@ -11,7 +11,6 @@ Shape legend: B batch, T frames, P pose size.
 """
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Mapping
 
@@ -35,17 +34,38 @@ def load_qtg_checkpoint(path):
 
     Parameters are the arrays named ``param.<name>`` (training checkpoints) or all arrays (state dicts); the
     config comes from ``meta["model_config"]`` (unknown keys ignored), else ``QTGConfig()``.
+
+    The content is validated before it is returned (:mod:`refimpl.checkpoint_schema`, spec/robustness.md §9):
+    the config's field types and ranges, stored statistics (``fps`` > 0, ``root_std`` > 0, finite), and every
+    parameter's name, shape (from the config), dtype and finiteness.
+
+    Raises
+    ------
+    ValueError
+        A damaged file, or content that fails the schema (the message names the file and the field).
     """
+    from refimpl.checkpoint_schema import (expected_param_shapes, validate_model_config, validate_params,
+                                           validate_task_fields)
+    from refimpl.models import qtg as qtg_model
+
+    where = str(path)
     try:
         arrays, meta = _read_checkpoint(path)
     except ValueError as exc:
         if "not a refimpl checkpoint" not in str(exc):
             raise
         arrays, meta = load_state_dict_npz(path), {}
+    cfg = meta.get("model_config", {})
+    cfg = {} if cfg is None else cfg
+    validate_task_fields(meta, where=where)  # top-level root_mean / root_std, when a caller stored them there
+    if not isinstance(cfg, dict):
+        raise ValueError(f"{where}: model_config: expected a JSON object, got {type(cfg).__name__}")
+    validate_task_fields(cfg, where=where)
+    config = validate_model_config(QTGConfig, cfg, where)
     params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")} or dict(arrays)
-    fields = {f.name for f in dataclasses.fields(QTGConfig)}
-    cfg = {k: v for k, v in (meta.get("model_config") or {}).items() if k in fields}
-    return params, QTGConfig(**cfg), meta
+    validate_params(params, expected_param_shapes(qtg_model, QTGConfig, config), where, dtype=cfg.get("dtype"),
+                    prefix="param." if any(k.startswith("param.") for k in arrays) else "")
+    return params, config, meta
 
 
 def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None, opset=None, dtype=np.float32,
