@@ -85,7 +85,7 @@ def _fully_static(vi) -> bool:
     return t is not None and t.HasField("shape") and all(d.HasField("dim_value") for d in t.shape.dim)
 
 
-def _check_graph(graph: onnx.GraphProto, path: str, total: list) -> None:
+def _check_graph(graph: onnx.GraphProto, path: str, total: list, inferred: bool) -> None:
     constants = set()
     for t in graph.initializer:
         total[0] += _tensor_bytes(t, f"{path}initializer {t.name!r}")
@@ -99,7 +99,7 @@ def _check_graph(graph: onnx.GraphProto, path: str, total: list) -> None:
                              f"MAX_TENSOR_BYTES = {MAX_TENSOR_BYTES // 2**20} MiB per tensor (deploy/session.py)")
         constants.add(st.values.name)
     known = {vi.name: vi for vi in list(graph.value_info) + list(graph.output)}
-    for name, vi in known.items():
+    for name, vi in (known.items() if inferred else ()):
         size = _static_bytes(vi)
         if size is not None and size > MAX_TENSOR_BYTES:
             dims = [d.dim_value if d.HasField("dim_value") else (d.dim_param or "?")
@@ -125,7 +125,7 @@ def _check_graph(graph: onnx.GraphProto, path: str, total: list) -> None:
         else:
             inputs = [i for i in node.input if i]
             if all(i in constants for i in inputs):
-                if node.op_type in _EXPANDING and not all(_fully_static(known.get(o)) for o in node.output if o):
+                if inferred and node.op_type in _EXPANDING and not all(_fully_static(known.get(o)) for o in node.output if o):
                     raise ValueError(f"model: {where} enlarges constants to a size shape inference cannot "
                                      "bound before onnxruntime folds it; refused (deploy/session.py)")
                 if node.op_type not in ("Loop", "Scan", "If", "RandomNormal", "RandomUniform", "Multinomial"):
@@ -138,10 +138,10 @@ def _check_graph(graph: onnx.GraphProto, path: str, total: list) -> None:
                                      f"MAX_LOOP_ITERATIONS = {MAX_LOOP_ITERATIONS} (deploy/session.py)")
         for a in node.attribute:
             if a.type == onnx.AttributeProto.GRAPH:
-                _check_graph(a.g, f"{where} / {a.name}: ", total)
+                _check_graph(a.g, f"{where} / {a.name}: ", total, inferred)
             elif a.type == onnx.AttributeProto.GRAPHS:
                 for sub in a.graphs:
-                    _check_graph(sub, f"{where} / {a.name}: ", total)
+                    _check_graph(sub, f"{where} / {a.name}: ", total, inferred)
     if total[0] > MAX_CONSTANT_BYTES:
         raise ValueError(f"model: its initializers and constants declare {total[0] / 2**20:.0f} MiB; the limit is "
                          f"MAX_CONSTANT_BYTES = {MAX_CONSTANT_BYTES // 2**20} MiB (deploy/session.py)")
@@ -171,12 +171,12 @@ def check_model_size(model: onnx.ModelProto) -> None:
     if not isinstance(model, onnx.ModelProto):
         raise ValueError(f"model: expected an onnx.ModelProto, got {type(model).__name__}")
     total = [0]
-    _check_graph(model.graph, "", total)   # declared sizes first: shape inference never sees a huge initializer
+    _check_graph(model.graph, "", total, False)   # declared sizes first: shape inference never sees a huge initializer
     try:
         inferred = onnx.shape_inference.infer_shapes(model, strict_mode=False, data_prop=True)
     except Exception as exc:  # InferenceError and others on malformed models
         raise ValueError(f"model: shape inference failed: {exc}") from exc
-    _check_graph(inferred.graph, "", [0])
+    _check_graph(inferred.graph, "", [0], True)
 
 
 def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all"):
