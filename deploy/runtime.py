@@ -17,7 +17,7 @@ import numpy as np
 import onnx
 
 from deploy.metadata import read_metadata
-from deploy.session import make_session, make_session_options  # noqa: F401  (their home before deploy.session)
+from deploy.session import check_model_size, make_session, make_session_options  # noqa: F401  (their home before deploy.session)
 from deploy.validate import validate_model
 
 __all__ = ["DeployedModel", "load_model", "MAX_INPUT_ELEMENTS"]
@@ -86,6 +86,7 @@ class DeployedModel:
 
     def __init__(self, model, *, intra_op_threads: int = 1, validate: bool = True):
         proto = _load_proto(model)
+        check_model_size(proto)   # before the checker too: a declared 10 GB constant is refused without reading it
         if validate:
             validate_model(proto)
         self.metadata = read_metadata(proto)
@@ -111,10 +112,12 @@ class DeployedModel:
         the process); at most :data:`MAX_INPUT_ELEMENTS` elements; finite values after the conversion to the
         declared dtype (float64 → float32 for a float32 model; ``1e300`` would become ``inf``).
 
+        Outputs are checked too: a non-finite output (damaged weights, absurd inputs) is a ``ValueError``.
+
         Raises
         ------
         ValueError
-            Naming the input, what was expected and what was given.
+            Naming the input, what was expected and what was given (or the non-finite output).
         """
         if feeds is not None and not isinstance(feeds, Mapping):
             raise ValueError(f"feeds: expected a mapping name -> array, got {type(feeds).__name__}")
@@ -130,7 +133,12 @@ class DeployedModel:
         for name, shape, dtype in self.inputs:
             ready[name] = self._check_input(name, shape, dtype, given[name], symbols)
         outs = self.session.run(None, ready)
-        return {name: out for (name, _, _), out in zip(self.outputs, outs)}
+        result = {name: out for (name, _, _), out in zip(self.outputs, outs)}
+        for name, out in result.items():
+            if out.dtype.kind == "f" and not np.all(np.isfinite(out)):
+                raise ValueError(f"{name}: the model produced NaN or infinite values from finite inputs (weights "
+                                 "damaged, or inputs far outside the training range)")
+        return result
 
     @staticmethod
     def _check_input(name, shape, dtype, value, symbols) -> np.ndarray:
