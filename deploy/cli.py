@@ -116,9 +116,10 @@ def _cmd_run(args) -> int:
     if s < 2 or s + T + 2 > len(rot):
         raise ValueError(f"--start: expected 2 <= S <= {len(rot) - T - 2} for T = {T} at {args.fps:g} fps "
                          f"({len(rot)} frames), got {s}")
-    window = make_windows(rot[s - 2:s + T + 2], pos[s - 2:s + T + 2], length=T + 4)[0]   # (T + 4, P)
+    context = [s - 2, s - 1, s + T, s + T + 1]               # p_-1, p_0, g1, g2: never the frames to replace
+    window = make_windows(rot[context], pos[context], length=4)[0]   # (4, P), the metadata's input_transform
     norm = meta.get("normalization")
-    past, target = window[None, :2], window[None, -2:]
+    past, target = window[None, :2], window[None, 2:]
     if norm is not None and not norm["in_graph"]:
         m, sd = np.asarray(norm["mean"][:3]), np.asarray(norm["std"][:3])
         gen = denormalize_poses(rt.transition(normalize_poses(past, m, sd), normalize_poses(target, m, sd), T),
