@@ -91,7 +91,7 @@ class DeployedModel:
             validate_model(proto)
         self.metadata = read_metadata(proto)
         _check_metadata_types(self.metadata)
-        self.session = make_session(proto, intra_op_threads=intra_op_threads)
+        self.session = make_session(proto, intra_op_threads=intra_op_threads, check_size=False)
         self.inputs = [(i.name, list(i.shape), _NP_FROM_ORT.get(i.type, None)) for i in self.session.get_inputs()]
         self.outputs = [(o.name, list(o.shape), _NP_FROM_ORT.get(o.type, None))
                         for o in self.session.get_outputs()]

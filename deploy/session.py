@@ -162,6 +162,27 @@ def _constant_value(graph: onnx.GraphProto, name: str):
     return None
 
 
+def _without_large_data(model: onnx.ModelProto) -> onnx.ModelProto:
+    """A copy of ``model`` whose main-graph initializers of more than 4096 elements keep their type and dims but
+    not their data: shape inference needs only the small ones (shape tensors), and copying a 37 MB model's
+    weights would cost most of the check's time."""
+    graph = model.graph
+    stubs = []
+    for t in graph.initializer:
+        if np.prod(list(t.dims), dtype=np.float64) > 4096:
+            stub = onnx.TensorProto(name=t.name, data_type=t.data_type)
+            stub.dims.extend(t.dims)
+            stubs.append(stub)
+        else:
+            stubs.append(t)
+    light = onnx.helper.make_graph(graph.node, graph.name, graph.input, graph.output, initializer=stubs,
+                                   value_info=graph.value_info, sparse_initializer=graph.sparse_initializer)
+    out = onnx.ModelProto(ir_version=model.ir_version, graph=light)
+    out.opset_import.extend(model.opset_import)
+    out.functions.extend(model.functions)
+    return out
+
+
 def check_model_size(model: onnx.ModelProto) -> None:
     """Refuse a model whose declared or statically known sizes exceed the limits (module docstring), without
     allocating them: ``ValueError`` naming the tensor or node, its size and the limit.
@@ -173,7 +194,7 @@ def check_model_size(model: onnx.ModelProto) -> None:
     total = [0]
     _check_graph(model.graph, "", total, False)   # declared sizes first: shape inference never sees a huge initializer
     try:
-        inferred = onnx.shape_inference.infer_shapes(model, strict_mode=False, data_prop=True)
+        inferred = onnx.shape_inference.infer_shapes(_without_large_data(model), strict_mode=False, data_prop=True)
     except Exception as exc:  # InferenceError and others on malformed models
         raise ValueError(f"model: shape inference failed: {exc}") from exc
     _check_graph(inferred.graph, "", [0], True)
@@ -211,9 +232,10 @@ def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all"
 
 
 def make_session(model: onnx.ModelProto | bytes | str | os.PathLike, *, intra_op_threads: int = 1,
-                 optimization: str = "all"):
+                 optimization: str = "all", check_size: bool = True):
     """An ``onnxruntime.InferenceSession`` on the CPU provider with :func:`make_session_options`, after
-    :func:`check_model_size` (no other validation: ``deploy.validate.validate_model``).
+    :func:`check_model_size` (unless ``check_size=False``: for a caller that has just run it, like
+    ``deploy.runtime.load_model``; no other validation: ``deploy.validate.validate_model``).
 
     Raises
     ------
@@ -229,7 +251,8 @@ def make_session(model: onnx.ModelProto | bytes | str | os.PathLike, *, intra_op
                      else onnx.load(os.fspath(model)))
         except Exception as exc:  # DecodeError, OSError, ...
             raise ValueError(f"model: not a readable ONNX model ({type(exc).__name__}: {exc})") from exc
-    check_model_size(model)
+    if check_size:
+        check_model_size(model)
     model = model.SerializeToString()
     options = make_session_options(intra_op_threads, optimization=optimization)
     try:
