@@ -153,7 +153,13 @@ def _cmd_info(args) -> int:
         if key == "skeleton" and value is not None:
             value = {"joints": len(value["names"]), "names": value["names"]}
         elif key == "normalization" and value is not None:
-            value = {"in_graph": value["in_graph"], "root_mean": value["mean"][:3], "root_std": value["std"][:3]}
+            value = {"in_graph": value["in_graph"], "model_io": value.get("model_io"),
+                     "root_mean": value["mean"][:3], "root_std": value["std"][:3]}
+        elif key in ("input_transform", "output_transform") and isinstance(value, dict):
+            print(f"  {key}: {value.get('summary', '')}")
+            for step in value.get("steps", []):
+                print(f"    {step}")
+            continue
         elif key == "io":
             continue
         print(f"  {key}: {json.dumps(value)}")
