@@ -317,7 +317,8 @@ def make_bomb(rng: random.Random) -> tuple[str, onnx.ModelProto]:
         return kind, _graph_model(nodes)
     # chain: a small ConstantOfShape, then Tile / Expand of it to the huge size (shape from Concat of constants)
     nodes = [_const("s1", np.array([4], np.int64)),
-             helper.make_node("ConstantOfShape", ["s1"], ["small"], value=numpy_helper.from_array(np.ones(1, np.float32))),
+             helper.make_node("ConstantOfShape", ["s1"], ["small"],
+                              value=numpy_helper.from_array(np.ones(1, np.float32))),
              _const("a", np.array(dims[:1], np.int64)), _const("b", np.array(dims[1:] or [1], np.int64)),
              helper.make_node("Concat", ["a", "b"], ["shape"], axis=0),
              _const("one", np.ones((1, 1), np.float32)), helper.make_node("Expand", ["one", "shape"], ["big"])]

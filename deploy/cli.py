@@ -3,8 +3,8 @@
 ``export CHECKPOINT OUT_DIR``
     Read a checkpoint (``refimpl.checkpoint.load_checkpoint``; a plain state-dict ``.npz`` also works) and export
     it, standardising inside the graphs with the root statistics the checkpoint stores (``--root-mean/--root-std``
-    only for a checkpoint without them), with the exporter of the model it names (``deploy.models.EXPORTERS``; ``--model`` for a state dict,
-    default ``qtg``): for QTG ``qtg_init.onnx``, ``qtg_step.onnx`` and ``qtg_rollout.onnx`` (validated, written
+    only for a checkpoint without them), with the exporter of the model it names (``deploy.models.EXPORTERS``;
+    ``--model`` for a state dict, default ``qtg``): for QTG ``qtg_init.onnx``, ``qtg_step.onnx`` and ``qtg_rollout.onnx`` (validated, written
     atomically).
 ``run MODEL_DIR IN.bvh OUT.bvh --start S``
     Open the folder's models with the runtime of the model named in their metadata

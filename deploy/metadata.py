@@ -3,27 +3,27 @@
 Stored in ``model.metadata_props`` as key → JSON string (``spec/deploy.md`` §4). Read with ``json.loads``; never
 executed. Keys:
 
-==================  ========================================================================================
-key                 value (JSON)
-==================  ========================================================================================
-``format``          ``"refimpl.deploy/1"``: version of this metadata contract
-``model``           ``{"name", "role", "config", "transition_length"?}`` (role: ``init``, ``step``, ``rollout``)
-``io``              ``{"inputs": [...], "outputs": [...]}``, each ``{"name", "shape", "meaning"}``
-``representation``  pose layout: ``{"name", "size", "fields": [{"name", "start", "size", ...}]}``
-``normalization``   ``{"mean": [P], "std": [P], "in_graph": bool, "model_io": "raw" | "normalized",
-                    "equation"}``: ``pose_normalized = (pose − mean) / std`` per entry of the last axis; with
-                    ``in_graph`` the graph does it, so the model takes and returns raw poses
-                    (``model_io = "raw"``); else the caller does (``"normalized"``). ``null``: no statistics
-                    known, the model's inputs and outputs are whatever it was trained on
-``skeleton``        ``{"names", "parents", "offsets", "units"?, "source"?}`` (joint ``j``: name, parent index, −1
-                    for the root, offset from the parent in the rest pose) or ``null``
-``input_transform`` how to build the inputs from world-space data (``{"summary", "steps": [...], ...}``, any
-                    JSON the exporter documents) or ``null``
-``output_transform`` how to read the outputs back into world space (same form) or ``null``
-``frame_rate``      frames per second (number)
-``source_paper``    citation string
-``exporter``        ``{"name", "version", "opset", "ir_version", "dtype", "variant"}``
-==================  ========================================================================================
+====================  ========================================================================================
+key                   value (JSON)
+====================  ========================================================================================
+``format``            ``"refimpl.deploy/1"``: version of this metadata contract
+``model``             ``{"name", "role", "config", "transition_length"?}`` (role: ``init``, ``step``, ``rollout``)
+``io``                ``{"inputs": [...], "outputs": [...]}``, each ``{"name", "shape", "meaning"}``
+``representation``    pose layout: ``{"name", "size", "fields": [{"name", "start", "size", ...}]}``
+``normalization``     ``{"mean": [P], "std": [P], "in_graph": bool, "model_io": "raw" | "normalized",
+                      "equation"}``: ``pose_normalized = (pose − mean) / std`` per entry of the last axis; with
+                      ``in_graph`` the graph does it, so the model takes and returns raw poses
+                      (``model_io = "raw"``); else the caller does (``"normalized"``). ``null``: no statistics
+                      known, the model's inputs and outputs are whatever it was trained on
+``skeleton``          ``{"names", "parents", "offsets", "units"?, "source"?}`` (joint ``j``: name, parent index, −1
+                      for the root, offset from the parent in the rest pose) or ``null``
+``input_transform``   how to build the inputs from world-space data (``{"summary", "steps": [...], ...}``, any
+                      JSON the exporter documents) or ``null``
+``output_transform``  how to read the outputs back into world space (same form) or ``null``
+``frame_rate``        frames per second (number)
+``source_paper``      citation string
+``exporter``          ``{"name", "version", "opset", "ir_version", "dtype", "variant"}``
+====================  ========================================================================================
 
 Shape legend in ``io``: symbolic dimension names (``"B"`` batch) or integers.
 """

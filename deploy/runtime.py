@@ -17,7 +17,8 @@ import numpy as np
 import onnx
 
 from deploy.metadata import read_metadata
-from deploy.session import check_model_size, make_session, make_session_options  # noqa: F401  (their home before deploy.session)
+from deploy.session import check_model_size, make_session
+from deploy.session import make_session_options  # noqa: F401  (its home before deploy.session)
 from deploy.validate import validate_model
 
 __all__ = ["DeployedModel", "load_model", "MAX_INPUT_ELEMENTS"]

@@ -125,7 +125,8 @@ def _check_graph(graph: onnx.GraphProto, path: str, total: list, inferred: bool)
         else:
             inputs = [i for i in node.input if i]
             if all(i in constants for i in inputs):
-                if inferred and node.op_type in _EXPANDING and not all(_fully_static(known.get(o)) for o in node.output if o):
+                if inferred and node.op_type in _EXPANDING and not all(_fully_static(known.get(o))
+                                                                       for o in node.output if o):
                     raise ValueError(f"model: {where} enlarges constants to a size shape inference cannot "
                                      "bound before onnxruntime folds it; refused (deploy/session.py)")
                 if node.op_type not in ("Loop", "Scan", "If", "RandomNormal", "RandomUniform", "Multinomial"):

@@ -211,6 +211,7 @@ def test_consumer_from_metadata_reproduces_refimpl_transition(checkpoint, tmp_pa
     fk_ref = ref.motion.positions()[ref.start:ref.stop]
     from refimpl.skeleton import Skeleton
 
-    mskel = Skeleton(meta["skeleton"]["parents"], np.array(meta["skeleton"]["offsets"]), names=meta["skeleton"]["names"])
+    mskel = Skeleton(meta["skeleton"]["parents"], np.array(meta["skeleton"]["offsets"]),
+                     names=meta["skeleton"]["names"])
     fk_got = mskel.forward_kinematics(got_rot, got_root)
     assert np.abs(fk_got - fk_ref).max() < 0.05                                     # cm
