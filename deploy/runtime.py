@@ -147,7 +147,7 @@ class DeployedModel:
             raise ValueError(f"{name}: expected a numeric array of shape {shape}, got {type(value).__name__}")
         try:
             a = np.asarray(value)
-        except (ValueError, TypeError) as exc:  # ragged nested lists and the like
+        except Exception as exc:  # ragged nested lists, objects whose __array__ raises, ...
             raise ValueError(f"{name}: expected a numeric array of shape {shape}, got {type(value).__name__} "
                              f"that is not one ({exc})") from None
         kinds = _ACCEPTED_KINDS.get(dtype, "fiub")
