@@ -2,8 +2,9 @@
 
 ``export CHECKPOINT OUT_DIR``
     Read a checkpoint (``refimpl.checkpoint.load_checkpoint``; a plain state-dict ``.npz`` also works) and export
-    it with the exporter of the model it names (``deploy.models.EXPORTERS``; ``--model`` for a state dict,
-    default ``qtg``): for QTG ``qtg_init.onnx``, ``qtg_step.onnx`` and ``qtg_rollout.onnx`` (validated, written
+    it, standardising inside the graphs with the root statistics the checkpoint stores (``--root-mean/--root-std``
+    only for a checkpoint without them), with the exporter of the model it names (``deploy.models.EXPORTERS``;
+    ``--model`` for a state dict, default ``qtg``): for QTG ``qtg_init.onnx``, ``qtg_step.onnx`` and ``qtg_rollout.onnx`` (validated, written
     atomically).
 ``run MODEL_DIR IN.bvh OUT.bvh --start S``
     Open the folder's models with the runtime of the model named in their metadata
@@ -53,25 +54,44 @@ def _skeleton_from_bvh(path, joints: str):
     return scale_skeleton(skel, unit)
 
 
+def _root_statistics(args, meta):
+    """Root mean / std for the export: the checkpoint's (``refimpl train`` stores the training windows'
+    ``root_mean``/``root_std`` in ``meta["model_config"]``), or ``--root-mean/--root-std`` for a checkpoint
+    without them; ``None`` when neither (the models then take normalised poses)."""
+    cfg = meta.get("model_config") if isinstance(meta.get("model_config"), dict) else {}
+    stored = (cfg.get("root_mean"), cfg.get("root_std"))
+    given = (args.root_mean, args.root_std)
+    if (given[0] is None) != (given[1] is None):
+        raise ValueError("--root-mean and --root-std: give both or neither")
+    if stored[0] is not None and stored[1] is not None:
+        if given[0] is not None and not (np.allclose(given[0], stored[0]) and np.allclose(given[1], stored[1])):
+            raise ValueError(f"--root-mean/--root-std {given[0]} / {given[1]} differ from the statistics the "
+                             f"network was trained with (stored in the checkpoint: {stored[0]} / {stored[1]}); "
+                             "leave them out")
+        return np.asarray(stored[0], dtype=np.float64), np.asarray(stored[1], dtype=np.float64)
+    if given[0] is not None:
+        return np.asarray(given[0], dtype=np.float64), np.asarray(given[1], dtype=np.float64)
+    return None
+
+
 def _cmd_export(args) -> int:
     from deploy.models import exporter
 
     entry = exporter(_checkpoint_model(args.checkpoint, args.model))
     params, config, meta = entry.load_checkpoint(args.checkpoint)
-    normalization = None
-    mean = args.root_mean if args.root_mean is not None else meta.get("root_mean")
-    std = args.root_std if args.root_std is not None else meta.get("root_std")
-    if (mean is None) != (std is None):
-        raise ValueError("--root-mean and --root-std: give both or neither")
-    if mean is not None:
-        normalization = (np.asarray(mean, dtype=np.float64), np.asarray(std, dtype=np.float64))
-    else:
-        print("note: no root statistics; the models take and return normalised poses", file=sys.stderr)
+    normalization = _root_statistics(args, meta)
+    if normalization is None:
+        print("note: no root statistics in the checkpoint and no --root-mean/--root-std; the models take and "
+              "return normalised poses (metadata normalization: null)", file=sys.stderr)
     skeleton = _skeleton_from_bvh(args.skeleton_bvh, args.joints) if args.skeleton_bvh else None
     dtype = {"float32": np.float32, "float64": np.float64}[args.dtype]
+    extra = {"checkpoint": {"path": str(args.checkpoint), "step": meta.get("step")}}
+    cfg = meta.get("model_config") if isinstance(meta.get("model_config"), dict) else {}
+    if isinstance(cfg.get("fps"), (int, float)) and not isinstance(cfg.get("fps"), bool):
+        extra["frame_rate"] = float(cfg["fps"])
     paths = entry.export_dir(params, config, args.out_dir, normalization=normalization, skeleton=skeleton,
-                           opset=args.opset, dtype=dtype, mode=args.mode, T=args.frames, compact=args.compact,
-                           metadata={"checkpoint": {"path": str(args.checkpoint), "step": meta.get("step")}})
+                             opset=args.opset, dtype=dtype, mode=args.mode, T=args.frames, compact=args.compact,
+                             metadata=extra)
     for role, p in paths.items():
         print(f"{role}: {p} ({p.stat().st_size / 1e6:.2f} MB)")
     return 0
@@ -96,9 +116,10 @@ def _cmd_run(args) -> int:
     if s < 2 or s + T + 2 > len(rot):
         raise ValueError(f"--start: expected 2 <= S <= {len(rot) - T - 2} for T = {T} at {args.fps:g} fps "
                          f"({len(rot)} frames), got {s}")
-    window = make_windows(rot[s - 2:s + T + 2], pos[s - 2:s + T + 2], length=T + 4)[0]   # (T + 4, P)
+    context = [s - 2, s - 1, s + T, s + T + 1]               # p_-1, p_0, g1, g2: never the frames to replace
+    window = make_windows(rot[context], pos[context], length=4)[0]   # (4, P), the metadata's input_transform
     norm = meta.get("normalization")
-    past, target = window[None, :2], window[None, -2:]
+    past, target = window[None, :2], window[None, 2:]
     if norm is not None and not norm["in_graph"]:
         m, sd = np.asarray(norm["mean"][:3]), np.asarray(norm["std"][:3])
         gen = denormalize_poses(rt.transition(normalize_poses(past, m, sd), normalize_poses(target, m, sd), T),
@@ -132,7 +153,13 @@ def _cmd_info(args) -> int:
         if key == "skeleton" and value is not None:
             value = {"joints": len(value["names"]), "names": value["names"]}
         elif key == "normalization" and value is not None:
-            value = {"in_graph": value["in_graph"], "root_mean": value["mean"][:3], "root_std": value["std"][:3]}
+            value = {"in_graph": value["in_graph"], "model_io": value.get("model_io"),
+                     "root_mean": value["mean"][:3], "root_std": value["std"][:3]}
+        elif key in ("input_transform", "output_transform") and isinstance(value, dict):
+            print(f"  {key}: {value.get('summary', '')}")
+            for step in value.get("steps", []):
+                print(f"    {step}")
+            continue
         elif key == "io":
             continue
         print(f"  {key}: {json.dumps(value)}")
@@ -150,9 +177,13 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("out_dir")
     e.add_argument("--model", default=None, help="exporter (default: the model named in the checkpoint; a plain "
                                                   "state dict: qtg)")
-    e.add_argument("--root-mean", type=float, nargs=3, default=None, help="root translation mean (x y z)")
-    e.add_argument("--root-std", type=float, nargs=3, default=None, help="root translation std (x y z)")
-    e.add_argument("--skeleton-bvh", default=None, help="BVH whose 22-joint subset goes into the metadata")
+    e.add_argument("--root-mean", type=float, nargs=3, default=None,
+                   help="root translation mean (x y z, cm) of the training windows, only for a checkpoint that "
+                        "does not store it (a `refimpl train` checkpoint does, and it is used)")
+    e.add_argument("--root-std", type=float, nargs=3, default=None, help="root translation std (x y z, cm); as "
+                                                                          "--root-mean")
+    e.add_argument("--skeleton-bvh", default=None, help="BVH whose 22-joint subset goes into the metadata "
+                                                        "(default: the CMU 22-joint rig of the embedded sample)")
     e.add_argument("--joints", choices=("cmu", "salsa"), default="cmu")
     e.add_argument("--opset", type=int, default=None)
     e.add_argument("--dtype", choices=("float32", "float64"), default="float32")

@@ -3,20 +3,27 @@
 Stored in ``model.metadata_props`` as key → JSON string (``spec/deploy.md`` §4). Read with ``json.loads``; never
 executed. Keys:
 
-==================  ========================================================================================
-key                 value (JSON)
-==================  ========================================================================================
-``format``          ``"refimpl.deploy/1"``: version of this metadata contract
-``model``           ``{"name", "role", "config", "transition_length"?}`` (role: ``init``, ``step``, ``rollout``)
-``io``              ``{"inputs": [...], "outputs": [...]}``, each ``{"name", "shape", "meaning"}``
-``representation``  pose layout: ``{"name", "size", "fields": [{"name", "start", "size", ...}]}``
-``normalization``   ``{"mean": [P], "std": [P], "in_graph": bool}``: ``pose_normalized = (pose − mean) / std``;
-                    with ``in_graph`` the model takes and returns raw poses; ``null`` when unknown
-``skeleton``        ``{"names", "parents", "offsets"}`` or ``null``
-``frame_rate``      frames per second (number)
-``source_paper``    citation string
-``exporter``        ``{"name", "version", "opset", "ir_version", "dtype", "variant"}``
-==================  ========================================================================================
+====================  ========================================================================================
+key                   value (JSON)
+====================  ========================================================================================
+``format``            ``"refimpl.deploy/1"``: version of this metadata contract
+``model``             ``{"name", "role", "config", "transition_length"?}`` (role: ``init``, ``step``, ``rollout``)
+``io``                ``{"inputs": [...], "outputs": [...]}``, each ``{"name", "shape", "meaning"}``
+``representation``    pose layout: ``{"name", "size", "fields": [{"name", "start", "size", ...}]}``
+``normalization``     ``{"mean": [P], "std": [P], "in_graph": bool, "model_io": "raw" | "normalized",
+                      "equation"}``: ``pose_normalized = (pose − mean) / std`` per entry of the last axis; with
+                      ``in_graph`` the graph does it, so the model takes and returns raw poses
+                      (``model_io = "raw"``); else the caller does (``"normalized"``). ``null``: no statistics
+                      known, the model's inputs and outputs are whatever it was trained on
+``skeleton``          ``{"names", "parents", "offsets", "units"?, "source"?}`` (joint ``j``: name, parent index, −1
+                      for the root, offset from the parent in the rest pose) or ``null``
+``input_transform``   how to build the inputs from world-space data (``{"summary", "steps": [...], ...}``, any
+                      JSON the exporter documents) or ``null``
+``output_transform``  how to read the outputs back into world space (same form) or ``null``
+``frame_rate``        frames per second (number)
+``source_paper``      citation string
+``exporter``          ``{"name", "version", "opset", "ir_version", "dtype", "variant"}``
+====================  ========================================================================================
 
 Shape legend in ``io``: symbolic dimension names (``"B"`` batch) or integers.
 """
@@ -32,17 +39,48 @@ from refimpl._parsing import json_loads_strict
 
 from deploy.graph import IR_VERSION, OPSET, ir_version_for
 
-__all__ = ["EXPORTER_VERSION", "FORMAT", "skeleton_metadata", "read_metadata", "io_entries", "build_metadata"]
+__all__ = ["EXPORTER_VERSION", "FORMAT", "skeleton_metadata", "normalization_metadata", "read_metadata",
+           "io_entries", "build_metadata"]
 
 EXPORTER_VERSION = "0.1.0"
 FORMAT = "refimpl.deploy/1"
-def skeleton_metadata(skeleton) -> dict | None:
-    """``{"names", "parents", "offsets"}`` (plain lists) from a ``refimpl.skeleton.Skeleton``, or ``None``."""
+
+
+def skeleton_metadata(skeleton, *, units: str | None = None, source: str | None = None) -> dict | None:
+    """``{"names", "parents", "offsets"[, "units", "source"]}`` (plain lists) from a ``refimpl.skeleton.Skeleton``
+    (or a dict with those keys, passed through with its lists checked), or ``None``."""
     if skeleton is None:
         return None
-    return {"names": [str(n) for n in skeleton.names],
-            "parents": [int(p) for p in skeleton.parents],
-            "offsets": [[float(v) for v in row] for row in np.asarray(skeleton.offsets, dtype=np.float64)]}
+    if isinstance(skeleton, Mapping):
+        out = {"names": [str(n) for n in skeleton["names"]], "parents": [int(p) for p in skeleton["parents"]],
+               "offsets": [[float(v) for v in row] for row in skeleton["offsets"]]}
+        for key in ("units", "source"):
+            if skeleton.get(key) is not None:
+                out[key] = str(skeleton[key])
+    else:
+        out = {"names": [str(n) for n in skeleton.names],
+               "parents": [int(p) for p in skeleton.parents],
+               "offsets": [[float(v) for v in row] for row in np.asarray(skeleton.offsets, dtype=np.float64)]}
+    if not (len(out["names"]) == len(out["parents"]) == len(out["offsets"])):
+        raise ValueError(f"skeleton: expected as many names, parents and offsets, got {len(out['names'])}, "
+                         f"{len(out['parents'])} and {len(out['offsets'])}")
+    if units is not None:
+        out["units"] = units
+    if source is not None:
+        out["source"] = source
+    return out
+
+
+def normalization_metadata(normalization, in_graph: bool) -> dict | None:
+    """The ``normalization`` entry: ``{"mean", "std", "in_graph", "model_io", "equation"}`` or ``None``."""
+    if normalization is None:
+        return None
+    return {"mean": [float(v) for v in normalization[0]], "std": [float(v) for v in normalization[1]],
+            "in_graph": bool(in_graph), "model_io": "raw" if in_graph else "normalized",
+            "equation": ("normalized = (x - mean) / std and x = normalized * std + mean, per entry of the last "
+                         "axis; " + ("the graph applies both: feed raw values, read raw values" if in_graph else
+                                     "the graph does not: normalise the inputs and de-normalise the outputs "
+                                     "yourself"))}
 
 
 def _finite_float(text: str) -> float:
@@ -83,7 +121,9 @@ def io_entries(*entries) -> list[dict]:
 def build_metadata(g, *, name: str, role: str, config: Mapping[str, Any], io: Mapping[str, Any],
                    representation: Mapping[str, Any], normalization=None, in_graph: bool = False, skeleton=None,
                    frame_rate: float = 30.0, source_paper: str = "", variant: str = "float",
-                   extra: Mapping[str, Any] | None = None, T: int | None = None) -> dict:
+                   extra: Mapping[str, Any] | None = None, T: int | None = None,
+                   input_transform: Mapping[str, Any] | None = None,
+                   output_transform: Mapping[str, Any] | None = None) -> dict:
     """The metadata of an exported model (every key of the module docstring, in that order, then ``extra``).
 
     Parameters
@@ -100,7 +140,8 @@ def build_metadata(g, *, name: str, role: str, config: Mapping[str, Any], io: Ma
     normalization : (mean (P,), std (P,)) or None
     in_graph : bool
         Whether the graph standardises inside (raw poses in and out).
-    skeleton : Skeleton or None
+    skeleton : Skeleton, dict or None
+        Joint names, parents and offsets naming the slots of the pose (:func:`skeleton_metadata`).
     frame_rate : float
     source_paper : str
     variant : str
@@ -109,6 +150,10 @@ def build_metadata(g, *, name: str, role: str, config: Mapping[str, Any], io: Ma
         More keys (they replace the standard ones of the same name).
     T : int, optional
         ``model.transition_length``, for models with a fixed number of frames.
+    input_transform, output_transform : dict, optional
+        How a consumer builds the inputs from world-space data and maps the outputs back, stated in words and
+        equations (``{"summary": str, "steps": [str, ...], ...}``), so that nothing but the metadata and
+        ``deploy/README.md`` is needed. ``null`` when not given.
     """
     model = {"name": name, "role": role, "config": dict(config)}
     if T is not None:
@@ -118,10 +163,10 @@ def build_metadata(g, *, name: str, role: str, config: Mapping[str, Any], io: Ma
         "model": model,
         "io": io,
         "representation": representation,
-        "normalization": None if normalization is None else {
-            "mean": [float(v) for v in normalization[0]], "std": [float(v) for v in normalization[1]],
-            "in_graph": bool(in_graph)},
+        "normalization": normalization_metadata(normalization, in_graph),
         "skeleton": skeleton_metadata(skeleton),
+        "input_transform": None if input_transform is None else dict(input_transform),
+        "output_transform": None if output_transform is None else dict(output_transform),
         "frame_rate": float(frame_rate),
         "source_paper": source_paper,
         "exporter": {"name": "refimpl.deploy", "version": EXPORTER_VERSION, "opset": g.opset,

@@ -17,10 +17,18 @@ import numpy as np
 import onnx
 
 from deploy.metadata import read_metadata
-from deploy.session import make_session, make_session_options  # noqa: F401  (their home before deploy.session)
+from deploy.session import check_model_size, make_session
+from deploy.session import make_session_options  # noqa: F401  (its home before deploy.session)
 from deploy.validate import validate_model
 
-__all__ = ["DeployedModel", "load_model"]
+__all__ = ["DeployedModel", "load_model", "MAX_INPUT_ELEMENTS"]
+
+#: Largest input tensor :meth:`DeployedModel.run` passes to onnxruntime (elements; 2^26 = 256 MiB of float32).
+MAX_INPUT_ELEMENTS = 2 ** 26
+
+#: Array kinds accepted for each declared input type (anything else is refused, not cast): a float input takes
+#: floating and integer arrays; an int64 input integers; a bool input booleans.
+_ACCEPTED_KINDS = {np.float32: "fiu", np.float64: "fiu", np.int64: "iu", np.bool_: "b"}
 
 _NP_FROM_ORT = {"tensor(float)": np.float32, "tensor(double)": np.float64, "tensor(int64)": np.int64,
                 "tensor(bool)": np.bool_}
@@ -46,13 +54,16 @@ def _load_proto(model) -> onnx.ModelProto:
 _METADATA_TYPES = {"model": dict, "io": dict, "representation": dict, "normalization": (dict, type(None)),
                    "skeleton": (dict, type(None)), "exporter": dict, "frame_rate": (int, float), "format": str,
                    "source_paper": str}
+#: Keys written by ``build_metadata`` since the contract gained them (type-checked when present, not required,
+#: so models exported before them still load).
+_OPTIONAL_METADATA_TYPES = {"input_transform": (dict, type(None)), "output_transform": (dict, type(None))}
 
 
 def _check_metadata_types(meta: dict) -> None:
     """The keys this package writes must have the documented JSON types (``deploy/metadata.py``); a model that
     carries any of them (``format``, ``exporter``, ...) must carry all of them — ``metadata_props`` are serialized
     last, so a file cut at an entry boundary would otherwise load with keys silently missing."""
-    for key, types in _METADATA_TYPES.items():
+    for key, types in {**_METADATA_TYPES, **_OPTIONAL_METADATA_TYPES}.items():
         if key in meta and (not isinstance(meta[key], types) or isinstance(meta[key], bool)):
             raise ValueError(f"metadata[{key!r}]: expected a JSON {getattr(types, '__name__', 'object or null')}, "
                              f"got {type(meta[key]).__name__}")
@@ -76,11 +87,12 @@ class DeployedModel:
 
     def __init__(self, model, *, intra_op_threads: int = 1, validate: bool = True):
         proto = _load_proto(model)
+        check_model_size(proto)   # before the checker too: a declared 10 GB constant is refused without reading it
         if validate:
             validate_model(proto)
         self.metadata = read_metadata(proto)
         _check_metadata_types(self.metadata)
-        self.session = make_session(proto, intra_op_threads=intra_op_threads)
+        self.session = make_session(proto, intra_op_threads=intra_op_threads, check_size=False)
         self.inputs = [(i.name, list(i.shape), _NP_FROM_ORT.get(i.type, None)) for i in self.session.get_inputs()]
         self.outputs = [(o.name, list(o.shape), _NP_FROM_ORT.get(o.type, None))
                         for o in self.session.get_outputs()]
@@ -95,31 +107,80 @@ class DeployedModel:
     def run(self, feeds: Mapping[str, np.ndarray] | None = None, **kw) -> dict[str, np.ndarray]:
         """Run once; inputs by name (``feeds`` dict and/or keywords), outputs as a dict by name.
 
-        Inputs are converted to the declared dtype (float64 → float32 for a float32 model) after checking the
-        names, ranks, fixed dimensions and finiteness.
+        Every input is checked before onnxruntime sees it (``spec/deploy.md`` §7): names; array kind (numeric,
+        not object, string or complex; see ``_ACCEPTED_KINDS``); rank and fixed dimensions; symbolic dimensions
+        (``"B"``) equal across all inputs and at least 1 (a batch of 0 crashes onnxruntime's GRU kernel and kills
+        the process); at most :data:`MAX_INPUT_ELEMENTS` elements; finite values after the conversion to the
+        declared dtype (float64 → float32 for a float32 model; ``1e300`` would become ``inf``).
+
+        Outputs are checked too: a non-finite output (damaged weights, absurd inputs) is a ``ValueError``.
 
         Raises
         ------
         ValueError
-            Missing or unknown input name, wrong rank or fixed dimension, non-finite values.
+            Naming the input, what was expected and what was given (or the non-finite output).
         """
+        if feeds is not None and not isinstance(feeds, Mapping):
+            raise ValueError(f"feeds: expected a mapping name -> array, got {type(feeds).__name__}")
         given = dict(feeds or {})
         given.update(kw)
         names = [n for n, _, _ in self.inputs]
-        unknown = sorted(set(given) - set(names))
+        unknown = sorted(map(str, set(given) - set(names)))
         missing = [n for n in names if n not in given]
         if unknown or missing:
             raise ValueError(f"feeds: expected inputs {names}; missing {missing}, unknown {unknown}")
         ready = {}
+        symbols: dict[str, tuple[str, int]] = {}
         for name, shape, dtype in self.inputs:
-            a = np.asarray(given[name])
-            if a.ndim != len(shape) or any(isinstance(d, int) and d != s for d, s in zip(shape, a.shape)):
-                raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
-            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
-                raise ValueError(f"{name}: contains NaN or infinite values")
-            ready[name] = np.ascontiguousarray(a, dtype=dtype) if dtype is not None else a
+            ready[name] = self._check_input(name, shape, dtype, given[name], symbols)
         outs = self.session.run(None, ready)
-        return {name: out for (name, _, _), out in zip(self.outputs, outs)}
+        result = {name: out for (name, _, _), out in zip(self.outputs, outs)}
+        for name, out in result.items():
+            if out.dtype.kind == "f" and not np.all(np.isfinite(out)):
+                raise ValueError(f"{name}: the model produced NaN or infinite values from finite inputs (weights "
+                                 "damaged, or inputs far outside the training range)")
+        return result
+
+    @staticmethod
+    def _check_input(name, shape, dtype, value, symbols) -> np.ndarray:
+        if isinstance(value, (str, bytes, Mapping)) or value is None:
+            raise ValueError(f"{name}: expected a numeric array of shape {shape}, got {type(value).__name__}")
+        try:
+            a = np.asarray(value)
+        except Exception as exc:  # ragged nested lists, objects whose __array__ raises, ...
+            raise ValueError(f"{name}: expected a numeric array of shape {shape}, got {type(value).__name__} "
+                             f"that is not one ({exc})") from None
+        kinds = _ACCEPTED_KINDS.get(dtype, "fiub")
+        if a.dtype.kind not in kinds:
+            expected = {"fiu": "floating or integer", "iu": "integer", "b": "boolean"}.get(kinds, "numeric")
+            raise ValueError(f"{name}: expected a {expected} array for a tensor of "
+                             f"{np.dtype(dtype).name if dtype is not None else 'unknown type'}, got dtype "
+                             f"{a.dtype} (object, string and complex arrays are refused, not cast)")
+        if a.ndim != len(shape):
+            raise ValueError(f"{name}: expected shape {shape} (rank {len(shape)}), got {a.shape} (rank {a.ndim})")
+        for axis, (d, s) in enumerate(zip(shape, a.shape)):
+            if isinstance(d, int) and d > 0 and d != s:
+                raise ValueError(f"{name}: expected shape {shape}, got {a.shape} (axis {axis})")
+            if s == 0:
+                raise ValueError(f"{name}: expected shape {shape} with every dimension >= 1, got {a.shape} "
+                                 f"(an empty {'batch' if d == 'B' else 'axis'} is refused: onnxruntime's GRU "
+                                 "kernel crashes the process on a batch of 0)")
+            if isinstance(d, str) and d:
+                if d in symbols and symbols[d][1] != s:
+                    other, size = symbols[d]
+                    raise ValueError(f"{name}: dimension {d!r} (axis {axis}) must equal the one of {other!r}, "
+                                     f"{size}; got shape {a.shape}")
+                symbols.setdefault(d, (name, int(s)))
+        if a.size > MAX_INPUT_ELEMENTS:
+            raise ValueError(f"{name}: expected at most MAX_INPUT_ELEMENTS = {MAX_INPUT_ELEMENTS} elements, got "
+                             f"shape {a.shape} ({a.size})")
+        if dtype is not None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                a = np.ascontiguousarray(a, dtype=dtype)
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            raise ValueError(f"{name}: expected finite values, got NaN or infinite values (or values that "
+                             f"overflow {a.dtype})")
+        return a
 
 
 def load_model(path, *, intra_op_threads: int = 1, validate: bool = True) -> DeployedModel:

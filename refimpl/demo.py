@@ -196,7 +196,7 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
         say(f"[5/7] verify: onnxruntime vs NumPy on {min(64, len(past))} held-out transitions: max |diff| "
             f"rollout model {check.get('rollout', float('nan')):.2e}, init+step loop "
             f"{check.get('step_loop', float('nan')):.2e} -> {'OK' if check['ok'] else 'MISMATCH'} "
-            "(tolerance rtol 1e-3, atol 1e-4)")
+            "(tolerance rtol 1e-3, atol 2e-3 x pose std: the recipe's VERIFY_TOL)")
         if not check["ok"]:
             raise RuntimeError("onnxruntime and NumPy disagree beyond the rollout tolerance")
     else:

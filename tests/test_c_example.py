@@ -38,7 +38,7 @@ def test_source_reads_sizes_from_the_model():
 def export_rollout(tmp_path_factory):
     """``export(T, pose_size) -> path`` of a small float32 QTG rollout model (random weights)."""
     onnx = pytest.importorskip("onnx")
-    from deploy.qtg import export_qtg_rollout
+    from deploy.models.qtg import export_qtg_rollout
     from refimpl.models.qtg import QTGConfig, init_params
 
     folder = tmp_path_factory.mktemp("c_models")

@@ -130,11 +130,35 @@ def test_cli_export_run_info(tmp_path, capsys):
     assert motion.num_joints == 22 and abs(motion.fps - 30) < 0.01
     assert "generated frames 10..14" in capsys.readouterr().out
     assert main(["info", str(out / "qtg_step.onnx")]) == 0
-    assert "hidden_next" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "hidden_next" in printed and '"model_io": "raw"' in printed and "input_transform: 4 context" in printed
     assert main(["run", str(out), SAMPLE_BVH, str(bvh), "--start", "1"]) == 2
     assert "--start" in capsys.readouterr().err
     assert main(["export", str(tmp_path / "absent.npz"), str(out)]) == 2
     assert main(["export", str(ck), str(out), "--root-mean", "0", "0", "0"]) == 2
+
+
+def test_cli_run_reads_only_the_context_frames(tmp_path, capsys):
+    """spec/deploy.md §8: ``run`` builds its inputs from frames S−2, S−1, S+T, S+T+1 only (the metadata's
+    input_transform): changing the frames it replaces does not change the generated ones."""
+    from refimpl.bvh import write_bvh
+    from refimpl.motion import Motion
+
+    out = tmp_path / "models"
+    export_qtg_dir(_params(), SMALL, out, normalization=(np.array([0.0, 0, 0]), np.array([30.0, 10, 30])))
+    motion = read_bvh(SAMPLE_BVH)
+    rot = np.array(motion.rotations)
+    a, b = tmp_path / "a.bvh", tmp_path / "b.bvh"
+    write_bvh(a, motion)
+    rot[40:60] = rot[0]                                 # 120 fps frames 40..59 = 30 fps frames 10..14
+    write_bvh(b, Motion(motion.skeleton, rot, motion.root_positions, motion.frame_time, motion.name))
+    results = []
+    for src in (a, b):
+        dst = tmp_path / f"out_{src.stem}.bvh"
+        assert main(["run", str(out), str(src), str(dst), "--start", "10"]) == 0
+        results.append(read_bvh(dst).positions()[10:15])
+    capsys.readouterr()
+    np.testing.assert_array_equal(results[0], results[1])
 
 
 def test_export_dir_matches_numpy(tmp_path):

@@ -52,7 +52,7 @@ from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
 from deploy.recurrent import tiled_state
 
 __all__ = ["export_qtg_init", "export_qtg_step", "export_qtg_rollout", "ROLLOUT_MODES", "QTG_PAPER",
-           "qtg_representation"]
+           "qtg_representation", "QTG_INPUT_TRANSFORM", "QTG_OUTPUT_TRANSFORM", "default_skeleton"]
 
 ROLLOUT_MODES = ("scan", "loop", "unrolled")
 
@@ -60,14 +60,79 @@ QTG_PAPER = ("Geleijn, Radziszewski, van Straaten, Galvan Debarba: Lightweight Q
              "with Neural Networks. IEEE VR 2021 (abstracts and workshops)")
 
 
-def qtg_representation(pose_size: int) -> dict:
-    """Layout of a QTG pose vector: root translation (3) then ``(P − 3) / 4`` local joint quaternions (w, x, y, z)."""
+def qtg_representation(pose_size: int, model_io: str = "raw") -> dict:
+    """Layout of a QTG pose vector: root translation (3) then ``(P − 3) / 4`` local joint quaternions (w, x, y, z).
+
+    ``model_io``: ``"raw"`` (the graph standardises inside: root translation in centimetres) or ``"normalized"``
+    (root translation z-normalised with ``normalization.mean/std``, or in whatever space the model was trained
+    when there are no statistics).
+    """
     joints = (pose_size - 3) // 4
+    root = {"raw": "centimetres",
+            "normalized": "z-normalised per axis with the training statistics: (r' - normalization.mean[:3]) / "
+                          "normalization.std[:3] (normalization null: the statistics are not in this file)"}[model_io]
     return {"name": "qtg_pose", "size": int(pose_size),
-            "fields": [{"name": "root_translation", "start": 0, "size": 3,
-                        "meaning": "root translation relative to the window's first pose, z-normalised"},
+            "fields": [{"name": "root_translation", "start": 0, "size": 3, "units": "cm" if model_io == "raw" else
+                        "normalized", "meaning": f"root position r' relative to the window's first pose, heading "
+                        f"removed (input_transform), (x, y, z), y up; {root}"},
                        {"name": "joint_rotations", "start": 3, "size": 4 * joints, "joints": joints,
-                        "quaternion": "(w, x, y, z), Hamilton, local to the parent joint, not normalised"}]}
+                        "joint_names": "skeleton.names (slot j = joint j, slot 0 = the root)",
+                        "quaternion": "(w, x, y, z), Hamilton, local to the parent joint (root: relative to the "
+                                      "window frame); inputs unit, outputs not normalised"}]}
+
+
+#: How a consumer builds QTG's inputs from world-space frames (``metadata["input_transform"]``, deploy/README.md).
+QTG_INPUT_TRANSFORM = {
+    "summary": "4 context frames (2 before, 2 after the transition) made relative to the first of them: heading "
+               "about +y removed, root translated to the origin; then flattened to poses of P = 3 + 4 J values",
+    "frames": ["past[:, 0] = p_-1", "past[:, 1] = p_0", "target[:, 0] = g1 = p_T+1", "target[:, 1] = g2 = p_T+2"],
+    "data": "each frame: root position r_k (x, y, z) in centimetres, y up, and the local rotation of every joint "
+            "as a unit quaternion (w, x, y, z), joints in the order of skeleton.names, sampled at frame_rate fps",
+    "steps": [
+        "1. h = normalise(w, 0, y, 0) of the root rotation q_root of the first frame p_-1 (its twist about +y; "
+        "the identity (1, 0, 0, 0) when w = y = 0).",
+        "2. for each of the 4 frames k: r'_k = rotate(conj(h), r_k - r_first), with rotate(q, v) the vector part "
+        "of q (0, v) conj(q) (Hamilton product), r_first = the root position of p_-1.",
+        "3. q'_root,k = conj(h) * q_root,k (Hamilton product); the other joints' quaternions are unchanged.",
+        "4. signs: if the first frame's quaternion of a joint has w < 0, negate it; then, frame by frame in the "
+        "order p_-1, p_0, g1, g2, negate a joint's quaternion when its dot product with the same joint's quaternion "
+        "in the previous frame is negative.",
+        "5. pose_k = [r'_k (3) | q'_0,k (4) | q_1,k (4) | ... | q_J-1,k (4)] (representation); with "
+        "normalization.in_graph false, normalise it: (pose - normalization.mean) / normalization.std.",
+    ],
+    "reference": "refimpl.transitions.make_windows(rotations (4, J, 4), root_positions (4, 3), length=4)",
+}
+
+#: How a consumer maps QTG's outputs back to world space (``metadata["output_transform"]``).
+QTG_OUTPUT_TRANSFORM = {
+    "summary": "generated poses are relative to the same window frame: undo the input transform and normalise "
+               "the quaternions",
+    "steps": [
+        "1. with normalization.in_graph false, de-normalise: pose = pose_n * normalization.std + "
+        "normalization.mean.",
+        "2. r_k = rotate(h, r'_k) + r_first (h, r_first from input_transform step 1-2).",
+        "3. q_root,k = h * q'_root,k (Hamilton product).",
+        "4. divide every joint quaternion by its norm (the network's are not unit).",
+    ],
+    "frames": "poses[:, t] is frame p_t+1, t = 0 ... T-1: the frames between p_0 and g1",
+    "reference": "refimpl.transitions.window_to_world(poses, h, r_first)",
+}
+
+
+def default_skeleton(pose_size: int):
+    """The 22-joint CMU skeleton (centimetres) of the embedded sample's ``02_01.bvh`` when ``pose_size`` is 91,
+    else ``None``: the joint order every transition data set is mapped to (``refimpl.rigs.CMU_22_JOINTS``)."""
+    if (pose_size - 3) // 4 != 22 or (pose_size - 3) % 4:
+        return None
+    from refimpl.bvh import read_bvh_header
+    from refimpl.rigs import CMU_22_JOINTS, CMU_UNIT_CM, scale_skeleton, subset_22
+    from refimpl.transitions import SAMPLE_DIR
+
+    skel = read_bvh_header(SAMPLE_DIR / "bvh" / "02_01.bvh").skeleton
+    ident = np.zeros((1, skel.num_joints, 4))
+    ident[..., 0] = 1.0
+    sub, _ = subset_22(skel, ident, CMU_22_JOINTS)
+    return scale_skeleton(sub, CMU_UNIT_CM)
 
 
 # ------------------------------------------------------------------------------------------------- checks
@@ -170,11 +235,26 @@ def _zero_hidden(g, like, config, *, name):
 
 # ---------------------------------------------------------------------------------------------- metadata
 def qtg_metadata(config, role, io, normalization, in_graph, skeleton, frame_rate, g, variant, extra, T=None):
-    """:func:`deploy.metadata.build_metadata` of a QTG model (name ``qtg``, its pose layout and paper)."""
+    """:func:`deploy.metadata.build_metadata` of a QTG model (name ``qtg``, its pose layout, paper and window
+    transforms). ``skeleton=None`` writes :func:`default_skeleton` (the CMU 22 joints, for P = 91); ``False``
+    writes ``null``."""
+    from deploy.metadata import skeleton_metadata
+
+    if skeleton is None:
+        default = default_skeleton(config.pose_size)
+        skeleton = None if default is None else skeleton_metadata(
+            default, units="cm", source="default: CMU 22-joint rig (refimpl.rigs.CMU_22_JOINTS) of the embedded "
+                                        "sample 02_01.bvh; offsets of that actor")
+    elif skeleton is False:
+        skeleton = None
+    elif not isinstance(skeleton, Mapping):
+        skeleton = skeleton_metadata(skeleton, units="cm")
+    model_io = "raw" if in_graph else "normalized"
     return build_metadata(g, name="qtg", role=role, config=config.to_dict(), io=io,
-                          representation=qtg_representation(config.pose_size), normalization=normalization,
-                          in_graph=in_graph, skeleton=skeleton, frame_rate=frame_rate, source_paper=QTG_PAPER,
-                          variant=variant, extra=extra, T=T)
+                          representation=qtg_representation(config.pose_size, model_io),
+                          normalization=normalization, in_graph=in_graph, skeleton=skeleton, frame_rate=frame_rate,
+                          source_paper=QTG_PAPER, variant=variant, extra=extra, T=T,
+                          input_transform=QTG_INPUT_TRANSFORM, output_transform=QTG_OUTPUT_TRANSFORM)
 
 
 def _builder(name, dtype, opset, primitive):
@@ -220,8 +300,8 @@ def export_qtg_init(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
     normalize_in_graph : bool
         With ``False`` the statistics only go to the metadata (``"in_graph": false``) and the graph works on
         normalised poses like the NumPy model.
-    skeleton : refimpl.skeleton.Skeleton, optional
-        Written to the metadata.
+    skeleton : refimpl.skeleton.Skeleton, dict or False, optional
+        Written to the metadata (centimetres); default (``None``): :func:`default_skeleton`; ``False``: ``null``.
     frame_rate : float
         Written to the metadata.
     metadata : dict, optional

@@ -26,7 +26,11 @@ from deploy.quantize import WEIGHT_FORMATS
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model
 
-__all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime"]
+__all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime", "MAX_TRANSITION_FRAMES"]
+
+#: Largest ``T`` :meth:`QTGRuntime.transition` generates (5.5 minutes at 30 fps; a larger T would only hang).
+MAX_TRANSITION_FRAMES = 10_000
+_STATE_KEYS = ("pose", "latent_prev", "hidden", "target_latent")
 
 
 def load_qtg_checkpoint(path):
@@ -144,6 +148,9 @@ class QTGRuntime:
         """Run ``step`` once: ``(pose_next (B, P), next state)``."""
         if self.step_model is None:
             raise ValueError("step: no step model loaded")
+        if not isinstance(state, Mapping) or any(k not in state for k in _STATE_KEYS):
+            raise ValueError(f"state: expected a mapping with keys {list(_STATE_KEYS)} (from start or step), got "
+                             f"{sorted(map(str, state)) if isinstance(state, Mapping) else type(state).__name__}")
         out = self.step_model.run(pose=state["pose"], latent_prev=state["latent_prev"], hidden=state["hidden"],
                                   target_latent=state["target_latent"])
         new = {"pose": out["pose_next"], "latent_prev": out["latent_prev_next"], "hidden": out["hidden_next"],
@@ -155,12 +162,20 @@ class QTGRuntime:
 
         ``T`` defaults to the rollout model's length (or the config's ``transition_length``); the rollout model
         is used only when its baked-in length equals ``T``.
+
+        Raises
+        ------
+        ValueError
+            ``T`` not an integer in ``[1, MAX_TRANSITION_FRAMES]``; ``past``/``target`` refused by
+            :meth:`deploy.runtime.DeployedModel.run` (shape, batch mismatch, batch 0, dtype, non-finite values).
         """
         meta = (self.rollout_model or self.step_model or self.init_model).metadata.get("model", {})
         default_T = meta.get("transition_length") or meta.get("config", {}).get("transition_length")
         T = default_T if T is None else T
-        if not isinstance(T, (int, np.integer)) or T < 1:
-            raise ValueError(f"T: expected a positive integer, got {T!r}")
+        if not isinstance(T, (int, np.integer)) or isinstance(T, (bool, np.bool_)) or not 1 <= T <= \
+                MAX_TRANSITION_FRAMES:
+            raise ValueError(f"T: expected an integer in [1, MAX_TRANSITION_FRAMES = {MAX_TRANSITION_FRAMES}], "
+                             f"got {T!r}")
         if use_rollout and self.rollout_model is not None:
             rT = self.rollout_model.metadata.get("model", {}).get("transition_length")
             if rT == T:

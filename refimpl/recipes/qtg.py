@@ -236,6 +236,15 @@ def reference_outputs(model, past, target, T: int) -> np.ndarray:
     return denormalize_poses(ref.astype(np.float64), model.root_mean, model.root_std)  # (B, T, P)
 
 
+#: Tolerance of :func:`verify_onnx` (``refimpl export``'s check), in normalised units (``atol`` times the pose std).
+#: :data:`refimpl.testing.TOL_ORT_ROLLOUT` (atol 1e-4) holds for the tests' small random networks, but a trained
+#: network amplifies float32 rounding over 30 recurrent frames: on the README's 6000-step model, 8 random contexts
+#: per seed, NumPy float32 is up to 2.3e-4 and onnxruntime float32 up to 5.6e-4 (normalised units) away from NumPy
+#: float64, and the two float32 paths up to 7.8e-4 apart; atol 2e-3 (0.03-0.09 cm of root for a 13-45 cm std)
+#: still catches any real translation error (a wrong statistic or weight moves poses by centimetres).
+VERIFY_TOL = dict(rtol=1e-3, atol=2e-3)
+
+
 def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
     """Compare an exported QTG's onnxruntime outputs with :func:`reference_outputs` on raw context poses
     ``past, target (B, 2, P)``: the ``rollout`` model and the ``init`` + ``step`` loop.
@@ -243,11 +252,11 @@ def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
     Returns
     -------
     dict ``{"rollout": max |Δ|, "step_loop": max |Δ|, "ok": bool}``; ``ok`` against
-    :data:`refimpl.testing.TOL_ORT_ROLLOUT`.
+    :data:`VERIFY_TOL` in the network's (normalised) units: ``|Δ| <= atol · std + rtol · |ref|`` with ``std`` the
+    pose statistics (root: the training std in cm; quaternions: 1).
     """
-    from refimpl.testing import TOL_ORT_ROLLOUT
-
     T = int(T or model.transition_length)
+    std = np.asarray(model.pose_normalization[1], dtype=np.float64)  # (P,)
     ref = reference_outputs(model, past, target, T)  # (B, T, P)
     out = {}
     ok = True
@@ -258,6 +267,6 @@ def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
                                             use_rollout=use_rollout), dtype=np.float64)
         diff = np.abs(got - ref)
         out[key] = float(diff.max())
-        ok &= bool(np.all(diff <= TOL_ORT_ROLLOUT["atol"] + TOL_ORT_ROLLOUT["rtol"] * np.abs(ref)))
+        ok &= bool(np.all(diff <= VERIFY_TOL["atol"] * std + VERIFY_TOL["rtol"] * np.abs(ref)))
     out["ok"] = ok
     return out
