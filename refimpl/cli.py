@@ -256,6 +256,8 @@ def cmd_train(args) -> int:
         for f in ("checkpoint.npz", "loss.csv", "loss_val.csv"):
             if (out / f).is_file():
                 (out / f).unlink()
+    if args.batch_size is None:
+        args.batch_size = int(getattr(spec.recipe, "PAPER_BATCH", 32))
     t0 = time.perf_counter()
     _say(f"reading {args.data} ...")
     train_ds, test_ds = task.train_datasets(args)
@@ -283,9 +285,45 @@ def cmd_train(args) -> int:
     return 130 if result.interrupted else EXIT_OK
 
 
+def _eval_prediction(args, model) -> int:
+    """``refimpl eval`` on the prediction task: the network(s) and the baselines, the paper's table, JSON."""
+    from refimpl.tasks import prediction
+
+    _say(f"reading {args.data} ...")
+    stride = prediction.stride_of(model.extra["dataset"], model.extra["frame_time"]) if model else 2
+    data = prediction.resolve_data(args.data, downsample=stride)
+    if model is not None and model.extra.get("dataset") != data.dataset:
+        raise UsageError(f"--data {args.data} is {data.dataset}, the model was trained on {model.extra.get('dataset')}")
+    try:
+        protocol = prediction.eval_protocol(data.dataset, args.protocol, args.samples_per_sequence)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    networks = network_methods(model, onnx_dir=args.onnx) if (model is not None or args.onnx) else {}
+    try:
+        results = prediction.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line)
+    except ValueError as exc:
+        raise BadInputError(f"--data {args.data}: {exc}") from exc
+    if model is not None:
+        _say(f"network {model.spec.name} from {model.path} (step {model.meta.get('step')})")
+    _say("Mean Euler-angle error (radians, zyx, joint 0 excluded) per action and horizon:")
+    _say(prediction.format_table(results))
+    if args.json:
+        prediction.write_results_json(args.json, results[0] if len(results) == 1 else results)
+        _say(f"results          {args.json}")
+    if args.plot:
+        from refimpl.render import render_error_curves
+
+        render_error_curves(args.plot, prediction.average_curves(results), frame_time=protocol.frame_ms / 1000.0)
+        _say(f"plot             {args.plot}")
+    return EXIT_OK
+
+
 def cmd_eval(args) -> int:
     """``refimpl eval``."""
     model = load_trained(args.checkpoint) if args.checkpoint else None
+    task_name = model.spec.task if model is not None else (MODELS[args.model].task if args.model else "transition")
+    if task_name == "prediction":
+        return _eval_prediction(args, model)
     T = args.transition_length or (model.transition_length if model else 30)
     _say(f"reading {args.data} ...")
     _, test_ds = transition.build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
@@ -480,7 +518,8 @@ def build_parser() -> argparse.ArgumentParser:
     length = p.add_mutually_exclusive_group()
     length.add_argument("--steps", type=nonneg_int, default=None, help="optimiser steps")
     length.add_argument("--epochs", type=nonneg_int, default=10, help="epochs, when --steps is not given (default 10)")
-    p.add_argument("--batch-size", type=positive_int, default=32)
+    p.add_argument("--batch-size", type=positive_int, default=None,
+                   help="batch size (default: the model's paper value; qtg 32, quaternet 60)")
     p.add_argument("--lr", type=positive_float, default=None,
                    help="Adam learning rate (default: the model's paper value; qtg 1e-4)")
     p.add_argument("--betas", type=float, nargs=2, default=None, metavar=("B1", "B2"),
@@ -511,6 +550,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", default=None, help="write the per-frame curve as CSV")
     p.add_argument("--json", default=None, help="write all results as JSON")
     p.add_argument("--plot", default=None, help="write the per-frame curves as PNG (matplotlib)")
+    p.add_argument("--model", default=None, choices=sorted(MODELS),
+                   help="without --checkpoint: evaluate the baselines of this model's task (default qtg's)")
+    for task_name in sorted(TASKS):
+        if hasattr(task_of(task_name), "add_eval_options"):
+            task_of(task_name).add_eval_options(p.add_argument_group(f"{task_name} task"))
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("export", help="export a checkpoint to ONNX (needs the deploy extra)",
