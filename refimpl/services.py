@@ -224,11 +224,13 @@ def verify_onnx(model: TrainedModel, onnx_dir, *inputs, **options) -> dict:
 
 
 def onnx_metadata(onnx_dir) -> dict:
-    """The metadata of the first ``*_rollout.onnx`` (else ``*_step.onnx``) model in ``onnx_dir``."""
+    """The metadata of the first ``*_rollout.onnx`` (else ``*_step.onnx``, ``*_predict.onnx``, ``*_window.onnx``)
+    model in ``onnx_dir``."""
     d = Path(onnx_dir)
-    files = sorted(d.glob("*_rollout.onnx")) + sorted(d.glob("*_step.onnx"))
+    files = (sorted(d.glob("*_rollout.onnx")) + sorted(d.glob("*_step.onnx")) + sorted(d.glob("*_predict.onnx"))
+             + sorted(d.glob("*_window.onnx")))
     if not files:
-        raise BadInputError(f"{d}: no exported *_rollout.onnx / *_step.onnx models")
+        raise BadInputError(f"{d}: no exported *_rollout.onnx / *_step.onnx / *_predict.onnx / *_window.onnx models")
     try:
         from deploy.metadata import read_metadata
     except ImportError as exc:

@@ -49,7 +49,7 @@ __all__ = [
     "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of",
     "onnx_method", "methods", "evaluate_all", "task_evaluate", "canonical_prefix", "training_windows",
     "usable_training", "eval_protocol", "average_curves", "stride_of", "load_clip", "Prediction",
-    "make_prediction", "render_prediction",
+    "make_prediction", "render_prediction", "verify_inputs",
 ]
 
 # The published evaluation's action order (quaternet_reference_code.md §6.6).
@@ -986,3 +986,18 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
         written.append(render_gif(gif, gt, parents, prediction=pred if pr.truth is not None else None,
                                   fps=pr.motion.fps, highlight=hl, labels=labels, title=title))
     return written
+
+
+def verify_inputs(model, rng: np.random.Generator, batch: int = 8) -> tuple:
+    """``(prefix (B, P, J, 4),)`` for ``refimpl export``'s check: real CMU test windows of the embedded sample
+    (prefix of the model's training length) for a CMU model, small random rotations otherwise."""
+    from refimpl.quat import quat_from_axis_angle
+
+    P = int(getattr(model.config, "prefix_length", 50))
+    if model.extra.get("dataset") == "cmu":
+        data = load_cmu(SAMPLE_EXPMAP_DIR, stride=stride_of("cmu", model.extra["frame_time"]))
+        windows = [s.rotations[i:i + P] for s in data.test
+                   for i in rng.integers(0, s.num_frames - P + 1, size=batch)]
+        return (np.stack(windows[:batch]),)
+    J = int(model.config.num_joints)
+    return (quat_from_axis_angle(0.3 * rng.standard_normal((batch, P, J, 3))),)
