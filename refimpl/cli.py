@@ -369,10 +369,68 @@ def cmd_export(args) -> int:
     return EXIT_OK
 
 
+def _generate_prediction(args, model) -> int:
+    """``refimpl generate`` on the prediction task: a prefix of ``--source`` -> ``--length`` frames, BVH out."""
+    from refimpl.bvh import write_bvh
+    from refimpl.tasks import prediction
+
+    if args.backend == "onnx":
+        if not args.onnx:
+            raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
+        meta = onnx_metadata(args.onnx)
+        dataset, frame_time = meta.get("dataset"), 1.0 / float(meta.get("frame_rate", 25.0))
+        P, name = int(meta.get("prefix_length", 50)), f"{meta['model']['name']}_onnx"
+        if dataset not in ("cmu", "h36m"):
+            raise BadInputError(f"{args.onnx}: the models' metadata names no prediction dataset")
+    else:
+        dataset, frame_time = model.extra["dataset"], float(model.extra["frame_time"])
+        P, name = int(model.config.prefix_length), model.spec.name
+    networks = network_methods(None if args.backend == "onnx" else model,
+                               onnx_dir=args.onnx if args.backend == "onnx" else None)
+    rotations = prediction.load_clip(args.source, dataset, frame_time)
+    k = args.length or 25
+    pr = prediction.make_prediction(next(iter(networks.values())), rotations, args.source_frame, P, k,
+                                    skeleton=prediction.skeleton_of(dataset), frame_time=frame_time,
+                                    method_name=name, name=Path(args.out).stem)
+    write_bvh(args.out, pr.motion)
+    _say(f"wrote {args.out}: {pr.motion.num_frames} frames at {1.0 / frame_time:g} fps ({dataset} skeleton, root "
+         f"at the origin): prefix frames 0..{pr.start - 1}, predicted {pr.start}..{pr.stop - 1} ({name}, "
+         f"{args.backend})")
+    err = pr.euler_error()
+    if err is not None:
+        _say("ground truth available: Euler-angle error (rad) at predicted frames 2, 4, 8, 10: "
+             + ", ".join(f"{err[i]:.3f}" for i in (1, 3, 7, 9) if i < len(err)))
+        if args.truth:
+            write_bvh(args.truth, pr.truth)
+            _say(f"wrote {args.truth} (ground truth)")
+    elif args.truth:
+        raise UsageError(f"--truth: {args.source} ends before the {k} predicted frames")
+    if args.png or args.gif:
+        for f in prediction.render_prediction(pr, png=args.png, gif=args.gif):
+            _say(f"wrote {f}")
+    return EXIT_OK
+
+
+def _model_task(args, model) -> str:
+    """The task of ``--checkpoint``'s model, else of the exported models in ``--onnx``, else ``transition``."""
+    if model is not None:
+        return model.spec.task
+    if getattr(args, "backend", None) == "onnx" and args.onnx:
+        name = (onnx_metadata(args.onnx).get("model") or {}).get("name")
+        if name in MODELS:
+            return MODELS[name].task
+    return "transition"
+
+
 def cmd_generate(args) -> int:
     """``refimpl generate``."""
     from refimpl.bvh import write_bvh
 
+    first = load_trained(args.checkpoint) if args.checkpoint else None
+    if _model_task(args, first) == "prediction":
+        if args.backend == "numpy" and first is None:
+            raise UsageError("--backend numpy needs --checkpoint")
+        return _generate_prediction(args, first)
     model = None
     if args.method == "qtg":
         if args.backend == "numpy" and not args.checkpoint:

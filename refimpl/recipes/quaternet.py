@@ -249,6 +249,7 @@ def export_inputs(model) -> dict:
 
     skel = skeleton_of(model.extra["dataset"])
     meta = {"frame_rate": float(model.fps), "dataset": model.extra["dataset"],
+            "prefix_length": int(model.config.prefix_length),
             "training": {"checkpoint_step": model.meta.get("step")}}
     return {"metadata": meta, "skeleton": skel, "k": 10}
 
