@@ -1,5 +1,5 @@
 """QuaterNet's entries of the exporter table (``deploy.models.EXPORTERS["quaternet"]`` and ``["quaternet-cnn"]``):
-checkpoints in, model folders out, and the runtimes that drive the exported models (spec/deploy.md §10).
+checkpoints in, model folders out, and the runtimes that drive the exported models (spec/deploy.md §11).
 
 * :func:`load_quaternet_checkpoint`, :func:`export_quaternet_dir`, :class:`QuaterNetRuntime` — the recurrent
   network: ``quaternet_init.onnx``, ``quaternet_step.onnx`` (a frame loop) and ``quaternet_predict.onnx``
@@ -62,12 +62,11 @@ def load_quaternet_checkpoint(path):
 
 def load_cnn_checkpoint(path):
     """``(params, QuaterNetCNNConfig, meta)`` from a ``refimpl train`` checkpoint (``--model quaternet-cnn``)."""
-    from refimpl.recipes.quaternet_cnn import parse_skips
-
     def convert(cfg):
         cfg = dict(cfg)
-        if isinstance(cfg.get("skips"), str):
-            cfg["skips"] = parse_skips(cfg["skips"])
+        if isinstance(cfg.get("skips"), str):  # the recipe stores the skips as text "s:k,s:k"
+            cfg["skips"] = tuple(tuple(int(v) for v in item.split(":")) for item in cfg["skips"].split(",")
+                                 if item.strip())
         return cfg
 
     params, meta = _read(path)
