@@ -569,7 +569,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("train", help="train a network (today: qtg) on motion files",
+    p = sub.add_parser("train", help="train a network (qtg, quaternet, quaternet-cnn) on motion files",
                        description="Train a network with Adam; checkpoint.npz (resumable), loss.csv and "
                                    "loss_val.csv go to --out. Progress lines (rate, ETA) go to stderr. "
                                    "Models: " + "; ".join(f"{n}: {s.summary}" for n, s in sorted(MODELS.items())))
@@ -602,9 +602,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--progress-every", type=positive_int, default=50)
     p.set_defaults(func=cmd_train)
 
-    p = sub.add_parser("eval", help="QTG vs inertialisation vs interpolation on held-out windows",
-                       description="The QTG paper's protocol: mean joint-position error per joint per frame (cm) "
-                                   "on held-out transition windows, with the per-frame curve.")
+    p = sub.add_parser("eval", help="a network against its task's baselines (QTG: transitions; QuaterNet: "
+                                    "short-term prediction)",
+                       description="Transition task (qtg): the QTG paper's protocol, mean joint-position error per "
+                                   "joint per frame (cm) on held-out transition windows, with the per-frame curve. "
+                                   "Prediction task (quaternet, quaternet-cnn): the published short-term protocol, "
+                                   "Euler-angle error per action and horizon, with zero-velocity and running "
+                                   "averages.")
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (omit: baselines only)")
     p.add_argument("--onnx", default=None, help="also evaluate the exported models of this folder (onnxruntime)")
     add_data_options(p)
