@@ -36,7 +36,8 @@ from refimpl.train import ModelAdapter, OptimConfig
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "PAPER_PREFIX", "PAPER_TARGET", "PAPER_EPOCHS", "SCHEDULES", "LOSSES", "ShortTermConfig", "make_config",
-           "make_adapter", "loss_terms", "make_method", "export_inputs", "reference_outputs", "verify_onnx"]
+           "make_adapter", "loss_terms", "teacher_forcing_mask", "network_method", "raw_outputs", "predictor",
+           "make_method", "export_inputs", "reference_outputs", "verify_onnx"]
 
 NAME = "quaternet"
 SUMMARY = ("QuaterNet recurrent pose network (Pavllo et al., IJCV 2019), short-term: 50-frame prefix -> "
@@ -220,21 +221,35 @@ def _param_dtype(params) -> np.dtype:
     return next(iter(params.values())).dtype
 
 
-def predictor(params: Mapping[str, np.ndarray], config: ShortTermConfig) -> Callable:
+def network_method(predict_fn: Callable, params: Mapping[str, np.ndarray], network_config, name: str) -> Callable:
     """``f(prefix (B, P, J, 4), k) -> (B, k, J, 4)``: the published predict (canonical prefix, then
-    :func:`refimpl.models.quaternet.predict`) in the parameters' dtype."""
+    ``predict_fn(params, frames (B, P, 4J), k, network_config)``) in the parameters' dtype."""
     from refimpl.tasks.prediction import canonical_prefix
 
     dtype = _param_dtype(params)
-    ncfg = config.network
 
-    def quaternet(prefix, k):
+    def method(prefix, k):
         x = canonical_prefix(prefix)
         B, P, J, _ = x.shape
-        y = net.predict(params, x.reshape(B, P, 4 * J).astype(dtype), int(k), ncfg)
+        y = predict_fn(params, x.reshape(B, P, 4 * J).astype(dtype), int(k), network_config)
         return y.astype(np.float64).reshape(B, int(k), J, 4)
 
-    return quaternet
+    method.__name__ = method.__qualname__ = name
+    return method
+
+
+def raw_outputs(predict_fn: Callable, params: Mapping[str, np.ndarray], network_config, prefix, k: int):
+    """``predict_fn`` on the raw prefix ``(B, P, J, 4)`` (no canonicalisation) in the parameters' dtype:
+    ``(B, k, J, 4)`` float64, what an exported model must reproduce."""
+    x = np.asarray(prefix)
+    B, P, J, _ = x.shape
+    y = predict_fn(params, x.reshape(B, P, 4 * J).astype(_param_dtype(params)), int(k), network_config)
+    return y.astype(np.float64).reshape(B, int(k), J, 4)
+
+
+def predictor(params: Mapping[str, np.ndarray], config: ShortTermConfig) -> Callable:
+    """:func:`network_method` of :func:`refimpl.models.quaternet.predict`."""
+    return network_method(net.predict, params, config.network, NAME)
 
 
 def make_method(model) -> Callable:
@@ -257,11 +272,7 @@ def export_inputs(model) -> dict:
 def reference_outputs(model, prefix, k: int) -> np.ndarray:
     """What an exported model must reproduce: :func:`refimpl.models.quaternet.predict` of the raw prefix
     ``(B, P, J, 4)`` (no canonicalisation) in the parameters' dtype, ``(B, k, J, 4)`` float64."""
-    x = np.asarray(prefix)
-    B, P, J, _ = x.shape
-    y = net.predict(model.params, x.reshape(B, P, 4 * J).astype(_param_dtype(model.params)), int(k),
-                    model.config.network)
-    return y.astype(np.float64).reshape(B, int(k), J, 4)
+    return raw_outputs(net.predict, model.params, model.config.network, prefix, k)
 
 
 def verify_onnx(model, runtime, prefix, k: int = 10) -> dict:

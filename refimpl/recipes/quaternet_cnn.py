@@ -23,8 +23,8 @@ from refimpl.schedules import QUATERNET_TF_DECAY
 from refimpl.train import ModelAdapter
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
-           "PAPER_PREFIX", "CNNShortTermConfig", "parse_skips", "make_config", "make_adapter", "make_method",
-           "export_inputs", "reference_outputs", "verify_onnx"]
+           "PAPER_PREFIX", "CNNShortTermConfig", "parse_skips", "make_config", "make_adapter", "predictor",
+           "make_method", "export_inputs", "reference_outputs", "verify_onnx"]
 
 NAME = "quaternet-cnn"
 SUMMARY = ("QuaterNet convolutional pose network (IJCV 2019 §3.2; our reconstruction of the unreleased model): "
@@ -130,18 +130,7 @@ def make_adapter(train_ds, val_ds, config: CNNShortTermConfig, dtype, extra: Map
 def predictor(params: Mapping[str, np.ndarray], config: CNNShortTermConfig) -> Callable:
     """``f(prefix (B, P, J, 4), k) -> (B, k, J, 4)``: canonical prefix, then
     :func:`refimpl.models.quaternet_cnn.predict` (reads the last R frames)."""
-    from refimpl.tasks.prediction import canonical_prefix
-
-    dtype = next(iter(params.values())).dtype
-    ncfg = config.network
-
-    def quaternet_cnn(prefix, k):
-        x = canonical_prefix(prefix)
-        B, P, J, _ = x.shape
-        y = cnn.predict(params, x.reshape(B, P, 4 * J).astype(dtype), int(k), ncfg)
-        return y.astype(np.float64).reshape(B, int(k), J, 4)
-
-    return quaternet_cnn
+    return rnn_recipe.network_method(cnn.predict, params, config.network, NAME)
 
 
 def make_method(model) -> Callable:
@@ -155,11 +144,7 @@ def export_inputs(model) -> dict:
 
 def reference_outputs(model, prefix, k: int) -> np.ndarray:
     """:func:`refimpl.models.quaternet_cnn.predict` of the raw prefix ``(B, P, J, 4)``, ``(B, k, J, 4)`` float64."""
-    x = np.asarray(prefix)
-    B, P, J, _ = x.shape
-    y = cnn.predict(model.params, x.reshape(B, P, 4 * J).astype(next(iter(model.params.values())).dtype), int(k),
-                    model.config.network)
-    return y.astype(np.float64).reshape(B, int(k), J, 4)
+    return rnn_recipe.raw_outputs(cnn.predict, model.params, model.config.network, prefix, k)
 
 
 def verify_onnx(model, runtime, prefix, k: int = 10) -> dict:
