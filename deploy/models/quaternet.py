@@ -1,4 +1,4 @@
-"""ONNX export of QuaterNet (``refimpl/models/quaternet.py``, ``refimpl/models/quaternet_cnn.py``; spec/deploy.md §10).
+"""ONNX export of QuaterNet (``refimpl/models/quaternet.py``, ``refimpl/models/quaternet_cnn.py``; spec/deploy.md §11).
 
 Its entries of the exporter table are in ``deploy/models/quaternet_io.py``. The exporter translates the NumPy
 functions one to one:
