@@ -232,6 +232,9 @@ def test_export_rnn_parity(capsys, rnn_run, tmp_path):
     ref = rnn_recipe.reference_outputs(model, prefix, 10)
     for use_graph in (True, False):
         assert np.allclose(rt.predict(prefix, 10, use_graph=use_graph), ref, **TOL_ORT_ROLLOUT)
+    predict = onnx.load(str(tmp_path / "quaternet_predict.onnx"))
+    got = run_reference(predict, {"prefix": prefix.reshape(3, prefix.shape[1], -1).astype(np.float32)})[0]
+    assert np.allclose(got.reshape(ref.shape), ref, **TOL_ORT_ROLLOUT)
     x = prefix[:, 0].reshape(3, -1).astype(np.float32)
     h = net.init_state(model.params, 3, model.config.network)
     y, hn = net.step(model.params, h, x, model.config.network)
