@@ -265,3 +265,35 @@ def test_export_cnn_parity(capsys, cnn_run, tmp_path):
     code, text, _ = _run(capsys, "generate", "--backend", "onnx", "--onnx", tmp_path, "--source", WALK_TXT,
                          "--source-frame", "20", "--length", "4", "--out", tmp_path / "g.bvh")
     assert code == EXIT_OK and "quaternet-cnn_onnx" in text
+
+
+def _write_h36m(path, T, rate):
+    """A synthetic Human3.6M exp-map file: 99 values per row (junk translation + 32 exp-maps), joint 3 turning."""
+    e = np.zeros((T, 33, 3))
+    e[:, 0] = 50.0
+    e[:, 4, 0] = -rate * np.arange(T)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(",".join(repr(float(v)) for v in r) for r in e.reshape(T, 99)) + "\n")
+
+
+def test_h36m_directory_train_and_eval(capsys, tmp_path):
+    """--data pointing at a user's Human3.6M folder: train a few steps, evaluate with the H3.6M protocol."""
+    root = tmp_path / "h36m"
+    for sub, T in ((1, 460), (2, 400)):
+        _write_h36m(root / "S5" / f"walking_{sub}.txt", T, 0.004)
+    for s in ("S1", "S6"):
+        for sub in (1, 2):
+            _write_h36m(root / s / f"walking_{sub}.txt", 80, 0.01)
+    out = tmp_path / "run"
+    assert _train(out, "quaternet", TINY_RNN, 2, "--data", str(root)) == EXIT_OK
+    model = load_trained(out / "checkpoint.npz")
+    assert model.extra["dataset"] == "h36m" and model.config.num_joints == 32 and model.fps == pytest.approx(25.0)
+    path = tmp_path / "h.json"
+    code, text, _ = _run(capsys, "eval", "--checkpoint", out / "checkpoint.npz", "--data", root, "--json", path)
+    assert code == EXIT_OK and "dataset h36m" in text
+    doc = json.loads(path.read_text())
+    assert doc[0]["horizons_ms"] == [80, 160, 320, 400, 560, 1000, 2000, 3000, 4000]
+    assert doc[0]["method"] == "zero-velocity" and list(doc[0]["actions"]) == ["walking"]
+    # joint 3 turns 0.008 rad per 25 Hz frame about x: zero-velocity's error at frame k is 0.008 (k + 1)
+    assert np.allclose(doc[0]["average"][:4], [0.016, 0.032, 0.064, 0.080], atol=1e-9)
+    assert doc[-1]["method"] == "quaternet"
