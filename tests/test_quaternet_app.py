@@ -297,3 +297,26 @@ def test_h36m_directory_train_and_eval(capsys, tmp_path):
     # joint 3 turns 0.008 rad per 25 Hz frame about x: zero-velocity's error at frame k is 0.008 (k + 1)
     assert np.allclose(doc[0]["average"][:4], [0.016, 0.032, 0.064, 0.080], atol=1e-9)
     assert doc[-1]["method"] == "quaternet"
+
+
+def test_eval_protocol_and_curves():
+    assert pr.eval_protocol("cmu", "dense").samples_per_sequence == 128
+    assert pr.eval_protocol("h36m", "standard", 8).samples_per_sequence == 8
+    with pytest.raises(ValueError, match="standard"):
+        pr.eval_protocol("cmu", "sparse")
+    assert pr.stride_of("cmu", 1 / 60) == 2 and pr.stride_of("h36m", 0.04) == 2
+    data = pr.resolve_data("sample")
+    res = pr.evaluate_all(data, pr.methods())
+    curves = pr.average_curves(res)
+    assert list(curves) == ["zero-velocity", "run. avg. 2", "run. avg. 4"]
+    assert np.allclose(curves["zero-velocity"], np.mean([res[0].curves[a] for a in res[0].curves], axis=0))
+
+
+def test_render_prediction_and_plot(capsys, tmp_path, rnn_run):
+    pytest.importorskip("matplotlib")
+    code, text, _ = _run(capsys, "generate", "--checkpoint", rnn_run / "checkpoint.npz", "--source", WALK_TXT,
+                         "--source-frame", "30", "--length", "6", "--out", tmp_path / "p.bvh", "--png",
+                         tmp_path / "p.png")
+    assert code == EXIT_OK and (tmp_path / "p.png").stat().st_size > 1000
+    code, _, _ = _run(capsys, "eval", "--model", "quaternet-cnn", "--plot", tmp_path / "c.png")
+    assert code == EXIT_OK and (tmp_path / "c.png").is_file()
