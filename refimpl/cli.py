@@ -288,6 +288,8 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
         for f in ("checkpoint.npz", "loss.csv", "loss_val.csv"):
             if (out / f).is_file():
                 (out / f).unlink()
+    if args.batch_size is None:
+        args.batch_size = int(getattr(spec.recipe, "PAPER_BATCH", 32))
     t0 = time.perf_counter()
     _say(f"reading {args.data} ...")
     train_ds, test_ds = task.train_datasets(args)
@@ -317,9 +319,45 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
     return EXIT_OK
 
 
+def _eval_prediction(args, model) -> int:
+    """``refimpl eval`` on the prediction task: the network(s) and the baselines, the paper's table, JSON."""
+    from refimpl.tasks import prediction
+
+    _say(f"reading {args.data} ...")
+    stride = prediction.stride_of(model.extra["dataset"], model.extra["frame_time"]) if model else 2
+    data = prediction.resolve_data(args.data, downsample=stride)
+    if model is not None and model.extra.get("dataset") != data.dataset:
+        raise UsageError(f"--data {args.data} is {data.dataset}, the model was trained on {model.extra.get('dataset')}")
+    try:
+        protocol = prediction.eval_protocol(data.dataset, args.protocol, args.samples_per_sequence)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    networks = network_methods(model, onnx_dir=args.onnx) if (model is not None or args.onnx) else {}
+    try:
+        results = prediction.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line)
+    except ValueError as exc:
+        raise BadInputError(f"--data {args.data}: {exc}") from exc
+    if model is not None:
+        _say(f"network {model.spec.name} from {model.path} (step {model.meta.get('step')})")
+    _say("Mean Euler-angle error (radians, zyx, joint 0 excluded) per action and horizon:")
+    _say(prediction.format_table(results))
+    if args.json:
+        prediction.write_results_json(args.json, results[0] if len(results) == 1 else results)
+        _say(f"results          {args.json}")
+    if args.plot:
+        from refimpl.render import render_error_curves
+
+        render_error_curves(args.plot, prediction.average_curves(results), frame_time=protocol.frame_ms / 1000.0)
+        _say(f"plot             {args.plot}")
+    return EXIT_OK
+
+
 def cmd_eval(args) -> int:
     """``refimpl eval``."""
     model = load_trained(args.checkpoint) if args.checkpoint else None
+    task_name = model.spec.task if model is not None else (MODELS[args.model].task if args.model else "transition")
+    if task_name == "prediction":
+        return _eval_prediction(args, model)
     T = args.transition_length or (model.transition_length if model else 30)
     _say(f"reading {args.data} ...")
     _, test_ds = transition.build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
@@ -350,8 +388,12 @@ def cmd_export(args) -> int:
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
         rng = np.random.default_rng(args.seed)
-        past, target = transition.random_context(model, rng, 8)
-        check = verify_onnx(model, out, past, target, T=args.transition_length)
+        task = task_of(model.spec)
+        if hasattr(task, "verify_inputs"):  # the task's own check inputs (prediction: real CMU windows)
+            check = verify_onnx(model, out, *task.verify_inputs(model, rng, 8))
+        else:
+            past, target = transition.random_context(model, rng, 8)
+            check = verify_onnx(model, out, past, target, T=args.transition_length)
         for k, v in check.items():
             if k != "ok":
                 _say(f"verify   onnxruntime vs NumPy ({k}): max |diff| = {v:.3g}")
@@ -361,10 +403,68 @@ def cmd_export(args) -> int:
     return EXIT_OK
 
 
+def _generate_prediction(args, model) -> int:
+    """``refimpl generate`` on the prediction task: a prefix of ``--source`` -> ``--length`` frames, BVH out."""
+    from refimpl.bvh import write_bvh
+    from refimpl.tasks import prediction
+
+    if args.backend == "onnx":
+        if not args.onnx:
+            raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
+        meta = onnx_metadata(args.onnx)
+        dataset, frame_time = meta.get("dataset"), 1.0 / float(meta.get("frame_rate", 25.0))
+        P, name = int(meta.get("prefix_length", 50)), f"{meta['model']['name']}_onnx"
+        if dataset not in ("cmu", "h36m"):
+            raise BadInputError(f"{args.onnx}: the models' metadata names no prediction dataset")
+    else:
+        dataset, frame_time = model.extra["dataset"], float(model.extra["frame_time"])
+        P, name = int(model.config.prefix_length), model.spec.name
+    networks = network_methods(None if args.backend == "onnx" else model,
+                               onnx_dir=args.onnx if args.backend == "onnx" else None)
+    rotations = prediction.load_clip(args.source, dataset, frame_time)
+    k = args.length or 25
+    pr = prediction.make_prediction(next(iter(networks.values())), rotations, args.source_frame, P, k,
+                                    skeleton=prediction.skeleton_of(dataset), frame_time=frame_time,
+                                    method_name=name, name=Path(args.out).stem)
+    write_bvh(args.out, pr.motion)
+    _say(f"wrote {args.out}: {pr.motion.num_frames} frames at {1.0 / frame_time:g} fps ({dataset} skeleton, root "
+         f"at the origin): prefix frames 0..{pr.start - 1}, predicted {pr.start}..{pr.stop - 1} ({name}, "
+         f"{args.backend})")
+    err = pr.euler_error()
+    if err is not None:
+        _say("ground truth available: Euler-angle error (rad) at predicted frames 2, 4, 8, 10: "
+             + ", ".join(f"{err[i]:.3f}" for i in (1, 3, 7, 9) if i < len(err)))
+        if args.truth:
+            write_bvh(args.truth, pr.truth)
+            _say(f"wrote {args.truth} (ground truth)")
+    elif args.truth:
+        raise UsageError(f"--truth: {args.source} ends before the {k} predicted frames")
+    if args.png or args.gif:
+        for f in prediction.render_prediction(pr, png=args.png, gif=args.gif):
+            _say(f"wrote {f}")
+    return EXIT_OK
+
+
+def _model_task(args, model) -> str:
+    """The task of ``--checkpoint``'s model, else of the exported models in ``--onnx``, else ``transition``."""
+    if model is not None:
+        return model.spec.task
+    if getattr(args, "backend", None) == "onnx" and args.onnx:
+        name = (onnx_metadata(args.onnx).get("model") or {}).get("name")
+        if name in MODELS:
+            return MODELS[name].task
+    return "transition"
+
+
 def cmd_generate(args) -> int:
     """``refimpl generate``."""
     from refimpl.bvh import write_bvh
 
+    first = load_trained(args.checkpoint) if args.checkpoint else None
+    if _model_task(args, first) == "prediction":
+        if args.backend == "numpy" and first is None:
+            raise UsageError("--backend numpy needs --checkpoint")
+        return _generate_prediction(args, first)
     model = None
     if args.method == "qtg":
         if args.backend == "numpy" and not args.checkpoint:
@@ -524,7 +624,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("train", help="train a network (today: qtg) on motion files",
+    p = sub.add_parser("train", help="train a network (qtg, quaternet, quaternet-cnn) on motion files",
                        description="Train a network with Adam; checkpoint.npz (resumable), loss.csv and "
                                    "loss_val.csv go to --out. Progress lines (rate, ETA) go to stderr. "
                                    "Models: " + "; ".join(f"{n}: {s.summary}" for n, s in sorted(MODELS.items())))
@@ -535,7 +635,8 @@ def build_parser() -> argparse.ArgumentParser:
     length = p.add_mutually_exclusive_group()
     length.add_argument("--steps", type=nonneg_int, default=None, help="optimiser steps")
     length.add_argument("--epochs", type=nonneg_int, default=10, help="epochs, when --steps is not given (default 10)")
-    p.add_argument("--batch-size", type=positive_int, default=32)
+    p.add_argument("--batch-size", type=positive_int, default=None,
+                   help="batch size (default: the model's paper value; qtg 32, quaternet 60)")
     p.add_argument("--lr", type=positive_float, default=None,
                    help="Adam learning rate (default: the model's paper value; qtg 1e-4)")
     p.add_argument("--betas", type=float, nargs=2, default=None, metavar=("B1", "B2"),
@@ -556,9 +657,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--progress-every", type=positive_int, default=50)
     p.set_defaults(func=cmd_train)
 
-    p = sub.add_parser("eval", help="QTG vs inertialisation vs interpolation on held-out windows",
-                       description="The QTG paper's protocol: mean joint-position error per joint per frame (cm) "
-                                   "on held-out transition windows, with the per-frame curve.")
+    p = sub.add_parser("eval", help="a network against its task's baselines (QTG: transitions; QuaterNet: "
+                                    "short-term prediction)",
+                       description="Transition task (qtg): the QTG paper's protocol, mean joint-position error per "
+                                   "joint per frame (cm) on held-out transition windows, with the per-frame curve. "
+                                   "Prediction task (quaternet, quaternet-cnn): the published short-term protocol, "
+                                   "Euler-angle error per action and horizon, with zero-velocity and running "
+                                   "averages.")
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (omit: baselines only)")
     p.add_argument("--onnx", default=None, help="also evaluate the exported models of this folder (onnxruntime)")
     add_data_options(p)
@@ -566,6 +671,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", default=None, help="write the per-frame curve as CSV")
     p.add_argument("--json", default=None, help="write all results as JSON")
     p.add_argument("--plot", default=None, help="write the per-frame curves as PNG (matplotlib)")
+    p.add_argument("--model", default=None, choices=sorted(MODELS),
+                   help="without --checkpoint: evaluate the baselines of this model's task (default qtg's)")
+    for task_name in sorted(TASKS):
+        if hasattr(task_of(task_name), "add_eval_options"):
+            task_of(task_name).add_eval_options(p.add_argument_group(f"{task_name} task"))
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("export", help="export a checkpoint to ONNX (needs the deploy extra)",

@@ -18,11 +18,14 @@ __all__ = ["RECIPES", "TASKS", "ModelSpec", "TrainedModel", "MODELS", "task_of"]
 #: Model name -> (recipe module, task). One line per model.
 RECIPES = {
     "qtg": ("refimpl.recipes.qtg", "transition"),
+    "quaternet": ("refimpl.recipes.quaternet", "prediction"),
+    "quaternet-cnn": ("refimpl.recipes.quaternet_cnn", "prediction"),
 }
 
 #: Task name -> task module (``refimpl/tasks/<name>.py``).
 TASKS = {
     "transition": "refimpl.tasks.transition",
+    "prediction": "refimpl.tasks.prediction",
 }
 
 

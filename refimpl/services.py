@@ -114,7 +114,8 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
     extra = dict(task_of(spec).checkpoint_extra(train_ds), representation=spec.representations[0])
     adapter = spec.make_adapter(train_ds, val_ds, config, dtype, extra)
     optim = dataclasses.replace(spec.optim, lr=spec.optim.lr if lr is None else lr,
-                                betas=tuple(spec.optim.betas if betas is None else betas), clip_norm=clip_norm)
+                                betas=tuple(spec.optim.betas if betas is None else betas),
+                                clip_norm=spec.optim.clip_norm if clip_norm is None else clip_norm)
     tc = TrainConfig(steps=steps, batch_size=batch_size, seed=seed, checkpoint_path=str(out_dir / "checkpoint.npz"),
                      checkpoint_every=checkpoint_every, log_path=str(out_dir / "loss.csv"),
                      progress_every=progress_every, validate_every=validate_every)
@@ -218,11 +219,13 @@ def verify_onnx(model: TrainedModel, onnx_dir, *inputs, **options) -> dict:
 
 
 def onnx_metadata(onnx_dir) -> dict:
-    """The metadata of the first ``*_rollout.onnx`` (else ``*_step.onnx``) model in ``onnx_dir``."""
+    """The metadata of the first ``*_rollout.onnx`` (else ``*_step.onnx``, ``*_predict.onnx``, ``*_window.onnx``)
+    model in ``onnx_dir``."""
     d = Path(onnx_dir)
-    files = sorted(d.glob("*_rollout.onnx")) + sorted(d.glob("*_step.onnx"))
+    files = (sorted(d.glob("*_rollout.onnx")) + sorted(d.glob("*_step.onnx")) + sorted(d.glob("*_predict.onnx"))
+             + sorted(d.glob("*_window.onnx")))
     if not files:
-        raise BadInputError(f"{d}: no exported *_rollout.onnx / *_step.onnx models")
+        raise BadInputError(f"{d}: no exported *_rollout.onnx / *_step.onnx / *_predict.onnx / *_window.onnx models")
     try:
         from deploy.metadata import read_metadata
     except ImportError as exc:

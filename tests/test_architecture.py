@@ -155,7 +155,7 @@ def test_no_cross_module_underscore_imports():
     assert not bad, "\n".join(bad)
 
 
-@pytest.mark.parametrize("name", ["qtg"])
+@pytest.mark.parametrize("name", ["qtg", "quaternet", "quaternet-cnn"])
 def test_a_model_is_one_registry_line(name):
     """spec/architecture.md §adding a model: the registry names the recipe, the recipe the exporter."""
     from refimpl.registry import MODELS, RECIPES, TASKS

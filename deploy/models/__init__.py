@@ -21,6 +21,8 @@ __all__ = ["EXPORTERS", "exporter", "model_name_of_dir", "runtime_for_dir"]
 #: Model name -> entry module (load_checkpoint, export_dir, Runtime).
 EXPORTERS = {
     "qtg": "deploy.models.qtg_io",
+    "quaternet": "deploy.models.quaternet_io",
+    "quaternet-cnn": "deploy.models.quaternet_cnn_io",
 }
 
 

@@ -45,6 +45,11 @@ __all__ = [
     "euler_errors", "evaluate", "PredictionResult",
     "zero_velocity", "running_average", "baseline_methods",
     "format_table", "results_to_dict", "write_results_json",
+    "NAME", "SAMPLE_EXPMAP_DIR", "add_train_options", "add_eval_options", "resolve_data", "train_datasets",
+    "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of",
+    "onnx_method", "methods", "evaluate_all", "task_evaluate", "canonical_prefix", "training_windows",
+    "usable_training", "eval_protocol", "average_curves", "stride_of", "load_clip", "Prediction",
+    "make_prediction", "render_prediction", "verify_inputs",
 ]
 
 # The published evaluation's action order (quaternet_reference_code.md §6.6).
@@ -537,7 +542,10 @@ def evaluate(method: Callable, data: PredictionData, protocol: Protocol, *, meth
     Returns
     -------
     PredictionResult
+        (The application layer's form ``evaluate(data, {name: method})`` returns :func:`task_evaluate`'s list.)
     """
+    if isinstance(method, PredictionData) and isinstance(data, Mapping):  # the task interface's form
+        return task_evaluate(method, data)
     if not callable(method):
         raise ValueError(f"method: expected a callable method(prefix, n_future), got {type(method).__name__}")
     acts = data.test_actions() if actions is None else tuple(actions)
@@ -684,3 +692,312 @@ def write_results_json(path, results) -> None:
         if not doc:
             raise ValueError("results: expected at least one PredictionResult")
     atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+
+
+# ------------------------------------------------------------------------------------------------------------
+# the task interface of the application layer (spec/architecture.md §tasks; spec/prediction.md §7)
+# ------------------------------------------------------------------------------------------------------------
+
+NAME = "prediction"
+#: ``--data sample``: the embedded CMU exp-map sample.
+SAMPLE_EXPMAP_DIR = Path(__file__).resolve().parent.parent / "data" / "sample" / "expmap"
+
+
+def add_train_options(parser) -> None:
+    """The task's options of ``refimpl train`` (``--downsample``); its data is ``--data`` (:func:`resolve_data`)."""
+    parser.add_argument("--downsample", type=int, default=2,
+                        help="prediction task: keep every k-th frame, every phase for training (default 2: "
+                             "H3.6M 50 -> 25 Hz, CMU 120 -> 60 fps)")
+
+
+def add_eval_options(parser) -> None:
+    """The task's options of ``refimpl eval`` (``--protocol``, ``--samples-per-sequence``, ``--wrap``)."""
+    parser.add_argument("--protocol", default="standard", choices=("standard", "dense"),
+                        help="prediction task: 4 (standard, Table 1) or 128 (dense, Table 2) samples per sequence")
+    parser.add_argument("--samples-per-sequence", type=int, default=None,
+                        help="prediction task: override the protocol's samples per sequence")
+
+
+def resolve_data(data: str, *, downsample: int = 2) -> PredictionData:
+    """The data of ``--data``: ``"sample"`` (:data:`SAMPLE_EXPMAP_DIR`), a folder like ``../shared/data``
+    (its ``dmgnn_cmu_expmap``), a CMU exp-map folder (``train/``, ``test/``: :func:`load_cmu`) or a Human3.6M
+    folder (``S1`` … ``S11``: :func:`load_h36m`).
+
+    Raises
+    ------
+    BadInputError
+        Missing folder, unknown layout, malformed files.
+    """
+    from refimpl.errors import BadInputError
+
+    root = SAMPLE_EXPMAP_DIR if data == "sample" else Path(data)
+    if not root.is_dir():
+        raise BadInputError(f"{root}: no such folder (the prediction task's --data takes 'sample', a CMU exp-map "
+                            "folder with train/ and test/, or a Human3.6M folder with S1 ... S11)")
+    if (root / "dmgnn_cmu_expmap").is_dir():
+        root = root / "dmgnn_cmu_expmap"
+    try:
+        if (root / "train").is_dir() or (root / "test").is_dir():
+            return load_cmu(root, stride=downsample)
+        if any(p.is_dir() and _SUBJECT_DIR.match(p.name) for p in root.iterdir()):
+            return load_h36m(root, stride=downsample)
+    except ValueError as exc:
+        raise BadInputError(f"--data {data}: {exc}") from exc
+    raise BadInputError(f"{root}: neither a CMU exp-map folder (train/, test/) nor a Human3.6M folder (S1 ... S11)")
+
+
+def train_datasets(args):
+    """``(data, data)``: the :class:`PredictionData` of ``refimpl train``'s ``--data`` (its ``train`` sequences
+    are the training examples, its ``test`` sequences the held-out ones)."""
+    data = resolve_data(args.data, downsample=getattr(args, "downsample", 2))
+    if not data.train:
+        raise ValueError(f"--data {args.data}: no training sequences")
+    return data, data
+
+
+def num_examples(dataset: PredictionData) -> int:
+    """Training examples: the training sequences (one random window of each per epoch, the published epoch)."""
+    return len(dataset.train)
+
+
+def describe_data(train_ds: PredictionData, test_ds=None) -> str:
+    """``"cmu: 20 training sequences (75-299 frames), 2 test sequences, 38 joints at 16.7 ms per frame"``."""
+    lengths = [s.num_frames for s in train_ds.train]
+    return (f"{train_ds.dataset}: {len(train_ds.train)} training sequences "
+            f"({min(lengths, default=0)}-{max(lengths, default=0)} frames), {len(train_ds.test)} test sequences, "
+            f"{train_ds.skeleton.num_joints} joints at {train_ds.frame_time * 1000:.1f} ms per frame")
+
+
+def checkpoint_extra(train_ds: PredictionData) -> dict:
+    """What ``eval``, ``export`` and ``generate`` need later: the dataset (its skeleton) and the frame time."""
+    return {"dataset": train_ds.dataset, "frame_time": float(train_ds.frame_time),
+            "fps": float(1.0 / train_ds.frame_time), "num_joints": int(train_ds.skeleton.num_joints)}
+
+
+def check_checkpoint(model_config: Mapping, path) -> None:
+    """A prediction checkpoint names its dataset (``cmu`` or ``h36m``)."""
+    from refimpl.errors import BadInputError
+
+    if model_config.get("dataset") not in ("cmu", "h36m"):
+        raise BadInputError(f"{path}: the checkpoint names no prediction dataset (model_config['dataset'] = "
+                            f"{model_config.get('dataset')!r}); train it with `refimpl train`")
+
+
+def trained_fields(model_config: Mapping, config) -> dict:
+    """The :class:`~refimpl.registry.TrainedModel` fields of this task: the frame rate."""
+    return {"fps": float(model_config.get("fps", 25.0))}
+
+
+def skeleton_of(dataset: str) -> Skeleton:
+    """The skeleton of a dataset name (``h36m``: 32 joints; ``cmu``: the 38-joint ASF skeleton)."""
+    if dataset == "h36m":
+        return h36m_skeleton()
+    if dataset == "cmu":
+        return cmu_asf_skeleton()
+    raise ValueError(f"dataset: expected 'h36m' or 'cmu', got {dataset!r}")
+
+
+def onnx_method(runtime) -> Callable:
+    """``method(prefix (B, P, J, 4), n_future) -> (B, n_future, J, 4)`` running an exported predictor
+    (``runtime.predict``)."""
+    def network_onnx(prefix, n_future):
+        x = np.asarray(prefix, dtype=np.float64)
+        return np.asarray(runtime.predict(x, int(n_future)), dtype=np.float64)
+
+    return network_onnx
+
+
+def methods(networks: Mapping[str, Callable] | None = None, *, fps: float | None = None) -> dict:
+    """``name -> method(prefix, n_future)``: the baselines in Table 1's order (zero-velocity, running averages
+    over 2 and 4 frames), then the given networks' methods."""
+    base = baseline_methods()
+    return {**{k: base[k] for k in ("zero-velocity", "run. avg. 2", "run. avg. 4")}, **dict(networks or {})}
+
+
+def evaluate_all(data: PredictionData, methods_by_name: Mapping[str, Callable], protocol: Protocol | None = None,
+                 *, progress: Callable[[str], None] | None = None) -> list:
+    """:func:`evaluate` of every method under ``protocol`` (default: the dataset's standard one); a list of
+    :class:`PredictionResult` in the methods' order."""
+    protocol = make_protocol(data.dataset) if protocol is None else protocol
+    return [evaluate(m, data, protocol, method_name=name, progress=progress) for name, m in methods_by_name.items()]
+
+
+def task_evaluate(test_ds: PredictionData, methods_by_name: Mapping[str, Callable]) -> list:
+    """The task interface's ``evaluate(test_ds, methods)`` (standard protocol): :func:`evaluate_all`."""
+    return evaluate_all(test_ds, methods_by_name)
+
+
+def canonical_prefix(prefix) -> np.ndarray:
+    """The published predict's canonicalisation (reference §6.5, §12 item 12): quaternions -> zyx Euler ->
+    quaternions -> ``quat_fix`` over time. ``(B, P, J, 4) -> (B, P, J, 4)``, the same rotations."""
+    from refimpl.quat import quat_fix
+
+    x = np.asarray(prefix, dtype=np.float64)
+    q = quat_from_euler(euler_from_quat(x, "zyx"), "zyx")  # (B, P, J, 4)
+    return np.ascontiguousarray(np.swapaxes(quat_fix(np.swapaxes(q, 0, 1)), 0, 1))
+
+
+def training_windows(data: PredictionData, indices, rng: np.random.Generator, length: int) -> np.ndarray:
+    """One random window of ``length`` frames from each training sequence ``indices`` (the published short-term
+    batch: start uniform in ``[0, T_s − length]``, reference §6.3). ``(B,) -> (B, length, J, 4)`` float64."""
+    out = []
+    for i in np.asarray(indices):
+        rot = data.train[int(i)].rotations
+        start = int(rng.integers(0, rot.shape[0] - length + 1))
+        out.append(rot[start:start + length])
+    return np.stack(out)
+
+
+def usable_training(data: PredictionData, length: int) -> PredictionData:
+    """``data`` keeping the training sequences of at least ``length`` frames.
+
+    Raises
+    ------
+    ValueError
+        None is long enough.
+    """
+    keep = tuple(s for s in data.train if s.num_frames >= length)
+    if not keep:
+        raise ValueError(f"no training sequence has the {length} frames of a window (longest "
+                         f"{max((s.num_frames for s in data.train), default=0)})")
+    return dataclasses.replace(data, train=keep)
+
+
+def eval_protocol(dataset: str, name: str = "standard", samples_per_sequence: int | None = None) -> Protocol:
+    """``refimpl eval``'s ``--protocol standard|dense`` (and ``--samples-per-sequence``) for a dataset."""
+    if name not in ("standard", "dense"):
+        raise ValueError(f"protocol: expected 'standard' or 'dense', got {name!r}")
+    return make_protocol(dataset, dense=name == "dense", samples_per_sequence=samples_per_sequence)
+
+
+def average_curves(results: Sequence[PredictionResult]) -> dict:
+    """``method -> (K,)`` mean per-frame error over the actions (for a plot)."""
+    return {r.method: np.mean(np.stack(list(r.curves.values())), axis=0) for r in results}
+
+
+def stride_of(dataset: str, frame_time: float) -> int:
+    """Decimation stride of a trained model: its frame time over the files' (CMU 1/120 s, H3.6M 1/50 s)."""
+    base = {"cmu": 1.0 / 120.0, "h36m": 1.0 / 50.0}[dataset]
+    return max(1, int(round(frame_time / base)))
+
+
+def load_clip(path, dataset: str, frame_time: float) -> np.ndarray:
+    """One exp-map file at a model's rate: rotations ``(F, J, 4)`` (phase 0 of the decimation, ``quat_fix``;
+    CMU: the reference row dropped), as the task's test sequences.
+
+    Raises
+    ------
+    BadInputError
+        Missing or malformed file, or one that is not an exp-map ``.txt`` of the dataset's layout.
+    """
+    from refimpl.errors import BadInputError, existing_file, reading
+
+    p = existing_file(path)
+    if p.suffix.lower() != ".txt":
+        raise BadInputError(f"{p}: the prediction task reads exp-map .txt files ({dataset} layout)")
+    with reading(p):
+        motion = read_expmap(p, layout=dataset, use_root_position=False)
+    if dataset == "cmu":
+        motion = dataclasses.replace(motion, rotations=motion.rotations[1:], root_positions=motion.root_positions[1:])
+    m = fix_antipodal(downsample(motion, stride_of(dataset, frame_time), 0))
+    return np.asarray(m.rotations, dtype=np.float64)
+
+
+@dataclasses.dataclass(frozen=True)
+class Prediction:
+    """A prediction from a file's prefix, with its ground truth when the file continues.
+
+    Attributes
+    ----------
+    motion : Motion
+        The prefix frames then the ``k`` predicted frames (root at the origin: the task predicts rotations).
+    truth : Motion or None
+        The same frames from the file (when it has them).
+    start, stop : int
+        The predicted frames are ``motion`` frames ``[start, stop)``.
+    method : str
+    """
+
+    motion: object
+    truth: object
+    start: int
+    stop: int
+    method: str
+
+    def euler_error(self) -> np.ndarray | None:
+        """Per predicted frame, the protocol's error (:func:`euler_errors`) against the truth, or None."""
+        if self.truth is None:
+            return None
+        a = np.asarray(self.motion.rotations)[None, self.start:self.stop]
+        b = np.asarray(self.truth.rotations)[None, self.start:self.stop]
+        return euler_errors(a, b)[0]
+
+
+def make_prediction(method: Callable, rotations, frame: int, prefix_length: int, k: int, *, skeleton: Skeleton,
+                    frame_time: float, method_name: str = "network", name: str = "prediction") -> Prediction:
+    """Predict ``k`` frames after frame ``frame`` of ``rotations (F, J, 4)`` from the ``prefix_length`` frames
+    ending there (``method(prefix (1, P, J, 4), k)``).
+
+    Raises
+    ------
+    UsageError
+        ``frame`` outside ``[prefix_length − 1, F − 1]``.
+    """
+    from refimpl.errors import UsageError
+    from refimpl.motion import Motion
+
+    rot = np.asarray(rotations, dtype=np.float64)
+    F = rot.shape[0]
+    if not prefix_length - 1 <= frame <= F - 1:
+        raise UsageError(f"--source-frame must lie in [{prefix_length - 1}, {F - 1}] (a {prefix_length}-frame "
+                         f"prefix ending there, frames at the model's rate), got {frame}")
+    prefix = rot[frame - prefix_length + 1:frame + 1]  # (P, J, 4)
+    pred = np.asarray(method(prefix[None], int(k)), dtype=np.float64)[0]  # (k, J, 4)
+    pred = pred / np.linalg.norm(pred, axis=-1, keepdims=True)
+    out = np.concatenate([prefix, pred])
+    zeros = np.zeros((out.shape[0], 3))
+    motion = Motion(skeleton, out, zeros, frame_time, name)
+    truth = None
+    if frame + k < F:
+        truth = Motion(skeleton, rot[frame - prefix_length + 1:frame + k + 1], zeros, frame_time, f"{name}_truth")
+    return Prediction(motion=motion, truth=truth, start=prefix_length, stop=prefix_length + int(k),
+                      method=method_name)
+
+
+def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: int = 10) -> list:
+    """Draw a :class:`Prediction` (against its ground truth when it has one): the last ``context`` prefix frames
+    and the predicted ones, as a PNG strip and / or a GIF."""
+    from refimpl.render import render_gif, render_strip
+
+    a = max(0, pr.start - context)
+    parents = np.asarray(pr.motion.skeleton.parents)
+    pred = pr.motion.positions()[a:]
+    gt = pr.truth.positions()[a:] if pr.truth is not None else pred
+    hl = (pr.start - a, pr.stop - a)
+    labels = ("ground truth", pr.method) if pr.truth is not None else (pr.method, "")
+    written = []
+    if png:
+        n = pred.shape[0]
+        frames = sorted(set([0, hl[0] - 1] + list(range(hl[0], hl[1], max(1, (hl[1] - hl[0]) // 6))) + [n - 1]))
+        written.append(render_strip(png, gt, parents, prediction=pred if pr.truth is not None else None,
+                                    frames=frames, highlight=hl, labels=labels, title=title,
+                                    frame_time=pr.motion.frame_time))
+    if gif:
+        written.append(render_gif(gif, gt, parents, prediction=pred if pr.truth is not None else None,
+                                  fps=pr.motion.fps, highlight=hl, labels=labels, title=title))
+    return written
+
+
+def verify_inputs(model, rng: np.random.Generator, batch: int = 8) -> tuple:
+    """``(prefix (B, P, J, 4),)`` for ``refimpl export``'s check: real CMU test windows of the embedded sample
+    (prefix of the model's training length) for a CMU model, small random rotations otherwise."""
+    from refimpl.quat import quat_from_axis_angle
+
+    P = int(getattr(model.config, "prefix_length", 50))
+    if model.extra.get("dataset") == "cmu":
+        data = load_cmu(SAMPLE_EXPMAP_DIR, stride=stride_of("cmu", model.extra["frame_time"]))
+        windows = [s.rotations[i:i + P] for s in data.test
+                   for i in rng.integers(0, s.num_frames - P + 1, size=batch)]
+        return (np.stack(windows[:batch]),)
+    J = int(model.config.num_joints)
+    return (quat_from_axis_angle(0.3 * rng.standard_normal((batch, P, J, 3))),)

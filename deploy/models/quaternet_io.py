@@ -1,0 +1,241 @@
+"""QuaterNet's entries of the exporter table (``deploy.models.EXPORTERS["quaternet"]`` and ``["quaternet-cnn"]``):
+checkpoints in, model folders out, and the runtimes that drive the exported models (spec/deploy.md §11).
+
+* :func:`load_quaternet_checkpoint`, :func:`export_quaternet_dir`, :class:`QuaterNetRuntime` — the recurrent
+  network: ``quaternet_init.onnx``, ``quaternet_step.onnx`` (a frame loop) and ``quaternet_predict.onnx``
+  (prefix → k frames in one call);
+* :func:`load_cnn_checkpoint`, :func:`export_cnn_dir`, :class:`QuaterNetCNNRuntime` — the convolutional network:
+  ``quaternet-cnn_window.onnx``.
+
+The module-level names of the table's contract (``load_checkpoint``, ``export_dir``, ``Runtime``) are the
+recurrent network's; the convolutional network's entry is ``deploy/models/quaternet_cnn_io.py``.
+
+Shape legend: B batch, P prefix frames, k predicted frames, J joints, F input features, G output features,
+L layers, H hidden size.
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from refimpl.checkpoint import load_checkpoint as _read_checkpoint, load_state_dict_npz
+from refimpl.models.quaternet import QuaterNetConfig
+from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
+
+from deploy.graph import OPSET, save_model
+from deploy.models.quaternet import (export_quaternet_cnn_window, export_quaternet_init, export_quaternet_predict,
+                                     export_quaternet_step)
+from deploy.runtime import DeployedModel, load_model
+from deploy.validate import validate_model
+
+__all__ = ["load_quaternet_checkpoint", "export_quaternet_dir", "QuaterNetRuntime", "load_cnn_checkpoint",
+           "export_cnn_dir", "QuaterNetCNNRuntime"]
+
+
+def _read(path):
+    try:
+        arrays, meta = _read_checkpoint(path)
+    except ValueError as exc:
+        if "not a refimpl checkpoint" not in str(exc):
+            raise
+        arrays, meta = load_state_dict_npz(path), {}
+    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")} or dict(arrays)
+    return params, meta
+
+
+def _config(config_type, meta, convert=None):
+    names = {f.name for f in dataclasses.fields(config_type)}
+    cfg = {k: v for k, v in (meta.get("model_config") or {}).items() if k in names}
+    if convert:
+        cfg = convert(cfg)
+    return config_type(**cfg)
+
+
+def load_quaternet_checkpoint(path):
+    """``(params, QuaterNetConfig, meta)`` from a ``refimpl train`` checkpoint (``--model quaternet``) or a plain
+    state-dict ``.npz`` (the config's defaults: the paper's short-term model)."""
+    params, meta = _read(path)
+    return params, _config(QuaterNetConfig, meta), meta
+
+
+def load_cnn_checkpoint(path):
+    """``(params, QuaterNetCNNConfig, meta)`` from a ``refimpl train`` checkpoint (``--model quaternet-cnn``)."""
+    def convert(cfg):
+        cfg = dict(cfg)
+        if isinstance(cfg.get("skips"), str):  # the recipe stores the skips as text "s:k,s:k"
+            cfg["skips"] = tuple(tuple(int(v) for v in item.split(":")) for item in cfg["skips"].split(",")
+                                 if item.strip())
+        return cfg
+
+    params, meta = _read(path)
+    return params, _config(QuaterNetCNNConfig, meta, convert), meta
+
+
+def _network(config):
+    """The network config of a recipe config (``.network``) or the network config itself."""
+    return getattr(config, "network", config)
+
+
+def _write(models: dict, out_dir, name: str) -> dict:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    for role, m in models.items():
+        validate_model(m)
+        paths[role] = out / f"{name}_{role}.onnx"
+        save_model(m, paths[role])
+    return paths
+
+
+def _frame_rate(metadata):
+    return float((metadata or {}).get("frame_rate", 25.0))
+
+
+def export_quaternet_dir(params, config, out_dir, *, dtype=np.float32, opset=None, k: int = 10, T: int | None = None,
+                         skeleton=None, metadata=None, mode: str = "unrolled") -> dict:
+    """Export, validate and atomically write ``quaternet_init/step/predict.onnx`` into ``out_dir``.
+
+    ``k`` (or ``T``, its name in ``refimpl export``) is the predictor's number of frames; ``mode`` is accepted for
+    the table's contract (the predictor is always unrolled).
+    """
+    cfg = _network(config)
+    k = int(T or k)
+    kw = dict(dtype=dtype, opset=OPSET if opset is None else opset, skeleton=skeleton,
+              frame_rate=_frame_rate(metadata), metadata=metadata)
+    models = {"init": export_quaternet_init(params, cfg, **kw), "step": export_quaternet_step(params, cfg, **kw)}
+    if cfg.num_controls == 0:
+        models["predict"] = export_quaternet_predict(params, cfg, k=k, **kw)
+    return _write(models, out_dir, "quaternet")
+
+
+def export_cnn_dir(params, config, out_dir, *, dtype=np.float32, opset=None, skeleton=None, metadata=None,
+                   k: int = 10, T: int | None = None, mode: str = "unrolled") -> dict:
+    """Export, validate and atomically write ``quaternet-cnn_window.onnx`` into ``out_dir`` (``k``, ``T`` and
+    ``mode`` accepted for the table's contract; the window model has no fixed length)."""
+    m = export_quaternet_cnn_window(params, _network(config), dtype=dtype, opset=OPSET if opset is None else opset,
+                                   skeleton=skeleton, frame_rate=_frame_rate(metadata), metadata=metadata)
+    return _write({"window": m}, out_dir, "quaternet-cnn")
+
+
+def _load(m, role, intra_op_threads):
+    if m is None:
+        return None
+    dm = m if isinstance(m, DeployedModel) else load_model(m, intra_op_threads=intra_op_threads)
+    if dm.role != role:
+        raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {dm.role!r}")
+    return dm
+
+
+def _frames(prefix, name="prefix") -> tuple[np.ndarray, tuple]:
+    """``(B, P, J, 4)`` or ``(B, P, F)`` -> ``(B, P, F)`` float32 and the trailing shape to restore."""
+    x = np.asarray(prefix, dtype=np.float32)
+    if x.ndim == 4:
+        return x.reshape(x.shape[0], x.shape[1], -1), x.shape[2:]
+    if x.ndim != 3:
+        raise ValueError(f"{name}: expected shape (B, P, J, 4) or (B, P, F), got {x.shape}")
+    return x, x.shape[2:]
+
+
+class QuaterNetRuntime:
+    """The recurrent QuaterNet from exported ``init``/``step``/``predict`` models (any usable subset).
+
+    Parameters
+    ----------
+    init, step, predict : path, ModelProto, DeployedModel or None
+    intra_op_threads : int
+    """
+
+    def __init__(self, init=None, step=None, predict=None, *, intra_op_threads: int = 1):
+        self.init_model = _load(init, "init", intra_op_threads)
+        self.step_model = _load(step, "step", intra_op_threads)
+        self.predict_model = _load(predict, "predict", intra_op_threads)
+
+    @classmethod
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QuaterNetRuntime":
+        """Load ``quaternet_init/step/predict.onnx`` from ``directory`` (those present)."""
+        d = Path(directory)
+        found = {k: (d / f"quaternet_{k}.onnx" if (d / f"quaternet_{k}.onnx").is_file() else None)
+                 for k in ("init", "step", "predict")}
+        if not any(found.values()):
+            raise ValueError(f"directory: no quaternet_init/step/predict.onnx in {str(d)!r}")
+        return cls(**found, intra_op_threads=intra_op_threads)
+
+    @property
+    def k(self) -> int | None:
+        """Frames of the ``predict`` model (None without one)."""
+        return None if self.predict_model is None else int(self.predict_model.metadata.get("k"))
+
+    def start(self, x) -> np.ndarray:
+        """``hidden (L, B, H)``: the learned initial state for a batch of frames ``x (B, F)``."""
+        if self.init_model is None:
+            raise ValueError("start: no init model loaded")
+        return self.init_model.run(x=np.asarray(x, np.float32))["hidden"]
+
+    def step(self, x, hidden) -> tuple[np.ndarray, np.ndarray]:
+        """One frame: ``(y (B, G), hidden_next (L, B, H))``."""
+        if self.step_model is None:
+            raise ValueError("step: no step model loaded")
+        out = self.step_model.run(x=np.asarray(x, np.float32), hidden=hidden)
+        return out["y"], out["hidden_next"]
+
+    def predict(self, prefix, k: int, *, use_graph: bool = True) -> np.ndarray:
+        """``k`` frames after ``prefix (B, P, J, 4)`` (or ``(B, P, F)``), in the prefix's trailing shape: the
+        ``predict`` model when its ``k`` matches (and ``use_graph``), else ``init`` + a ``step`` loop."""
+        x, tail = _frames(prefix)
+        B, P, _ = x.shape
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+            raise ValueError(f"k: expected a positive integer, got {k!r}")
+        if use_graph and self.predict_model is not None and self.k == k:
+            out = self.predict_model.run(prefix=x)["frames"]
+        else:
+            h = self.start(x[:, 0])
+            for t in range(P):
+                y, h = self.step(x[:, t], h)
+            ys = [y]
+            for _ in range(int(k) - 1):
+                y, h = self.step(y, h)
+                ys.append(y)
+            out = np.stack(ys, axis=1)                                            # (B, k, G)
+        return out.reshape((B, int(k)) + tuple(tail))
+
+
+class QuaterNetCNNRuntime:
+    """The convolutional QuaterNet from an exported ``window`` model: predictions by repeated window calls, each
+    prediction appended to the window (``refimpl.models.quaternet_cnn.predict``)."""
+
+    def __init__(self, window, *, intra_op_threads: int = 1):
+        self.window_model = _load(window, "window", intra_op_threads)
+        self.receptive_field = int(self.window_model.metadata.get("receptive_field"))
+
+    @classmethod
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QuaterNetCNNRuntime":
+        p = Path(directory) / "quaternet-cnn_window.onnx"
+        if not p.is_file():
+            raise ValueError(f"directory: no quaternet-cnn_window.onnx in {str(directory)!r}")
+        return cls(p, intra_op_threads=intra_op_threads)
+
+    def step(self, window) -> np.ndarray:
+        """``pose_next (B, 4J)`` from ``window (B, W, 4J)`` (the last R frames are sent)."""
+        w, _ = _frames(window, "window")
+        return self.window_model.run(window=w[:, -self.receptive_field:])["pose_next"]
+
+    def predict(self, prefix, k: int, *, use_graph: bool = True) -> np.ndarray:
+        """``k`` frames after ``prefix (B, P, J, 4)`` (or ``(B, P, 4J)``) in the prefix's trailing shape."""
+        x, tail = _frames(prefix)
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+            raise ValueError(f"k: expected a positive integer, got {k!r}")
+        R = self.receptive_field
+        window, ys = x[:, -R:], []
+        for _ in range(int(k)):
+            y = self.step(window)
+            ys.append(y)
+            window = np.concatenate([window, y[:, None]], axis=1)[:, -R:]
+        return np.stack(ys, axis=1).reshape((x.shape[0], int(k)) + tuple(tail))
+
+
+#: The exporter table's names for the recurrent model.
+load_checkpoint = load_quaternet_checkpoint
+export_dir = export_quaternet_dir
+Runtime = QuaterNetRuntime
