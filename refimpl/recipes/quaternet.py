@@ -34,7 +34,8 @@ from refimpl.recipes.qtg import parse_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
+__all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
+           "PAPER_BATCH",
            "PAPER_PREFIX", "PAPER_TARGET", "PAPER_EPOCHS", "SCHEDULES", "LOSSES", "ShortTermConfig", "make_config",
            "make_adapter", "loss_terms", "teacher_forcing_mask", "network_method", "raw_outputs", "predictor",
            "make_method", "export_inputs", "reference_outputs", "verify_onnx"]
@@ -126,6 +127,12 @@ class ShortTermConfig:
 
 
 CONFIG_TYPE = ShortTermConfig
+
+
+def param_shapes(config) -> dict:
+    """Name -> shape of every parameter of the network ``config`` describes (the checkpoint schema's reference,
+    spec/robustness.md §9): the model module's ``param_shapes`` of ``config.network``."""
+    return net.param_shapes(config.network)
 
 
 def make_config(train_ds, overrides: Sequence[str] = (), config_type=ShortTermConfig):

@@ -22,7 +22,8 @@ from refimpl.recipes import quaternet as rnn_recipe
 from refimpl.schedules import QUATERNET_TF_DECAY
 from refimpl.train import ModelAdapter
 
-__all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
+__all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
+           "PAPER_BATCH",
            "PAPER_PREFIX", "CNNShortTermConfig", "parse_skips", "make_config", "make_adapter", "predictor",
            "make_method", "export_inputs", "reference_outputs", "verify_onnx"]
 
@@ -101,6 +102,12 @@ class CNNShortTermConfig:
 
 
 CONFIG_TYPE = CNNShortTermConfig
+
+
+def param_shapes(config) -> dict:
+    """Name -> shape of every parameter of the network ``config`` describes (the checkpoint schema's reference,
+    spec/robustness.md §9): the model module's ``param_shapes`` of ``config.network``."""
+    return cnn.param_shapes(config.network)
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> CNNShortTermConfig:
