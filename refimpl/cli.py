@@ -398,8 +398,8 @@ def cmd_export(args) -> int:
             if k != "ok":
                 _say(f"verify   onnxruntime vs NumPy ({k}): max |diff| = {v:.3g}")
         if not check["ok"]:
-            raise RuntimeError("onnxruntime and NumPy disagree beyond the rollout tolerance "
-                               "(refimpl.testing.TOL_ORT_ROLLOUT)")
+            raise RuntimeError("onnxruntime and NumPy disagree beyond the recipe's verification tolerance "
+                               f"(refimpl.recipes.{model.spec.name.replace('-', '_')}; spec/cli.md)")
     return EXIT_OK
 
 
