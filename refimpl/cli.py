@@ -286,6 +286,8 @@ def cmd_train(args) -> int:
 def cmd_eval(args) -> int:
     """``refimpl eval``."""
     model = load_trained(args.checkpoint) if args.checkpoint else None
+    if (model is not None and model.spec.task != "transition") or (args.model and MODELS[args.model].task != "transition"):
+        return _eval_synthesis(args, model)
     T = args.transition_length or (model.transition_length if model else 30)
     _say(f"reading {args.data} ...")
     _, test_ds = transition.build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
@@ -316,8 +318,12 @@ def cmd_export(args) -> int:
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
         rng = np.random.default_rng(args.seed)
-        past, target = transition.random_context(model, rng, 8)
-        check = verify_onnx(model, out, past, target, T=args.transition_length)
+        task = task_of(model.spec)
+        if hasattr(task, "random_inputs"):  # other tasks: the task's inputs, the recipe's check
+            check = verify_onnx(model, out, *task.random_inputs(model, rng))
+        else:
+            past, target = transition.random_context(model, rng, 8)
+            check = verify_onnx(model, out, past, target, T=args.transition_length)
         for k, v in check.items():
             if k != "ok":
                 _say(f"verify   onnxruntime vs NumPy ({k}): max |diff| = {v:.3g}")
@@ -332,6 +338,10 @@ def cmd_generate(args) -> int:
     from refimpl.bvh import write_bvh
 
     model = None
+    if args.model and MODELS[args.model].task != "transition":
+        return _generate_synthesis(args)
+    if args.source_frame is None:
+        raise UsageError("--source-frame is required for transitions")
     if args.method == "qtg":
         if args.backend == "numpy" and not args.checkpoint:
             raise UsageError("--method qtg with --backend numpy needs --checkpoint")
@@ -339,6 +349,8 @@ def cmd_generate(args) -> int:
             raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
         if args.checkpoint:
             model = load_trained(args.checkpoint)
+            if model.spec.task != "transition":
+                return _generate_synthesis(args, model)
     elif args.backend == "onnx":
         raise UsageError(f"--backend onnx runs the network; --method {args.method} is a NumPy baseline")
     fps, T_model = (model.fps, model.transition_length) if model else (30.0, 30)
@@ -438,6 +450,58 @@ def cmd_demo(args) -> int:
     return EXIT_OK
 
 
+def _eval_synthesis(args, model) -> int:
+    """``refimpl eval`` for a synthesis model (acRNN): Table 1's metrics on the test takes (spec/acrnn.md §8)."""
+    task = task_of(model.spec if model is not None else MODELS[args.model])
+    if model is None:
+        raise UsageError("--model acrnn: evaluation needs --checkpoint (the statistics and the representation)")
+    _say(f"reading {args.data} ...")
+    data = task.load_eval_data(args.data, model.extra)
+    results = evaluate_model(model, data, onnx_dir=args.onnx)
+    task.print_results(results, data, model)
+    if args.json:
+        task.write_results(results, args.json)
+        _say(f"results          {args.json}")
+    return EXIT_OK
+
+
+def _generate_synthesis(args, model=None) -> int:
+    """``refimpl generate --model acrnn``: seed frames of --source continued for --length frames, BVH out."""
+    from refimpl.bvh import write_bvh
+
+    if model is None:
+        if not args.checkpoint:
+            raise UsageError("--model acrnn needs --checkpoint (with --backend onnx too: skeleton and statistics)")
+        model = load_trained(args.checkpoint)
+    task = task_of(model.spec)
+    if args.backend == "onnx" and not args.onnx:
+        raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
+    networks = network_methods(None if args.backend == "onnx" else model,
+                               onnx_dir=args.onnx if args.backend == "onnx" else None)
+    method = next(iter(networks.values()))
+    n = args.length or 300
+    motion, seed_frames = task.continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
+    write_bvh(args.out, transition.with_end_sites(motion))
+    _say(f"wrote {args.out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
+         f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
+         "metres")
+    if args.png or args.gif:
+        from refimpl.render import render_gif, render_strip
+
+        pos = motion.positions()
+        parents = np.asarray(motion.skeleton.parents)
+        labels = (f"acrnn {model.extra.get('row')}", "")
+        if args.png:
+            render_strip(args.png, pos, parents, highlight=(seed_frames, motion.num_frames), labels=labels,
+                         frame_time=motion.frame_time)
+            _say(f"wrote {args.png}")
+        if args.gif:
+            render_gif(args.gif, pos, parents, fps=motion.fps, highlight=(seed_frames, motion.num_frames),
+                       labels=labels)
+            _say(f"wrote {args.gif}")
+    return EXIT_OK
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # parser and main
 # ----------------------------------------------------------------------------------------------------------------
@@ -505,6 +569,8 @@ def build_parser() -> argparse.ArgumentParser:
                        description="The QTG paper's protocol: mean joint-position error per joint per frame (cm) "
                                    "on held-out transition windows, with the per-frame curve.")
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (omit: baselines only)")
+    p.add_argument("--model", default=None, choices=sorted(MODELS),
+                   help="the checkpoint's model decides; acrnn: Table 1 metrics on the salsa test takes")
     p.add_argument("--onnx", default=None, help="also evaluate the exported models of this folder (onnxruntime)")
     add_data_options(p)
     p.add_argument("--transition-length", type=positive_int, default=None, help="T (default: the model's)")
@@ -531,7 +597,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "model's rate, 30 fps, after the files' first reference frame), generate the T "
                                    "frames between them and write a BVH with --context frames on both sides.")
     p.add_argument("--source", required=True, help=".bvh or exp-map .txt")
-    p.add_argument("--source-frame", type=positive_int, required=True, help="s, last frame of the source kept")
+    p.add_argument("--source-frame", type=nonneg_int, default=None,
+                   help="s, last frame of the source kept (transitions, required); acrnn: first seed frame (default 0)")
+    p.add_argument("--model", default=None, choices=sorted(MODELS),
+                   help="acrnn: continue 10 seed frames of --source for --length frames (default 300)")
     p.add_argument("--target", default=None, help=".bvh or exp-map .txt (default: --source)")
     p.add_argument("--target-frame", type=nonneg_int, default=None,
                    help="g, first target frame (default: s + T + 1 in the same file, else 1)")

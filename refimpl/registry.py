@@ -18,11 +18,13 @@ __all__ = ["RECIPES", "TASKS", "ModelSpec", "TrainedModel", "MODELS", "task_of"]
 #: Model name -> (recipe module, task). One line per model.
 RECIPES = {
     "qtg": ("refimpl.recipes.qtg", "transition"),
+    "acrnn": ("refimpl.recipes.acrnn", "synthesis"),
 }
 
 #: Task name -> task module (``refimpl/tasks/<name>.py``).
 TASKS = {
     "transition": "refimpl.tasks.transition",
+    "synthesis": "refimpl.tasks.synthesis",
 }
 
 
