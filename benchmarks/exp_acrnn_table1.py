@@ -69,5 +69,6 @@ if __name__ == "__main__":
     if a.phase == "train":
         train(Path(a.out), a.parallel)
     else:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
         from exp_acrnn_eval import main as eval_main  # noqa: E402  (benchmarks/exp_acrnn_eval.py)
         eval_main(Path(a.out))
