@@ -2,7 +2,7 @@
 
 1. **Step, batch 1** (the online use; spec/acrnn.md §8, spec/deploy.md §8.2): :func:`refimpl.models.acrnn.step`
    in NumPy float32, the exported ``acrnn_step.onnx`` in onnxruntime (float32, standardisation and the dual-quaternion
-   decoding in the graph), and PyTorch (``nn.LSTM`` + ``nn.Linear`` float32, one step, when torch is installed),
+   decoding in the graph), and PyTorch (three ``nn.LSTMCell`` + ``nn.Linear`` float32, as acRNN's code steps, when torch is installed),
    interleaved round by round; median per-call time and ratios to NumPy.
 2. **Training iteration** (``--train``): one auto-conditioned forward + backward of a batch of 32 windows of
    100 + 1 frames, float32: the step-by-step reference (:mod:`refimpl.models.acrnn`) against the fast path
@@ -67,21 +67,25 @@ def bench_step(rounds: int, hidden: int, frame_size: int) -> dict:
         import torch
 
         torch.set_num_threads(1)
-        lstm = torch.nn.LSTM(frame_size, hidden, 3)
+        # three nn.LSTMCell, as acRNN's published code steps its network
+        cells = [torch.nn.LSTMCell(frame_size if k == 0 else hidden, hidden) for k in range(3)]
         dec = torch.nn.Linear(hidden, frame_size)
         with torch.no_grad():
-            for k in range(3):
+            for k, cell in enumerate(cells):
                 for n in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"):
-                    getattr(lstm, f"{n}_l{k}").copy_(torch.from_numpy(params[f"lstm.{n}_l{k}"]))
+                    getattr(cell, n).copy_(torch.from_numpy(params[f"lstm.{n}_l{k}"]))
             dec.weight.copy_(torch.from_numpy(params["decoder.weight"]))
             dec.bias.copy_(torch.from_numpy(params["decoder.bias"]))
-        tx = torch.from_numpy(x)[None]
-        th, tc = torch.from_numpy(state[0]), torch.from_numpy(state[1])
+        tx = torch.from_numpy(x)
+        th = [torch.from_numpy(state[0][k]) for k in range(3)]
+        tc = [torch.from_numpy(state[1][k]) for k in range(3)]
 
         def torch_step():
             with torch.no_grad():
-                y, _ = lstm(tx, (th, tc))
-                return dec(y[0])
+                inp = tx
+                for k, cell in enumerate(cells):
+                    inp, _ = cell(inp, (th[k], tc[k]))
+                return dec(inp)
 
         variants["torch"] = torch_step
         ref = acrnn.step(params, cfg, x, state)[0]
@@ -131,9 +135,9 @@ def main():
     ap.add_argument("--train-hidden", type=int, default=1024)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_acrnn.json"))
     a = ap.parse_args()
-    res = {"step_batch1": bench_step(a.rounds, a.hidden, a.frame_size)}
+    res = {"step_batch1": bench_step(a.rounds, a.hidden, a.frame_size), "load_average": os.getloadavg()}
     s = res["step_batch1"]
-    print(f"step, batch 1, 3 x {a.hidden} LSTM, F = {a.frame_size}, float32, 1 thread (median of {a.rounds}):")
+    print(f"step, batch 1, 3 x {a.hidden} LSTM, F = {a.frame_size}, float32, 1 thread (median of {a.rounds}; load average {os.getloadavg()[0]:.1f}):", flush=True)
     for k, v in s["median_ms"].items():
         print(f"  {k:12s} {v:8.3f} ms   x{s['ratio_to_numpy'][k]:.2f} of numpy")
     if a.train:
