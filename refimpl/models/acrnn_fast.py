@@ -14,8 +14,9 @@ What is different from the step-by-step reference:
   per sequence: ``dW_k = dG_k^T Z_k`` (one GEMM over the ``T·B`` rows), ``db = Σ dG``, ``dW_dec = dY^T H_top``;
 * no allocation inside the step loops (every buffer is allocated once per call, kernels write with ``out=``).
 
-The cell kernels (:func:`_cell_forward`, :func:`_cell_backward`) are written here rather than imported, so
-this module depends on :mod:`refimpl.nn.lstm` only through nothing (the reference model uses it).
+The cell kernels (:func:`_cell_forward`, :func:`_cell_backward`) repeat ``refimpl/nn/lstm.py``'s private ones
+(whose module has no kernel tier yet) with the caller forming ``dh_prev``; the checks are
+:func:`refimpl.models.acrnn.check_sequence_inputs`.
 
 Shape legend: B batch, T steps, F frame size, H hidden size, L layers, I_k input size of layer k (F, then H),
 G = 4H gate pre-activations (i | f | g | o, PyTorch order).
@@ -27,24 +28,11 @@ from typing import Mapping
 import numpy as np
 
 from refimpl.models.acrnn import ACRNNConfig, loss_backward, loss_forward
+from refimpl.models.acrnn import check_sequence_inputs as _check_sequence
 from refimpl.nn.activations import sigmoid as _sigmoid
 from refimpl.nn.params import check_float_array
 
 __all__ = ["sequence_forward", "sequence_backward", "loss_and_grads"]
-
-
-def _check(params: Mapping[str, np.ndarray], config: ACRNNConfig):
-    from refimpl.models.acrnn import param_shapes
-
-    dt = None
-    for name, shape in param_shapes(config).items():
-        a = params.get(name)
-        if not isinstance(a, np.ndarray) or a.shape != shape:
-            raise ValueError(f"params[{name!r}]: expected shape {shape}, got {None if a is None else np.shape(a)}")
-        dt = a.dtype if dt is None else dt
-        if a.dtype != dt or dt not in (np.float32, np.float64):
-            raise ValueError(f"params[{name!r}]: expected dtype {dt} (float32 or float64), got {a.dtype}")
-    return dt
 
 
 def _cell_forward(gates, c_prev, c_new, tc, h_new, hid):
@@ -104,16 +92,8 @@ def sequence_forward(params: Mapping[str, np.ndarray], config: ACRNNConfig, fram
     pred : ndarray (B, T, F)
     cache : dict
     """
-    dt = _check(params, config)
-    x = check_float_array(frames, "frames", (None, None, config.frame_size))
-    if x.dtype != dt:
-        raise ValueError(f"frames: expected dtype {dt} (the parameters'), got {x.dtype}")
+    x, mask, dt = _check_sequence(params, config, frames, mask)
     B, T = x.shape[0], x.shape[1] - 1
-    if T < 1:
-        raise ValueError(f"frames: expected at least 2 frames (T + 1 with T >= 1), got shape {x.shape}")
-    mask = config.mask(T) if mask is None else np.asarray(mask, dtype=bool)
-    if mask.shape != (T,) or not mask[0]:
-        raise ValueError(f"mask: expected a bool array of shape ({T},) starting with True, got {mask.shape}")
     F, H, L, skew = config.frame_size, config.hidden_size, config.num_layers, config.skewed
     xt = np.ascontiguousarray(x.transpose(1, 0, 2))                           # (T + 1, B, F)
     w_cat, bias = [], []
