@@ -124,6 +124,12 @@ def test_export_verifies_and_onnx_backends_agree(trained, tmp_path, capsys):
                  "--onnx", str(onnx_dir), "--source", str(SALSA / "16.bvh"), "--length", "5",
                  "--out", str(gen)]) == EXIT_OK
     assert read_bvh(gen).num_frames == 15
+    js = tmp_path / "r.json"
+    assert main(["eval", "--checkpoint", str(trained / "checkpoint.npz"), "--onnx", str(onnx_dir),
+                 "--json", str(js)]) == EXIT_OK
+    res = json.loads(js.read_text())
+    for ms in ("100", "400", "1000"):
+        assert abs(res["acrnn_onnx"]["horizons"][ms]["euclidean"] - res["acrnn"]["horizons"][ms]["euclidean"]) < 1e-4
 
 
 def _tiny_model(representation, J=3, skewed=False, seed=0):
