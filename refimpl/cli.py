@@ -358,6 +358,8 @@ def cmd_eval(args) -> int:
     task_name = model.spec.task if model is not None else (MODELS[args.model].task if args.model else "transition")
     if task_name == "prediction":
         return _eval_prediction(args, model)
+    if task_name == "synthesis":
+        return _eval_synthesis(args, model)
     T = args.transition_length or (model.transition_length if model else 30)
     _say(f"reading {args.data} ...")
     _, test_ds = transition.build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
@@ -391,6 +393,8 @@ def cmd_export(args) -> int:
         task = task_of(model.spec)
         if hasattr(task, "verify_inputs"):  # the task's own check inputs (prediction: real CMU windows)
             check = verify_onnx(model, out, *task.verify_inputs(model, rng, 8))
+        elif hasattr(task, "random_inputs"):  # synthesis: random seeds in the data's range
+            check = verify_onnx(model, out, *task.random_inputs(model, rng))
         else:
             past, target = transition.random_context(model, rng, 8)
             check = verify_onnx(model, out, past, target, T=args.transition_length)
@@ -446,9 +450,12 @@ def _generate_prediction(args, model) -> int:
 
 
 def _model_task(args, model) -> str:
-    """The task of ``--checkpoint``'s model, else of the exported models in ``--onnx``, else ``transition``."""
+    """The task of ``--checkpoint``'s model, else of ``--model``, else of the exported models in ``--onnx``, else
+    ``transition``."""
     if model is not None:
         return model.spec.task
+    if getattr(args, "model", None):
+        return MODELS[args.model].task
     if getattr(args, "backend", None) == "onnx" and args.onnx:
         name = (onnx_metadata(args.onnx).get("model") or {}).get("name")
         if name in MODELS:
@@ -466,6 +473,10 @@ def cmd_generate(args) -> int:
             raise UsageError("--backend numpy needs --checkpoint")
         return _generate_prediction(args, first)
     model = None
+    if _model_task(args, first) == "synthesis":
+        return _generate_synthesis(args)
+    if args.source_frame is None:
+        raise UsageError("--source-frame is required for transitions")
     if args.method == "qtg":
         if args.backend == "numpy" and not args.checkpoint:
             raise UsageError("--method qtg with --backend numpy needs --checkpoint")
@@ -473,6 +484,8 @@ def cmd_generate(args) -> int:
             raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
         if args.checkpoint:
             model = load_trained(args.checkpoint)
+            if model.spec.task != "transition":
+                return _generate_synthesis(args, model)
     elif args.backend == "onnx":
         raise UsageError(f"--backend onnx runs the network; --method {args.method} is a NumPy baseline")
     fps, T_model = (model.fps, model.transition_length) if model else (30.0, 30)
@@ -593,6 +606,58 @@ def cmd_demo(args) -> int:
     return EXIT_OK
 
 
+def _eval_synthesis(args, model) -> int:
+    """``refimpl eval`` for a synthesis model (acRNN): Table 1's metrics on the test takes (spec/acrnn.md §8)."""
+    task = task_of(model.spec if model is not None else MODELS[args.model])
+    if model is None:
+        raise UsageError("--model acrnn: evaluation needs --checkpoint (the statistics and the representation)")
+    _say(f"reading {args.data} ...")
+    data = task.load_eval_data(args.data, model.extra)
+    results = evaluate_model(model, data, onnx_dir=args.onnx)
+    task.print_results(results, data, model)
+    if args.json:
+        task.write_results(results, args.json)
+        _say(f"results          {args.json}")
+    return EXIT_OK
+
+
+def _generate_synthesis(args, model=None) -> int:
+    """``refimpl generate --model acrnn``: seed frames of --source continued for --length frames, BVH out."""
+    from refimpl.bvh import write_bvh
+
+    if model is None:
+        if not args.checkpoint:
+            raise UsageError("--model acrnn needs --checkpoint (with --backend onnx too: skeleton and statistics)")
+        model = load_trained(args.checkpoint)
+    task = task_of(model.spec)
+    if args.backend == "onnx" and not args.onnx:
+        raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
+    networks = network_methods(None if args.backend == "onnx" else model,
+                               onnx_dir=args.onnx if args.backend == "onnx" else None)
+    method = next(iter(networks.values()))
+    n = args.length or 300
+    motion, seed_frames = task.continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
+    write_bvh(args.out, transition.with_end_sites(motion))
+    _say(f"wrote {args.out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
+         f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
+         "metres")
+    if args.png or args.gif:
+        from refimpl.render import render_gif, render_strip
+
+        pos = motion.positions()
+        parents = np.asarray(motion.skeleton.parents)
+        labels = (f"acrnn {model.extra.get('row')}", "")
+        if args.png:
+            render_strip(args.png, pos, parents, highlight=(seed_frames, motion.num_frames), labels=labels,
+                         frame_time=motion.frame_time)
+            _say(f"wrote {args.png}")
+        if args.gif:
+            render_gif(args.gif, pos, parents, fps=motion.fps, highlight=(seed_frames, motion.num_frames),
+                       labels=labels)
+            _say(f"wrote {args.gif}")
+    return EXIT_OK
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # parser and main
 # ----------------------------------------------------------------------------------------------------------------
@@ -624,7 +689,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("train", help="train a network (qtg, quaternet, quaternet-cnn) on motion files",
+    p = sub.add_parser("train", help="train a network (qtg, quaternet, quaternet-cnn, acrnn) on motion files",
                        description="Train a network with Adam; checkpoint.npz (resumable), loss.csv and "
                                    "loss_val.csv go to --out. Progress lines (rate, ETA) go to stderr. "
                                    "Models: " + "; ".join(f"{n}: {s.summary}" for n, s in sorted(MODELS.items())))
@@ -672,7 +737,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", default=None, help="write all results as JSON")
     p.add_argument("--plot", default=None, help="write the per-frame curves as PNG (matplotlib)")
     p.add_argument("--model", default=None, choices=sorted(MODELS),
-                   help="without --checkpoint: evaluate the baselines of this model's task (default qtg's)")
+                   help="without --checkpoint: evaluate the baselines of this model's task (default qtg's); the "
+                        "checkpoint's model decides otherwise (acrnn: Table 1 metrics on the salsa test takes)")
     for task_name in sorted(TASKS):
         if hasattr(task_of(task_name), "add_eval_options"):
             task_of(task_name).add_eval_options(p.add_argument_group(f"{task_name} task"))
@@ -696,7 +762,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "model's rate, 30 fps, after the files' first reference frame), generate the T "
                                    "frames between them and write a BVH with --context frames on both sides.")
     p.add_argument("--source", required=True, help=".bvh or exp-map .txt")
-    p.add_argument("--source-frame", type=positive_int, required=True, help="s, last frame of the source kept")
+    p.add_argument("--source-frame", type=nonneg_int, default=None,
+                   help="s, last frame of the source kept (transitions, required); acrnn: first seed frame (default 0)")
+    p.add_argument("--model", default=None, choices=sorted(MODELS),
+                   help="acrnn: continue 10 seed frames of --source for --length frames (default 300)")
     p.add_argument("--target", default=None, help=".bvh or exp-map .txt (default: --source)")
     p.add_argument("--target-frame", type=nonneg_int, default=None,
                    help="g, first target frame (default: s + T + 1 in the same file, else 1)")

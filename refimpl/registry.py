@@ -20,12 +20,14 @@ RECIPES = {
     "qtg": ("refimpl.recipes.qtg", "transition"),
     "quaternet": ("refimpl.recipes.quaternet", "prediction"),
     "quaternet-cnn": ("refimpl.recipes.quaternet_cnn", "prediction"),
+    "acrnn": ("refimpl.recipes.acrnn", "synthesis"),
 }
 
 #: Task name -> task module (``refimpl/tasks/<name>.py``).
 TASKS = {
     "transition": "refimpl.tasks.transition",
     "prediction": "refimpl.tasks.prediction",
+    "synthesis": "refimpl.tasks.synthesis",
 }
 
 

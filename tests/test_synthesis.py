@@ -134,7 +134,7 @@ def test_evaluate_is_zero_for_the_ground_truth_continuation():
             out.append(test[start + 10:start + 10 + n])
         return data.standardise(np.stack(out))
 
-    res = S.evaluate(oracle, data, max_seeds=20)
+    res = S.evaluate_generator(oracle, data, max_seeds=20)
     assert res["num_seeds"] == 20
     for ms, r in res["horizons"].items():
         assert r["frames"] == S.horizon_frames(ms)

@@ -23,6 +23,7 @@ EXPORTERS = {
     "qtg": "deploy.models.qtg_io",
     "quaternet": "deploy.models.quaternet_io",
     "quaternet-cnn": "deploy.models.quaternet_cnn_io",
+    "acrnn": "deploy.models.acrnn_io",
 }
 
 

@@ -186,6 +186,21 @@ def step(params: Mapping[str, np.ndarray], config: ACRNNConfig, x_t, state):
     return y_t, new_state
 
 
+def _check_sequence(params, config, frames, mask):
+    """Checks of :func:`sequence_forward`'s arguments: ``(frames (B, T + 1, F), mask (T,) bool, dtype)``."""
+    dt = _check_params(params, config)
+    x = check_float_array(frames, "frames", (None, None, config.frame_size))
+    if x.dtype != dt:
+        raise ValueError(f"frames: expected dtype {dt} (the parameters'), got {x.dtype}")
+    T = x.shape[1] - 1
+    if T < 1:
+        raise ValueError(f"frames: expected at least 2 frames (T + 1 with T >= 1), got shape {x.shape}")
+    mask = config.mask(T) if mask is None else np.asarray(mask, dtype=bool)
+    if mask.shape != (T,) or not mask[0]:
+        raise ValueError(f"mask: expected a bool array of shape ({T},) starting with True, got {mask.shape}")
+    return x, mask, dt
+
+
 def sequence_forward(params: Mapping[str, np.ndarray], config: ACRNNConfig, frames, mask=None):
     """Auto-conditioned training rollout over a window.
 
@@ -205,16 +220,8 @@ def sequence_forward(params: Mapping[str, np.ndarray], config: ACRNNConfig, fram
         ``pred[:, t]`` predicts ``frames[:, t + 1]``.
     cache : dict
     """
-    dt = _check_params(params, config)
-    x = check_float_array(frames, "frames", (None, None, config.frame_size))
-    if x.dtype != dt:
-        raise ValueError(f"frames: expected dtype {dt} (the parameters'), got {x.dtype}")
+    x, mask, dt = _check_sequence(params, config, frames, mask)
     B, T = x.shape[0], x.shape[1] - 1
-    if T < 1:
-        raise ValueError(f"frames: expected at least 2 frames (T + 1 with T >= 1), got shape {x.shape}")
-    mask = config.mask(T) if mask is None else np.asarray(mask, dtype=bool)
-    if mask.shape != (T,) or not mask[0]:
-        raise ValueError(f"mask: expected a bool array of shape ({T},) starting with True, got {mask.shape}")
     state = init_state(config, B, dt)
     pred = np.empty((B, T, config.frame_size), dtype=dt)
     caches = []
@@ -508,3 +515,5 @@ def config_for(representation: str, num_joints: int, **kwargs) -> ACRNNConfig:
     return ACRNNConfig(frame_size=frame_size(representation, num_joints), **kwargs)
 
 
+# Kernel tier (spec/architecture.md §kernel tier): public names of helpers other modules use.
+check_sequence_inputs = _check_sequence

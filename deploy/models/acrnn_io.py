@@ -1,0 +1,134 @@
+"""acRNN's entry of the exporter table (``deploy.models.EXPORTERS["acrnn"]``): checkpoints in, model folders out,
+and the runtime that drives the exported models (spec/deploy.md §8.2).
+
+* :func:`load_acrnn_checkpoint` — ``(params, config, meta)`` from a ``refimpl train --model acrnn`` checkpoint;
+* :func:`export_acrnn_dir` — ``acrnn_step.onnx`` and ``acrnn_generate.onnx`` (validated, atomic);
+* :class:`ACRNNRuntime` — a host loop of ``step`` calls or one ``generate`` call, in onnxruntime.
+
+Shape legend: B batch, S seed frames, N generated frames, F frame size, H hidden, L layers.
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from refimpl.checkpoint import load_checkpoint as _read_checkpoint
+from refimpl.models.acrnn import ACRNNConfig
+
+from deploy.graph import OPSET, save_model
+from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
+from deploy.runtime import DeployedModel, load_model
+from deploy.validate import validate_model
+
+__all__ = ["load_acrnn_checkpoint", "export_acrnn_dir", "ACRNNRuntime"]
+
+
+def load_acrnn_checkpoint(path):
+    """``(params, config, meta)`` of an acRNN training checkpoint (parameters ``param.<name>``, config from
+    ``meta["model_config"]``; the statistics, representation and skeleton are in ``meta["model_config"]`` too)."""
+    arrays, meta = _read_checkpoint(path)
+    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
+    fields = {f.name for f in dataclasses.fields(ACRNNConfig)}
+    cfg = {k: v for k, v in (meta.get("model_config") or {}).items() if k in fields}
+    return params, ACRNNConfig(**cfg), meta
+
+
+def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, parents=None, opset=None,
+                     dtype=np.float32, mode: str = "loop", metadata=None, skeleton=None,
+                     T: int | None = None) -> dict:
+    """Export, validate and atomically write ``acrnn_step.onnx`` and ``acrnn_generate.onnx`` into ``out_dir``.
+
+    ``mode`` is accepted for the command line's sake (the generator is always a Scan over the seed and a Loop
+    of ``num_frames`` steps); ``T`` is ignored (N is an input). ``parents`` goes into the metadata.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    extra = dict(metadata or {})
+    frame_rate = float(extra.pop("frame_rate", 30.0))
+    if parents is not None:
+        extra["parents"] = [int(p) for p in parents]
+    kw = dict(mean=np.asarray(mean), std=np.asarray(std), representation=representation, dtype=dtype,
+              opset=OPSET if opset is None else opset, skeleton=skeleton, frame_rate=frame_rate, metadata=extra)
+    models = {"step": export_acrnn_step(params, config, **kw), "generate": export_acrnn_generate(params, config, **kw)}
+    paths = {}
+    for role, m in models.items():
+        validate_model(m)
+        paths[role] = out / f"acrnn_{role}.onnx"
+        save_model(m, paths[role])
+    return paths
+
+
+class ACRNNRuntime:
+    """acRNN inference from exported ``step`` / ``generate`` models (either or both).
+
+    Parameters
+    ----------
+    step, generate : path, ModelProto, DeployedModel or None
+    intra_op_threads : int
+    """
+
+    def __init__(self, step=None, generate=None, *, intra_op_threads: int = 1):
+        def load(m):
+            if m is None or isinstance(m, DeployedModel):
+                return m
+            return load_model(m, intra_op_threads=intra_op_threads)
+
+        self.step_model, self.generate_model = load(step), load(generate)
+        for m, role in ((self.step_model, "step"), (self.generate_model, "generate")):
+            if m is not None and m.role != role:
+                raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
+        if self.step_model is None and self.generate_model is None:
+            raise ValueError("ACRNNRuntime: expected a step or a generate model")
+
+    @classmethod
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "ACRNNRuntime":
+        """Load ``acrnn_step.onnx`` and ``acrnn_generate.onnx`` from ``directory`` (those present)."""
+        d = Path(directory)
+        found = {k: (d / f"acrnn_{k}.onnx" if (d / f"acrnn_{k}.onnx").is_file() else None)
+                 for k in ("step", "generate")}
+        if not any(found.values()):
+            raise ValueError(f"directory: no acrnn_step/generate.onnx in {str(d)!r}")
+        return cls(**found, intra_op_threads=intra_op_threads)
+
+    @property
+    def config(self) -> dict:
+        return (self.step_model or self.generate_model).metadata["model"]["config"]
+
+    def zero_state(self, batch: int) -> tuple[np.ndarray, np.ndarray]:
+        """Zero ``(h, c)``, each ``(L, B, H)``."""
+        cfg = self.config
+        z = np.zeros((cfg["num_layers"], int(batch), cfg["hidden_size"]), dtype=np.float32)
+        return z, z.copy()
+
+    def step(self, frame, state) -> tuple[dict, tuple]:
+        """One step: ``(outputs dict with next_frame (B, F) and the decoded joints, (h, c))``."""
+        if self.step_model is None:
+            raise ValueError("step: no step model loaded")
+        out = self.step_model.run(frame=frame, h=state[0], c=state[1])
+        return out, (out["h_next"], out["c_next"])
+
+    def generate(self, seed, num_frames: int, *, use_generator: bool = True) -> np.ndarray:
+        """Raw frames ``(B, N, F)`` after the raw ``seed (B, S, F)``: one ``generate`` call, or the seed and N − 1
+        fed-back frames through ``step`` (host loop)."""
+        seed = np.asarray(seed)
+        n = int(num_frames)
+        if n < 1:
+            raise ValueError(f"num_frames: expected a positive integer, got {num_frames!r}")
+        if use_generator and self.generate_model is not None:
+            return self.generate_model.run(seed=seed, num_frames=np.array(n, dtype=np.int64))["frames"]
+        state = self.zero_state(seed.shape[0])
+        for t in range(seed.shape[1]):
+            out, state = self.step(seed[:, t], state)
+        frames = [out["next_frame"]]
+        for _ in range(n - 1):
+            out, state = self.step(frames[-1], state)
+            frames.append(out["next_frame"])
+        return np.stack(frames, axis=1)                                      # (B, N, F)
+
+
+#: The exporter table's names for this model.
+load_checkpoint = load_acrnn_checkpoint
+export_dir = export_acrnn_dir
+Runtime = ACRNNRuntime
