@@ -416,8 +416,12 @@ def _generate_prediction(args, model) -> int:
         if not args.onnx:
             raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
         meta = onnx_metadata(args.onnx)
-        dataset, frame_time = meta.get("dataset"), 1.0 / float(meta.get("frame_rate", 25.0))
-        P, name = int(meta.get("prefix_length", 50)), f"{meta['model']['name']}_onnx"
+        fps, _ = _onnx_rate_and_length(args.onnx, 1)  # frame rate and model entry checked (exit 3 when wrong)
+        P = meta.get("prefix_length", 50)
+        if isinstance(P, bool) or not isinstance(P, int) or not 1 <= P <= 100_000:
+            raise BadInputError(f"{args.onnx}: metadata prefix_length: expected an integer in [1, 100000], "
+                                f"got {P!r}"[:300])
+        dataset, frame_time, name = meta.get("dataset"), 1.0 / fps, f"{meta['model']['name']}_onnx"
         if dataset not in ("cmu", "h36m"):
             raise BadInputError(f"{args.onnx}: the models' metadata names no prediction dataset")
     else:
@@ -457,8 +461,12 @@ def _model_task(args, model) -> str:
     if getattr(args, "model", None):
         return MODELS[args.model].task
     if getattr(args, "backend", None) == "onnx" and args.onnx:
-        name = (onnx_metadata(args.onnx).get("model") or {}).get("name")
-        if name in MODELS:
+        model_meta = onnx_metadata(args.onnx).get("model") or {}
+        if not isinstance(model_meta, dict):
+            raise BadInputError(f"{args.onnx}: metadata model: expected a JSON object, got "
+                                f"{type(model_meta).__name__}")
+        name = model_meta.get("name")
+        if isinstance(name, str) and name in MODELS:
             return MODELS[name].task
     return "transition"
 
