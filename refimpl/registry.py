@@ -18,11 +18,14 @@ __all__ = ["RECIPES", "TASKS", "ModelSpec", "TrainedModel", "MODELS", "task_of"]
 #: Model name -> (recipe module, task). One line per model.
 RECIPES = {
     "qtg": ("refimpl.recipes.qtg", "transition"),
+    "quaternet-long": ("refimpl.recipes.quaternet_long", "locomotion"),
+    "pace": ("refimpl.recipes.pace", "locomotion"),
 }
 
 #: Task name -> task module (``refimpl/tasks/<name>.py``).
 TASKS = {
     "transition": "refimpl.tasks.transition",
+    "locomotion": "refimpl.tasks.locomotion",
 }
 
 

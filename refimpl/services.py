@@ -119,7 +119,8 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
     extra = dict(task_of(spec).checkpoint_extra(train_ds), representation=spec.representations[0])
     adapter = spec.make_adapter(train_ds, val_ds, config, dtype, extra)
     optim = dataclasses.replace(spec.optim, lr=spec.optim.lr if lr is None else lr,
-                                betas=tuple(spec.optim.betas if betas is None else betas), clip_norm=clip_norm)
+                                betas=tuple(spec.optim.betas if betas is None else betas),
+                                clip_norm=spec.optim.clip_norm if clip_norm is None else clip_norm)
     tc = TrainConfig(steps=steps, batch_size=batch_size, seed=seed, checkpoint_path=str(out_dir / "checkpoint.npz"),
                      checkpoint_every=checkpoint_every, log_path=str(out_dir / "loss.csv"),
                      progress_every=progress_every, validate_every=validate_every)
