@@ -21,6 +21,7 @@ __all__ = ["EXPORTERS", "exporter", "model_name_of_dir", "runtime_for_dir"]
 #: Model name -> entry module (load_checkpoint, export_dir, Runtime).
 EXPORTERS = {
     "qtg": "deploy.models.qtg_io",
+    "quaternet-long": "deploy.models.quaternet_long_io",
 }
 
 

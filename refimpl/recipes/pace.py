@@ -22,7 +22,7 @@ from refimpl.recipes.qtg import parse_overrides
 from refimpl.train import ModelAdapter, OptimConfig
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
-           "MAX_CHUNK", "make_config", "chunk_length", "make_adapter", "make_method", "export_inputs"]
+           "MAX_CHUNK", "make_config", "chunk_length", "make_adapter", "make_method", "export_inputs", "verify_onnx"]
 
 NAME = "pace"
 SUMMARY = "QuaterNet pace network (Pavllo et al. 2019): spline curvature and speed -> amplitude, frequency, facing"
@@ -101,3 +101,15 @@ def make_method(model) -> Callable:
 
 def export_inputs(model) -> dict:
     return {"metadata": {"frame_rate": float(model.fps or 30.0), "training": {"checkpoint_step": model.meta.get("step")}}}
+
+
+def verify_onnx(model, runtime, x=None, seed: int = 0) -> dict:
+    """The exported pace network (``runtime.pace``) against :func:`refimpl.models.pace.forward` on ``x (B, N, 2)``
+    (default: 2 random paths of 50 points). Returns ``{"pace": max |Δ|, "ok": max |Δ| <= 1e-4}``."""
+    if x is None:
+        rng = np.random.default_rng(seed)
+        x = np.stack([0.2 * rng.standard_normal((2, 50)), rng.uniform(0.3, 1.5, (2, 1)).repeat(50, 1)], axis=-1)
+    dtype = np.asarray(model.params["h0"]).dtype
+    ref, _ = pace.forward(model.params, model.config, np.asarray(x).astype(dtype))
+    diff = float(np.abs(np.asarray(runtime.pace(x), np.float64) - ref).max())
+    return {"pace": diff, "ok": diff <= 1e-4}
