@@ -52,6 +52,7 @@ class GeneratedWalk:
         N frames, the training skeleton, QuaterNet units, 30 fps.
     controls : (N, 6) the controls fed at each step ``[A cos φ, A sin φ, A t̂x, A t̂z, f_x, f_z]``.
     distance : (N,) arc length s + δ where the root was placed.
+    travelled : (N,) arc length s at which the frame's controls were read (before ``s ← s + A``).
     phase : (N,) φ after each step (radians, wrapped to [0, 2π)).
     path : Spline — the pace network's reparameterised path with its tracks (``amplitude``, ``frequency``,
         ``direction``).
@@ -60,6 +61,7 @@ class GeneratedWalk:
     motion: Motion
     controls: np.ndarray
     distance: np.ndarray
+    travelled: np.ndarray
     phase: np.ndarray
     path: Spline
 
@@ -168,7 +170,7 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
         y, h = quaternet.step(pose_params, h, seed[t:t + 1], net)
     phi = math.atan2(feats[-1, 3], feats[-1, 2])
     s = 0.0
-    rots, roots, ctrls, dists, phases = [], [], [], [], []
+    rots, roots, ctrls, dists, phases, arcs = [], [], [], [], [], []
     for _ in range(int(num_frames)):
         tan = tracks.interpolate(s, "tangent")
         tan = tan / (np.linalg.norm(tan) + 1e-9)
@@ -177,6 +179,7 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
         freq = float(tracks.interpolate(s, "frequency")[0])
         c = np.array([amp * math.cos(phi), amp * math.sin(phi), amp * tan[0], amp * tan[1], face[0], face[1]])
         y, h = quaternet.step(pose_params, h, np.concatenate([y, c[None].astype(dtype)], axis=1), net)
+        arc = s
         phi = (phi + freq) % (2 * math.pi)
         s += amp
         nxt = s + float(y[0, 4 * J])
@@ -188,11 +191,13 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
         roots.append([xz[0], float(y[0, 4 * J + 1]), xz[1]])
         ctrls.append(c)
         dists.append(nxt)
+        arcs.append(arc)
         phases.append(phi)
     if not rots:
         raise ValueError("path: too short for one frame")
     motion = Motion(skeleton, np.stack(rots), np.array(roots), 1.0 / FPS, "generated")
-    return GeneratedWalk(motion=motion, controls=np.array(ctrls), distance=np.array(dists), phase=np.array(phases),
+    return GeneratedWalk(motion=motion, controls=np.array(ctrls), distance=np.array(dists),
+                         travelled=np.array(arcs), phase=np.array(phases),
                          path=tracks)
 
 
