@@ -1080,8 +1080,8 @@ def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = FPS)
 
 def position_errors(skeleton: Skeleton, rotations, translations, target_positions) -> tuple[np.ndarray, np.ndarray]:
     """Per horizon frame: mean joint-position error and mean joint-velocity error (units), positions from FK
-    with root ``(0, height, 0)`` as the loss (QN §4.4.2: velocity error = Euclidean error of the first
-    difference of the positions).
+    with root ``(0, height, 0)`` as the loss, or ``rotations`` themselves when they are positions (..., J, 3)
+    (QN §4.4.2: velocity error = Euclidean error of the first difference of the positions).
 
     Returns
     -------
@@ -1089,9 +1089,12 @@ def position_errors(skeleton: Skeleton, rotations, translations, target_position
     """
     rot = np.asarray(rotations, np.float64)
     tr = np.asarray(translations, np.float64)
-    root = np.zeros(rot.shape[:-2] + (3,))
-    root[..., 1] = tr[..., 1]
-    pos = skeleton.forward_kinematics(rot, root)                            # (B, T, J, 3)
+    if rot.shape[-1] == 3:  # a position-output model: the positions themselves
+        pos = rot
+    else:
+        root = np.zeros(rot.shape[:-2] + (3,))
+        root[..., 1] = tr[..., 1]
+        pos = skeleton.forward_kinematics(rot, root)                        # (B, T, J, 3)
     tgt = np.asarray(target_positions, np.float64)
     perr = np.linalg.norm(pos - tgt, axis=-1).mean(axis=(0, 2))
     verr = np.linalg.norm(np.diff(pos, axis=1) - np.diff(tgt, axis=1), axis=-1).mean(axis=(0, 2))

@@ -28,6 +28,9 @@ def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: st
         speed = parse_speed(speed_text)
     except (OSError, ValueError) as exc:
         raise UsageError(str(exc)) from exc
+    if pose_model.config.output != "quaternion":
+        raise UsageError(f"--checkpoint: generation needs a quaternion-output model, got output = "
+                         f"{pose_model.config.output!r} (an ablation)")
     seed = pose_model.extra["seed_clip"]
     return generate_walk(pose_model.params, pose_model.config.network(), pace_model.params, pace_model.config,
                          skeleton_of(pose_model.extra), np.asarray(seed["rotations"]), np.asarray(seed["features"]),
