@@ -284,3 +284,71 @@ def test_generated_bvh_opens_in_blender_with_the_same_motion(tmp_path):
             if name in got[str(f)]:
                 v = pos[f - 1, j]
                 assert np.allclose(got[str(f)][name], [v[0], -v[2], v[1]], atol=0.05), (f, name)
+
+
+@pytest.mark.parametrize("order", ["xyz", "yzx"])
+def test_euler_to_quat_layer(order):
+    """The Euler ablation's conversion equals refimpl.quat.quat_from_euler; its backward = central differences;
+    it inverts euler_from_quat (up to sign)."""
+    from refimpl.quat import euler_from_quat, quat_from_euler
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-3, 3, (6, 3))
+    q, cache = recipe.euler_to_quat_forward(a, order)
+    assert np.allclose(q, quat_from_euler(a, order), atol=1e-15)
+    w = rng.standard_normal(q.shape)
+    check_gradients(lambda: float(np.sum(w * recipe.euler_to_quat_forward(a, order)[0])), {"a": a},
+                    {"a": recipe.euler_to_quat_backward(w, cache)}, **TOL_FD, max_entries=None)
+    q2, _ = recipe.euler_to_quat_forward(euler_from_quat(q, order), order)
+    assert np.allclose(np.abs(np.sum(q2 * q, -1)), 1.0, atol=1e-12)
+
+
+def test_axis_angle_to_quat_layer():
+    from refimpl.quat import quat_from_axis_angle
+    rng = np.random.default_rng(2)
+    v = rng.standard_normal((6, 3)) * np.array([[1e-7], [1e-5], [0.3], [1.0], [2.5], [3.0]])
+    q, cache = recipe.axis_angle_to_quat_forward(v)
+    assert np.allclose(q, quat_from_axis_angle(v), atol=1e-15)
+    w = rng.standard_normal(q.shape)
+    check_gradients(lambda: float(np.sum(w * recipe.axis_angle_to_quat_forward(v)[0])), {"v": v},
+                    {"v": recipe.axis_angle_to_quat_backward(w, cache)}, eps=1e-8, rtol=1e-5, atol=1e-7,
+                    max_entries=None)
+
+
+@pytest.mark.parametrize("output", ["euler_yzx", "axis_angle", "positions"])
+def test_ablation_recipe_gradient_central_differences(output):
+    """QN §4.4.2-4.4.3 ablations: the same recurrent network with 3J raw outputs; loss through the conversion to
+    quaternions and FK (or the Euclidean position loss); gradients of every parameter array."""
+    rng = np.random.default_rng(7)
+    batch, offsets, parents = _tiny_batch(rng)
+    sk = Skeleton(parents, offsets)
+    batch["inputs"] = recipe.ablation_inputs(batch["inputs"], output, sk)
+    net = recipe.QuaterNetLongConfig(num_joints=3, hidden_size=3, controls_hidden=2, output=output).network()
+    assert net.num_joints == 1 and net.num_outputs == 3 * 3 + 2
+    params = quaternet.init_params(net, rng)
+    _, grads = recipe.loss_and_grads(params, batch, net, offsets, parents, output=output)
+    check_gradients(lambda: recipe.loss_and_grads(params, batch, net, offsets, parents, output=output)[0], params,
+                    grads, **TOL_FD, max_entries=12)
+
+
+def test_ablation_inputs_and_rollout_layout():
+    """Ground-truth windows in an ablation's layout decode back to the same FK positions."""
+    rng = np.random.default_rng(3)
+    batch, offsets, parents = _tiny_batch(rng, B=1)
+    sk = Skeleton(parents, offsets)
+    J = 3
+    q = batch["inputs"][..., :4 * J].reshape(1, 7, J, 4)
+    for output in ("euler_xyz", "axis_angle"):
+        x = recipe.ablation_inputs(batch["inputs"], output, sk)
+        assert x.shape == (1, 7, 4 + 3 * J + 8) and np.all(x[..., 0] == 1)
+        q2, _ = recipe.quat_from_rotations(x[..., 4:4 + 3 * J].reshape(1, 7, J, 3), output)
+        assert np.allclose(sk.forward_kinematics(q2, np.zeros((1, 7, 3))), sk.forward_kinematics(q, np.zeros((1, 7, 3))))
+    x = recipe.ablation_inputs(batch["inputs"], "positions", sk)
+    root = np.zeros((1, 7, 3))
+    root[..., 1] = batch["inputs"][..., 4 * J + 1]
+    assert np.allclose(x[..., 4:4 + 3 * J].reshape(1, 7, J, 3), sk.forward_kinematics(q, root))
+    net = recipe.QuaterNetLongConfig(num_joints=J, hidden_size=4, output="positions").network()
+    params = quaternet.init_params(net, rng)
+    pos, tr = recipe.rollout(params, net, batch["inputs"], 3, "positions", sk)
+    assert pos.shape == (1, 4, J, 3) and tr.shape == (1, 4, 2)
+    with pytest.raises(ValueError):
+        recipe.QuaterNetLongConfig(output="matrix")
