@@ -352,3 +352,17 @@ def test_ablation_inputs_and_rollout_layout():
     assert pos.shape == (1, 4, J, 3) and tr.shape == (1, 4, 2)
     with pytest.raises(ValueError):
         recipe.QuaterNetLongConfig(output="matrix")
+
+
+def test_render_path_motion_gif_and_errors(tmp_path):
+    pytest.importorskip("matplotlib")
+    from refimpl.render import render_path_motion
+    net, params, pc, pp, sk, seed_rot, feats = _random_networks(seed=5)
+    walk = G.generate_walk(params, net, pp, pc, sk, seed_rot, feats, circle_path(5.0), 0.5, 8)
+    pos = walk.motion.positions()
+    out = render_path_motion(tmp_path / "w.gif", pos, sk.parents, walk.path.points, closed=True, stride=2)
+    assert out.stat().st_size > 1000 and out.read_bytes()[:3] == b"GIF"
+    with pytest.raises(ValueError):
+        render_path_motion(tmp_path / "w.jpg", pos, sk.parents, walk.path.points)
+    with pytest.raises(ValueError):
+        render_path_motion(tmp_path / "w.png", pos, sk.parents, walk.path.points[:1])
