@@ -294,6 +294,8 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
     _say(f"reading {args.data} ...")
     train_ds, test_ds = task.train_datasets(args)
     config = spec.make_config(train_ds, args.set)
+    if args.batch_size is None:
+        args.batch_size = int(getattr(spec.recipe, "PAPER_BATCH", 32))
     n = task.num_examples(train_ds)
     per_epoch = max(1, n // min(args.batch_size, n))
     steps = args.steps if args.steps is not None else args.epochs * per_epoch
@@ -391,13 +393,15 @@ def cmd_export(args) -> int:
     if args.verify:
         rng = np.random.default_rng(args.seed)
         task = task_of(model.spec)
-        if hasattr(task, "verify_inputs"):  # the task's own check inputs (prediction: real CMU windows)
+        if model.spec.task == "transition":
+            past, target = transition.random_context(model, rng, 8)
+            check = verify_onnx(model, out, past, target, T=args.transition_length)
+        elif hasattr(task, "verify_inputs"):  # the task's own check inputs (prediction: real CMU windows)
             check = verify_onnx(model, out, *task.verify_inputs(model, rng, 8))
         elif hasattr(task, "random_inputs"):  # synthesis: random seeds in the data's range
             check = verify_onnx(model, out, *task.random_inputs(model, rng))
-        else:
-            past, target = transition.random_context(model, rng, 8)
-            check = verify_onnx(model, out, past, target, T=args.transition_length)
+        else:  # locomotion: the recipe draws its own random inputs
+            check = verify_onnx(model, out, seed=args.seed)
         for k, v in check.items():
             if k != "ok":
                 _say(f"verify   onnxruntime vs NumPy ({k}): max |diff| = {v:.3g}")
@@ -475,16 +479,30 @@ def cmd_generate(args) -> int:
     """``refimpl generate``."""
     from refimpl.bvh import write_bvh
 
+    if args.model is not None and MODELS[args.model].task == "locomotion":
+        from refimpl.tasks.locomotion_cli import generate_command
+
+        return generate_command(args, load_trained, _say)
     first = load_trained(args.checkpoint) if args.checkpoint else None
-    if _model_task(args, first) == "prediction":
+    task_name = _model_task(args, first)
+    if task_name == "locomotion":
+        raise UsageError("a quaternet-long / pace checkpoint: pass --model quaternet-long --checkpoint POSE.npz "
+                         "--pace PACE.npz [--path ...]")
+    if args.source is None:
+        raise UsageError("--source is required (the prefix, seed or source clip); for locomotion: "
+                         "--model quaternet-long --checkpoint POSE.npz --pace PACE.npz [--path ...]")
+    if task_name == "prediction":
         if args.backend == "numpy" and first is None:
             raise UsageError("--backend numpy needs --checkpoint")
         return _generate_prediction(args, first)
     model = None
-    if _model_task(args, first) == "synthesis":
+    if task_name == "synthesis":
         return _generate_synthesis(args)
     if args.source_frame is None:
-        raise UsageError("--source-frame is required for transitions")
+        raise UsageError("the following arguments are required for a transition: --source, --source-frame\n"
+                         "usage: refimpl generate --source FILE --source-frame S [...]  (a transition)\n"
+                         "       refimpl generate --model quaternet-long --checkpoint POSE.npz --pace PACE.npz "
+                         "[--path ...]  (locomotion)")
     if args.method == "qtg":
         if args.backend == "numpy" and not args.checkpoint:
             raise UsageError("--method qtg with --backend numpy needs --checkpoint")
@@ -709,7 +727,8 @@ def build_parser() -> argparse.ArgumentParser:
     length.add_argument("--steps", type=nonneg_int, default=None, help="optimiser steps")
     length.add_argument("--epochs", type=nonneg_int, default=10, help="epochs, when --steps is not given (default 10)")
     p.add_argument("--batch-size", type=positive_int, default=None,
-                   help="batch size (default: the model's paper value; qtg 32, quaternet 60)")
+                   help="batch size (default: the model's paper value; qtg 32, quaternet 60, quaternet-long and "
+                        "pace 40)")
     p.add_argument("--lr", type=positive_float, default=None,
                    help="Adam learning rate (default: the model's paper value; qtg 1e-4)")
     p.add_argument("--betas", type=float, nargs=2, default=None, metavar=("B1", "B2"),
@@ -769,11 +788,9 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Take frames s-1, s of --source and g, g+1 of --target (frame numbers at the "
                                    "model's rate, 30 fps, after the files' first reference frame), generate the T "
                                    "frames between them and write a BVH with --context frames on both sides.")
-    p.add_argument("--source", required=True, help=".bvh or exp-map .txt")
+    p.add_argument("--source", default=None, help=".bvh or exp-map .txt (every task but locomotion)")
     p.add_argument("--source-frame", type=nonneg_int, default=None,
                    help="s, last frame of the source kept (transitions, required); acrnn: first seed frame (default 0)")
-    p.add_argument("--model", default=None, choices=sorted(MODELS),
-                   help="acrnn: continue 10 seed frames of --source for --length frames (default 300)")
     p.add_argument("--target", default=None, help=".bvh or exp-map .txt (default: --source)")
     p.add_argument("--target-frame", type=nonneg_int, default=None,
                    help="g, first target frame (default: s + T + 1 in the same file, else 1)")
@@ -791,6 +808,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth", default=None, help="also write the ground truth (same file, g = s + T + 1)")
     p.add_argument("--png", default=None, help="also render a PNG strip (matplotlib)")
     p.add_argument("--gif", default=None, help="also render a GIF (matplotlib)")
+    loco = p.add_argument_group("locomotion (--model quaternet-long)")
+    loco.add_argument("--model", default=None, choices=sorted(MODELS),
+                      help="the network when the checkpoint does not say it: quaternet-long walks a path (needs "
+                           "--checkpoint, --pace); acrnn continues 10 seed frames of --source for --length frames "
+                           "(default 300); default: the checkpoint's model, else a transition")
+    loco.add_argument("--pace", default=None, help="pace-network checkpoint (`refimpl train --model pace`)")
+    loco.add_argument("--path", default="circle:r=3",
+                      help="circle[:r=M], figure8[:size=M], line-turn[:turn=DEG] or a CSV of x,z points in metres")
+    loco.add_argument("--speed", default="walk", help="walk, jog, run or units per frame (default walk)")
+    loco.add_argument("--seconds", type=positive_float, default=10.0, help="length of the motion (default 10)")
+    loco.add_argument("--controls", default=None, help="also write the per-frame controls as JSON")
     p.set_defaults(func=cmd_generate)
 
     p = sub.add_parser("render", help="draw a motion as a PNG strip or GIF (matplotlib)",

@@ -21,6 +21,8 @@ RECIPES = {
     "quaternet": ("refimpl.recipes.quaternet", "prediction"),
     "quaternet-cnn": ("refimpl.recipes.quaternet_cnn", "prediction"),
     "acrnn": ("refimpl.recipes.acrnn", "synthesis"),
+    "quaternet-long": ("refimpl.recipes.quaternet_long", "locomotion"),
+    "pace": ("refimpl.recipes.pace", "locomotion"),
 }
 
 #: Task name -> task module (``refimpl/tasks/<name>.py``).
@@ -28,6 +30,7 @@ TASKS = {
     "transition": "refimpl.tasks.transition",
     "prediction": "refimpl.tasks.prediction",
     "synthesis": "refimpl.tasks.synthesis",
+    "locomotion": "refimpl.tasks.locomotion",
 }
 
 

@@ -30,7 +30,8 @@ import numpy as np
 
 from refimpl.atomic import atomic_path
 
-__all__ = ["render_strip", "render_gif", "render_loss_curve", "render_error_curves", "read_loss_log"]
+__all__ = ["render_strip", "render_gif", "render_loss_curve", "render_error_curves", "read_loss_log",
+           "render_path_motion"]
 
 _GT_COLOR = "tab:blue"
 _PRED_COLOR = "tab:red"
@@ -518,3 +519,101 @@ def render_error_curves(path: str | os.PathLike, curves: Mapping[str, np.ndarray
     ax.set_ylabel(ylabel)
     ax.set_ylim(bottom=0.0)
     return _finish_plot(fig, ax, title, path)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# a character walking a path (locomotion generation)
+
+
+def render_path_motion(path: str | os.PathLike, positions, parents, path_points, *, closed: bool = False,
+                       fps: float = 30.0, stride: int = 2, num_frames: int = 8, title: str | None = None,
+                       panel_size: float = 3.2, dpi: float = 80) -> Path:
+    """Draw a character following a ground path: a ``.png`` (left: the poses at ``num_frames`` evenly spaced
+    frames in 3-D with the path on the floor; right: the map — path in grey, root track in red, start marked)
+    or an animated ``.gif`` (left: the character followed by the camera, the path on the floor; right: the map
+    with the current position).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        ``.png`` or ``.gif`` (written atomically).
+    positions : array_like (T, J, 3)
+        World positions, Y up.
+    parents : array_like (J,)
+    path_points : array_like (M, 2)
+        The path's ``(x, z)`` points in the positions' units.
+    closed : bool
+        Draw the closing segment.
+    fps, stride : GIF playback rate and frame step.
+    """
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    par = _check_parents(parents)
+    pos = _check_positions(positions, "positions", par)
+    pts = np.asarray(path_points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
+        raise ValueError(f"path_points: expected shape (M >= 2, 2), got {pts.shape}")
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".png", ".gif"):
+        raise ValueError(f"path: expected a .png or .gif file name, got {path}")
+    if closed:
+        pts = np.concatenate([pts, pts[:1]])
+    pp = _to_plot(pos, "y")                                                 # (T, J, 3), Z up
+    floor = float(pp[..., 2].min())
+    path3 = np.stack([pts[:, 0], -pts[:, 1], np.full(len(pts), floor)], axis=-1)  # (M, 3)
+    fig = _figure(2 * panel_size, panel_size + 0.3, dpi)
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    ax2 = fig.add_subplot(1, 2, 2)
+    ax2.plot(pts[:, 0], pts[:, 1], color="0.6", lw=1.5, label="path")
+    ax2.plot(pos[:, 0, 0], pos[:, 0, 2], color=_PRED_COLOR, lw=1.0, label="root")
+    ax2.plot(pos[0, 0, 0], pos[0, 0, 2], "o", color=_CONTEXT_COLOR, ms=4, label="start")
+    ax2.set_aspect("equal")
+    ax2.invert_yaxis()  # the map seen from above with x right and z down, as the 3-D view's floor
+    ax2.set_xlabel("x")
+    ax2.set_ylabel("z")
+    ax2.legend(fontsize=6, loc="upper right")
+    ax2.tick_params(labelsize=6)
+    if title:
+        fig.suptitle(title, fontsize=8)
+    if suffix == ".png":
+        ax.set_proj_type("ortho")
+        ax.view_init(elev=25.0, azim=-60.0)
+        ax.set_axis_off()
+        lo = np.minimum(path3.min(0), pp.reshape(-1, 3).min(0))
+        hi = np.maximum(path3.max(0), pp.reshape(-1, 3).max(0))
+        centre, half = 0.5 * (lo + hi), 0.55 * float(np.max(hi - lo))
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        ax.set_ylim(centre[1] - half, centre[1] + half)
+        ax.set_zlim(floor, floor + 2 * half)
+        ax.set_box_aspect((1.0, 1.0, 1.0), zoom=1.2)
+        ax.plot(path3[:, 0], path3[:, 1], path3[:, 2], color="0.6", lw=1.2)
+        for k, t in enumerate(np.linspace(0, len(pp) - 1, max(1, int(num_frames))).round().astype(int)):
+            ax.add_collection3d(Line3DCollection(_bone_segments(pp[t], par), colors=_PRED_COLOR, linewidths=1.2))
+            ax2.plot(pos[t, 0, 0], pos[t, 0, 2], ".", color="k", ms=3)
+        fig.subplots_adjust(left=0.0, right=0.98, bottom=0.12, top=0.9, wspace=0.15)
+        return _save_figure(fig, path)
+
+    try:
+        from matplotlib.animation import PillowWriter
+    except ImportError as exc:  # pragma: no cover
+        raise ImportError(_INSTALL_HINT) from exc
+    half = _half_extent([pp])
+    grid = _setup_axes(ax, half, floor)
+    ax.plot(path3[:, 0], path3[:, 1], path3[:, 2], color="0.6", lw=1.5)
+    bones = Line3DCollection(_bone_segments(pp[0], par), colors=_PRED_COLOR, linewidths=1.8)
+    ax.add_collection3d(bones)
+    (dot,) = ax2.plot([pos[0, 0, 0]], [pos[0, 0, 2]], "o", color=_PRED_COLOR, ms=5)
+    caption = fig.text(0.25, 0.01, "", ha="center", fontsize=7)
+    fig.subplots_adjust(left=0.0, right=0.98, bottom=0.12, top=0.9, wspace=0.15)
+    idx = np.arange(0, pp.shape[0], max(1, int(stride)))
+    writer = PillowWriter(fps=max(1.0, fps / max(1, int(stride))))
+    path = Path(path)
+    with atomic_path(path, make_parents=True) as tmp:
+        with writer.saving(fig, str(tmp), dpi):
+            for t in idx:
+                _centre_axes(ax, grid, pp[t, 0, :2], half, floor, floor + half * 0.9)
+                bones.set_segments(_bone_segments(pp[t], par))
+                dot.set_data([pos[t, 0, 0]], [pos[t, 0, 2]])
+                caption.set_text(f"frame {t} ({t / fps:.1f} s)")
+                writer.grab_frame(facecolor="white")
+    return path

@@ -24,6 +24,7 @@ EXPORTERS = {
     "quaternet": "deploy.models.quaternet_io",
     "quaternet-cnn": "deploy.models.quaternet_cnn_io",
     "acrnn": "deploy.models.acrnn_io",
+    "quaternet-long": "deploy.models.quaternet_long_io",
 }
 
 

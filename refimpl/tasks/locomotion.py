@@ -29,7 +29,7 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -48,6 +48,10 @@ __all__ = [
     "facing_vectors", "build_phase_track", "extract_features", "LocomotionSequence", "build_sequences",
     "downsample_strides", "cmu_split", "bandai_namco_split", "PoseBatch", "pose_batch", "rotate_controls",
     "sequence_spline", "pace_training_data", "pace_batch", "train_pace_network",
+    "NAME", "SPEEDS", "SEED_FRAMES", "LocomotionDataset", "add_train_options", "resolve_files", "build_dataset",
+    "train_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields",
+    "skeleton_of", "rig_of", "onnx_method", "evaluation_windows", "zero_velocity", "methods", "position_errors",
+    "evaluate", "format_results",
 ]
 
 #: Length of one QuaterNet (CMU/Holden BVH = CMU ASF) unit in centimetres (CMU FAQ: 0.056444 m).
@@ -787,3 +791,345 @@ def train_pace_network(train_data, config=None, epochs: int = 10, batch_size: in
             log(f"pace epoch {epoch + 1}/{epochs}: train L1 {total / batches:.5f}"
                 + ("" if valid is None else f", valid L1 {valid:.5f}"))
     return params, history
+
+
+# ============================================================================================================
+# the task interface (spec/architecture.md §tasks; spec/locomotion.md §8): data options, datasets, checkpoint
+# facts, protocol, baselines. Generation along a path: refimpl.locomotion_generate (layer 7).
+# ============================================================================================================
+
+NAME = "locomotion"
+#: Target speeds of ``refimpl generate --speed`` in units per frame at 30 fps (the reference notebook: walk 0.5,
+#: run 1.2; jog between them is ours).
+SPEEDS = {"walk": 0.5, "jog": 0.85, "run": 1.2}
+#: Frames of the seed clip stored in a pose-network checkpoint (the generation prefix).
+SEED_FRAMES = 30
+
+
+@dataclasses.dataclass(frozen=True)
+class LocomotionDataset:
+    """The locomotion sequences of one side of a whole-file split.
+
+    Attributes
+    ----------
+    sequences : tuple of LocomotionSequence
+    rig : LocomotionRig
+    files : tuple of str
+        The source files (the unit of the split).
+    prefix, target : int
+        P and T of the pose network's windows.
+    pace_chunk_length : int
+        Spline points per pace-network training chunk (0 = automatic: min(1000, median spline length)).
+    fps : float
+    """
+
+    sequences: tuple
+    rig: LocomotionRig
+    files: tuple
+    prefix: int = 30
+    target: int = 60
+    pace_chunk_length: int = 0
+    fps: float = FPS
+
+    @property
+    def skeleton(self) -> Skeleton:
+        return self.sequences[0].skeleton
+
+    @property
+    def windows(self) -> tuple:
+        """Sequences long enough for one pose window (P + T frames)."""
+        return tuple(s for s in self.sequences if s.num_frames >= self.prefix + self.target)
+
+    @property
+    def num_frames(self) -> int:
+        return int(sum(s.num_frames for s in self.sequences))
+
+    def pace_data(self) -> list:
+        """``(inputs (N, 2), targets (N, 4))`` of every sequence's spline (:func:`pace_training_data`); sequences
+        whose root does not move are skipped."""
+        out = []
+        for s in self.sequences:
+            try:
+                out.append(pace_training_data(sequence_spline(s)))
+            except ValueError:
+                continue
+        return out
+
+
+def add_train_options(parser) -> None:
+    """The locomotion task's options of ``refimpl train`` (its own names: every task adds its options to the
+    same parser)."""
+    parser.add_argument("--locomotion-prefix", type=int, default=30, metavar="P",
+                        help="locomotion: conditioning frames of a pose window (default 30)")
+    parser.add_argument("--locomotion-target", type=int, default=60, metavar="T",
+                        help="locomotion: predicted frames of a pose window (default 60)")
+    parser.add_argument("--locomotion-max-files", type=int, default=0, metavar="N",
+                        help="locomotion: use at most N training and N held-out files (evenly spaced; 0 = all)")
+    parser.add_argument("--pace-chunk-length", type=int, default=0, metavar="N",
+                        help="locomotion: spline points per pace-network chunk (default: min(1000, median))")
+
+
+def _evenly(items: list, n: int) -> list:
+    if n <= 0 or n >= len(items):
+        return list(items)
+    idx = np.unique(np.linspace(0, len(items) - 1, n).round().astype(int))
+    return [items[i] for i in idx]
+
+
+def resolve_files(data: str) -> tuple[str, list, list]:
+    """``(source kind, train files, test files)`` for ``--data``.
+
+    * ``"sample"``: the embedded CMU exp-map walks and runs (``refimpl/data/sample/expmap``, 10 training and 2
+      held-out files, :func:`cmu_split`; 40-150 frames each at 30 fps, so use short windows);
+    * a folder of Bandai Namco files (``dataset-2_*.bvh``), or a folder holding ``bandai_namco_locomotion``
+      (``../shared/data``): :func:`bandai_namco_split`;
+    * a folder with ``dmgnn_cmu_expmap`` or a DMGNN-like ``train/``, ``test/`` tree of CMU exp-map ``.txt``:
+      :func:`cmu_split`;
+    * any other folder of CMU ``.bvh`` files: sorted, the last 20 % held out.
+    """
+    from refimpl.errors import BadInputError
+    if data == "sample":
+        from refimpl.transitions import SAMPLE_DIR
+        data = str(Path(SAMPLE_DIR) / "expmap")
+    root = Path(data)
+    if not root.is_dir():
+        raise BadInputError(f"{root}: no such folder (locomotion --data takes 'sample' or a folder)")
+    if (root / "bandai_namco_locomotion").is_dir():
+        root = root / "bandai_namco_locomotion"
+    bn = sorted(root.glob("dataset-2_*.bvh"))
+    if bn:
+        train, test = bandai_namco_split(bn)
+        return "bandai_namco", [str(p) for p in train], [str(p) for p in test]
+    if (root / "dmgnn_cmu_expmap").is_dir():
+        root = root / "dmgnn_cmu_expmap"
+    txt = sorted(p for p in root.rglob("*.txt") if "readme" not in p.name.lower())
+    if txt:
+        train, test = cmu_split(txt)
+        return "cmu_expmap", [str(p) for p in train], [str(p) for p in test]
+    bvh = sorted(root.rglob("*.bvh"))
+    if len(bvh) < 2:
+        raise BadInputError(f"{root}: found {len(bvh)} .bvh files; locomotion needs at least 2 (train and test)")
+    n_test = max(1, int(round(0.2 * len(bvh))))
+    return "cmu_bvh", [str(p) for p in bvh[:-n_test]], [str(p) for p in bvh[-n_test:]]
+
+
+def _load_file(kind: str, path: str) -> tuple[Motion, LocomotionRig]:
+    if kind == "bandai_namco":
+        return load_bandai_namco(path), BANDAI_NAMCO_RIG
+    if kind == "cmu_expmap":
+        return load_cmu_expmap(path), CMU_RIG
+    return load_cmu_bvh(path), CMU_RIG
+
+
+def build_dataset(kind: str, files: Sequence[str], *, prefix: int = 30, target: int = 60, mirror: bool = True,
+                  pace_chunk_length: int = 0, progress: Callable[[str], None] | None = None) -> LocomotionDataset:
+    """Load ``files`` of one ``kind`` (:func:`resolve_files`) into a :class:`LocomotionDataset`
+    (:func:`build_sequences`: mirrored, every downsampling phase)."""
+    seqs, rig = [], None
+    for i, f in enumerate(files):
+        motion, rig = _load_file(kind, f)
+        seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
+        if progress is not None and (i + 1) % 100 == 0:
+            progress(f"  loaded {i + 1}/{len(files)} files")
+    if not seqs:
+        raise ValueError("files: no sequence loaded")
+    ref = seqs[0].skeleton
+    for s in seqs:
+        if s.skeleton.num_joints != ref.num_joints or not np.allclose(s.skeleton.offsets, ref.offsets, atol=1e-6):
+            raise ValueError(f"{s.name}: its skeleton differs from {seqs[0].name}'s; the FK loss needs one skeleton")
+    return LocomotionDataset(tuple(seqs), rig, tuple(str(f) for f in files), int(prefix), int(target),
+                             int(pace_chunk_length))
+
+
+def train_datasets(args):
+    """Train and held-out :class:`LocomotionDataset` of ``refimpl train``'s options (``--data``,
+    ``--locomotion-*``)."""
+    from refimpl.errors import BadInputError, UsageError
+    P, T = int(args.locomotion_prefix), int(args.locomotion_target)
+    if P < 1 or T < 2:
+        raise UsageError(f"--locomotion-prefix must be >= 1 and --locomotion-target >= 2, got {P}, {T}")
+    kind, train, test = resolve_files(args.data)
+    n = int(getattr(args, "locomotion_max_files", 0) or 0)
+    train, test = _evenly(train, n), _evenly(test, n)
+    chunk = int(getattr(args, "pace_chunk_length", 0) or 0)
+    try:
+        return (build_dataset(kind, train, prefix=P, target=T, pace_chunk_length=chunk, progress=print),
+                build_dataset(kind, test, prefix=P, target=T, pace_chunk_length=chunk))
+    except (OSError, ValueError) as exc:
+        raise BadInputError(f"--data {args.data}: {exc}") from exc
+
+
+def num_examples(dataset: LocomotionDataset) -> int:
+    """Training examples: sequences with at least one pose window (the reference's ⌈#seq / batch⌉ batches per
+    epoch; our trainer takes ⌊N / batch⌋)."""
+    return max(1, len(dataset.windows))
+
+
+def describe_data(train_ds: LocomotionDataset, test_ds: LocomotionDataset) -> str:
+    """``"1470 training sequences (735 files, ...) / 190 held-out ..."``."""
+    return (f"{len(train_ds.sequences)} training sequences ({len(train_ds.files)} files, {train_ds.num_frames} "
+            f"frames, {len(train_ds.windows)} with a {train_ds.prefix}+{train_ds.target}-frame window) / "
+            f"{len(test_ds.sequences)} held-out ({len(test_ds.files)} files), {train_ds.rig.name} rig, "
+            f"{train_ds.skeleton.num_joints} joints, {train_ds.fps:g} fps")
+
+
+def _seed_clip(ds: LocomotionDataset) -> dict:
+    """The first SEED_FRAMES frames of the training sequence whose average speed is closest to a walk, for the
+    generation prefix."""
+    best, best_d = None, np.inf
+    for s in ds.sequences:
+        if s.num_frames < SEED_FRAMES + 1:
+            continue
+        amp = float(np.hypot(s.features[:SEED_FRAMES, 2], s.features[:SEED_FRAMES, 3]).mean())
+        d = abs(amp - SPEEDS["walk"])
+        if d < best_d:
+            best, best_d = s, d
+    if best is None:
+        best = max(ds.sequences, key=lambda s: s.num_frames)
+    n = min(SEED_FRAMES, best.num_frames)
+    return {"name": best.name, "rotations": np.round(best.rotations[:n], 6).tolist(),
+            "features": np.round(best.features[:n], 6).tolist()}
+
+
+def checkpoint_extra(train_ds: LocomotionDataset) -> dict:
+    """What a locomotion checkpoint carries: frame rate, rig, window sizes, the skeleton (FK and BVH output), and
+    a seed clip (the generation prefix)."""
+    sk = train_ds.skeleton
+    return {"fps": float(train_ds.fps), "rig": train_ds.rig.name, "prefix": int(train_ds.prefix),
+            "target": int(train_ds.target),
+            "skeleton": {"names": list(sk.names), "parents": [int(p) for p in sk.parents],
+                         "offsets": np.asarray(sk.offsets, np.float64).tolist(),
+                         "joints_left": [int(j) for j in sk.joints_left],
+                         "joints_right": [int(j) for j in sk.joints_right]},
+            "seed_clip": _seed_clip(train_ds)}
+
+
+def check_checkpoint(model_config: Mapping, path) -> None:
+    """Refuse (BadInputError) a checkpoint without :func:`checkpoint_extra`'s skeleton."""
+    from refimpl.errors import BadInputError
+    if "skeleton" not in model_config or "rig" not in model_config:
+        raise BadInputError(f"{path}: the checkpoint has no locomotion skeleton/rig; train it with `refimpl train`")
+
+
+def trained_fields(model_config: Mapping, config) -> dict:
+    """The :class:`~refimpl.registry.TrainedModel` fields of this task: the frame rate."""
+    return {"fps": float(model_config.get("fps", FPS))}
+
+
+def skeleton_of(model_config: Mapping) -> Skeleton:
+    """The training skeleton stored by :func:`checkpoint_extra`."""
+    s = model_config["skeleton"]
+    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), names=s["names"],
+                    joints_left=s.get("joints_left"), joints_right=s.get("joints_right"))
+
+
+def rig_of(model_config: Mapping) -> LocomotionRig:
+    return {r.name: r for r in (CMU_RIG, BANDAI_NAMCO_RIG)}[model_config["rig"]]
+
+
+def onnx_method(runtime) -> Callable:
+    """``f(inputs (B, P + T, F)) -> (rotations (B, T, J, 4), translations (B, T, 2))`` running an exported
+    long-term pose network step by step (``runtime.rollout``)."""
+    def network_onnx(inputs, prefix: int):
+        return runtime.rollout(np.asarray(inputs, np.float32), int(prefix))
+
+    return network_onnx
+
+
+# ------------------------------------------------------------------------------------------------------------
+# protocol: free-running position error over the horizon, with ground-truth controls
+# ------------------------------------------------------------------------------------------------------------
+
+def evaluation_windows(ds: LocomotionDataset, stride: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Deterministic held-out windows: every sequence with P + T frames, starts every ``stride`` frames (default
+    T), no augmentation.
+
+    Returns
+    -------
+    inputs : (N, P + T, 4J + 8); target_positions : (N, T, J, 3) ``positions_local``;
+    target_translations : (N, T, 2)
+    """
+    P, T = ds.prefix, ds.target
+    stride = T if stride is None else int(stride)
+    ins, pos, tr = [], [], []
+    for s in ds.windows:
+        for st in range(0, s.num_frames - P - T + 1, stride):
+            ins.append(np.concatenate([s.rotations[st:st + P + T].reshape(P + T, -1), s.features[st:st + P + T]], 1))
+            pos.append(s.positions_local[st + P:st + P + T])
+            tr.append(s.features[st + P:st + P + T, :2])
+    if not ins:
+        raise ValueError(f"dataset: no sequence has the {P + T} frames of a window")
+    return np.stack(ins), np.stack(pos), np.stack(tr)
+
+
+def zero_velocity(inputs: np.ndarray, prefix: int):
+    """Baseline: the last prefix frame's pose and translations, held for the T frames."""
+    B, L, F = inputs.shape
+    J = (F - 8) // 4
+    T = L - prefix
+    rot = np.repeat(inputs[:, prefix - 1:prefix, :4 * J].reshape(B, 1, J, 4), T, axis=1)
+    tr = np.repeat(inputs[:, prefix - 1:prefix, 4 * J:4 * J + 2], T, axis=1)
+    return rot, tr
+
+
+def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = FPS) -> dict:
+    """``name -> f(inputs (B, P + T, F), prefix) -> (rotations (B, T, J, 4), translations (B, T, 2))``: the
+    networks (free-running with the ground-truth controls), then the zero-velocity baseline."""
+    return {**dict(networks or {}), "zero_velocity": zero_velocity}
+
+
+def position_errors(skeleton: Skeleton, rotations, translations, target_positions) -> tuple[np.ndarray, np.ndarray]:
+    """Per horizon frame: mean joint-position error and mean joint-velocity error (units), positions from FK
+    with root ``(0, height, 0)`` as the loss, or ``rotations`` themselves when they are positions (..., J, 3)
+    (QN §4.4.2: velocity error = Euclidean error of the first difference of the positions).
+
+    Returns
+    -------
+    position : (T,); velocity : (T - 1,)
+    """
+    rot = np.asarray(rotations, np.float64)
+    tr = np.asarray(translations, np.float64)
+    if rot.shape[-1] == 3:  # a position-output model: the positions themselves
+        pos = rot
+    else:
+        root = np.zeros(rot.shape[:-2] + (3,))
+        root[..., 1] = tr[..., 1]
+        pos = skeleton.forward_kinematics(rot, root)                        # (B, T, J, 3)
+    tgt = np.asarray(target_positions, np.float64)
+    perr = np.linalg.norm(pos - tgt, axis=-1).mean(axis=(0, 2))
+    verr = np.linalg.norm(np.diff(pos, axis=1) - np.diff(tgt, axis=1), axis=-1).mean(axis=(0, 2))
+    return perr, verr
+
+
+def evaluate(test_ds: LocomotionDataset, methods_by_name: Mapping[str, Callable], batch: int = 64) -> dict:
+    """Free-running held-out error of every method over the T-frame horizon (:func:`evaluation_windows`,
+    :func:`position_errors`): ``{name: {"position": (T,), "velocity": (T-1,), "mean_position", "mean_velocity",
+    "windows"}}`` in QuaterNet units (× 5.6444 for cm)."""
+    inputs, tpos, _ = evaluation_windows(test_ds)
+    out = {}
+    for name, f in methods_by_name.items():
+        rots, trs = [], []
+        for i in range(0, len(inputs), batch):
+            r, t = f(inputs[i:i + batch], test_ds.prefix)
+            rots.append(np.asarray(r, np.float64))
+            trs.append(np.asarray(t, np.float64))
+        perr, verr = position_errors(test_ds.skeleton, np.concatenate(rots), np.concatenate(trs), tpos)
+        out[name] = {"position": perr, "velocity": verr, "mean_position": float(perr.mean()),
+                     "mean_velocity": float(verr.mean()), "windows": int(len(inputs))}
+    return out
+
+
+def format_results(results: Mapping[str, dict], horizons=(1, 10, 30, 60)) -> str:
+    """A table of the position error (units and cm) at a few horizon frames, and the mean velocity error."""
+    names = list(results)
+    T = len(results[names[0]]["position"])
+    hs = [h for h in horizons if h <= T]
+    head = ["method"] + [f"pos@{h}" for h in hs] + ["pos mean", "pos mean cm", "vel mean"]
+    rows = [head]
+    for n in names:
+        r = results[n]
+        rows.append([n] + [f"{r['position'][h - 1]:.3f}" for h in hs]
+                    + [f"{r['mean_position']:.3f}", f"{r['mean_position'] * QUATERNET_UNIT_CM:.2f}",
+                       f"{r['mean_velocity']:.4f}"])
+    w = [max(len(r[i]) for r in rows) for i in range(len(head))]
+    return "\n".join("  ".join(c.rjust(x) for c, x in zip(r, w)) for r in rows)

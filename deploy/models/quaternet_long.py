@@ -1,0 +1,115 @@
+"""ONNX graphs of QuaterNet's long-term locomotion networks (spec/deploy.md §9, spec/locomotion.md §10).
+
+* :func:`export_pose_step` — one step of the long-term pose network (``refimpl.models.quaternet.step`` with
+  controls and translations, absolute rotations): ``x (B, 4J + 2 + 6)``, ``state (L, B, H)`` →
+  ``y (B, 4J + 2)`` (unit quaternions per joint, then offset and height), ``state_next (L, B, H)``.
+  A generation loop feeds ``[y | controls]`` back (``refimpl.tasks.locomotion_generate``).
+* :func:`export_pace` — the bidirectional pace network over a whole path: ``x (B, N, 2)``
+  ``[turning_angle, average_speed]`` → ``y (B, N, 4)`` ``[A, ω, cos Δ, sin Δ]`` (raw; the clipping and facing of
+  ``refimpl.models.pace.predict`` stay in the host).
+
+Shape legend: B batch, N spline points, J joints, L GRU layers, H hidden, F input features, G outputs.
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+import onnx
+
+from refimpl.models import pace
+from refimpl.models.quaternet import QuaterNetConfig, check_params
+
+from deploy.activations import leaky_relu
+from deploy.graph import OPSET, GraphBuilder
+from deploy.gru import gru, gru_step
+from deploy.linear import linear
+from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
+from deploy.quat import quat_normalize
+from deploy.recurrent import tiled_state
+
+__all__ = ["NAME", "QUATERNET_PAPER", "export_pose_step", "export_pace"]
+
+NAME = "quaternet-long"
+QUATERNET_PAPER = ("Pavllo, Feichtenhofer, Auli, Grangier: Modeling Human Motion with Quaternion-based Neural "
+                   "Networks, IJCV 2019 (long-term locomotion, §3.7)")
+
+
+def _representation(config: QuaterNetConfig) -> dict:
+    return {"kind": "quaternet_long", "layout": ["rotations (4J, (w, x, y, z) per joint, local, root absolute)",
+                                                "translations (offset, height)", "controls (6, inputs only)"],
+            "num_joints": int(config.num_joints), "units": "QuaterNet units (5.6444 cm)"}
+
+
+def export_pose_step(params: Mapping[str, np.ndarray], config: QuaterNetConfig, *, dtype=np.float32,
+                     opset: int = OPSET, primitive: bool | None = None, skeleton=None, frame_rate: float = 30.0,
+                     metadata: Mapping | None = None) -> onnx.ModelProto:
+    """The ``step`` model of the long-term pose network (QN Fig. 1 with the controls block, spec/quaternet.md §1).
+
+    Graph: ``a = LReLU(fc2(LReLU(fc1(c))))``, ``h' = GRU([q | τ | a], h)``, ``o = fc(h'_top)``,
+    ``q̂_j = o_j / max(‖o_j‖, ε)``, ``y = [q̂ | τ']``.
+    """
+    check_params(params, config)
+    if config.velocity or config.num_controls == 0:
+        raise ValueError(f"config: expected a long-term (absolute, with controls) network, got {config}")
+    J, O, C = config.num_joints, config.num_outputs, config.num_controls
+    G, F, H, L = config.output_size, config.input_size, config.hidden_size, config.num_layers
+    g = GraphBuilder(f"{NAME}_step", dtype=dtype, opset=opset, primitive=primitive)
+    x = g.input("x", ["B", F])
+    state = g.input("state", [L, "B", H])
+    pose, ctrl = g.node("Split", [x, g.ints([G, C])], "x.split", axis=1, outputs=("pose", "controls"))
+    a = leaky_relu(g, linear(g, ctrl, params, "fc1", name="fc1", rank2=True), name="fc1.act",
+                   alpha=config.negative_slope)
+    a = leaky_relu(g, linear(g, a, params, "fc2", name="fc2", rank2=True), name="fc2.act",
+                   alpha=config.negative_slope)
+    gin = g.node("Concat", [pose, a], "gru_in", axis=1)                          # (B, I)
+    top, h_new = gru_step(g, gin, state, params, "rnn", name="rnn", num_layers=L)  # (B, H), (L, B, H)
+    o = linear(g, top, params, "fc", name="fc", rank2=True)                       # (B, G)
+    q, tau = g.node("Split", [o, g.ints([4 * J, O])], "o.split", axis=1, outputs=("q", "tau"))
+    q = g.node("Reshape", [q, g.ints([0, J, 4])], "q.joints")                     # (B, J, 4)
+    q = quat_normalize(g, q, name="q.unit", eps=float(config.eps))
+    q = g.node("Reshape", [q, g.ints([0, 4 * J])], "q.flat")                      # (B, 4J)
+    y = g.node("Concat", [q, tau], "y", axis=1)                                   # (B, G)
+    g.output(y, "y", ["B", G])
+    g.output(h_new, "state_next", [L, "B", H])
+    io = {"inputs": io_entries(("x", ["B", F], "[rotations 4J | offset, height | 6 controls] of the current frame"),
+                               ("state", [L, "B", H], "GRU state (h0 repeated at the start; then state_next)")),
+          "outputs": io_entries(("y", ["B", G], "next frame: unit quaternions per joint, offset, height"),
+                                ("state_next", [L, "B", H], "GRU state after this frame"))}
+    extra = dict(metadata or {})
+    extra["initial_state"] = "h0 of the parameters, repeated over B (see the pace/step runtime)"
+    meta = build_metadata(g, name=NAME, role="step", config=config.to_dict(), io=io,
+                          representation=_representation(config), skeleton=skeleton, frame_rate=frame_rate,
+                          source_paper=QUATERNET_PAPER, variant="float", extra=extra)
+    return g.model(metadata=meta, doc_string="QuaterNet long-term pose network: one step",
+                   producer_version=EXPORTER_VERSION)
+
+
+def export_pace(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, dtype=np.float32, opset: int = OPSET,
+                primitive: bool | None = None, frame_rate: float = 30.0,
+                metadata: Mapping | None = None) -> onnx.ModelProto:
+    """The ``pace`` model: the bidirectional pace network over a whole path (``refimpl.models.pace.forward``).
+
+    Graph: ``h_0`` learned ``(2, 1, H)`` tiled over B, ``Y = BiGRU(x)`` ``(B, N, 2H)``, ``y = fc(Y)``.
+    """
+    if not config.bidirectional:
+        raise ValueError("config: only the bidirectional pace network is exported (the delayed one runs in NumPy)")
+    H = config.hidden_size
+    for k in ("h0", "fc.weight"):
+        if k not in params:
+            raise ValueError(f"params: missing {k!r}")
+    g = GraphBuilder(f"{NAME}_pace", dtype=dtype, opset=opset, primitive=primitive)
+    x = g.input("x", ["B", "N", config.input_size])
+    h0 = tiled_state(g, np.asarray(params["h0"], dtype=dtype), x, name="h0")      # (2, B, H)
+    y, _ = gru(g, x, h0, params, "rnn", name="rnn", num_layers=1, bidirectional=True)  # (B, N, 2H)
+    out = linear(g, y, params, "fc", name="fc")                                   # (B, N, 4)
+    g.output(out, "y", ["B", "N", config.output_size])
+    io = {"inputs": io_entries(("x", ["B", "N", 2], "[turning_angle, average_speed] per spline point")),
+          "outputs": io_entries(("y", ["B", "N", 4], "[amplitude, frequency, cos Δ, sin Δ] (before clipping)"))}
+    meta = build_metadata(g, name=NAME, role="pace", config={"bidirectional": True, "hidden_size": int(H),
+                                                             "input_size": int(config.input_size),
+                                                             "output_size": int(config.output_size)},
+                          io=io, representation={"kind": "pace", "points_per_unit": 5.0}, frame_rate=frame_rate,
+                          source_paper=QUATERNET_PAPER, variant="float", extra=dict(metadata or {}))
+    return g.model(metadata=meta, doc_string="QuaterNet pace network (bidirectional GRU + linear)",
+                   producer_version=EXPORTER_VERSION)

@@ -1,0 +1,137 @@
+"""QuaterNet long-term's entry of the exporter table (``deploy.models.EXPORTERS["quaternet-long"]``): the pose
+network's step and the pace network (spec/deploy.md §9).
+
+* :func:`load_checkpoint` — ``(params, config, meta)`` of a ``refimpl train`` checkpoint of ``quaternet-long``
+  (config: :class:`~refimpl.models.quaternet.QuaterNetConfig`) or ``pace`` (:class:`~refimpl.models.pace.PaceConfig`);
+* :func:`export_dir` — ``quaternet-long_step.onnx`` (+ ``quaternet-long_h0.npy``, the learned initial state) for
+  a pose network, ``quaternet-long_pace.onnx`` for a pace network (validated, atomic);
+* :class:`Runtime` — ``step(x, state)`` and ``pace(x)`` in onnxruntime, and a ``rollout`` for evaluation.
+
+Shape legend: B batch, F input features, G outputs, L layers, H hidden, N points, P prefix, T frames.
+"""
+from __future__ import annotations
+
+import dataclasses
+import io
+from pathlib import Path
+
+import numpy as np
+
+from refimpl.atomic import atomic_write_bytes
+from refimpl.checkpoint import load_checkpoint as _read_checkpoint
+from refimpl.models import pace
+from refimpl.models.quaternet import QuaterNetConfig
+
+from deploy.graph import save_model
+from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
+from deploy.runtime import DeployedModel, load_model
+from deploy.validate import validate_model
+
+__all__ = ["load_checkpoint", "export_dir", "Runtime", "STEP_FILE", "PACE_FILE", "H0_FILE"]
+
+STEP_FILE = f"{NAME}_step.onnx"
+PACE_FILE = f"{NAME}_pace.onnx"
+H0_FILE = f"{NAME}_h0.npy"
+
+
+def load_checkpoint(path):
+    """``(params, config, meta)``: a ``quaternet-long`` checkpoint gives its ``QuaterNetConfig`` (long-term), a
+    ``pace`` checkpoint its ``PaceConfig``."""
+    arrays, meta = _read_checkpoint(path)
+    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
+    cfg = dict(meta.get("model_config") or {})
+    if meta.get("model") == "pace":
+        names = {f.name for f in dataclasses.fields(pace.PaceConfig)}
+        return params, pace.PaceConfig(**{k: v for k, v in cfg.items() if k in names}), meta
+    if meta.get("model") != NAME:
+        raise ValueError(f"{path}: expected a quaternet-long or pace checkpoint, got model {meta.get('model')!r}")
+    net = QuaterNetConfig.long_term(num_joints=int(cfg["num_joints"]), hidden_size=int(cfg["hidden_size"]),
+                                    num_layers=int(cfg["num_layers"]), controls_hidden=int(cfg["controls_hidden"]),
+                                    negative_slope=float(cfg["negative_slope"]))
+    return params, net, meta
+
+
+def _network(config):
+    """The recipe's config → the network's (``QuaterNetLongConfig.network()``), others unchanged."""
+    return config.network() if hasattr(config, "network") else config
+
+
+def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, **_ignored) -> dict[str, Path]:
+    """Export, validate and write the model(s) of ``config`` into ``out_dir``; returns role -> path.
+
+    A pose network writes ``step`` (and its ``h0`` as ``.npy``), a pace network ``pace``. Options of other
+    exporters (``mode``, ``T``) are ignored.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    config = _network(config)
+    if isinstance(config, pace.PaceConfig):
+        m = validate_model(export_pace(params, config, dtype=dtype, metadata=metadata))
+        save_model(m, out / PACE_FILE)
+        return {"pace": out / PACE_FILE}
+    m = validate_model(export_pose_step(params, config, dtype=dtype, metadata=metadata))
+    save_model(m, out / STEP_FILE)
+    buf = io.BytesIO()
+    np.save(buf, np.asarray(params["h0"], dtype=dtype), allow_pickle=False)
+    atomic_write_bytes(out / H0_FILE, buf.getvalue())
+    return {"step": out / STEP_FILE, "h0": out / H0_FILE}
+
+
+class Runtime:
+    """The exported long-term models in onnxruntime (any of ``step`` and ``pace``)."""
+
+    def __init__(self, step=None, pace_model=None, h0=None, *, intra_op_threads: int = 1):
+        def load(m):
+            return m if m is None or isinstance(m, DeployedModel) else load_model(m, intra_op_threads=intra_op_threads)
+
+        self.step_model, self.pace_model = load(step), load(pace_model)
+        self.h0 = None if h0 is None else np.asarray(h0)
+        # the `refimpl export` check compares against these
+        self.rollout_model = None
+
+    @classmethod
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "Runtime":
+        d = Path(directory)
+        step, pm, h0 = d / STEP_FILE, d / PACE_FILE, d / H0_FILE
+        if not step.is_file() and not pm.is_file():
+            raise ValueError(f"directory: no {STEP_FILE} or {PACE_FILE} in {str(d)!r}")
+        return cls(step if step.is_file() else None, pm if pm.is_file() else None,
+                   np.load(h0, allow_pickle=False) if h0.is_file() else None, intra_op_threads=intra_op_threads)
+
+    def initial_state(self, batch: int) -> np.ndarray:
+        """``h0`` repeated: ``(L, B, H)``."""
+        if self.h0 is None:
+            raise ValueError("initial_state: no h0 file beside the step model")
+        return np.repeat(self.h0, int(batch), axis=1)
+
+    def step(self, x, state=None):
+        """One frame: ``(y (B, G), state_next (L, B, H))``; ``state`` None = the learned initial state."""
+        if self.step_model is None:
+            raise ValueError("step: no step model loaded")
+        x = np.asarray(x, np.float32)
+        state = self.initial_state(x.shape[0]) if state is None else state
+        out = self.step_model.run(x=x, state=state)
+        return out["y"], out["state_next"]
+
+    def pace(self, x) -> np.ndarray:
+        """Raw pace outputs ``(B, N, 4)`` for ``x (B, N, 2)``."""
+        if self.pace_model is None:
+            raise ValueError("pace: no pace model loaded")
+        return self.pace_model.run(x=np.asarray(x, np.float32))["y"]
+
+    def rollout(self, inputs, prefix: int):
+        """Free-running prediction with the ground-truth controls (the task's method interface):
+        ``inputs (B, P + T, F)`` → ``rotations (B, T, J, 4)``, ``translations (B, T, 2)``."""
+        x = np.asarray(inputs, np.float32)
+        B, Ltot, F = x.shape
+        G = F - 6
+        J = (G - 2) // 4
+        h = None
+        for t in range(int(prefix)):
+            y, h = self.step(x[:, t], h)
+        ys = [y]
+        for t in range(int(prefix), Ltot - 1):
+            y, h = self.step(np.concatenate([y, x[:, t, G:]], axis=1), h)
+            ys.append(y)
+        y = np.stack(ys, axis=1)
+        return y[..., :4 * J].reshape(B, -1, J, 4), y[..., 4 * J:]
