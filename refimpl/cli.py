@@ -475,6 +475,12 @@ def _model_task(args, model) -> str:
     return "transition"
 
 
+_GENERATE_USAGE = ("usage: refimpl generate --source FILE --source-frame S [...]  (a transition)\n"
+                   "       refimpl generate --checkpoint CKPT --source FILE [...]  (prediction, acrnn)\n"
+                   "       refimpl generate --model quaternet-long --checkpoint POSE.npz --pace PACE.npz "
+                   "[--path ...]  (locomotion)")
+
+
 def cmd_generate(args) -> int:
     """``refimpl generate``."""
     from refimpl.bvh import write_bvh
@@ -489,8 +495,8 @@ def cmd_generate(args) -> int:
         raise UsageError("a quaternet-long / pace checkpoint: pass --model quaternet-long --checkpoint POSE.npz "
                          "--pace PACE.npz [--path ...]")
     if args.source is None:
-        raise UsageError("--source is required (the prefix, seed or source clip); for locomotion: "
-                         "--model quaternet-long --checkpoint POSE.npz --pace PACE.npz [--path ...]")
+        raise UsageError("the following argument is required: --source (the prefix, seed or source clip)\n"
+                         + _GENERATE_USAGE)
     if task_name == "prediction":
         if args.backend == "numpy" and first is None:
             raise UsageError("--backend numpy needs --checkpoint")
@@ -500,9 +506,7 @@ def cmd_generate(args) -> int:
         return _generate_synthesis(args)
     if args.source_frame is None:
         raise UsageError("the following arguments are required for a transition: --source, --source-frame\n"
-                         "usage: refimpl generate --source FILE --source-frame S [...]  (a transition)\n"
-                         "       refimpl generate --model quaternet-long --checkpoint POSE.npz --pace PACE.npz "
-                         "[--path ...]  (locomotion)")
+                         + _GENERATE_USAGE)
     if args.method == "qtg":
         if args.backend == "numpy" and not args.checkpoint:
             raise UsageError("--method qtg with --backend numpy needs --checkpoint")

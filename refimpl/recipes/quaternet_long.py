@@ -34,7 +34,8 @@ from refimpl.recipes.qtg import parse_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
+__all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
+           "PAPER_BATCH",
            "OUTPUTS", "QuaterNetLongConfig", "make_config", "euler_to_quat_forward", "euler_to_quat_backward",
            "axis_angle_to_quat_forward", "axis_angle_to_quat_backward", "rotations_from_quat", "quat_from_rotations",
            "quat_from_rotations_backward", "ablation_inputs", "loss_and_grads", "make_adapter", "rollout",
@@ -92,6 +93,12 @@ class QuaterNetLongConfig:
 
 
 CONFIG_TYPE = QuaterNetLongConfig
+
+
+def param_shapes(config: QuaterNetLongConfig) -> dict:
+    """Name -> shape of every parameter of the network ``config`` describes (the checkpoint schema's reference,
+    spec/robustness.md §9): the recurrent network's ``param_shapes`` of ``config.network`` (ablations included)."""
+    return quaternet.param_shapes(config.network())
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> QuaterNetLongConfig:
