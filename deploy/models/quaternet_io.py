@@ -15,16 +15,15 @@ L layers, H hidden size.
 """
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
 
-from refimpl.checkpoint import load_checkpoint as _read_checkpoint, load_state_dict_npz
 from refimpl.models.quaternet import QuaterNetConfig
 from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
 
 from deploy.graph import OPSET, save_model
+from deploy.models.checkpoint_io import checkpoint_params, config_from_meta, read_checkpoint
 from deploy.models.quaternet import (export_quaternet_cnn_window, export_quaternet_init, export_quaternet_predict,
                                      export_quaternet_step)
 from deploy.runtime import DeployedModel, load_model
@@ -35,29 +34,15 @@ __all__ = ["load_quaternet_checkpoint", "export_quaternet_dir", "QuaterNetRuntim
 
 
 def _read(path):
-    try:
-        arrays, meta = _read_checkpoint(path)
-    except ValueError as exc:
-        if "not a refimpl checkpoint" not in str(exc):
-            raise
-        arrays, meta = load_state_dict_npz(path), {}
-    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")} or dict(arrays)
-    return params, meta
-
-
-def _config(config_type, meta, convert=None):
-    names = {f.name for f in dataclasses.fields(config_type)}
-    cfg = {k: v for k, v in (meta.get("model_config") or {}).items() if k in names}
-    if convert:
-        cfg = convert(cfg)
-    return config_type(**cfg)
+    arrays, meta = read_checkpoint(path, state_dict_ok=True)
+    return checkpoint_params(arrays, state_dict_ok=True), meta
 
 
 def load_quaternet_checkpoint(path):
     """``(params, QuaterNetConfig, meta)`` from a ``refimpl train`` checkpoint (``--model quaternet``) or a plain
     state-dict ``.npz`` (the config's defaults: the paper's short-term model)."""
     params, meta = _read(path)
-    return params, _config(QuaterNetConfig, meta), meta
+    return params, config_from_meta(QuaterNetConfig, meta), meta
 
 
 def load_cnn_checkpoint(path):
@@ -70,7 +55,7 @@ def load_cnn_checkpoint(path):
         return cfg
 
     params, meta = _read(path)
-    return params, _config(QuaterNetCNNConfig, meta, convert), meta
+    return params, config_from_meta(QuaterNetCNNConfig, meta, convert), meta
 
 
 def _network(config):
