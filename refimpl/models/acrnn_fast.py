@@ -27,7 +27,7 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.models.acrnn import ACRNNConfig, loss_backward, loss_forward
+from refimpl.models.acrnn import ACRNNConfig, loss_and_grads_with
 from refimpl.models.acrnn import check_sequence_inputs as _check_sequence
 from refimpl.nn.lstm import cell_activate as _cell_activate, cell_gates_backward as _cell_gates_backward
 from refimpl.nn.params import check_float_array
@@ -179,10 +179,4 @@ def sequence_backward(dpred, cache) -> dict[str, np.ndarray]:
 
 def loss_and_grads(params: Mapping[str, np.ndarray], config: ACRNNConfig, frames, spec, mask=None):
     """:func:`refimpl.models.acrnn.loss_and_grads` on the fast path: ``(total, parts, grads)``."""
-    if config.frame_size != spec.mean.size:
-        raise ValueError(f"spec: expected frames of size {config.frame_size} (config.frame_size), got "
-                         f"{spec.mean.size}")
-    pred, cache = sequence_forward(params, config, frames, mask)
-    total, parts, lcache = loss_forward(pred, np.asarray(frames)[:, 1:], spec)
-    grads = sequence_backward(loss_backward(1.0, lcache), cache)
-    return total, parts, grads
+    return loss_and_grads_with(sequence_forward, sequence_backward, params, config, frames, spec, mask)
