@@ -15,11 +15,10 @@ import numpy as np
 
 from refimpl.models.acrnn import ACRNNConfig
 
-from deploy.graph import OPSET, save_model
+from deploy.graph import OPSET
 from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
-from deploy.models.checkpoint_io import checkpoint_params, config_from_meta, read_checkpoint
+from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
 from deploy.runtime import DeployedModel, load_model
-from deploy.validate import validate_model
 
 __all__ = ["load_acrnn_checkpoint", "export_acrnn_dir", "ACRNNRuntime"]
 
@@ -48,12 +47,7 @@ def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, pare
     kw = dict(mean=np.asarray(mean), std=np.asarray(std), representation=representation, dtype=dtype,
               opset=OPSET if opset is None else opset, skeleton=skeleton, frame_rate=frame_rate, metadata=extra)
     models = {"step": export_acrnn_step(params, config, **kw), "generate": export_acrnn_generate(params, config, **kw)}
-    paths = {}
-    for role, m in models.items():
-        validate_model(m)
-        paths[role] = out / f"acrnn_{role}.onnx"
-        save_model(m, paths[role])
-    return paths
+    return write_models(models, out, "acrnn")
 
 
 class ACRNNRuntime:

@@ -18,13 +18,12 @@ import numpy as np
 
 from refimpl.models.qtg import QTGConfig
 
-from deploy.graph import OPSET, save_model
-from deploy.models.checkpoint_io import checkpoint_params, read_checkpoint
+from deploy.graph import OPSET
+from deploy.models.entry_io import checkpoint_params, read_checkpoint, write_models
 from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
 from deploy.models.qtg_compact import export_qtg_rollout_compact
 from deploy.quantize import WEIGHT_FORMATS
 from deploy.runtime import DeployedModel, load_model
-from deploy.validate import validate_model
 
 __all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime", "MAX_TRANSITION_FRAMES"]
 
@@ -92,12 +91,7 @@ def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None
                                              normalization=normalization, skeleton=skeleton, metadata=metadata)
     models = {"init": export_qtg_init(params, config, **kw), "step": export_qtg_step(params, config, **kw),
               "rollout": rollout}
-    paths = {}
-    for role, m in models.items():
-        validate_model(m)
-        paths[role] = out / f"qtg_{role}.onnx"
-        save_model(m, paths[role])
-    return paths
+    return write_models(models, out, "qtg")
 
 
 class QTGRuntime:

@@ -22,12 +22,11 @@ import numpy as np
 from refimpl.models.quaternet import QuaterNetConfig
 from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
 
-from deploy.graph import OPSET, save_model
-from deploy.models.checkpoint_io import checkpoint_params, config_from_meta, read_checkpoint
+from deploy.graph import OPSET
+from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
 from deploy.models.quaternet import (export_quaternet_cnn_window, export_quaternet_init, export_quaternet_predict,
                                      export_quaternet_step)
 from deploy.runtime import DeployedModel, load_model
-from deploy.validate import validate_model
 
 __all__ = ["load_quaternet_checkpoint", "export_quaternet_dir", "QuaterNetRuntime", "load_cnn_checkpoint",
            "export_cnn_dir", "QuaterNetCNNRuntime"]
@@ -63,17 +62,6 @@ def _network(config):
     return getattr(config, "network", config)
 
 
-def _write(models: dict, out_dir, name: str) -> dict:
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {}
-    for role, m in models.items():
-        validate_model(m)
-        paths[role] = out / f"{name}_{role}.onnx"
-        save_model(m, paths[role])
-    return paths
-
-
 def _frame_rate(metadata):
     return float((metadata or {}).get("frame_rate", 25.0))
 
@@ -92,7 +80,7 @@ def export_quaternet_dir(params, config, out_dir, *, dtype=np.float32, opset=Non
     models = {"init": export_quaternet_init(params, cfg, **kw), "step": export_quaternet_step(params, cfg, **kw)}
     if cfg.num_controls == 0:
         models["predict"] = export_quaternet_predict(params, cfg, k=k, **kw)
-    return _write(models, out_dir, "quaternet")
+    return write_models(models, out_dir, "quaternet")
 
 
 def export_cnn_dir(params, config, out_dir, *, dtype=np.float32, opset=None, skeleton=None, metadata=None,
@@ -101,7 +89,7 @@ def export_cnn_dir(params, config, out_dir, *, dtype=np.float32, opset=None, ske
     ``mode`` accepted for the table's contract; the window model has no fixed length)."""
     m = export_quaternet_cnn_window(params, _network(config), dtype=dtype, opset=OPSET if opset is None else opset,
                                    skeleton=skeleton, frame_rate=_frame_rate(metadata), metadata=metadata)
-    return _write({"window": m}, out_dir, "quaternet-cnn")
+    return write_models({"window": m}, out_dir, "quaternet-cnn")
 
 
 def _load(m, role, intra_op_threads):

@@ -21,7 +21,7 @@ from refimpl.models import pace
 from refimpl.models.quaternet import QuaterNetConfig
 
 from deploy.graph import save_model
-from deploy.models.checkpoint_io import checkpoint_params, config_from_meta, read_checkpoint
+from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint
 from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model

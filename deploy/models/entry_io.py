@@ -1,20 +1,25 @@
-"""Reading ``refimpl train`` checkpoints for the exporter table's entry modules (``deploy/models/*_io.py``):
-the arrays and metadata, the parameters (``param.<name>`` arrays), and a config dataclass from
-``meta["model_config"]``.
+"""What the exporter table's entry modules (``deploy/models/*_io.py``) share: reading ``refimpl train``
+checkpoints (the arrays and metadata, the parameters ``param.<name>``, a config dataclass from
+``meta["model_config"]``) and writing a folder of exported models.
 
 * :func:`read_checkpoint` — ``(arrays, meta)``; with ``state_dict_ok`` a plain state-dict ``.npz`` is accepted too
   (``meta`` then ``{}``);
 * :func:`checkpoint_params` — the ``param.<name>`` arrays without the prefix (with ``state_dict_ok``: all arrays
   when there is none);
-* :func:`config_from_meta` — ``config_type(**fields)`` from ``meta["model_config"]`` (unknown keys ignored).
+* :func:`config_from_meta` — ``config_type(**fields)`` from ``meta["model_config"]`` (unknown keys ignored);
+* :func:`write_models` — validate each model and write it as ``<name>_<role>.onnx``.
 """
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
 
-__all__ = ["read_checkpoint", "checkpoint_params", "config_from_meta"]
+from deploy.graph import save_model
+from deploy.validate import validate_model
+
+__all__ = ["read_checkpoint", "checkpoint_params", "config_from_meta", "write_models"]
 
 PARAM_PREFIX = "param."
 
@@ -44,3 +49,16 @@ def config_from_meta(config_type, meta, convert=None):
     if convert:
         cfg = convert(cfg)
     return config_type(**cfg)
+
+
+def write_models(models: dict, out_dir, name: str) -> dict:
+    """Validate every ``role -> ModelProto`` of ``models`` and write it atomically to ``out_dir/<name>_<role>.onnx``
+    (``out_dir`` created if needed); returns ``role -> Path``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    for role, m in models.items():
+        validate_model(m)
+        paths[role] = out / f"{name}_{role}.onnx"
+        save_model(m, paths[role])
+    return paths
