@@ -9,18 +9,16 @@ Shape legend: B batch, S seed frames, N generated frames, F frame size, H hidden
 """
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
 
-from refimpl.checkpoint import load_checkpoint as _read_checkpoint
 from refimpl.models.acrnn import ACRNNConfig
 
-from deploy.graph import OPSET, save_model
+from deploy.graph import OPSET
 from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
+from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
 from deploy.runtime import DeployedModel, load_model
-from deploy.validate import validate_model
 
 __all__ = ["load_acrnn_checkpoint", "export_acrnn_dir", "ACRNNRuntime"]
 
@@ -28,11 +26,8 @@ __all__ = ["load_acrnn_checkpoint", "export_acrnn_dir", "ACRNNRuntime"]
 def load_acrnn_checkpoint(path):
     """``(params, config, meta)`` of an acRNN training checkpoint (parameters ``param.<name>``, config from
     ``meta["model_config"]``; the statistics, representation and skeleton are in ``meta["model_config"]`` too)."""
-    arrays, meta = _read_checkpoint(path)
-    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
-    fields = {f.name for f in dataclasses.fields(ACRNNConfig)}
-    cfg = {k: v for k, v in (meta.get("model_config") or {}).items() if k in fields}
-    return params, ACRNNConfig(**cfg), meta
+    arrays, meta = read_checkpoint(path)
+    return checkpoint_params(arrays), config_from_meta(ACRNNConfig, meta), meta
 
 
 def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, parents=None, opset=None,
@@ -52,12 +47,7 @@ def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, pare
     kw = dict(mean=np.asarray(mean), std=np.asarray(std), representation=representation, dtype=dtype,
               opset=OPSET if opset is None else opset, skeleton=skeleton, frame_rate=frame_rate, metadata=extra)
     models = {"step": export_acrnn_step(params, config, **kw), "generate": export_acrnn_generate(params, config, **kw)}
-    paths = {}
-    for role, m in models.items():
-        validate_model(m)
-        paths[role] = out / f"acrnn_{role}.onnx"
-        save_model(m, paths[role])
-    return paths
+    return write_models(models, out, "acrnn")
 
 
 class ACRNNRuntime:

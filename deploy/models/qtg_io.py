@@ -16,15 +16,14 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.checkpoint import load_checkpoint as _read_checkpoint, load_state_dict_npz
 from refimpl.models.qtg import QTGConfig
 
-from deploy.graph import OPSET, save_model
+from deploy.graph import OPSET
+from deploy.models.entry_io import checkpoint_params, read_checkpoint, write_models
 from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
 from deploy.models.qtg_compact import export_qtg_rollout_compact
 from deploy.quantize import WEIGHT_FORMATS
 from deploy.runtime import DeployedModel, load_model
-from deploy.validate import validate_model
 
 __all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime", "MAX_TRANSITION_FRAMES"]
 
@@ -53,12 +52,7 @@ def load_qtg_checkpoint(path):
     from refimpl.models import qtg as qtg_model
 
     where = str(path)
-    try:
-        arrays, meta = _read_checkpoint(path)
-    except ValueError as exc:
-        if "not a refimpl checkpoint" not in str(exc):
-            raise
-        arrays, meta = load_state_dict_npz(path), {}
+    arrays, meta = read_checkpoint(path, state_dict_ok=True)
     cfg = meta.get("model_config", {})
     cfg = {} if cfg is None else cfg
     validate_task_fields(meta, where=where)  # top-level root_mean / root_std, when a caller stored them there
@@ -66,7 +60,7 @@ def load_qtg_checkpoint(path):
         raise ValueError(f"{where}: model_config: expected a JSON object, got {type(cfg).__name__}")
     validate_task_fields(cfg, where=where)
     config = validate_model_config(QTGConfig, cfg, where)
-    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")} or dict(arrays)
+    params = checkpoint_params(arrays, state_dict_ok=True)
     validate_params(params, expected_param_shapes(qtg_model, QTGConfig, config), where, dtype=cfg.get("dtype"),
                     prefix="param." if any(k.startswith("param.") for k in arrays) else "")
     return params, config, meta
@@ -97,12 +91,7 @@ def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None
                                              normalization=normalization, skeleton=skeleton, metadata=metadata)
     models = {"init": export_qtg_init(params, config, **kw), "step": export_qtg_step(params, config, **kw),
               "rollout": rollout}
-    paths = {}
-    for role, m in models.items():
-        validate_model(m)
-        paths[role] = out / f"qtg_{role}.onnx"
-        save_model(m, paths[role])
-    return paths
+    return write_models(models, out, "qtg")
 
 
 class QTGRuntime:

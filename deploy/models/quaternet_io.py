@@ -15,49 +15,33 @@ L layers, H hidden size.
 """
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
 
-from refimpl.checkpoint import load_checkpoint as _read_checkpoint, load_state_dict_npz
 from refimpl.models.quaternet import QuaterNetConfig
 from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
 
-from deploy.graph import OPSET, save_model
+from deploy.graph import OPSET
+from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
 from deploy.models.quaternet import (export_quaternet_cnn_window, export_quaternet_init, export_quaternet_predict,
                                      export_quaternet_step)
 from deploy.runtime import DeployedModel, load_model
-from deploy.validate import validate_model
 
 __all__ = ["load_quaternet_checkpoint", "export_quaternet_dir", "QuaterNetRuntime", "load_cnn_checkpoint",
            "export_cnn_dir", "QuaterNetCNNRuntime"]
 
 
 def _read(path):
-    try:
-        arrays, meta = _read_checkpoint(path)
-    except ValueError as exc:
-        if "not a refimpl checkpoint" not in str(exc):
-            raise
-        arrays, meta = load_state_dict_npz(path), {}
-    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")} or dict(arrays)
-    return params, meta
-
-
-def _config(config_type, meta, convert=None):
-    names = {f.name for f in dataclasses.fields(config_type)}
-    cfg = {k: v for k, v in (meta.get("model_config") or {}).items() if k in names}
-    if convert:
-        cfg = convert(cfg)
-    return config_type(**cfg)
+    arrays, meta = read_checkpoint(path, state_dict_ok=True)
+    return checkpoint_params(arrays, state_dict_ok=True), meta
 
 
 def load_quaternet_checkpoint(path):
     """``(params, QuaterNetConfig, meta)`` from a ``refimpl train`` checkpoint (``--model quaternet``) or a plain
     state-dict ``.npz`` (the config's defaults: the paper's short-term model)."""
     params, meta = _read(path)
-    return params, _config(QuaterNetConfig, meta), meta
+    return params, config_from_meta(QuaterNetConfig, meta), meta
 
 
 def load_cnn_checkpoint(path):
@@ -70,23 +54,12 @@ def load_cnn_checkpoint(path):
         return cfg
 
     params, meta = _read(path)
-    return params, _config(QuaterNetCNNConfig, meta, convert), meta
+    return params, config_from_meta(QuaterNetCNNConfig, meta, convert), meta
 
 
 def _network(config):
     """The network config of a recipe config (``.network``) or the network config itself."""
     return getattr(config, "network", config)
-
-
-def _write(models: dict, out_dir, name: str) -> dict:
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {}
-    for role, m in models.items():
-        validate_model(m)
-        paths[role] = out / f"{name}_{role}.onnx"
-        save_model(m, paths[role])
-    return paths
 
 
 def _frame_rate(metadata):
@@ -107,7 +80,7 @@ def export_quaternet_dir(params, config, out_dir, *, dtype=np.float32, opset=Non
     models = {"init": export_quaternet_init(params, cfg, **kw), "step": export_quaternet_step(params, cfg, **kw)}
     if cfg.num_controls == 0:
         models["predict"] = export_quaternet_predict(params, cfg, k=k, **kw)
-    return _write(models, out_dir, "quaternet")
+    return write_models(models, out_dir, "quaternet")
 
 
 def export_cnn_dir(params, config, out_dir, *, dtype=np.float32, opset=None, skeleton=None, metadata=None,
@@ -116,7 +89,7 @@ def export_cnn_dir(params, config, out_dir, *, dtype=np.float32, opset=None, ske
     ``mode`` accepted for the table's contract; the window model has no fixed length)."""
     m = export_quaternet_cnn_window(params, _network(config), dtype=dtype, opset=OPSET if opset is None else opset,
                                    skeleton=skeleton, frame_rate=_frame_rate(metadata), metadata=metadata)
-    return _write({"window": m}, out_dir, "quaternet-cnn")
+    return write_models({"window": m}, out_dir, "quaternet-cnn")
 
 
 def _load(m, role, intra_op_threads):

@@ -11,18 +11,17 @@ Shape legend: B batch, F input features, G outputs, L layers, H hidden, N points
 """
 from __future__ import annotations
 
-import dataclasses
 import io
 from pathlib import Path
 
 import numpy as np
 
 from refimpl.atomic import atomic_write_bytes
-from refimpl.checkpoint import load_checkpoint as _read_checkpoint
 from refimpl.models import pace
 from refimpl.models.quaternet import QuaterNetConfig
 
 from deploy.graph import save_model
+from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint
 from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model
@@ -37,12 +36,11 @@ H0_FILE = f"{NAME}_h0.npy"
 def load_checkpoint(path):
     """``(params, config, meta)``: a ``quaternet-long`` checkpoint gives its ``QuaterNetConfig`` (long-term), a
     ``pace`` checkpoint its ``PaceConfig``."""
-    arrays, meta = _read_checkpoint(path)
-    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
+    arrays, meta = read_checkpoint(path)
+    params = checkpoint_params(arrays)
     cfg = dict(meta.get("model_config") or {})
     if meta.get("model") == "pace":
-        names = {f.name for f in dataclasses.fields(pace.PaceConfig)}
-        return params, pace.PaceConfig(**{k: v for k, v in cfg.items() if k in names}), meta
+        return params, config_from_meta(pace.PaceConfig, meta), meta
     if meta.get("model") != NAME:
         raise ValueError(f"{path}: expected a quaternet-long or pace checkpoint, got model {meta.get('model')!r}")
     net = QuaterNetConfig.long_term(num_joints=int(cfg["num_joints"]), hidden_size=int(cfg["hidden_size"]),

@@ -501,12 +501,19 @@ def loss_and_grads(params: Mapping[str, np.ndarray], config: ACRNNConfig, frames
     parts : dict
     grads : dict
     """
+    return loss_and_grads_with(sequence_forward, sequence_backward, params, config, frames, spec, mask)
+
+
+def loss_and_grads_with(forward, backward, params: Mapping[str, np.ndarray], config: ACRNNConfig, frames,
+                        spec: LossSpec, mask=None):
+    """:func:`loss_and_grads` with the rollout's ``forward(params, config, frames, mask) -> (pred, cache)`` and
+    ``backward(dpred, cache) -> grads`` given (this module's, or :mod:`refimpl.models.acrnn_fast`'s)."""
     if config.frame_size != spec.mean.size:
         raise ValueError(f"spec: expected frames of size {config.frame_size} (config.frame_size), got "
                          f"{spec.mean.size}")
-    pred, cache = sequence_forward(params, config, frames, mask)
+    pred, cache = forward(params, config, frames, mask)
     total, parts, lcache = loss_forward(pred, np.asarray(frames)[:, 1:], spec)
-    grads = sequence_backward(loss_backward(1.0, lcache), cache)
+    grads = backward(loss_backward(1.0, lcache), cache)
     return total, parts, grads
 
 

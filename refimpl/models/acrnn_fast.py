@@ -14,8 +14,8 @@ What is different from the step-by-step reference:
   per sequence: ``dW_k = dG_k^T Z_k`` (one GEMM over the ``T·B`` rows), ``db = Σ dG``, ``dW_dec = dY^T H_top``;
 * no allocation inside the step loops (every buffer is allocated once per call, kernels write with ``out=``).
 
-The cell kernels (:func:`_cell_forward`, :func:`_cell_backward`) repeat ``refimpl/nn/lstm.py``'s private ones
-(whose module has no kernel tier yet) with the caller forming ``dh_prev``; the checks are
+The cell kernels are :mod:`refimpl.nn.lstm`'s (kernel tier: ``cell_activate``, ``cell_gates_backward``, the
+caller forming ``dh_prev``); the checks are
 :func:`refimpl.models.acrnn.check_sequence_inputs`.
 
 Shape legend: B batch, T steps, F frame size, H hidden size, L layers, I_k input size of layer k (F, then H),
@@ -27,54 +27,12 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.models.acrnn import ACRNNConfig, loss_backward, loss_forward
+from refimpl.models.acrnn import ACRNNConfig, loss_and_grads_with
 from refimpl.models.acrnn import check_sequence_inputs as _check_sequence
-from refimpl.nn.activations import sigmoid as _sigmoid
+from refimpl.nn.lstm import cell_activate as _cell_activate, cell_gates_backward as _cell_gates_backward
 from refimpl.nn.params import check_float_array
 
 __all__ = ["sequence_forward", "sequence_backward", "loss_and_grads"]
-
-
-def _cell_forward(gates, c_prev, c_new, tc, h_new, hid):
-    """Activate ``gates (B, 4H)`` (pre-activations on entry) in place; write ``c_new``, ``tc = tanh(c_new)``,
-    ``h_new`` (each (B, H)). ``c' = f c + i g``, ``h' = o tanh(c')``."""
-    _sigmoid(gates[:, :2 * hid], out=gates[:, :2 * hid])                     # i, f
-    np.tanh(gates[:, 2 * hid:3 * hid], out=gates[:, 2 * hid:3 * hid])       # g
-    _sigmoid(gates[:, 3 * hid:], out=gates[:, 3 * hid:])                     # o
-    np.multiply(gates[:, hid:2 * hid], c_prev, out=c_new)
-    np.multiply(gates[:, :hid], gates[:, 2 * hid:3 * hid], out=tc)
-    c_new += tc
-    np.tanh(c_new, out=tc)
-    np.multiply(gates[:, 3 * hid:], tc, out=h_new)
-
-
-def _cell_backward(dh, dc, c_prev, gates, tc, dg, tmp, hid):
-    """From the cotangents ``dh, dc`` of ``h', c'`` write the gate cotangents ``dg (B, 4H)``; ``dc`` becomes the
-    cotangent of ``c_prev`` (``dh`` is left as is; the caller forms ``dh_prev`` from ``dg``)."""
-    i, f, g, o = gates[:, :hid], gates[:, hid:2 * hid], gates[:, 2 * hid:3 * hid], gates[:, 3 * hid:]
-    di, df, dgg, do = dg[:, :hid], dg[:, hid:2 * hid], dg[:, 2 * hid:3 * hid], dg[:, 3 * hid:]
-    np.subtract(1, o, out=do)                                                 # da_o = dh tanh(c') o (1 - o)
-    do *= o
-    do *= tc
-    do *= dh
-    np.multiply(tc, tc, out=tmp)                                              # dc += dh o (1 - tanh(c')^2)
-    np.subtract(1, tmp, out=tmp)
-    tmp *= o
-    tmp *= dh
-    dc += tmp
-    np.subtract(1, i, out=di)                                                 # da_i = dc g i (1 - i)
-    di *= i
-    di *= g
-    di *= dc
-    np.subtract(1, f, out=df)                                                 # da_f = dc c f (1 - f)
-    df *= f
-    df *= c_prev
-    df *= dc
-    np.multiply(g, g, out=dgg)                                                # da_g = dc i (1 - g^2)
-    np.subtract(1, dgg, out=dgg)
-    dgg *= i
-    dgg *= dc
-    dc *= f                                                                   # dc_prev = dc f
 
 
 def sequence_forward(params: Mapping[str, np.ndarray], config: ACRNNConfig, frames, mask=None):
@@ -137,7 +95,7 @@ def sequence_forward(params: Mapping[str, np.ndarray], config: ACRNNConfig, fram
                 Z[k][t, :, H:] = hs[k, t]
                 np.matmul(Z[k][t], wcat_t[k], out=g)
                 g += bias[k]
-            _cell_forward(g, cs[k, t], cs[k, t + 1], tcs[k, t], hs[k, t + 1], H)
+            _cell_activate(g, cs[k, t], cs[k, t + 1], tcs[k, t], hs[k, t + 1])
         if t + 1 < T and not mask[t + 1]:
             np.matmul(hs[L - 1, t + 1], w_dec_t, out=feed)
             feed += b_dec
@@ -188,7 +146,7 @@ def sequence_backward(dpred, cache) -> dict[str, np.ndarray]:
         carry = None
         for k in range(L - 1, -1, -1):
             g = dG[k, t]
-            _cell_backward(dh[k], dc[k], cs[k, t], gates[k, t], tcs[k, t], g, tmp, H)
+            _cell_gates_backward(dh[k], dc[k], cs[k, t], gates[k, t], tcs[k, t], g, tmp)
             n_in = F if k == 0 else H
             if k == 0 and mask[t]:
                 np.matmul(g, w_hh0, out=dh[0])                                 # the input is data: no dx
@@ -221,10 +179,4 @@ def sequence_backward(dpred, cache) -> dict[str, np.ndarray]:
 
 def loss_and_grads(params: Mapping[str, np.ndarray], config: ACRNNConfig, frames, spec, mask=None):
     """:func:`refimpl.models.acrnn.loss_and_grads` on the fast path: ``(total, parts, grads)``."""
-    if config.frame_size != spec.mean.size:
-        raise ValueError(f"spec: expected frames of size {config.frame_size} (config.frame_size), got "
-                         f"{spec.mean.size}")
-    pred, cache = sequence_forward(params, config, frames, mask)
-    total, parts, lcache = loss_forward(pred, np.asarray(frames)[:, 1:], spec)
-    grads = sequence_backward(loss_backward(1.0, lcache), cache)
-    return total, parts, grads
+    return loss_and_grads_with(sequence_forward, sequence_backward, params, config, frames, spec, mask)

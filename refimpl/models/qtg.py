@@ -45,6 +45,7 @@ from typing import Mapping, NamedTuple
 
 import numpy as np
 
+from refimpl.models._shared import check_param_dict
 from refimpl.nn.gru import gru_init, gru_step_backward, gru_step_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
 from refimpl.nn.mlp import mlp_backward, mlp_forward
@@ -248,20 +249,9 @@ def _mlp_backward(dy, cache, grads):
 def check_params(params: Mapping[str, np.ndarray], config: QTGConfig) -> np.dtype:
     if not isinstance(config, QTGConfig):
         raise ValueError(f"config: expected a QTGConfig, got {type(config).__name__}")
-    dtype = None
-    for name, shape in param_shapes(config).items():
-        if name not in params:
-            raise ValueError(f"params: missing parameter {name!r} (expected shape {shape})")
-        a = params[name]
-        if not isinstance(a, np.ndarray) or a.shape != shape:
-            raise ValueError(f"params[{name!r}]: expected shape {shape}, got {np.shape(a)}")
-        if dtype is None:
-            dtype = a.dtype
-        elif a.dtype != dtype:
-            raise ValueError(f"params[{name!r}]: expected dtype {dtype} like the other parameters, got {a.dtype}")
-    if dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
-        raise ValueError(f"params: expected float32 or float64 arrays, got {dtype}")
-    return dtype
+    shapes = param_shapes(config)
+    # parameters beyond the config's are ignored here (unlike check_param_dict, which rejects them)
+    return check_param_dict({k: v for k, v in params.items() if k in shapes}, shapes)
 
 
 def check_context(past, target, config: QTGConfig, dtype) -> tuple[np.ndarray, np.ndarray]:

@@ -140,12 +140,18 @@ def _cell_forward(gi, h, c, w_hh, whh_t, g, c_new, tc, h_new):
     ``W_hh^T`` or None (then ``w_hh`` is used via :func:`~refimpl.nn.linear._matmul_wt`). Writes g (B, 4H) =
     activated gates [i | f | g | o], c_new, tc = tanh(c_new), h_new (all (B, H)).
     """
-    hid = h.shape[1]
     if whh_t is not None:
         np.matmul(h, whh_t, out=g)  # (B, 4H)
     else:
         _matmul_wt(h, w_hh, out=g)
     g += gi
+    _cell_activate(g, c, c_new, tc, h_new)
+
+
+def _cell_activate(g, c, c_new, tc, h_new):
+    """The activations and state update of one LSTM step: g (B, 4H) holds the gate pre-activations on entry and
+    the activated gates [i | f | g | o] on exit; writes c_new, tc = tanh(c_new), h_new (all (B, H)) from c."""
+    hid = c.shape[1]
     _sigmoid(g[:, :2 * hid], out=g[:, :2 * hid])  # i, f
     np.tanh(g[:, 2 * hid:3 * hid], out=g[:, 2 * hid:3 * hid])  # g
     _sigmoid(g[:, 3 * hid:], out=g[:, 3 * hid:])  # o
@@ -172,12 +178,17 @@ def _output_gate_backward(dh, dc, o, tc, do, tmp):
 def _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dg, w_hh):
     """The end of a step's backward: ``da_g = dc i (1 - g^2)`` into ``dgg``; then ``dc_prev = dc f`` and
     ``dh_prev = dg W_hh`` overwrite ``dc`` and ``dh`` (dg (B, 4H) must hold all four gate cotangents)."""
+    _cell_gate_g_and_dc(dc, i, f, gg, dgg)
+    np.matmul(dg, w_hh, out=dh)
+
+
+def _cell_gate_g_and_dc(dc, i, f, gg, dgg):
+    """``da_g = dc i (1 - g^2)`` into ``dgg``, then ``dc_prev = dc f`` overwrites ``dc``."""
     np.multiply(gg, gg, out=dgg)
     np.subtract(1, dgg, out=dgg)
     dgg *= i
     dgg *= dc
     dc *= f
-    np.matmul(dg, w_hh, out=dh)
 
 
 def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
@@ -187,6 +198,13 @@ def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     h, c. c (B, H): previous cell state. Writes dg (B, 4H): cotangents of the gate pre-activations
     [a_i | a_f | a_g | a_o]. tmp (B, H) is scratch.
     """
+    _cell_gates_backward(dh, dc, c, g, tc, dg, tmp)
+    np.matmul(dg, w_hh, out=dh)  # dh_prev = dg W_hh
+
+
+def _cell_gates_backward(dh, dc, c, g, tc, dg, tmp):
+    """:func:`_cell_backward` without ``dh_prev``: writes dg (B, 4H) and overwrites dc with the cotangent of the
+    previous c; dh is left as is (the caller forms ``dh_prev = dg W_hh``). tmp (B, H) is scratch."""
     hid = c.shape[1]
     i, f, gg, o = g[:, :hid], g[:, hid:2 * hid], g[:, 2 * hid:3 * hid], g[:, 3 * hid:]
     di, df, dgg, do = dg[:, :hid], dg[:, hid:2 * hid], dg[:, 2 * hid:3 * hid], dg[:, 3 * hid:]
@@ -199,7 +217,7 @@ def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     df *= f
     df *= c
     df *= dc
-    _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dg, w_hh)  # da_g; dc_prev = dc f; dh_prev = dg W_hh
+    _cell_gate_g_and_dc(dc, i, f, gg, dgg)  # da_g; dc_prev = dc f
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -721,3 +739,8 @@ def _lstm_backward_naive(dy, dstate_n, x, state, params, prefix, num_layers=1, s
     dh0 = np.stack([dh_acc[0][k] for k in range(num_layers)])
     dc0 = np.stack([dc_acc[0][k] for k in range(num_layers)])
     return dx, (dh0, dc0), grads
+
+
+#: Kernel-tier names (no checks; used by refimpl.models.acrnn_fast).
+cell_activate = _cell_activate
+cell_gates_backward = _cell_gates_backward

@@ -18,7 +18,6 @@ Shape legend: B batch, S seed frames, N generated frames, F frame size, J joints
 """
 from __future__ import annotations
 
-import dataclasses
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
@@ -27,7 +26,7 @@ from refimpl.errors import UsageError
 from refimpl.models import acrnn, acrnn_fast
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
-from refimpl.recipes.qtg import parse_overrides
+from refimpl.recipes.qtg import config_with_overrides
 from refimpl.tasks.synthesis import TABLE1_ROWS, sample_windows, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 
@@ -59,13 +58,7 @@ def make_config(train_ds, overrides: Sequence[str] = ()) -> ACRNNConfig:
     overrides. Raises UsageError for an unknown field, a bad value or a ``frame_size`` other than the data's."""
     F = int(train_ds.data.frame_size)
     base = ACRNNConfig(frame_size=F, ground_truth_length=PAPER_GROUND_TRUTH, condition_length=PAPER_CONDITION)
-    values = parse_overrides(ACRNNConfig, dataclasses.asdict(base), overrides)
-    if values.get("frame_size", F) != F:
-        raise UsageError(f"--set frame_size={values['frame_size']}: the data has frames of {F} values")
-    try:
-        return dataclasses.replace(base, **values)
-    except ValueError as exc:
-        raise UsageError(f"--set: {exc}") from None
+    return config_with_overrides(base, overrides, "frame_size", f"the data has frames of {F} values")
 
 
 def loss_spec(variant: str, weights: Mapping | None, mean, std, skeleton) -> acrnn.LossSpec:

@@ -18,7 +18,7 @@ import numpy as np
 from refimpl.errors import UsageError
 from refimpl.models import pace
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_LR_DECAY
-from refimpl.recipes.qtg import parse_overrides
+from refimpl.recipes.qtg import config_with_overrides
 from refimpl.train import ModelAdapter, OptimConfig
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
@@ -40,11 +40,7 @@ MAX_CHUNK = 1000
 def make_config(train_ds, overrides: Sequence[str] = ()) -> pace.PaceConfig:
     """The paper's sizes with ``--set`` overrides (``bidirectional``, ``hidden_size``, ``delay``)."""
     base = pace.PaceConfig()
-    values = parse_overrides(pace.PaceConfig, dataclasses.asdict(base), overrides)
-    try:
-        return dataclasses.replace(base, **values)
-    except ValueError as exc:
-        raise UsageError(f"--set: {exc}") from None
+    return config_with_overrides(base, overrides)
 
 
 def chunk_length(data, requested: int = 0) -> int:

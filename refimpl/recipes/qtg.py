@@ -73,6 +73,19 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
     return out
 
 
+def config_with_overrides(base, overrides: Sequence[str], fixed: str | None = None, fixed_note: str = ""):
+    """``base`` (a config dataclass) with the ``--set`` ``overrides`` (:func:`parse_overrides`). ``fixed`` names a
+    field the data determines: overriding it with another value than ``base``'s raises
+    ``UsageError("--set <fixed>=<value>: <fixed_note>")``; a value the config refuses raises ``UsageError``."""
+    values = parse_overrides(type(base), dataclasses.asdict(base), overrides)
+    if fixed is not None and fixed in values and values[fixed] != getattr(base, fixed):
+        raise UsageError(f"--set {fixed}={values[fixed]}: {fixed_note}")
+    try:
+        return dataclasses.replace(base, **values)
+    except ValueError as exc:
+        raise UsageError(f"--set: {exc}") from None
+
+
 def make_config(train_ds, overrides: Sequence[str] = ()) -> QTGConfig:
     """The config for ``train_ds`` (its pose size P and transition length T) with ``--set`` overrides.
 
@@ -83,14 +96,7 @@ def make_config(train_ds, overrides: Sequence[str] = ()) -> QTGConfig:
     """
     pose_size, T = int(train_ds.poses.shape[-1]), int(train_ds.transition_length)
     base = QTGConfig(pose_size=pose_size, transition_length=T)
-    values = parse_overrides(QTGConfig, dataclasses.asdict(base), overrides)
-    for fixed in ("pose_size",):
-        if fixed in values and values[fixed] != pose_size:
-            raise UsageError(f"--set pose_size={values[fixed]}: the data has poses of {pose_size} values")
-    try:
-        return dataclasses.replace(base, **values)
-    except ValueError as exc:
-        raise UsageError(f"--set: {exc}") from None
+    return config_with_overrides(base, overrides, "pose_size", f"the data has poses of {pose_size} values")
 
 
 def qtg_adapter(train_poses, config=None, dtype=np.float32, validation_poses=None, name: str = "qtg") -> ModelAdapter:

@@ -30,7 +30,7 @@ from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, euler_l1_loss_backward, eu
                             quat_loss_backward, quat_loss_forward, quat_norm_loss_backward, quat_norm_loss_forward)
 from refimpl.models import quaternet as net
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
-from refimpl.recipes.qtg import parse_overrides
+from refimpl.recipes.qtg import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
@@ -145,13 +145,7 @@ def make_config(train_ds, overrides: Sequence[str] = (), config_type=ShortTermCo
     """
     J = int(train_ds.skeleton.num_joints)
     base = config_type(num_joints=J)
-    values = parse_overrides(config_type, dataclasses.asdict(base), overrides)
-    if "num_joints" in values and values["num_joints"] != J:
-        raise UsageError(f"--set num_joints={values['num_joints']}: the data has {J} joints")
-    try:
-        return dataclasses.replace(base, **values)
-    except ValueError as exc:
-        raise UsageError(f"--set: {exc}") from None
+    return config_with_overrides(base, overrides, "num_joints", f"the data has {J} joints")
 
 
 def teacher_forcing_mask(config, epoch: int, rng: np.random.Generator) -> np.ndarray:

@@ -30,7 +30,7 @@ from refimpl.models import quaternet
 from refimpl.nn.quat_layers import quat_mul_backward, quat_mul_forward
 from refimpl.quat import axis_angle_from_quat, euler_from_quat
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
-from refimpl.recipes.qtg import parse_overrides
+from refimpl.recipes.qtg import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
@@ -105,13 +105,7 @@ def make_config(train_ds, overrides: Sequence[str] = ()) -> QuaterNetLongConfig:
     """J from the data's skeleton, then ``--set`` overrides (``num_joints`` cannot change)."""
     J = int(train_ds.skeleton.num_joints)
     base = QuaterNetLongConfig(num_joints=J)
-    values = parse_overrides(QuaterNetLongConfig, dataclasses.asdict(base), overrides)
-    if values.get("num_joints", J) != J:
-        raise UsageError(f"--set num_joints={values['num_joints']}: the data has {J} joints")
-    try:
-        return dataclasses.replace(base, **values)
-    except ValueError as exc:
-        raise UsageError(f"--set: {exc}") from None
+    return config_with_overrides(base, overrides, "num_joints", f"the data has {J} joints")
 
 
 # ----------------------------------------------------------------------------------------------------------------
