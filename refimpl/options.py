@@ -6,9 +6,14 @@ options every training / evaluation command takes (:func:`add_data_options`).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
+from typing import Mapping, Sequence
 
-__all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "add_data_options"]
+from refimpl.errors import UsageError
+
+__all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "add_data_options", "parse_overrides",
+           "config_with_overrides"]
 
 
 def number_parser(convert, accept, expected: str):
@@ -39,3 +44,46 @@ def add_data_options(p, default="sample") -> None:
                    help="true frame rate of the files when the header is wrong (CMU salsa: 60)")
     p.add_argument("--test-fraction", type=float, default=0.2, help="held-out share when splitting (default 0.2)")
     p.add_argument("--stride", type=positive_int, default=4, help="frames between window starts (default 4)")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# --set FIELD=VALUE overrides of a model config (every recipe's make_config)
+# ----------------------------------------------------------------------------------------------------------------
+
+def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) -> dict:
+    """``["gru_hidden=128", "encoder_sizes=128,64"]`` -> typed values, by the type of the default."""
+    fields = {f.name for f in dataclasses.fields(config_type)}
+    out = {}
+    for item in overrides or ():
+        key, sep, value = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if not sep or key not in fields:
+            raise UsageError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {sorted(fields)}")
+        default = defaults[key]
+        try:
+            if isinstance(default, tuple):
+                out[key] = tuple(int(v) for v in value.split(",") if v.strip())
+            elif isinstance(default, bool):
+                out[key] = value.lower() in ("1", "true", "yes")
+            elif isinstance(default, int):
+                out[key] = int(value)
+            elif isinstance(default, float):
+                out[key] = float(value)
+            else:
+                out[key] = value
+        except ValueError:
+            raise UsageError(f"--set {item!r}: {value!r} is not a valid {type(default).__name__}") from None
+    return out
+
+
+def config_with_overrides(base, overrides: Sequence[str], fixed: str | None = None, fixed_note: str = ""):
+    """``base`` (a config dataclass) with the ``--set`` ``overrides`` (:func:`parse_overrides`). ``fixed`` names a
+    field the data determines: overriding it with another value than ``base``'s raises
+    ``UsageError("--set <fixed>=<value>: <fixed_note>")``; a value the config refuses raises ``UsageError``."""
+    values = parse_overrides(type(base), dataclasses.asdict(base), overrides)
+    if fixed is not None and fixed in values and values[fixed] != getattr(base, fixed):
+        raise UsageError(f"--set {fixed}={values[fixed]}: {fixed_note}")
+    try:
+        return dataclasses.replace(base, **values)
+    except ValueError as exc:
+        raise UsageError(f"--set: {exc}") from None

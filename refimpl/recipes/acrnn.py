@@ -26,7 +26,7 @@ from refimpl.errors import UsageError
 from refimpl.models import acrnn, acrnn_fast
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
-from refimpl.recipes.qtg import config_with_overrides
+from refimpl.options import config_with_overrides
 from refimpl.tasks.synthesis import TABLE1_ROWS, sample_windows, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 

@@ -18,7 +18,7 @@ import numpy as np
 from refimpl.errors import UsageError
 from refimpl.models import pace
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_LR_DECAY
-from refimpl.recipes.qtg import config_with_overrides
+from refimpl.options import config_with_overrides
 from refimpl.train import ModelAdapter, OptimConfig
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",

@@ -21,6 +21,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.options import config_with_overrides, parse_overrides  # noqa: F401 (re-exported)
 from refimpl.errors import UsageError
 from refimpl.losses import mae_loss_backward, mae_loss_forward
 from refimpl.models.qtg import QTGConfig, init_params
@@ -45,45 +46,6 @@ EXPORTER = "qtg"
 PAPER_OPTIM = OptimConfig(**QTG_ADAM)
 #: The paper's batch size.
 PAPER_BATCH = 32
-
-
-def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) -> dict:
-    """``["gru_hidden=128", "encoder_sizes=128,64"]`` -> typed values, by the type of the default."""
-    fields = {f.name for f in dataclasses.fields(config_type)}
-    out = {}
-    for item in overrides or ():
-        key, sep, value = item.partition("=")
-        key = key.strip().replace("-", "_")
-        if not sep or key not in fields:
-            raise UsageError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {sorted(fields)}")
-        default = defaults[key]
-        try:
-            if isinstance(default, tuple):
-                out[key] = tuple(int(v) for v in value.split(",") if v.strip())
-            elif isinstance(default, bool):
-                out[key] = value.lower() in ("1", "true", "yes")
-            elif isinstance(default, int):
-                out[key] = int(value)
-            elif isinstance(default, float):
-                out[key] = float(value)
-            else:
-                out[key] = value
-        except ValueError:
-            raise UsageError(f"--set {item!r}: {value!r} is not a valid {type(default).__name__}") from None
-    return out
-
-
-def config_with_overrides(base, overrides: Sequence[str], fixed: str | None = None, fixed_note: str = ""):
-    """``base`` (a config dataclass) with the ``--set`` ``overrides`` (:func:`parse_overrides`). ``fixed`` names a
-    field the data determines: overriding it with another value than ``base``'s raises
-    ``UsageError("--set <fixed>=<value>: <fixed_note>")``; a value the config refuses raises ``UsageError``."""
-    values = parse_overrides(type(base), dataclasses.asdict(base), overrides)
-    if fixed is not None and fixed in values and values[fixed] != getattr(base, fixed):
-        raise UsageError(f"--set {fixed}={values[fixed]}: {fixed_note}")
-    try:
-        return dataclasses.replace(base, **values)
-    except ValueError as exc:
-        raise UsageError(f"--set: {exc}") from None
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> QTGConfig:

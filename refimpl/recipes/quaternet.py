@@ -30,7 +30,7 @@ from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, euler_l1_loss_backward, eu
                             quat_loss_backward, quat_loss_forward, quat_norm_loss_backward, quat_norm_loss_forward)
 from refimpl.models import quaternet as net
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
-from refimpl.recipes.qtg import config_with_overrides
+from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 

@@ -30,7 +30,7 @@ from refimpl.models import quaternet
 from refimpl.nn.quat_layers import quat_mul_backward, quat_mul_forward
 from refimpl.quat import axis_angle_from_quat, euler_from_quat
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
-from refimpl.recipes.qtg import config_with_overrides
+from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
