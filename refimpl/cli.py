@@ -362,6 +362,8 @@ def cmd_eval(args) -> int:
         return _eval_prediction(args, model)
     if task_name == "synthesis":
         return _eval_synthesis(args, model)
+    if task_name == "locomotion":
+        return _eval_locomotion(args, model)
     T = args.transition_length or (model.transition_length if model else 30)
     _say(f"reading {args.data} ...")
     _, test_ds = transition.build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
@@ -647,6 +649,29 @@ def _eval_synthesis(args, model) -> int:
     task.print_results(results, data, model)
     if args.json:
         task.write_results(results, args.json)
+        _say(f"results          {args.json}")
+    return EXIT_OK
+
+
+def _eval_locomotion(args, model) -> int:
+    """``refimpl eval`` for the long-term pose network: free-running position and velocity error over the held-out
+    windows (QN §4.4.2; spec/locomotion.md §8), against zero-velocity."""
+    task = task_of("locomotion")
+    if model is None or model.spec.name != "quaternet-long":
+        raise UsageError("locomotion: evaluation needs --checkpoint of a quaternet-long model (the pace network's "
+                         "held-out L1 is its loss_val.csv)")
+    _say(f"reading {args.data} ...")
+    data = task.load_eval_data(args.data, model.extra)
+    results = evaluate_model(model, data)
+    _say(f"held-out windows: {next(iter(results.values()))['windows']} of {data.prefix} + {data.target} frames "
+         f"({len(data.files)} files); error in QuaterNet units (1 unit = 5.6444 cm)")
+    _say(task.format_results(results))
+    if args.json:
+        from refimpl.atomic import atomic_write_text
+
+        serial = {n: {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()}
+                  for n, r in results.items()}
+        atomic_write_text(args.json, json.dumps(serial, indent=1) + "\n")
         _say(f"results          {args.json}")
     return EXIT_OK
 

@@ -1119,6 +1119,29 @@ def evaluate(test_ds: LocomotionDataset, methods_by_name: Mapping[str, Callable]
     return out
 
 
+def load_eval_data(data: str, model_config: Mapping, max_files: int = 0) -> LocomotionDataset:
+    """The held-out :class:`LocomotionDataset` of ``--data`` (:func:`resolve_files`' test files) with the window
+    sizes a checkpoint was trained with (``model_config["prefix"]``, ``["target"]``), for ``refimpl eval``.
+
+    Raises
+    ------
+    BadInputError
+        ``--data`` cannot be read, or its rig is not the checkpoint's.
+    """
+    from refimpl.errors import BadInputError
+    kind, _, test = resolve_files(data)
+    test = _evenly(test, int(max_files or 0))
+    try:
+        ds = build_dataset(kind, test, prefix=int(model_config.get("prefix", 30)),
+                           target=int(model_config.get("target", 60)))
+    except (OSError, ValueError) as exc:
+        raise BadInputError(f"--data {data}: {exc}") from exc
+    if model_config.get("rig") not in (None, ds.rig.name):
+        raise BadInputError(f"--data {data}: a {ds.rig.name} rig, but the checkpoint was trained on the "
+                            f"{model_config.get('rig')} rig")
+    return ds
+
+
 def format_results(results: Mapping[str, dict], horizons=(1, 10, 30, 60)) -> str:
     """A table of the position error (units and cm) at a few horizon frames, and the mean velocity error."""
     names = list(results)
