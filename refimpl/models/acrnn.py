@@ -32,6 +32,7 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.models._shared import check_param_dict
 from refimpl.dq_output import DQ_TERM_NAMES, DQ_TERMS, dq_output_loss_backward, dq_output_loss_forward
 from refimpl.losses import (WEIGHT_ACRNN_QUAT_FK, euclidean_loss_backward, euclidean_loss_forward,
                             mse_loss_backward, mse_loss_forward, quat_loss_backward, quat_loss_forward,
@@ -142,18 +143,9 @@ def init_params(config: ACRNNConfig, rng: np.random.Generator, dtype=np.float64)
 
 
 def _check_params(params: Mapping[str, np.ndarray], config: ACRNNConfig) -> np.dtype:
+    """:func:`refimpl.models._shared.check_param_dict` on the parameters this config names (others are ignored)."""
     shapes = param_shapes(config)
-    dt = None
-    for name, shape in shapes.items():
-        if name not in params:
-            raise ValueError(f"params: missing {name!r} (expected shape {shape})")
-        a = params[name]
-        if not isinstance(a, np.ndarray) or a.shape != shape:
-            raise ValueError(f"params[{name!r}]: expected shape {shape}, got {np.shape(a)}")
-        dt = a.dtype if dt is None else dt
-        if a.dtype != dt or dt not in (np.float32, np.float64):
-            raise ValueError(f"params[{name!r}]: expected dtype {dt} (float32 or float64), got {a.dtype}")
-    return dt
+    return check_param_dict({k: v for k, v in params.items() if k in shapes}, shapes)
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -37,6 +37,7 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.models._shared import check_param_dict
 from refimpl.losses import mae_loss_backward, mae_loss_forward
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init, gru_step_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
@@ -126,16 +127,9 @@ def init_params(config: PaceConfig, rng: np.random.Generator, dtype=np.float64) 
 
 
 def _check_params(params: Mapping[str, np.ndarray], config: PaceConfig) -> np.dtype:
+    """:func:`refimpl.models._shared.check_param_dict` on the parameters this config names (others are ignored)."""
     shapes = param_shapes(config)
-    missing = sorted(set(shapes) - set(params))
-    if missing:
-        raise ValueError(f"params: missing {missing} for {config}")
-    dt = np.asarray(params["h0"]).dtype
-    for k, s in shapes.items():
-        a = np.asarray(params[k])
-        if a.shape != s or a.dtype != dt:
-            raise ValueError(f"params[{k!r}]: expected shape {s} dtype {dt}, got {a.shape} {a.dtype}")
-    return dt
+    return check_param_dict({k: v for k, v in params.items() if k in shapes}, shapes)
 
 
 def forward(params: Mapping[str, np.ndarray], config: PaceConfig, x: np.ndarray):

@@ -22,7 +22,6 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from refimpl.options import config_with_overrides, parse_overrides  # noqa: F401 (re-exported)
-from refimpl.errors import UsageError
 from refimpl.losses import mae_loss_backward, mae_loss_forward
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import prepare_inference, rollout_backward, rollout_forward, rollout_inference

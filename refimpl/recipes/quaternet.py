@@ -25,7 +25,6 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from refimpl.errors import UsageError
 from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, euler_l1_loss_backward, euler_l1_loss_forward,
                             quat_loss_backward, quat_loss_forward, quat_norm_loss_backward, quat_norm_loss_forward)
 from refimpl.models import quaternet as net

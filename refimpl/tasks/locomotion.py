@@ -35,9 +35,9 @@ import numpy as np
 
 from refimpl.bvh import read_bvh, read_bvh_header
 from refimpl.expmap import read_expmap
-from refimpl.motion import Motion
+from refimpl.motion import TRANSLATION_TOLERANCE, Motion
 from refimpl.optim import QUATERNET_LR_DECAY, adam_init, adam_step, exponential_lr
-from refimpl.quat import matrix_from_quat, quat_fix, quat_from_euler, quat_from_matrix, quat_mul, quat_rotate
+from refimpl.quat import matrix_from_quat, quat_fix, quat_from_matrix, quat_mul, quat_rotate
 from refimpl.skeleton import Skeleton, remove_joints
 from refimpl.splines import Spline, gaussian_filter1d
 
@@ -150,97 +150,33 @@ def _drop_first(m: Motion) -> Motion:
     return dataclasses.replace(m, rotations=m.rotations[1:], root_positions=m.root_positions[1:])
 
 
-def load_bandai_namco(path, tolerance: float = 1e-3) -> Motion:
+def load_bandai_namco(path, tolerance: float = TRANSLATION_TOLERANCE) -> Motion:
     """A Bandai Namco Research Motion Dataset 2 BVH, read by its documented convention.
 
     The files have a static ``joint_Root`` (6 channels, all zero) whose child ``Hips`` carries the root motion,
     and 6 channels on EVERY joint whose position channels hold the joint's local translation: they REPLACE the
-    ``OFFSET`` (Blender's reading; adding them would double every bone). So: local translation of joint j at
-    frame t = its position channels (or its OFFSET when it has none); rotations from the rotation channels
-    (composed in channel order, as :func:`refimpl.bvh.read_bvh`); then the motion is re-rooted at ``Hips``:
-    ``Hips``' world rotation and position (through ``joint_Root``'s transform) become the root's, ``joint_Root``
-    is dropped, and each other joint's per-frame translation must be constant (within ``tolerance`` cm) and
-    becomes its offset.
-
-    This reader parses the file itself (the hierarchy with :func:`refimpl.bvh.read_bvh_header`, the numbers
-    here) because ``read_bvh`` of commit 4ec2a6f adds non-root position channels to the offsets and refuses
-    varying ones. It returns centimetres, 30 fps; :func:`prepare_motion` with :data:`BANDAI_NAMCO_RIG` keeps
-    the 21 joints and converts the units.
+    ``OFFSET`` (Blender's reading). :func:`refimpl.bvh.read_bvh` reads that convention (spec/data.md §2.1); with
+    ``translations="rotations"`` it re-roots the motion at ``Hips`` and folds every other joint's translation,
+    constant within ``tolerance`` (relative), into its offset, or raises. This function checks the layout (a root
+    ``joint_Root`` whose only child is ``Hips``), sets the root's offset to 0 (the root position carries it) and
+    makes the rotations continuous over time. Centimetres, 30 fps; :func:`prepare_motion` with
+    :data:`BANDAI_NAMCO_RIG` keeps the 21 joints and converts the units.
 
     Returns
     -------
     Motion with the header's joints minus ``joint_Root`` (End Sites included), rotations continuous over time.
     """
     where = os.fspath(path)
-    header = read_bvh_header(path)
-    data = _read_motion_numbers(path, header.num_channels, where)            # (T, C)
-    if data.shape[0] != header.num_frames:
-        raise ValueError(f"{where}: Frames: declares {header.num_frames} frames, the file has {data.shape[0]}")
-    skel = header.skeleton
-    num_j, num_t = skel.num_joints, data.shape[0]
-    if num_t < 1:
-        raise ValueError(f"{where}: no frames")
-    if skel.names[0] != "joint_Root" or num_j < 2 or skel.names[1] != "Hips" or skel.children[0] != (1,):
+    skel = read_bvh_header(path).skeleton
+    if skel.names[0] != "joint_Root" or skel.num_joints < 2 or skel.names[1] != "Hips" or skel.children[0] != (1,):
         raise ValueError(f"{where}: expected a root 'joint_Root' whose only child is 'Hips', got root "
                          f"{skel.names[0]!r} with children {[skel.names[c] for c in skel.children[0]]}")
-    trans = np.broadcast_to(skel.offsets, (num_t, num_j, 3)).copy()         # (T, J, 3) local translations
-    rot = np.zeros((num_t, num_j, 4))
-    rot[..., 0] = 1.0
-    col = 0
-    for j, chans in enumerate(header.channels):
-        order, rcols = "", []
-        for ch in chans:
-            axis = "xyz".index(ch[0].lower())
-            if ch.endswith("position"):
-                trans[:, j, axis] = data[:, col]
-            else:
-                order += ch[0].lower()
-                rcols.append(col)
-            col += 1
-        if order:
-            order += "".join(a for a in "xyz" if a not in order)
-            angles = np.zeros((num_t, 3))
-            angles[:, :len(rcols)] = np.deg2rad(data[:, rcols])
-            rot[:, j] = quat_from_euler(angles, order)
-    # re-root at Hips: world transform of Hips through joint_Root
-    hips_rot = quat_mul(rot[:, 0], rot[:, 1])                               # (T, 4)
-    hips_pos = trans[:, 0] + quat_rotate(rot[:, 0], trans[:, 1])            # (T, 3)
-    offsets = np.empty((num_j - 1, 3))
-    for j in range(2, num_j):
-        spread = float(np.max(np.ptp(trans[:, j], axis=0)))
-        if spread > tolerance:
-            raise ValueError(f"{where}: joint {skel.names[j]!r} changes its translation over time by {spread:.3g}; "
-                             "a Motion keeps one offset per joint")
-        offsets[j - 1] = trans[0, j]
+    m = read_bvh(path, translations="rotations", tolerance=tolerance)
+    offsets = np.array(m.skeleton.offsets, dtype=np.float64)
     offsets[0] = 0.0
-    parents = [-1] + [int(p) - 1 for p in skel.parents[2:]]
-    new_skel = Skeleton(parents, offsets, names=skel.names[1:], end_sites=[e - 1 for e in skel.end_sites])
-    rotations = rot[:, 1:].copy()
-    rotations[:, 0] = hips_rot
-    return Motion(skeleton=new_skel, rotations=quat_fix(rotations), root_positions=hips_pos,
-                  frame_time=header.frame_time, name=Path(where).stem)
-
-
-def _read_motion_numbers(path, num_channels: int, where: str) -> np.ndarray:
-    with open(path, "rb") as fh:
-        text = fh.read().decode("utf-8-sig").replace("\r\n", "\n").replace("\r", "\n")
-    lines = text.split("\n")
-    k = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
-    if k is None:
-        raise ValueError(f"{where}: missing MOTION section")
-    i, seen = k + 1, 0
-    while i < len(lines) and seen < 2:  # the Frames: and Frame Time: lines (checked by read_bvh_header)
-        if lines[i].strip():
-            seen += 1
-        i += 1
-    rows = [ln for ln in lines[i:] if ln.strip()]
-    try:
-        flat = np.array(" ".join(rows).split(), dtype=np.float64)
-    except ValueError:
-        raise ValueError(f"{where}: non-numeric value in the motion block") from None
-    if flat.size != len(rows) * num_channels or not np.all(np.isfinite(flat)):
-        raise ValueError(f"{where}: expected {num_channels} finite numbers on each of the {len(rows)} frame lines")
-    return flat.reshape(len(rows), num_channels)
+    sk = Skeleton(m.skeleton.parents, offsets, names=m.skeleton.names, end_sites=m.skeleton.end_sites)
+    return Motion(skeleton=sk, rotations=quat_fix(m.rotations), root_positions=m.root_positions,
+                  frame_time=m.frame_time, name=Path(where).stem)
 
 
 # ------------------------------------------------------------------------------------------------------------

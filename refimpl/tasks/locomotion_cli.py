@@ -3,12 +3,11 @@ controls, and print the stability numbers (spec/cli.md, spec/locomotion.md §9).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from refimpl.errors import BadInputError, UsageError
+from refimpl.errors import UsageError
 from refimpl.tasks.locomotion import FPS, QUATERNET_UNIT_CM, rig_of, skeleton_of
 from refimpl.tasks.locomotion_generate import (bone_length_drift, facing_of, foot_skating, generate_walk,
                                               parse_path, parse_speed, write_outputs)
