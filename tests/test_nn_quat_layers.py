@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from refimpl.dualquat import dq_normalize
+from refimpl.dualquat import dq_from_quat_translation, dq_mul, dq_normalize
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.nn.quat_layers import (
     EULER_ORDERS,
@@ -15,6 +15,8 @@ from refimpl.nn.quat_layers import (
     dq_normalize_forward,
     euler_from_quat_backward,
     euler_from_quat_forward,
+    dq_velocity_backward,
+    dq_velocity_forward,
     qmul_velocity_backward,
     qmul_velocity_forward,
     quat_mul_backward,
@@ -121,6 +123,8 @@ def test_backward_refuses_non_finite_upstream_gradient(bad):
              (quat_mul_backward, quat_mul_forward(q, q)[1], (2, 3, 4), "dy"),
              (qmul_velocity_backward, qmul_velocity_forward(q, q)[1], (2, 3, 4), "dy"),
              (dq_normalize_backward, dq_normalize_forward(rng.standard_normal((2, 3, 8)))[1], (2, 3, 8), "dy"),
+             (dq_velocity_backward, dq_velocity_forward(rng.standard_normal((2, 3, 8)),
+                                                        rng.standard_normal((2, 3, 8)))[1], (2, 3, 8), "dy"),
              (euler_from_quat_backward, euler_from_quat_forward(q)[1], (2, 3, 3), "dangles")]
     for backward, cache, shape, name in cases:
         g = np.ones(shape)
@@ -222,6 +226,50 @@ def test_qmul_velocity_order_and_central_differences():
                     {"delta": delta, "q_in": q_in}, {"delta": dd, "q_in": dq}, max_entries=None)
     with pytest.raises(ValueError, match="q_in"):
         qmul_velocity_forward(delta, q_in[:2])
+
+
+# ------------------------------------------------------------------------------------------------
+# dq_velocity (spec/quaternet.md §9)
+
+def _unit_dq(rng, lead):
+    return dq_from_quat_translation(_unit(rng, lead), rng.standard_normal(lead + (3,)))
+
+
+@given(lead_shapes, seeds)
+def test_dq_velocity_is_normalized_left_dq_product(lead, seed):
+    """spec/quaternet.md §9: y = N(ΔD ⊗ D_in) (Eq. 13 after the dual-quaternion product, delta on the LEFT),
+    against refimpl.dualquat.dq_mul + dq_normalize; VJP into both inputs."""
+    rng = np.random.default_rng([seed, 11])
+    delta = rng.standard_normal(lead + (8,))
+    d_in = _unit_dq(rng, lead)
+    y, _ = dq_velocity_forward(delta, d_in)
+    assert_close(y, dq_normalize(dq_mul(delta, d_in)), **TOL_EXACT)
+
+    def vjp(w):
+        dd, di = dq_velocity_backward(w[0], dq_velocity_forward(delta, d_in)[1])
+        return {"delta": dd, "d_in": di}
+
+    check_vjp(lambda: dq_velocity_forward(delta, d_in)[0], {"delta": delta, "d_in": d_in}, vjp)
+
+
+def test_dq_velocity_identity_order_and_central_differences():
+    """The identity delta keeps D_in; order matters (ΔD ⊗ D_in ≠ D_in ⊗ ΔD); gradients vs central differences
+    (raw, non-unit inputs on both sides); mismatched shapes are refused."""
+    rng = np.random.default_rng(5)
+    d_in = _unit_dq(rng, (3,))
+    ident = np.zeros((3, 8))
+    ident[:, 0] = 1.0
+    assert_close(dq_velocity_forward(ident, d_in)[0], d_in, **TOL_EXACT)
+    delta, raw_in = rng.standard_normal((3, 8)), rng.standard_normal((3, 8))
+    y, cache = dq_velocity_forward(delta, d_in)
+    assert not np.allclose(y, dq_normalize(dq_mul(d_in, delta)))
+    w = rng.standard_normal(y.shape)
+    for a_in in (d_in, raw_in):
+        dd, di = dq_velocity_backward(w, dq_velocity_forward(delta, a_in)[1])
+        check_gradients(lambda: float(np.sum(dq_velocity_forward(delta, a_in)[0] * w)),
+                        {"delta": delta, "d_in": a_in}, {"delta": dd, "d_in": di}, max_entries=None)
+    with pytest.raises(ValueError, match="d_in"):
+        dq_velocity_forward(delta, d_in[:2])
 
 
 # ------------------------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.losses import quat_norm_loss_backward, quat_norm_loss_forward
 from refimpl.models.quaternet import (QuaterNetConfig, _backward_per_step, _forward_per_step, backward, check_params, count_parameters,
                                       forward, init_params, init_state, param_shapes, predict, step)
+from refimpl.dualquat import dq_from_quat_translation, dq_mul, dq_normalize
 from refimpl.quat import quat_mul, quat_normalize
 from refimpl.schedules import scheduled_sampling_mask
 from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
@@ -20,15 +21,31 @@ ABS_LT = QuaterNetConfig(num_joints=2, num_outputs=2, num_controls=3, velocity=F
                          controls_hidden=5)  # long-term shape: absolute, translations, controls
 VEL_LT = QuaterNetConfig(num_joints=2, num_outputs=1, num_controls=2, velocity=True, hidden_size=3, num_layers=1,
                          controls_hidden=3, negative_slope=0.2)
-CONFIGS = [VEL, ABS_LT, VEL_LT]
+# the dual-quaternion variants (Andreou et al. §6.2, spec/quaternet.md §9): 8 numbers per joint
+DQ_VEL = QuaterNetConfig(num_joints=2, hidden_size=4, representation="dual_quaternion")
+DQ_ABS_LT = QuaterNetConfig(num_joints=2, num_outputs=2, num_controls=3, velocity=False, hidden_size=4,
+                            controls_hidden=5, representation="dual_quaternion")
+CONFIGS = [VEL, ABS_LT, VEL_LT, DQ_VEL, DQ_ABS_LT]
 
 
 def _frames(rng, cfg, B, n, dtype=np.float64):
-    """Random frames: unit quaternions per joint, then translations and controls."""
+    """Random frames: unit quaternions (or unit dual quaternions) per joint, then translations and controls."""
     x = rng.standard_normal((B, n, cfg.input_size))
-    R = cfg.rotation_size
-    x[..., :R] = quat_normalize(x[..., :R].reshape(B, n, cfg.num_joints, 4)).reshape(B, n, R)
+    R, J = cfg.rotation_size, cfg.num_joints
+    q = quat_normalize(x[..., :4 * J].reshape(B, n, J, 4))
+    if cfg.joint_width == 8:
+        q = dq_from_quat_translation(q, x[..., 4 * J:R].reshape(B, n, J, 4)[..., :3])
+    x[..., :R] = q.reshape(B, n, R)
     return x.astype(dtype)
+
+
+def _normalized_blocks(cfg, a):
+    """Eq. 13 for dual quaternions, plain normalisation for quaternions, on (..., D) blocks."""
+    return dq_normalize(a) if cfg.joint_width == 8 else quat_normalize(a)
+
+
+def _product(cfg, a, b):
+    return dq_mul(a, b) if cfg.joint_width == 8 else quat_mul(a, b)
 
 
 def _published_names(num_controls: int) -> set[str]:
@@ -51,6 +68,13 @@ def test_paper_sizes_names_and_counts():
     assert count_parameters(lt) == 9_529_246
     for J in (22, 26, 31):  # spec/quaternet.md §2: per-joint growth 4 (3H + H + 1) with the long-term extras
         assert count_parameters(QuaterNetConfig.long_term(num_joints=J)) == 9_529_246 + 4 * 4001 * (J - 26)
+    # dual quaternions (spec/quaternet.md §9): 8J instead of 4J in the GRU input and the head
+    dq = QuaterNetConfig(representation="dual_quaternion")
+    assert (dq.input_size, dq.output_size) == (256, 256)
+    assert count_parameters(dq) == 9_526_128 + 3 * 1000 * 128 + 128 * 1001 == 10_038_256
+    with pytest.raises(ValueError, match="representation"):
+        QuaterNetConfig(representation="euler")
+    assert QuaterNetConfig(**dq.to_dict()) == dq
     # the hand arithmetic of spec/quaternet.md §2
     assert count_parameters(st) == 3 * 1000 * (128 + 1000) + 6000 + 3 * 1000 * 2000 + 6000 + 2000 + 128 * 1001
     ss, sl = param_shapes(st), param_shapes(lt)
@@ -83,8 +107,10 @@ def test_forward_equals_loop_of_steps(cfg):
         y, pre, _ = forward(params, prefix, future, mask, cfg)
         assert y.shape == (3, 6, cfg.output_size) and pre.shape == (3, 6, cfg.rotation_size)
         assert_close(y, _forward_per_step(params, prefix, future, mask, cfg), **TOL_EXACT, name=str(mask))
-        q = y[..., :cfg.rotation_size].reshape(3, 6, cfg.num_joints, 4)
-        assert_close(np.linalg.norm(q, axis=-1), np.ones((3, 6, cfg.num_joints)), **TOL_EXACT)
+        q = y[..., :cfg.rotation_size].reshape(3, 6, cfg.num_joints, cfg.joint_width)
+        assert_close(np.linalg.norm(q[..., :4], axis=-1), np.ones((3, 6, cfg.num_joints)), **TOL_EXACT)
+        if cfg.joint_width == 8:  # Eq. 3: <q_r, q_d> = 0
+            assert_close(np.sum(q[..., :4] * q[..., 4:], axis=-1), np.zeros((3, 6, cfg.num_joints)), **TOL_EXACT)
 
 
 @pytest.mark.parametrize("cfg", CONFIGS)
@@ -100,21 +126,22 @@ def test_predict_equals_free_running_forward(cfg):
     assert predict(params, prefix, 1, cfg, controls=future[:, :0, G:] if cfg.num_controls else None).shape == (2, 1, G)
 
 
-@pytest.mark.parametrize("cfg", [VEL, VEL_LT, ABS_LT])
+@pytest.mark.parametrize("cfg", [VEL, VEL_LT, ABS_LT, DQ_VEL, DQ_ABS_LT])
 def test_velocity_mode_is_qmul_with_the_fed_input(cfg):
-    """§3.6: velocity mode y_q = normalize(Δ ⊗ q_in), q_in = the fed frame's quaternion; absolute: normalize(Δ)."""
+    """§3.6: velocity mode y_q = normalize(Δ ⊗ q_in), q_in = the fed frame's quaternion; absolute: normalize(Δ).
+    Dual quaternions (spec/quaternet.md §9): the dual-quaternion product and Eq. 13."""
     rng = np.random.default_rng(3)
     params = init_params(cfg, rng)
     prefix, future = _frames(rng, cfg, 2, 3), _frames(rng, cfg, 2, 4)
     mask = np.array([True, False, True])
     y, pre, _ = forward(params, prefix, future, mask, cfg)
-    J, R = cfg.num_joints, cfg.rotation_size
+    J, R, D = cfg.num_joints, cfg.rotation_size, cfg.joint_width
     fed = [prefix[:, -1]] + [future[:, i] if mask[i] else y[:, i] for i in range(3)]
     for t in range(4):
-        delta = pre[:, t].reshape(2, J, 4)
-        q_in = fed[t][:, :R].reshape(2, J, 4)
-        expected = quat_normalize(quat_mul(delta, q_in) if cfg.velocity else delta)
-        assert_close(y[:, t, :R].reshape(2, J, 4), expected, **TOL_EXACT, name=f"t={t}")
+        delta = pre[:, t].reshape(2, J, D)
+        q_in = fed[t][:, :R].reshape(2, J, D)
+        expected = _normalized_blocks(cfg, _product(cfg, delta, q_in) if cfg.velocity else delta)
+        assert_close(y[:, t, :R].reshape(2, J, D), expected, **TOL_EXACT, name=f"t={t}")
     # translations are the raw head outputs: the same as with a zero rotation part of the fed frame
     if cfg.num_outputs:
         h = init_state(params, 2, cfg)
@@ -293,7 +320,8 @@ def test_input_validation():
 _configs = st.builds(QuaterNetConfig, num_joints=st.integers(1, 2), num_outputs=st.integers(0, 2),
                      num_controls=st.integers(0, 2), velocity=st.booleans(), hidden_size=st.integers(1, 4),
                      num_layers=st.integers(1, 3), controls_hidden=st.integers(1, 3),
-                     negative_slope=st.sampled_from([0.0, 0.05, 0.3]))
+                     negative_slope=st.sampled_from([0.0, 0.05, 0.3]),
+                     representation=st.sampled_from(["quaternion", "dual_quaternion"]))
 
 
 @given(_configs, st.integers(1, 3), st.integers(1, 4), st.integers(1, 3), st.integers(0, 2**31 - 1))

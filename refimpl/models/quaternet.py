@@ -11,6 +11,11 @@ the long-term locomotion model (absolute rotations, 26 joints, 2 translations, 6
     rotations  velocity mode: q̂ = normalize(Δ_j ⊗ q_in,j) per joint j; absolute: q̂ = normalize(Δ_j)
     output     y_t = [q̂ (4J) | τ (O)]   (translations raw, no activation)
 
+With ``representation="dual_quaternion"`` (Andreou et al. §6.2; spec/quaternet.md §9) every joint block is a
+current (root-relative) dual quaternion of 8 numbers instead of a local quaternion of 4: ``D = 8`` replaces 4 in
+every size below, the head normalises with Eq. 13 (``refimpl.nn.quat_layers.dq_normalize_forward``) and velocity
+mode is ``N(ΔD_j ⊗ D_in,j)`` (``dq_velocity_forward``).
+
 ``y_t`` predicts frame ``t + 1``. ``Δ`` (called ``pre``, the un-normalised output before the QMul) feeds the
 quaternion norm penalty (``refimpl.losses.quat_norm_loss_forward``). Parameters carry the state-dict names of the
 published PyTorch code (``h0``, ``rnn.weight_ih_l0``…, ``fc.weight``, ``fc1.*``, ``fc2.*``) so a converted
@@ -27,7 +32,8 @@ Online use: :func:`init_state`, :func:`step` (one frame in, one prediction out; 
 translates) and :func:`predict` (prefix -> k frames, built on :func:`step`).
 
 Shape legend: B batch, P prefix frames, T predicted frames, J joints, O translations, C controls, H hidden size,
-L GRU layers, F = 4J + O + C input features per frame, G = 4J + O output features, I = 4J + O (+ 30) GRU input.
+L GRU layers, D joint width (4 quaternions, 8 dual quaternions), F = DJ + O + C input features per frame,
+G = DJ + O output features, I = DJ + O (+ 30) GRU input.
 """
 from __future__ import annotations
 
@@ -41,16 +47,19 @@ from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init, gru_step_backward, gru_step_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
 from refimpl.nn.params import check_float_array, init_normal
-from refimpl.nn.quat_layers import (qmul_velocity_backward, qmul_velocity_forward, quat_normalize_backward,
-                                    quat_normalize_forward)
+from refimpl.nn.quat_layers import (dq_normalize_backward, dq_normalize_forward, dq_velocity_backward,
+                                    dq_velocity_forward, qmul_velocity_backward, qmul_velocity_forward,
+                                    quat_normalize_backward, quat_normalize_forward)
 
 __all__ = [
-    "QuaterNetConfig", "param_shapes", "count_parameters", "init_params", "check_params",
+    "JOINT_WIDTH", "QuaterNetConfig", "param_shapes", "count_parameters", "init_params", "check_params",
     "init_state", "step", "predict", "forward", "backward",
 ]
 
 #: Hidden size of the controls block (two dense layers, hard-coded in the published code).
 CONTROLS_HIDDEN = 30
+#: Joint representations of the rotation block -> numbers per joint.
+JOINT_WIDTH = {"quaternion": 4, "dual_quaternion": 8}
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -64,7 +73,8 @@ class QuaterNetConfig:
     Attributes
     ----------
     num_joints : int
-        J; the rotations are ``4 J`` features ``(w, x, y, z)`` per joint, joint-major.
+        J; the rotation block is ``D J`` features, joint-major: ``(w, x, y, z)`` per joint, or ``(q_r | q_d)``
+        for dual quaternions.
     num_outputs : int
         O, extra raw outputs fed back as inputs ("Translations" block; long-term: 2).
     num_controls : int
@@ -82,6 +92,9 @@ class QuaterNetConfig:
         LeakyReLU slope of the controls block (0.05 in the paper).
     eps : float
         Normalisation clamp ``q / max(|q|, eps)`` (PyTorch ``F.normalize`` default 1e-12).
+    representation : str
+        ``"quaternion"`` (QuaterNet: local quaternions, 4 per joint) or ``"dual_quaternion"`` (Andreou et al. §6.2:
+        current dual quaternions ``(q_r | q_d)``, 8 per joint, Eq. 13 normalisation, dual-quaternion QMul).
     """
 
     num_joints: int = 32
@@ -93,6 +106,7 @@ class QuaterNetConfig:
     controls_hidden: int = CONTROLS_HIDDEN
     negative_slope: float = 0.05
     eps: float = 1e-12
+    representation: str = "quaternion"
 
     def __post_init__(self):
         for name, low in (("num_joints", 1), ("num_outputs", 0), ("num_controls", 0), ("hidden_size", 1),
@@ -106,6 +120,9 @@ class QuaterNetConfig:
             raise ValueError(f"QuaterNetConfig.negative_slope: expected a value in [0, 1), got {self.negative_slope}")
         if not (np.isfinite(self.eps) and self.eps > 0):
             raise ValueError(f"QuaterNetConfig.eps: expected a finite value > 0, got {self.eps}")
+        if self.representation not in JOINT_WIDTH:
+            raise ValueError(f"QuaterNetConfig.representation: expected one of {tuple(JOINT_WIDTH)}, "
+                             f"got {self.representation!r}")
 
     @classmethod
     def short_term(cls, num_joints: int = 32, **kw) -> "QuaterNetConfig":
@@ -118,23 +135,28 @@ class QuaterNetConfig:
         return cls(num_joints=num_joints, num_outputs=num_outputs, num_controls=num_controls, velocity=False, **kw)
 
     @property
+    def joint_width(self) -> int:
+        """D: 4 (quaternions) or 8 (dual quaternions)."""
+        return JOINT_WIDTH[self.representation]
+
+    @property
     def rotation_size(self) -> int:
-        """4 J."""
-        return 4 * self.num_joints
+        """D J."""
+        return self.joint_width * self.num_joints
 
     @property
     def output_size(self) -> int:
-        """G = 4 J + O, features of a prediction ``[q̂ | τ]``."""
-        return 4 * self.num_joints + self.num_outputs
+        """G = D J + O, features of a prediction ``[q̂ | τ]``."""
+        return self.rotation_size + self.num_outputs
 
     @property
     def input_size(self) -> int:
-        """F = 4 J + O + C, features of an input frame ``[q | τ | c]``."""
+        """F = D J + O + C, features of an input frame ``[q | τ | c]``."""
         return self.output_size + self.num_controls
 
     @property
     def gru_input_size(self) -> int:
-        """I = 4 J + O (+ controls_hidden when C > 0)."""
+        """I = D J + O (+ controls_hidden when C > 0)."""
         return self.output_size + (self.controls_hidden if self.num_controls > 0 else 0)
 
     def to_dict(self) -> dict:
@@ -143,7 +165,7 @@ class QuaterNetConfig:
                 "num_controls": int(self.num_controls), "velocity": bool(self.velocity),
                 "hidden_size": int(self.hidden_size), "num_layers": int(self.num_layers),
                 "controls_hidden": int(self.controls_hidden), "negative_slope": float(self.negative_slope),
-                "eps": float(self.eps)}
+                "eps": float(self.eps), "representation": str(self.representation)}
 
 
 def param_shapes(config: QuaterNetConfig = QuaterNetConfig()) -> dict[str, tuple[int, ...]]:
@@ -233,7 +255,7 @@ def check_params(params: Mapping[str, np.ndarray], config: QuaterNetConfig = Qua
 def _check_frames(x, name: str, config: QuaterNetConfig, dtype, batch=None, ndim: int = 3) -> np.ndarray:
     F = config.input_size
     shape = (batch, None, F) if ndim == 3 else (batch, F)
-    x = check_float_array(x, name, shape, context=f"F = 4J + O + C = {F} from the config")
+    x = check_float_array(x, name, shape, context=f"F = DJ + O + C = {F} from the config")
     if x.dtype != dtype:
         raise ValueError(f"{name}: expected dtype {dtype} (the parameters' dtype), got {x.dtype}")
     return x
@@ -282,34 +304,37 @@ def _input_backward(dg, cache, config: QuaterNetConfig, grads: dict) -> np.ndarr
 
 
 def _head_forward(params, top, x, config: QuaterNetConfig):
-    """``o = fc(top)``, ``y = [normalize(Δ ⊗ q_in) or normalize(Δ) | τ]``.
+    """``o = fc(top)``, ``y = [normalize(Δ ⊗ q_in) or normalize(Δ) | τ]`` (Eq. 13 and the DQ product for
+    dual quaternions).
 
-    Returns ``(y (B, G), pre (B, 4J), cache)``.
+    Returns ``(y (B, G), pre (B, DJ), cache)``.
 
-    ``x (B, F)`` is the frame fed at this step (its quaternions are ``q_in`` in velocity mode)."""
+    ``x (B, F)`` is the frame fed at this step (its joint blocks are ``q_in`` in velocity mode)."""
     B, R = top.shape[0], config.rotation_size
-    J = config.num_joints
+    J, D = config.num_joints, config.joint_width
     o, lc = linear_forward(top, params, "fc")  # (B, G)
-    pre = o[:, :R]  # (B, 4J) view
+    pre = o[:, :R]  # (B, DJ) view
+    dual = D == 8
     if config.velocity:
-        q, qc = qmul_velocity_forward(pre.reshape(B, J, 4), x[:, :R].reshape(B, J, 4), config.eps)
+        fwd = dq_velocity_forward if dual else qmul_velocity_forward
+        q, qc = fwd(pre.reshape(B, J, D), x[:, :R].reshape(B, J, D), config.eps)
     else:
-        q, qc = quat_normalize_forward(pre.reshape(B, J, 4), config.eps)
+        q, qc = (dq_normalize_forward if dual else quat_normalize_forward)(pre.reshape(B, J, D), config.eps)
     y = np.concatenate([q.reshape(B, R), o[:, R:]], axis=1)  # (B, G)
     return y, pre.copy(), (lc, qc)
 
 
 def _head_backward(dy, dpre, cache, config: QuaterNetConfig, grads: dict):
-    """Returns ``(dtop (B, H), dq_in (B, 4J) or None)``; adds the fc gradients into ``grads``."""
+    """Returns ``(dtop (B, H), dq_in (B, DJ) or None)``; adds the fc gradients into ``grads``."""
     lc, qc = cache
-    B, R, J = dy.shape[0], config.rotation_size, config.num_joints
+    B, R, J, D = dy.shape[0], config.rotation_size, config.num_joints, config.joint_width
     do = np.empty_like(dy)  # (B, G)
-    dq = np.ascontiguousarray(dy[:, :R]).reshape(B, J, 4)
+    dq = np.ascontiguousarray(dy[:, :R]).reshape(B, J, D)
     if config.velocity:
-        dd, dqin = qmul_velocity_backward(dq, qc)
+        dd, dqin = (dq_velocity_backward if D == 8 else qmul_velocity_backward)(dq, qc)
         dqin = dqin.reshape(B, R)
     else:
-        dd, dqin = quat_normalize_backward(dq, qc), None
+        dd, dqin = (dq_normalize_backward if D == 8 else quat_normalize_backward)(dq, qc), None
     do[:, :R] = dd.reshape(B, R)
     if dpre is not None:
         do[:, :R] += dpre
@@ -320,7 +345,7 @@ def _head_backward(dy, dpre, cache, config: QuaterNetConfig, grads: dict):
 
 
 def _frame_forward(params, x, h, config: QuaterNetConfig):
-    """One step: frame ``x (B, F)``, state ``h (L, B, H)`` -> ``(y (B, G), pre (B, 4J), h_new, cache)``."""
+    """One step: frame ``x (B, F)``, state ``h (L, B, H)`` -> ``(y (B, G), pre (B, DJ), h_new, cache)``."""
     g, ic = _input_forward(params, x, config)
     top, h_new, gc = gru_step_forward(g, h, params, "rnn", config.num_layers)
     y, pre, hc = _head_forward(params, top, x, config)
@@ -363,13 +388,13 @@ def step(params: Mapping[str, np.ndarray], state, x,
     state : ndarray (L, B, H)
         GRU states after the previous frame (:func:`init_state` at the start).
     x : ndarray (B, F)
-        The current frame ``[q (4J) | τ (O) | c (C)]``: ground truth, or the previous prediction ``y`` with the
+        The current frame ``[q (DJ) | τ (O) | c (C)]``: ground truth, or the previous prediction ``y`` with the
         frame's controls appended.
 
     Returns
     -------
     y : ndarray (B, G)
-        ``[q̂ (4J, unit per joint) | τ (O)]``, the prediction of the next frame.
+        ``[q̂ (DJ, unit per joint) | τ (O)]``, the prediction of the next frame.
     state : ndarray (L, B, H)
     """
     dtype = check_params(params, config)
@@ -455,7 +480,7 @@ def forward(params: Mapping[str, np.ndarray], prefix, future, mask, config: Quat
     -------
     y : ndarray (B, T, G)
         Predictions of frames ``P … P+T-1``: unit quaternions per joint, then the raw translations.
-    pre : ndarray (B, T, 4J)
+    pre : ndarray (B, T, DJ)
         The un-normalised head output ``Δ`` before the QMul (for the norm penalty).
     cache : dict
         For :func:`backward`.
@@ -494,7 +519,7 @@ def backward(dy, dpre, cache, input_grads: bool = False):
     ----------
     dy : ndarray (B, T, G)
         Cotangent of ``y``.
-    dpre : ndarray (B, T, 4J) or None
+    dpre : ndarray (B, T, DJ) or None
         Cotangent of ``pre`` (the norm penalty's gradient), or None (zero).
     cache : dict
         From :func:`forward`.

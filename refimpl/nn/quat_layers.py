@@ -7,6 +7,7 @@ Every layer is a pure function pair ``y, cache = name_forward(...)`` / ``dx = na
 * ``quat_mul``            Hamilton product a ⊗ b
 * ``qmul_velocity``       normalize(Δq ⊗ q_in): QuaterNet's velocity ("QMul") block, network delta on the LEFT
 * ``dq_normalize``        dual-quaternion normalisation, Andreou et al. Eq. 13
+* ``dq_velocity``         Eq.-13-normalize(ΔD ⊗ D_in): the velocity block of a dual-quaternion QuaterNet
 * ``euler_from_quat``     QuaterNet's quaternion → Euler conversion (``qeuler``) for the six orders
 
 Conventions: quaternions ``(w, x, y, z)``, Hamilton product, dual quaternions ``(q_r | q_d)`` (8 numbers). All
@@ -30,6 +31,7 @@ __all__ = [
     "quat_mul_forward", "quat_mul_backward",
     "qmul_velocity_forward", "qmul_velocity_backward",
     "dq_normalize_forward", "dq_normalize_backward",
+    "dq_velocity_forward", "dq_velocity_backward",
     "euler_from_quat_forward", "euler_from_quat_backward",
 ]
 
@@ -324,6 +326,71 @@ def dq_normalize_backward(dy, cache):
     radial = np.sum(rh * g_rh, axis=-1, keepdims=True)
     dr = (g_rh - rh * np.where(big, radial, 0)) / nc + rh * np.where(big, g_n, 0)  # n = eps const under the clamp
     return np.concatenate([dr, dd], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------------
+# dual-quaternion velocity block (QuaterNet with dual quaternions, spec/quaternet.md §9)
+
+def _dq_mul_parts(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dual-quaternion product ``a ⊗ b = (a_r ⊗ b_r | a_r ⊗ b_d + a_d ⊗ b_r)`` on ``(..., 8)`` arrays."""
+    r = _quat_mul(a[..., :4], b[..., :4])
+    d = _quat_mul(a[..., :4], b[..., 4:]) + _quat_mul(a[..., 4:], b[..., :4])
+    return np.concatenate([r, d], axis=-1)
+
+
+def dq_velocity_forward(delta, d_in, eps: float = 1e-12):
+    """Velocity mode for dual quaternions: ``y = N(ΔD ⊗ D_in)``, the network's delta on the LEFT.
+
+    ``⊗`` is the dual-quaternion product ``(a_r ⊗ b_r | a_r ⊗ b_d + a_d ⊗ b_r)`` and ``N`` the Eq. 13
+    normalisation (:func:`dq_normalize_forward`). With ``D_in`` a joint's current (root-relative) transform, ``ΔD``
+    is a rigid motion applied in the root frame; ``ΔD`` = identity keeps the joint where it was. The paper does not
+    say how QuaterNet's velocity mode was adapted to dual quaternions (reference notes §1.5); this is the direct
+    analogue of :func:`qmul_velocity_forward` (spec/quaternet.md §9).
+
+    Parameters
+    ----------
+    delta : ndarray, shape (..., 8)
+        Raw network output per joint ``(Δ_r | Δ_d)``.
+    d_in : ndarray, shape (..., 8)
+        The input dual quaternion of the same step and joint.
+    eps : float
+        Clamp of the real-part norm in Eq. 13.
+
+    Returns
+    -------
+    y : ndarray, shape (..., 8)
+        Unit dual quaternions.
+    cache : tuple
+    """
+    delta = _as_float_array(delta, "delta", 8)
+    d_in = _as_float_array(d_in, "d_in", 8)
+    if delta.shape != d_in.shape:
+        raise ValueError(f"d_in: expected shape {delta.shape} (the shape of delta), got {d_in.shape}")
+    y, nc = dq_normalize_forward(_dq_mul_parts(delta, d_in), eps)
+    return y, (delta, d_in, nc)
+
+
+def dq_velocity_backward(dy, cache):
+    """Gradients of :func:`dq_velocity_forward` into both inputs.
+
+    With ``p = ΔD ⊗ D_in`` and ``g = ∂L/∂p`` (from :func:`dq_normalize_backward`), by the bilinearity of the three
+    Hamilton products: ``dΔ_r = g_r ⊗ D_r* + g_d ⊗ D_d*``, ``dΔ_d = g_d ⊗ D_r*``, ``dD_r = Δ_r* ⊗ g_r + Δ_d* ⊗ g_d``,
+    ``dD_d = Δ_r* ⊗ g_d``.
+
+    Returns
+    -------
+    ddelta : ndarray, shape (..., 8)
+    dd_in : ndarray, shape (..., 8)
+    """
+    delta, d_in, nc = cache
+    g = dq_normalize_backward(dy, nc)
+    gr, gd = g[..., :4], g[..., 4:]
+    ar, ad, br, bd = delta[..., :4], delta[..., 4:], d_in[..., :4], d_in[..., 4:]
+    da_r1, db_r1 = _quat_mul_backward(gr, ar, br)  # r = a_r ⊗ b_r
+    da_r2, db_d = _quat_mul_backward(gd, ar, bd)  # d ∋ a_r ⊗ b_d
+    da_d, db_r2 = _quat_mul_backward(gd, ad, br)  # d ∋ a_d ⊗ b_r
+    return (np.concatenate([da_r1 + da_r2, da_d], axis=-1),
+            np.concatenate([db_r1 + db_r2, db_d], axis=-1))
 
 
 # --------------------------------------------------------------------------------------------------
