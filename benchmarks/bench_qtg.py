@@ -10,12 +10,19 @@ Paper (Geleijn et al. 2021): 0.33 ms per 1-second (30-frame) transition on a 6-c
 * multiply-accumulates per generated frame of QTG (:func:`refimpl.models.qtg.macs_per_frame`) and RTN
   (:func:`refimpl.models.qtg.rtn_macs_per_frame`), and their ratio; parameters and weight bytes.
 
+With ``--train``: the QTG training step (issue #17) at the paper size, batch 32 (``--train-batch``), float32:
+``rollout_forward`` + MAE loss + ``rollout_backward`` + ``adam_step`` (QTG's Adam settings) against the same
+step in PyTorch eager (``nn.Linear`` / ``nn.GRUCell`` modules, ``L1Loss``, ``torch.optim.Adam``) with the same
+parameters, batch and thread count, interleaved per round (0.15 s settling between them), each round's time
+the median of ``--steps`` consecutive steps; the ratio NumPy / PyTorch is paired per round. Before timing, the
+loss and every gradient are compared with PyTorch's (float32 precision). Written into the JSON under ``train``.
+
 Target: ≤ 2 ms at batch 1 (reference/performance_facts.md: the physical limit on the 2-core development VM
 is 0.6-0.8 ms, because every step streams ~2.1 MB of float32 weights from L3). The ONNX timings are
 another benchmark's. A table is printed and JSON written to ``benchmarks/results/bench_qtg.json``.
 Nothing asserts on time.
 
-    python benchmarks/bench_qtg.py [--rounds 7] [--out PATH]
+    python benchmarks/bench_qtg.py [--rounds 7] [--out PATH] [--train [--train-rounds 5] [--steps 5]]
 """
 from __future__ import annotations
 
@@ -35,7 +42,11 @@ sys.path.insert(0, str(ROOT))
 
 from refimpl.models.qtg import (QTGConfig, count_parameters, init_params, macs_per_frame,  # noqa: E402
                                 rtn_macs_per_frame)
-from refimpl.models.qtg_fast import prepare_inference, rollout_forward, rollout_inference  # noqa: E402
+from refimpl.models.qtg_fast import (prepare_inference, rollout_backward, rollout_forward,  # noqa: E402
+                                     rollout_inference)
+from refimpl.atomic import atomic_write_text  # noqa: E402
+from refimpl.losses import mae_loss_backward, mae_loss_forward  # noqa: E402
+from refimpl.optim import QTG_ADAM, adam_init, adam_step  # noqa: E402
 
 try:
     from threadpoolctl import threadpool_info, threadpool_limits
@@ -66,11 +77,172 @@ def _blas():
             for i in threadpool_info()]
 
 
+# ------------------------------------------------------------------------------------------- training step
+SETTLE = 0.15
+
+
+def _numpy_train_step(params, past, target, truth, cfg):
+    """One training step of the project (forward, MAE loss, backward, Adam in place); returns the loss."""
+    state = adam_init(params)
+
+    def step():
+        pred, cache = rollout_forward(params, past, target, truth.shape[1], cfg)
+        loss, lcache = mae_loss_forward(pred, truth)
+        grads = rollout_backward(mae_loss_backward(1.0, lcache), cache)
+        adam_step(params, grads, state, **QTG_ADAM)
+        return loss
+    return step
+
+
+def _torch_qtg(torch, params, cfg):
+    """QTG (spec/qtg.md §3) as a PyTorch eager module with the given float32 parameters (PyTorch names)."""
+    nn = torch.nn
+
+    class QTG(nn.Module):
+        def __init__(self):
+            super().__init__()
+            sizes = (cfg.pose_size,) + cfg.encoder_sizes
+            self.enc = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
+            self.gru = nn.ModuleList(nn.GRUCell(3 * cfg.latent_size if k == 0 else cfg.gru_hidden, cfg.gru_hidden)
+                                     for k in range(cfg.gru_layers))
+            self.vel = nn.Linear(cfg.gru_hidden, cfg.latent_size)
+            sizes = (cfg.latent_size,) + cfg.decoder_sizes + (cfg.pose_size,)
+            self.dec = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
+
+        def encode(self, x):
+            for lin in self.enc:
+                x = nn.functional.leaky_relu(lin(x), cfg.negative_slope)
+            return x
+
+        def forward(self, past, target, T):
+            z_prev, pose = self.encode(past[:, 0]), past[:, 1]
+            e1, e2 = self.encode(target[:, 0]), self.encode(target[:, 1])
+            hs = [past.new_zeros(past.shape[0], cfg.gru_hidden) for _ in self.gru]
+            out = []
+            for _ in range(T):
+                z = self.encode(pose)
+                x = torch.cat([z - z_prev, e1 - z, e2 - e1], dim=1)
+                for k, cell in enumerate(self.gru):
+                    hs[k] = x = cell(x, hs[k])
+                h = z + self.vel(x)
+                for j, lin in enumerate(self.dec):
+                    h = lin(h)
+                    if j < len(self.dec) - 1:
+                        h = nn.functional.leaky_relu(h, cfg.negative_slope)
+                out.append(h)
+                pose, z_prev = h, z
+            return torch.stack(out, dim=1)
+
+    model = QTG()
+    names = dict(model.named_parameters())
+    missing = set(params) ^ set(_torch_names(names, cfg))
+    if missing:
+        raise RuntimeError(f"parameter names differ: {sorted(missing)}")
+    with torch.no_grad():
+        for k, v in _torch_names(names, cfg).items():
+            v.copy_(torch.from_numpy(params[k]))
+    return model
+
+
+def _torch_names(named, cfg):
+    """Map the project's parameter names to the module's tensors (``gru.weight_ih_l0`` <- ``gru.0.weight_ih``)."""
+    out = {}
+    for k, v in named.items():
+        parts = k.split(".")
+        if parts[0] == "gru":
+            out[f"gru.{parts[2]}_l{parts[1]}"] = v
+        else:
+            out[k] = v
+    return out
+
+
+def _torch_train_step(torch, model, past, target, truth):
+    past, target, truth = (torch.from_numpy(a) for a in (past, target, truth))
+    opt = torch.optim.Adam(model.parameters(), lr=QTG_ADAM["lr"], betas=QTG_ADAM["betas"], eps=QTG_ADAM["eps"])
+    loss_fn = torch.nn.L1Loss()
+
+    def step():
+        opt.zero_grad(set_to_none=True)
+        loss = loss_fn(model(past, target, truth.shape[1]), truth)
+        loss.backward()
+        opt.step()
+        return float(loss)
+    return step
+
+
+def _train_check(torch, params, past, target, truth, cfg) -> dict:
+    """Loss and gradients of one step, NumPy vs PyTorch: max |difference| / max |value| per array."""
+    pred, cache = rollout_forward(params, past, target, truth.shape[1], cfg)
+    loss, lcache = mae_loss_forward(pred, truth)
+    grads = rollout_backward(mae_loss_backward(1.0, lcache), cache)
+    model = _torch_qtg(torch, params, cfg)
+    tpred = model(torch.from_numpy(past), torch.from_numpy(target), truth.shape[1])
+    tloss = torch.nn.L1Loss()(tpred, torch.from_numpy(truth))
+    tloss.backward()
+    tgrads = {k: v.grad.numpy() for k, v in _torch_names(dict(model.named_parameters()), cfg).items()}
+
+    def rel(a, b):
+        return float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-30))
+    return {"poses_max_rel": rel(pred, tpred.detach().numpy()), "loss_rel": abs(loss - float(tloss)) / float(tloss),
+            "grads_max_rel": max(rel(grads[k], tgrads[k]) for k in grads),
+            "worst_grad": max(grads, key=lambda k: rel(grads[k], tgrads[k]))}
+
+
+def bench_train(args, cfg) -> dict:
+    """Paired, interleaved rounds of the NumPy and PyTorch training steps (see the module docstring)."""
+    import torch
+    torch.set_num_threads(args.threads)
+    rng = np.random.default_rng(1)
+    B, T = args.train_batch, cfg.transition_length
+    params = init_params(cfg, rng, dtype=np.float32)
+    past, target = (rng.standard_normal((B, 2, cfg.pose_size)).astype(np.float32) for _ in range(2))
+    truth = rng.standard_normal((B, T, cfg.pose_size)).astype(np.float32)
+    check = _train_check(torch, params, past, target, truth, cfg)
+    print("train check vs PyTorch: " + ", ".join(f"{k} {v:.2e}" if isinstance(v, float) else f"{k} {v}"
+                                                 for k, v in check.items()), flush=True)
+    variants = {"numpy": _numpy_train_step({k: v.copy() for k, v in params.items()}, past, target, truth, cfg),
+                "torch": _torch_train_step(torch, _torch_qtg(torch, params, cfg), past, target, truth)}
+    for fn in variants.values():
+        fn()
+    load_start = os.getloadavg()
+    rounds = []
+    names = list(variants)
+    for r in range(args.train_rounds):
+        order = names[r % 2:] + names[:r % 2]
+        row = {"order": order}
+        for name in order:
+            time.sleep(SETTLE)
+            ts = []
+            for _ in range(args.steps):
+                t0 = time.perf_counter()
+                variants[name]()
+                ts.append(time.perf_counter() - t0)
+            row[name + "_ms"] = 1e3 * statistics.median(ts)
+        row["numpy_over_torch"] = row["numpy_ms"] / row["torch_ms"]
+        row["loadavg_1min"] = os.getloadavg()[0]
+        rounds.append(row)
+        print(f"train round {r + 1}: numpy {row['numpy_ms']:.1f} ms, torch {row['torch_ms']:.1f} ms, "
+              f"ratio {row['numpy_over_torch']:.2f} (load {row['loadavg_1min']:.1f})", flush=True)
+    ratios = [r["numpy_over_torch"] for r in rounds]
+    out = {"batch": B, "T": T, "threads": args.threads, "torch": torch.__version__, "check": check,
+           "rounds": rounds, "loadavg_start": load_start, "loadavg_end": os.getloadavg(),
+           "numpy_over_torch": {"min": min(ratios), "median": statistics.median(ratios), "max": max(ratios)}}
+    print("train ratio numpy / torch (min / median / max): "
+          + " / ".join(f"{v:.2f}" for v in out["numpy_over_torch"].values()))
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--T", type=int, default=30)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_qtg.json"))
+    ap.add_argument("--train", action="store_true",
+                    help="time the training step against PyTorch instead (JSON: bench_qtg_train.json)")
+    ap.add_argument("--train-batch", type=int, default=32)
+    ap.add_argument("--train-rounds", type=int, default=5)
+    ap.add_argument("--steps", type=int, default=5, help="training steps per round and variant")
+    ap.add_argument("--threads", type=int, default=2, help="PyTorch intra-op threads (training)")
     args = ap.parse_args(argv)
 
     cfg = QTGConfig()
@@ -80,6 +252,16 @@ def main(argv=None) -> dict:
     model = prepare_inference(params, cfg)
     ctx = {b: (rng.standard_normal((b, 2, cfg.pose_size)).astype(np.float32),
                rng.standard_normal((b, 2, cfg.pose_size)).astype(np.float32)) for b in (1, 64)}
+
+    if args.train:
+        out = Path(args.out).with_name("bench_qtg_train.json") if args.out.endswith("bench_qtg.json") else Path(args.out)
+        result = {"benchmark": "bench_qtg --train", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                  "config": cfg.to_dict(), "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(),
+                                                       "numpy": np.__version__, "blas": _blas()},
+                  "train": bench_train(args, cfg)}
+        atomic_write_text(out, json.dumps(result, indent=2), make_parents=True)
+        print(f"wrote {out}")
+        return result
 
     rows = []
 
