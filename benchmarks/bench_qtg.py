@@ -166,7 +166,7 @@ def _torch_train_step(torch, model, past, target, truth):
         loss = loss_fn(model(past, target, truth.shape[1]), truth)
         loss.backward()
         opt.step()
-        return float(loss)
+        return float(loss.detach())
     return step
 
 
@@ -183,7 +183,7 @@ def _train_check(torch, params, past, target, truth, cfg) -> dict:
 
     def rel(a, b):
         return float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-30))
-    return {"poses_max_rel": rel(pred, tpred.detach().numpy()), "loss_rel": abs(loss - float(tloss)) / float(tloss),
+    return {"poses_max_rel": rel(pred, tpred.detach().numpy()), "loss_rel": abs(loss - float(tloss.detach())) / float(tloss.detach()),
             "grads_max_rel": max(rel(grads[k], tgrads[k]) for k in grads),
             "worst_grad": max(grads, key=lambda k: rel(grads[k], tgrads[k]))}
 
@@ -242,7 +242,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--train-batch", type=int, default=32)
     ap.add_argument("--train-rounds", type=int, default=5)
     ap.add_argument("--steps", type=int, default=5, help="training steps per round and variant")
-    ap.add_argument("--threads", type=int, default=2, help="PyTorch intra-op threads (training)")
+    ap.add_argument("--threads", type=int, default=2, help="training: PyTorch intra-op and NumPy BLAS threads")
     args = ap.parse_args(argv)
 
     cfg = QTGConfig()
@@ -258,7 +258,13 @@ def main(argv=None) -> dict:
         result = {"benchmark": "bench_qtg --train", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                   "config": cfg.to_dict(), "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(),
                                                        "numpy": np.__version__, "blas": _blas()},
-                  "train": bench_train(args, cfg)}
+                  "numpy_blas_threads": args.threads}
+        if threadpool_limits is not None:  # NumPy's BLAS gets the same thread count as PyTorch
+            with threadpool_limits(args.threads):
+                result["train"] = bench_train(args, cfg)
+        else:
+            result["numpy_blas_threads"] = "default (threadpoolctl absent)"
+            result["train"] = bench_train(args, cfg)
         atomic_write_text(out, json.dumps(result, indent=2), make_parents=True)
         print(f"wrote {out}")
         return result
