@@ -13,8 +13,10 @@ Paper (Geleijn et al. 2021): 0.33 ms per 1-second (30-frame) transition on a 6-c
 With ``--train``: the QTG training step (issue #17) at the paper size, batch 32 (``--train-batch``), float32:
 ``rollout_forward`` + MAE loss + ``rollout_backward`` + ``adam_step`` (QTG's Adam settings) against the same
 step in PyTorch eager (``nn.Linear`` / ``nn.GRUCell`` modules, ``L1Loss``, ``torch.optim.Adam``) with the same
-parameters, batch and thread count, interleaved per round (0.15 s settling between them), each round's time
-the median of ``--steps`` consecutive steps; the ratio NumPy / PyTorch is paired per round. Before timing, the
+parameters, batch and thread count (``--threads``, NumPy's BLAS limited to it through threadpoolctl), interleaved
+per round (0.15 s settling between them), each round's time the median of ``--steps`` consecutive steps; the
+ratio NumPy / PyTorch is paired per round, for the wall time and for the process CPU time (all threads; with one
+thread the CPU-time ratio is the one that other jobs on the machine disturb least). Before timing, the
 loss and every gradient are compared with PyTorch's (float32 precision). Written into the JSON under ``train``.
 
 Target: ≤ 2 ms at batch 1 (reference/performance_facts.md: the physical limit on the 2-core development VM
@@ -212,23 +214,30 @@ def bench_train(args, cfg) -> dict:
         row = {"order": order}
         for name in order:
             time.sleep(SETTLE)
-            ts = []
+            ts, cs = [], []
             for _ in range(args.steps):
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 variants[name]()
                 ts.append(time.perf_counter() - t0)
+                cs.append(time.process_time() - c0)
             row[name + "_ms"] = 1e3 * statistics.median(ts)
+            row[name + "_cpu_ms"] = 1e3 * statistics.median(cs)  # CPU time of all threads: robust to other load
         row["numpy_over_torch"] = row["numpy_ms"] / row["torch_ms"]
+        row["numpy_over_torch_cpu"] = row["numpy_cpu_ms"] / row["torch_cpu_ms"]
         row["loadavg_1min"] = os.getloadavg()[0]
         rounds.append(row)
-        print(f"train round {r + 1}: numpy {row['numpy_ms']:.1f} ms, torch {row['torch_ms']:.1f} ms, "
-              f"ratio {row['numpy_over_torch']:.2f} (load {row['loadavg_1min']:.1f})", flush=True)
+        print(f"train round {r + 1}: numpy {row['numpy_ms']:.1f} ms (CPU {row['numpy_cpu_ms']:.1f}), torch "
+              f"{row['torch_ms']:.1f} ms (CPU {row['torch_cpu_ms']:.1f}); ratio {row['numpy_over_torch']:.2f}, "
+              f"CPU-time ratio {row['numpy_over_torch_cpu']:.2f} (load {row['loadavg_1min']:.1f})", flush=True)
     ratios = [r["numpy_over_torch"] for r in rounds]
+    cpu_ratios = [r["numpy_over_torch_cpu"] for r in rounds]
     out = {"batch": B, "T": T, "threads": args.threads, "torch": torch.__version__, "check": check,
            "rounds": rounds, "loadavg_start": load_start, "loadavg_end": os.getloadavg(),
-           "numpy_over_torch": {"min": min(ratios), "median": statistics.median(ratios), "max": max(ratios)}}
-    print("train ratio numpy / torch (min / median / max): "
-          + " / ".join(f"{v:.2f}" for v in out["numpy_over_torch"].values()))
+           "numpy_over_torch": {"min": min(ratios), "median": statistics.median(ratios), "max": max(ratios)},
+           "numpy_over_torch_cpu": {"min": min(cpu_ratios), "median": statistics.median(cpu_ratios),
+                                    "max": max(cpu_ratios)}}
+    for key in ("numpy_over_torch", "numpy_over_torch_cpu"):
+        print(f"train {key} (min / median / max): " + " / ".join(f"{v:.2f}" for v in out[key].values()))
     return out
 
 

@@ -21,10 +21,13 @@ layer's outputs, forward direction first.
 Implementation (spec/layers.md §4.3, reference/performance_facts.md): a teacher-forced sequence is processed
 layer by layer; the input projections of all time steps of a layer are ONE GEMM ``(T*B, I) @ W_ih^T``; the
 per-step recurrent product uses a weight transposed once per call; back-propagation through time stores the
-per-step pre-activation gradients and forms ``dW_hh``, ``dW_ih`` and ``dx`` with one GEMM each after the loop;
-the state-independent factors of every step's gate cotangents are formed for the whole sequence before the
-reverse loop (``_backward_factors``), so a reverse step is 7 calls (``_cell_backward_factored``; the per-step
-kernel ``_cell_backward`` stays beside it as the reference, tested equal).
+per-step pre-activation gradients and forms ``dW_hh``, ``dW_ih`` and ``dx`` with one GEMM each after the loop.
+Kernels for callers that run their own step loops (QTG's fused rollout): ``_cell_update`` (the element-wise part
+of a step after an outside product), ``_backward_factors`` (the state-independent factors of every step's gate
+cotangents, for a whole sequence at once) and ``_cell_backward_factored`` / ``_cell_backward_gates`` (a reverse
+step from them: 7 calls instead of 19), tested equal to the per-step kernel ``_cell_backward``. The sequence
+backward here keeps ``_cell_backward``: at QuaterNet's size (2 x 1000, B 32, T 60) the factored reverse loop
+measured the same CPU time (ratio 0.99-1.03, GEMM-bound), spec/layers.md §4.3.
 Internally arrays are time-major ``(T, B, ...)`` so that each step reads contiguous rows.
 The per-step, per-gate loop versions ``_gru_forward_naive`` / ``_gru_backward_naive`` are the test oracles.
 
@@ -288,11 +291,10 @@ def _direction_backward(dys, dh_last, xs, hs, g, n, w_ih, w_hh, reverse):
     dgh = np.empty((t_len, batch, 3 * hid), dtype=xs.dtype)  # processing order (pairs with hs[:-1])
     dh = np.zeros((batch, hid), dtype=xs.dtype) if dh_last is None else np.array(dh_last, dtype=xs.dtype)
     tmp = np.empty((batch, hid), dtype=xs.dtype)
-    f = _backward_factors(hs[:-1], g, n)  # (T, B, 3H): every step's factors in a few whole-sequence passes
     for s in range(t_len - 1, -1, -1):
         t = t_len - 1 - s if reverse else s
         dh += dys[t]
-        _cell_backward_factored(dh, f[s], g[s], w_hh, dgi[t], dgh[s], tmp)
+        _cell_backward(dh, hs[s], g[s], n[s], w_hh, dgi[t], dgh[s], tmp)
     dgi2 = dgi.reshape(t_len * batch, 3 * hid)  # (T*B, 3H)
     dgh2 = dgh.reshape(t_len * batch, 3 * hid)
     dw_hh = dgh2.T @ hs[:-1].reshape(t_len * batch, hid)  # (3H, H), one GEMM over all steps
