@@ -8,12 +8,15 @@ step and the oracles there (``_rollout_naive``, ``_rollout_backward_per_step``) 
   (``_Record``); the reverse loop propagates only the input and state cotangents and keeps the pre-activation
   cotangents, and each weight gradient is then ONE matrix product over the stacked rows of all steps
   (``_weight_grads``). Gradients flow through the fed-back poses, the carried latents, the GRU state and the
-  target encodings (BPTT, no detaching).
+  target encodings (BPTT, no detaching). Fused per step (spec/qtg.md §4): layer 0's input gates from one product
+  of ``z_t`` with ``[W1 − W2 ; W1]``, the top GRU state times ``[W_hh ; W_v]`` once (forward and backward), the
+  gate and LeakyReLU factors of the backward formed for all steps before the reverse loop (``_Factors``).
 * Inference: :func:`prepare_inference` folds, transposes and bias-augments the weights once;
   :func:`rollout_inference` runs the steps with buffers allocated once per call and written in place.
 
 Kernels from the layers' kernel tier: :func:`refimpl.nn.linear.matmul_wt`, :func:`refimpl.nn.gru.input_gates`,
-:func:`refimpl.nn.gru.cell_forward`, :func:`refimpl.nn.gru.cell_backward` (no checks; the public functions
+:func:`refimpl.nn.gru.cell_forward`, :func:`refimpl.nn.gru.cell_update`, :func:`refimpl.nn.gru.backward_factors`,
+:func:`refimpl.nn.gru.cell_backward_gates` (no checks; the public functions
 here validate at their boundary with :func:`refimpl.models.qtg.check_params` and friends).
 
 Shape legend: B batch, T transition frames, P pose size, Z latent size, H GRU hidden size, L GRU layers.
