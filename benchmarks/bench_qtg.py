@@ -19,12 +19,16 @@ ratio NumPy / PyTorch is paired per round, for the wall time and for the process
 thread the CPU-time ratio is the one that other jobs on the machine disturb least). Before timing, the
 loss and every gradient are compared with PyTorch's (float32 precision). Written into the JSON under ``train``.
 
+With ``--ort``: ``rollout_inference`` at batch 1 against onnxruntime running the exports of ``deploy``
+(``export_qtg_rollout_compact`` float32 and the unrolled ``export_qtg_rollout``), one thread each, interleaved,
+wall and CPU time, ratios paired per round (issue #17: NumPy within 1.1 × onnxruntime); JSON under ``ort``.
+
 Target: ≤ 2 ms at batch 1 (reference/performance_facts.md: the physical limit on the 2-core development VM
 is 0.6-0.8 ms, because every step streams ~2.1 MB of float32 weights from L3). The ONNX timings are
 another benchmark's. A table is printed and JSON written to ``benchmarks/results/bench_qtg.json``.
 Nothing asserts on time.
 
-    python benchmarks/bench_qtg.py [--rounds 7] [--out PATH] [--train [--train-rounds 5] [--steps 5]]
+    python benchmarks/bench_qtg.py [--rounds 7] [--out PATH] [--train | --ort] [--train-rounds 5] [--steps 5]
 """
 from __future__ import annotations
 
@@ -241,6 +245,71 @@ def bench_train(args, cfg) -> dict:
     return out
 
 
+# ------------------------------------------------------------------------------- inference against onnxruntime
+def bench_ort(args, cfg) -> dict:
+    """NumPy ``rollout_inference`` vs the onnxruntime exports (``deploy``) of the same float32 30-frame transition
+    at batch 1, one thread each (NumPy's BLAS limited through threadpoolctl when available), interleaved per
+    round (order rotated), each round's value the median over ``--steps`` blocks of 20 calls; wall and process
+    CPU time, ratios paired per round. Checks the exports' poses against NumPy first."""
+    from deploy.models.qtg import export_qtg_rollout
+    from deploy.models.qtg_compact import export_qtg_rollout_compact
+    from deploy.session import make_session
+
+    rng = np.random.default_rng(2)
+    params = init_params(cfg, rng, dtype=np.float32)
+    model = prepare_inference(params, cfg)
+    past, target = (rng.standard_normal((1, 2, cfg.pose_size)).astype(np.float32) for _ in range(2))
+    feeds = {"past": past, "target": target}
+    sessions = {"ort_compact_float32": make_session(export_qtg_rollout_compact(params, cfg, weights="float32")),
+                "ort_unrolled": make_session(export_qtg_rollout(params, cfg, mode="unrolled"))}
+    ref = rollout_inference(model, past, target)
+    check = {k: float(np.max(np.abs(s.run(None, feeds)[0] - ref))) for k, s in sessions.items()}
+    print("onnxruntime vs NumPy max |difference| of the poses: "
+          + ", ".join(f"{k} {v:.1e}" for k, v in check.items()), flush=True)
+    variants = {"numpy": lambda: rollout_inference(model, past, target)}
+    variants.update({k: (lambda s=s: s.run(None, feeds)) for k, s in sessions.items()})
+    names = list(variants)
+    rounds = []
+    limits = threadpool_limits(1) if threadpool_limits is not None else None
+    try:
+        for r in range(args.train_rounds):
+            order = names[r % len(names):] + names[:r % len(names)]
+            row = {"order": order}
+            for name in order:
+                time.sleep(SETTLE)
+                ts, cs = [], []
+                for _ in range(args.steps):
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    for _ in range(20):
+                        variants[name]()
+                    ts.append((time.perf_counter() - t0) / 20)
+                    cs.append((time.process_time() - c0) / 20)
+                row[name + "_ms"] = 1e3 * statistics.median(ts)
+                row[name + "_cpu_ms"] = 1e3 * statistics.median(cs)
+            for k in sessions:
+                row[f"numpy_over_{k}"] = row["numpy_ms"] / row[k + "_ms"]
+                row[f"numpy_over_{k}_cpu"] = row["numpy_cpu_ms"] / row[k + "_cpu_ms"]
+            row["loadavg_1min"] = os.getloadavg()[0]
+            rounds.append(row)
+            print(f"ort round {r + 1}: " + ", ".join(f"{k} {row[k + '_ms']:.2f} ms (CPU {row[k + '_cpu_ms']:.2f})"
+                                                     for k in names)
+                  + f"; NumPy / compact {row['numpy_over_ort_compact_float32']:.2f} "
+                  f"(CPU {row['numpy_over_ort_compact_float32_cpu']:.2f}) (load {row['loadavg_1min']:.1f})",
+                  flush=True)
+    finally:
+        if limits is not None:
+            limits.restore_original_limits()
+    summary = {}
+    for key in rounds[0]:
+        if key.startswith("numpy_over"):
+            vals = [r[key] for r in rounds]
+            summary[key] = {"min": min(vals), "median": statistics.median(vals), "max": max(vals)}
+    for k, v in summary.items():
+        print(f"  {k} (min / median / max): " + " / ".join(f"{x:.2f}" for x in v.values()))
+    return {"batch": 1, "T": cfg.transition_length, "threads": 1, "check_max_abs_diff": check, "rounds": rounds,
+            "summary": summary}
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=7)
@@ -248,6 +317,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_qtg.json"))
     ap.add_argument("--train", action="store_true",
                     help="time the training step against PyTorch instead (JSON: bench_qtg_train.json)")
+    ap.add_argument("--ort", action="store_true",
+                    help="time rollout_inference against onnxruntime at batch 1 instead (JSON: bench_qtg_ort.json)")
     ap.add_argument("--train-batch", type=int, default=32)
     ap.add_argument("--train-rounds", type=int, default=5)
     ap.add_argument("--steps", type=int, default=5, help="training steps per round and variant")
@@ -262,6 +333,16 @@ def main(argv=None) -> dict:
     ctx = {b: (rng.standard_normal((b, 2, cfg.pose_size)).astype(np.float32),
                rng.standard_normal((b, 2, cfg.pose_size)).astype(np.float32)) for b in (1, 64)}
 
+    if args.ort:
+        out = Path(args.out).with_name("bench_qtg_ort.json") if args.out.endswith("bench_qtg.json") else Path(args.out)
+        result = {"benchmark": "bench_qtg --ort", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                  "config": cfg.to_dict(), "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(),
+                                                       "numpy": np.__version__, "blas": _blas(),
+                                                       "loadavg_start": os.getloadavg()},
+                  "ort": bench_ort(args, cfg)}
+        atomic_write_text(out, json.dumps(result, indent=2), make_parents=True)
+        print(f"wrote {out}")
+        return result
     if args.train:
         out = Path(args.out).with_name("bench_qtg_train.json") if args.out.endswith("bench_qtg.json") else Path(args.out)
         result = {"benchmark": "bench_qtg --train", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
