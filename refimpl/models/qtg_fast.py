@@ -28,7 +28,7 @@ from typing import Mapping, NamedTuple
 
 import numpy as np
 
-from refimpl.models.qtg import QTGConfig, QTGState, check_context, check_length, check_params
+from refimpl.models.qtg import QTGConfig, check_context, check_length, check_params
 from refimpl.nn.gru import (backward_factors as _backward_factors, cell_backward_gates as _cell_backward_gates,
                             cell_forward as _cell_forward, cell_update as _cell_update, input_gates as _input_gates)
 from refimpl.nn.linear import matmul_wt as _matmul_wt
