@@ -329,3 +329,35 @@ def test_backwards_refuse_non_finite_cotangents():
         gru_step_backward(gy[:, 0, :4], None, step_cache)
     with pytest.raises(ValueError, match=r"^dy: expected a float32 or float64 array"):
         gru_backward(gy.astype(int), None, cache)
+
+
+@pytest.mark.parametrize("B, H", [(1, 1), (3, 5), (4, 16)])
+def test_factored_cell_backward_equals_reference_kernel(B, H):
+    """spec/layers.md §4.3: the reverse step from precomputed factors (``_backward_factors`` over all steps, then
+    ``_cell_backward_factored``) equals the per-step reference kernel ``_cell_backward`` (float64), and the
+    forward's element-wise part ``_cell_update`` after an outside product equals ``_cell_forward``."""
+    from refimpl.nn import gru as G
+    rng = np.random.default_rng(B * 100 + H)
+    T = 3
+    w_hh = rng.standard_normal((3 * H, H))
+    b_hn = rng.standard_normal(H)
+    gi = rng.standard_normal((T, B, 3 * H))
+    hs = np.zeros((T + 1, B, H))
+    hs[0] = rng.standard_normal((B, H))
+    g, n = np.empty((T, B, 3 * H)), np.empty((T, B, H))
+    for t in range(T):
+        G._cell_forward(gi[t], hs[t], w_hh, None, b_hn, g[t], n[t], hs[t + 1])
+        g2, n2, h2 = hs[t] @ w_hh.T, np.empty((B, H)), np.empty((B, H))
+        G._cell_update(gi[t], hs[t], b_hn, g2, n2, h2)
+        assert np.array_equal(g2, g[t]) and np.array_equal(n2, n[t]) and np.array_equal(h2, hs[t + 1])
+    f = G._backward_factors(hs[:-1], g, n)
+    dh_ref = rng.standard_normal((B, H))
+    dh_fast = dh_ref.copy()
+    for t in range(T - 1, -1, -1):
+        out_ref = [np.empty((B, 3 * H)), np.empty((B, 3 * H)), np.empty((B, H))]
+        out_fast = [np.empty((B, 3 * H)), np.full((B, 3 * H), np.nan), np.empty((B, H))]
+        G._cell_backward(dh_ref, hs[t], g[t], n[t], w_hh, *out_ref)
+        G._cell_backward_factored(dh_fast, f[t], g[t], w_hh, *out_fast)
+        assert_close(out_fast[0], out_ref[0], **TOL_EXACT, name="dgi")
+        assert_close(out_fast[1], out_ref[1], **TOL_EXACT, name="dgh")
+        assert_close(dh_fast, dh_ref, **TOL_EXACT, name="dh")
