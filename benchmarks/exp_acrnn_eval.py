@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from refimpl.atomic import atomic_write_text
 from refimpl.metrics import root_zeroed_positions
 from refimpl.registry import task_of
 from refimpl.services import evaluate_model, load_trained
@@ -43,33 +44,57 @@ def _draw(ax, pose, parents, color):
             ax.plot([pose[p, 0], pose[j, 0]], [pose[p, 1], pose[j, 1]], color=color, lw=1.2)
 
 
+def _load_row(d: Path):
+    """The cached evaluation of one row (``eval_row.json``, ``eval_clip.npz``), or None when missing or older than
+    the checkpoint."""
+    js, npz, ck = d / "eval_row.json", d / "eval_clip.npz", d / "checkpoint.npz"
+    if not (js.is_file() and npz.is_file()) or js.stat().st_mtime < ck.stat().st_mtime:
+        return None
+    r = json.loads(js.read_text())
+    with np.load(npz, allow_pickle=False) as z:
+        clip = (z["pos"], z["gt_pos"], z["parents"])
+    return r["results"], r["longrun"], clip
+
+
+def _evaluate_row(d: Path):
+    """Protocol of §5 and the long run of one trained row; written to ``eval_row.json`` / ``eval_clip.npz``
+    (so rows can be evaluated as they finish: ``python benchmarks/exp_acrnn_eval.py OUT ROW``)."""
+    model = load_trained(d / "checkpoint.npz")
+    task = task_of(model.spec)
+    data = task.load_eval_data(DATA, model.extra)
+    res = evaluate_model(model, data)
+    # long run from one seed
+    i, s = SEED
+    seed = data.test[i][s:s + S.SEED_LENGTH][None]
+    gen = model.spec.make_method(model)(seed, LONG_FRAMES)[0]                          # (N, F)
+    pos = root_zeroed_positions(data.representation, data.skeleton, gen)                # (N, J, 3)
+    gt_pos = root_zeroed_positions(data.representation, data.skeleton, data.test[i][s + S.SEED_LENGTH:])
+    sp, gsp = _speed(pos), _speed(gt_pos)
+    hip_y = gen[:, 1]
+    longrun = {"windows": {f"{a}-{b}": float(sp[a:b - 1].mean()) for a, b in WINDOWS},
+               "data_speed": float(gsp.mean()),
+               "pose_std_last_1000": float(pos[-1000:].std(axis=0).mean()),
+               "data_pose_std": float(gt_pos.std(axis=0).mean()),
+               "hip_height_first_last": [float(hip_y[:100].mean()), float(hip_y[-100:].mean())]}
+    S.write_results(res, d / "eval_results.json")          # JSON-friendly conversion of the protocol's output
+    results = json.loads((d / "eval_results.json").read_text())
+    atomic_write_text(d / "eval_row.json", json.dumps({"results": results, "longrun": longrun}, indent=2) + "\n")
+    np.savez(d / "eval_clip.npz", pos=pos, gt_pos=gt_pos, parents=np.asarray(data.skeleton.parents))
+
+
 def main(out: Path):
     rows = [r for r in ORDER if (out / r / "checkpoint.npz").is_file()]
     results, longrun, clips = {}, {}, {}
     hold = None
     for row in rows:
         t0 = time.time()
-        model = load_trained(out / row / "checkpoint.npz")
-        task = task_of(model.spec)
-        data = task.load_eval_data(DATA, model.extra)
-        res = evaluate_model(model, data)
+        cached = _load_row(out / row)
+        if cached is None:
+            _evaluate_row(out / row)
+            cached = _load_row(out / row)
+        res, longrun[row], clips[row] = cached
         results[row] = res["acrnn"]
         hold = hold or res["hold"]
-        # long run from one seed
-        i, s = SEED
-        seed = data.test[i][s:s + S.SEED_LENGTH][None]
-        gen = model.spec.make_method(model)(seed, LONG_FRAMES)[0]                          # (N, F)
-        pos = root_zeroed_positions(data.representation, data.skeleton, gen)                # (N, J, 3)
-        gt_pos = root_zeroed_positions(data.representation, data.skeleton,
-                                       data.test[i][s + S.SEED_LENGTH:])
-        sp, gsp = _speed(pos), _speed(gt_pos)
-        hip_y = gen[:, 1]
-        longrun[row] = {"windows": {f"{a}-{b}": float(sp[a:b - 1].mean()) for a, b in WINDOWS},
-                        "data_speed": float(gsp.mean()),
-                        "pose_std_last_1000": float(pos[-1000:].std(axis=0).mean()),
-                        "data_pose_std": float(gt_pos.std(axis=0).mean()),
-                        "hip_height_first_last": [float(hip_y[:100].mean()), float(hip_y[-100:].mean())]}
-        clips[row] = (pos, gt_pos, np.asarray(data.skeleton.parents))
         print(f"{row}: evaluated in {time.time() - t0:.0f} s; long run speeds {longrun[row]['windows']}", flush=True)
     results["hold"] = hold
     S.write_results(results, out / "table1.json")
@@ -143,4 +168,7 @@ def _pictures(out, clips):
 if __name__ == "__main__":
     import sys
 
-    main(Path(sys.argv[1] if len(sys.argv) > 1 else "runs/acrnn_table1"))
+    if len(sys.argv) > 2:                                  # one row: evaluate and cache it
+        _evaluate_row(Path(sys.argv[1]) / sys.argv[2])
+    else:
+        main(Path(sys.argv[1] if len(sys.argv) > 1 else "runs/acrnn_table1"))

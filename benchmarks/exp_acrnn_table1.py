@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 ROWS = ("dq-all", "quaternions", "dq-mse", "quaternions-fk", "ortho6d")
-HIDDEN = 128
-STEPS = 600
+HIDDEN = 256
+STEPS = 1500
 LR = 1e-3
 BATCH = 16
 WINDOW = 50
@@ -33,7 +33,7 @@ def _train_cmd(row, out):
     return [sys.executable, "-m", "refimpl", "train", "--model", "acrnn", "--representation", row, "--data", DATA,
             "--set", f"hidden_size={HIDDEN}", "--steps", str(STEPS), "--lr", str(LR), "--batch-size", str(BATCH),
             "--window-length", str(WINDOW),
-            "--out", str(out), "--checkpoint-every", "200", "--progress-every", "50"]
+            "--out", str(out), "--checkpoint-every", "250", "--progress-every", "50"]
 
 
 def train(out: Path, parallel: int = 2):
