@@ -27,6 +27,7 @@ from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, fk_position_loss_backward,
                             quat_norm_loss_backward, quat_norm_loss_forward)
 from refimpl.losses import euclidean_loss_backward, euclidean_loss_forward
 from refimpl.models import quaternet
+from refimpl.recipes import quaternet_long_dq
 from refimpl.nn.quat_layers import quat_mul_backward, quat_mul_forward
 from refimpl.quat import axis_angle_from_quat, euler_from_quat
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
@@ -52,8 +53,8 @@ PAPER_OPTIM = OptimConfig(**QUATERNET_ADAM, clip_norm=QUATERNET_CLIP_NORM, lr_de
 PAPER_BATCH = 40
 #: Output parameterisations (``--set output=...``; QN §4.4.2-4.4.3, spec/locomotion.md §8): quaternions (the
 #: model), Euler angles (orders xyz, yzx) and axis-angle vectors converted to quaternions before FK, and joint
-#: positions (no FK).
-OUTPUTS = ("quaternion", "euler_xyz", "euler_yzx", "axis_angle", "positions")
+#: positions (no FK); and current dual quaternions (Andreou et al. §6.2: positions read from the DQs, Eq. 8).
+OUTPUTS = ("quaternion", "euler_xyz", "euler_yzx", "axis_angle", "positions", "dual_quaternion")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,6 +87,9 @@ class QuaterNetLongConfig:
                   negative_slope=self.negative_slope)
         if self.output == "quaternion":
             return quaternet.QuaterNetConfig.long_term(num_joints=self.num_joints, **kw)
+        if self.output == "dual_quaternion":
+            return quaternet.QuaterNetConfig.long_term(num_joints=self.num_joints, representation="dual_quaternion",
+                                                       **kw)
         return quaternet.QuaterNetConfig.long_term(num_joints=1, num_outputs=3 * self.num_joints + 2, **kw)
 
     def to_dict(self) -> dict:
@@ -231,6 +235,9 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     -------
     loss : float (position loss + penalty); grads : dict
     """
+    if output == "dual_quaternion":  # Andreou et al. §6.2 (quaternet_long_dq.loss_and_grads)
+        value, grads, _ = quaternet_long_dq.loss_and_grads(params, batch, net, parents)
+        return value, grads
     x, P = batch["inputs"], int(batch["prefix"])
     B, L, _ = x.shape
     T, R = L - P, 4 * net.num_joints
@@ -272,6 +279,9 @@ def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, in
     -------
     rotations (B, T, J, 4) — or positions (B, T, J, 3) for ``output = "positions"`` — and translations (B, T, 2)
     """
+    if output == "dual_quaternion":  # local rotations decoded from the DQs (Eq. 12)
+        dq, tr = quaternet_long_dq.rollout(params, net, inputs, prefix, skeleton)
+        return quaternet_long_dq.decode(dq, tr, skeleton)["rotations"], tr
     dtype = np.asarray(params["h0"]).dtype
     x = np.asarray(inputs)
     B, L, F = x.shape
@@ -306,7 +316,12 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
     def get_batch(idx, ctx):
         b = pose_batch(seqs, ctx.rng, len(idx), P, T, augment=True)
         mask = scheduled_sampling_mask(teacher_forcing_ratio(ctx.epoch, decay=config.tf_decay), T - 1, ctx.rng)
-        inputs = b.inputs if config.output == "quaternion" else ablation_inputs(b.inputs, config.output, skel)
+        if config.output == "dual_quaternion":
+            inputs = quaternet_long_dq.dq_inputs(b.inputs, skel)
+        elif config.output == "quaternion":
+            inputs = b.inputs
+        else:
+            inputs = ablation_inputs(b.inputs, config.output, skel)
         return {"inputs": inputs.astype(dtype), "target_positions": b.target_positions.astype(dtype),
                 "target_translations": b.target_translations.astype(dtype), "mask": mask, "prefix": P}
 
@@ -317,6 +332,13 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
         vin, vpos = vin[sel], vpos[sel]
 
         def validate(params):
+            if config.output == "dual_quaternion":  # FK of the decoded rotations, and the DQs' own positions
+                dq, tr = quaternet_long_dq.rollout(params, net, vin, P, skel)
+                dec = quaternet_long_dq.decode(dq, tr, skel)
+                perr, verr = position_errors(skel, dec["fk_positions"], tr, vpos)
+                dq_err, _ = position_errors(skel, dec["dq_positions"], tr, vpos)
+                return {"val_position": float(perr.mean()), "val_velocity": float(verr.mean()),
+                        "val_position_dq": float(dq_err.mean())}
             rot, tr = rollout(params, net, vin, P, config.output, skel)
             perr, verr = position_errors(skel, rot, tr, vpos)
             return {"val_position": float(perr.mean()), "val_velocity": float(verr.mean())}
