@@ -144,3 +144,116 @@ def test_loss_and_grads_against_the_slow_loop_oracles():
     assert set(slow) == set(grads)
     for k in grads:
         assert np.allclose(grads[k], slow[k], rtol=1e-10, atol=1e-13), k
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# through the application: train, eval, generate, export (tiny sizes on the embedded CMU sample)
+# ----------------------------------------------------------------------------------------------------------------
+
+import json  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+from refimpl.bvh import read_bvh  # noqa: E402
+from refimpl.cli import main  # noqa: E402
+from refimpl.tasks import locomotion as L  # noqa: E402
+from refimpl.tasks import locomotion_generate as G  # noqa: E402
+
+SMALL = ["--data", "sample", "--set", "hidden_size=8", "--set", "output=dual_quaternion", "--locomotion-prefix", "6",
+         "--locomotion-target", "8", "--batch-size", "4", "--progress-every", "1", "--checkpoint-every", "1"]
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """A tiny dual-quaternion quaternet-long checkpoint and a tiny pace checkpoint (``refimpl train``)."""
+    out = tmp_path_factory.mktemp("loco_dq")
+    assert main(["train", "--model", "quaternet-long", *SMALL, "--out", str(out / "pose"), "--steps", "2",
+                 "--validate-every", "2"]) == 0
+    assert main(["train", "--model", "pace", "--data", "sample", "--out", str(out / "pace"), "--steps", "2",
+                 "--batch-size", "4", "--pace-chunk-length", "60"]) == 0
+    return out
+
+
+def test_training_validation_reports_both_position_readings(trained):
+    head, row = (trained / "pose" / "loss_val.csv").read_text().splitlines()[:2]
+    assert head == "step,val_position,val_velocity,val_position_dq"
+    assert all(float(v) > 0 for v in row.split(",")[1:])
+
+
+def test_eval_prints_fk_and_dq_positions_against_zero_velocity(trained, capsys, tmp_path):
+    """``refimpl eval`` of a DQ checkpoint: FK of the decoded rotations (``quaternet-long``), the DQs' own
+    positions (``quaternet-long_dq_positions``) and zero velocity; the DQ method equals Eq. 8 on the rollout."""
+    from refimpl.services import load_trained
+    ckpt = trained / "pose" / "checkpoint.npz"
+    capsys.readouterr()
+    assert main(["eval", "--checkpoint", str(ckpt), "--data", "sample", "--json", str(tmp_path / "e.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "quaternet-long_dq_positions" in printed and "zero_velocity" in printed
+    got = json.loads((tmp_path / "e.json").read_text())
+    assert set(got) == {"quaternet-long", "quaternet-long_dq_positions", "zero_velocity"}
+    model = load_trained(ckpt)
+    ds = L.load_eval_data("sample", model.extra)
+    inputs, tpos, _ = L.evaluation_windows(ds)
+    sk = L.skeleton_of(model.extra)
+    dq, tr = dqr.rollout(model.params, model.config.network(), inputs, ds.prefix, sk)
+    dec = dqr.decode(dq, tr, sk)
+    perr, _ = L.position_errors(sk, dec["dq_positions"], tr, tpos)
+    np.testing.assert_allclose(got["quaternet-long_dq_positions"]["position"], perr, rtol=1e-6)
+    perr, _ = L.position_errors(sk, dec["fk_positions"], tr, tpos)
+    np.testing.assert_allclose(got["quaternet-long"]["position"], perr, rtol=1e-6)
+
+
+def test_generate_writes_bvh_of_the_decoded_rotations(trained, tmp_path, capsys):
+    """``refimpl generate`` with a DQ checkpoint: the BVH holds the rotations decoded current → local (Eq. 12),
+    FK bone lengths exact; the printout reports the DQ-vs-FK position gap and the DQ bone-length drift."""
+    from refimpl.services import load_trained
+    from refimpl.tasks.locomotion_cli import walk_from_checkpoints
+    out = tmp_path / "walk.bvh"
+    assert main(["generate", "--model", "quaternet-long", "--checkpoint", str(trained / "pose" / "checkpoint.npz"),
+                 "--pace", str(trained / "pace" / "checkpoint.npz"), "--path", "circle:r=2", "--speed", "walk",
+                 "--seconds", "2", "--out", str(out)]) == 0
+    assert read_bvh(out).num_frames == 60
+    text = capsys.readouterr().out
+    assert "DQ bone-length drift" in text and "vs FK of the decoded rotations" in text
+    walk = walk_from_checkpoints(load_trained(trained / "pose" / "checkpoint.npz"),
+                                 load_trained(trained / "pace" / "checkpoint.npz"), "circle:r=2", "walk", 1.0)
+    m = walk.motion
+    assert walk.dq_positions.shape == (m.num_frames, m.num_joints, 3)
+    assert G.bone_length_drift(m) < 1e-9
+    # an untrained network's DQ positions are not FK-consistent (root translation and bone lengths are free)
+    assert np.all(np.isfinite(walk.dq_positions)) and not np.allclose(walk.dq_positions, m.positions(), atol=1e-3)
+    drift = G.dq_bone_length_drift(walk.dq_positions, m.skeleton)
+    assert drift["max"] >= drift["mean"] > 0
+
+
+def test_dq_bone_length_drift_is_zero_on_fk_positions():
+    rng = np.random.default_rng(2)
+    sk = Skeleton([-1, 0, 1, 1], rng.standard_normal((4, 3)))
+    q = rng.standard_normal((5, 4, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    p = sk.forward_kinematics(q, rng.standard_normal((5, 3)))
+    assert G.dq_bone_length_drift(p, sk)["max"] < 1e-12
+    p[:, 2] += 0.5 * np.array([1.0, 0, 0])
+    assert G.dq_bone_length_drift(p, sk)["max"] > 0.1
+
+
+def test_export_step_with_eq13_in_the_graph(trained, tmp_path):
+    """The exported DQ step (Eq. 13 per joint in the graph) against NumPy over 5 chained steps from h0; its
+    outputs are unit dual quaternions; the task's ONNX rollout refuses a DQ step model (it takes DQ frames)."""
+    pytest.importorskip("onnxruntime")
+    from refimpl.services import export_onnx, load_trained, verify_onnx
+    pose = load_trained(trained / "pose" / "checkpoint.npz")
+    assert set(export_onnx(pose, tmp_path)) == {"step", "h0"}
+    check = verify_onnx(pose, tmp_path, seed=1)
+    assert check["ok"] and check["step"] < 1e-4
+    from deploy.models import runtime_for_dir
+    rt = runtime_for_dir(tmp_path)
+    net = pose.config.network()
+    y, _ = rt.step(np.random.default_rng(0).standard_normal((3, net.input_size)).astype(np.float32))
+    dq = np.asarray(y[:, :net.rotation_size], np.float64).reshape(3, net.num_joints, 8)
+    assert np.allclose(np.linalg.norm(dq[..., :4], axis=-1), 1, atol=1e-5)
+    assert np.allclose(np.sum(dq[..., :4] * dq[..., 4:], -1), 0, atol=1e-5)
+    assert rt.step_model.metadata["representation"]["kind"] == "quaternet_long_dq"
+    with pytest.raises(ValueError, match="dual-quaternion"):
+        rt.rollout(np.zeros((1, 3, net.input_size), np.float32), 2)

@@ -40,7 +40,7 @@ __all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG
            "OUTPUTS", "QuaterNetLongConfig", "make_config", "euler_to_quat_forward", "euler_to_quat_backward",
            "axis_angle_to_quat_forward", "axis_angle_to_quat_backward", "rotations_from_quat", "quat_from_rotations",
            "quat_from_rotations_backward", "ablation_inputs", "loss_and_grads", "make_adapter", "rollout",
-           "make_method", "export_inputs", "reference_outputs", "verify_onnx"]
+           "make_method", "extra_methods", "export_inputs", "reference_outputs", "verify_onnx"]
 
 NAME = "quaternet-long"
 SUMMARY = ("QuaterNet long-term pose network (Pavllo et al. 2019): GRU with controls and translations, FK "
@@ -364,10 +364,29 @@ def make_method(model) -> Callable:
     return quaternet_long
 
 
+def extra_methods(model) -> dict:
+    """Further methods of ``refimpl eval`` beside :func:`make_method`: for a dual-quaternion model,
+    ``quaternet-long_dq_positions`` returns the positions read from the predicted DQs (Eq. 8, root ``(0, h, 0)``)
+    instead of FK of the decoded rotations; none for the other outputs."""
+    if model.config.output != "dual_quaternion":
+        return {}
+    from refimpl.tasks.locomotion import skeleton_of
+    net = model.config.network()
+    skel = skeleton_of(model.extra)
+
+    def dq_positions(inputs, prefix):
+        dq, tr = quaternet_long_dq.rollout(model.params, net, inputs, prefix, skel)
+        return quaternet_long_dq.decode(dq, tr, skel)["dq_positions"], tr
+
+    return {f"{NAME}_dq_positions": dq_positions}
+
+
 def export_inputs(model) -> dict:
-    """Keyword arguments of the exporter (``deploy.models.quaternet_long_io.export_dir``); quaternion models only."""
-    if model.config.output != "quaternion":
-        raise UsageError(f"export: only quaternion-output models are exported (this one: {model.config.output})")
+    """Keyword arguments of the exporter (``deploy.models.quaternet_long_io.export_dir``); quaternion and
+    dual-quaternion models (the step graph normalises each joint's 8 numbers with Eq. 13)."""
+    if model.config.output not in ("quaternion", "dual_quaternion"):
+        raise UsageError(f"export: only quaternion- and dual-quaternion-output models are exported (this one: "
+                         f"{model.config.output})")
     return {"metadata": {"frame_rate": float(model.fps or 30.0),
                          "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}}}
 
