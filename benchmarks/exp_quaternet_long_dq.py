@@ -64,8 +64,8 @@ def held_out(quat, dq, data_dir: str, max_files: int = 0) -> dict:
     sk = L.skeleton_of(dq.extra)
     gaps, drifts = [], []
     for i in range(0, len(inputs), 64):
-        d, tr = dqr.rollout(dq.params, dq.config.network(), inputs[i:i + 64], data.prefix, sk)
-        dec = dqr.decode(d, tr, sk)
+        d, tr = dqr.rollout(dq.params, dq.config.network(), inputs[i:i + 64], data.prefix, sk, dq.config.dq_scale)
+        dec = dqr.decode(d, tr, sk, dq.config.dq_scale)
         gaps.append(np.linalg.norm(dec["dq_positions"] - dec["fk_positions"], axis=-1).ravel())
         drifts.append(np.abs(dqr.bone_lengths(dec["dq_positions"], sk.parents)
                              - np.linalg.norm(np.asarray(sk.offsets)[1:], axis=-1)).ravel())

@@ -257,3 +257,39 @@ def test_export_step_with_eq13_in_the_graph(trained, tmp_path):
     assert rt.step_model.metadata["representation"]["kind"] == "quaternet_long_dq"
     with pytest.raises(ValueError, match="dual-quaternion"):
         rt.rollout(np.zeros((1, 3, net.input_size), np.float32), 2)
+
+
+def test_dq_scale_changes_the_unit_not_the_motion_or_the_loss():
+    """``dq_scale`` s: the DQs' dual parts are s × those of the data's units, the decoded rotations and positions
+    are the same, and L_pos, L_offset (divided by s) and L_quat of a prediction scaled the same way are equal."""
+    from refimpl.dq_output import dq_output_loss_forward
+    rng = np.random.default_rng(4)
+    _, sk, _, _, windows = _tiny(rng, J=4)
+    s = 0.056444
+    a, b = dqr.dq_inputs(windows, sk), dqr.dq_inputs(windows, sk, s)
+    J = 4
+    da, db = (x[..., :8 * J].reshape(x.shape[:2] + (J, 8)) for x in (a, b))
+    assert np.allclose(db[..., :4], da[..., :4]) and np.allclose(db[..., 4:], s * da[..., 4:])
+    tr = rng.standard_normal(da.shape[:2] + (2,))
+    ra, rb = dqr.decode(da, tr, sk), dqr.decode(db, tr, sk, s)
+    for k in ra:
+        assert np.allclose(ra[k], rb[k], atol=1e-10), k
+    pred = da + 0.05 * rng.standard_normal(da.shape)
+    pred_s = pred.copy()
+    pred_s[..., 4:] *= s
+    w = {"pos": 1.0, "offset": 1.0, "quat": 1.0}
+    va, _, _ = dq_output_loss_forward(pred, da, sk.parents, w)
+    vb, _, _ = dq_output_loss_forward(pred_s, db, sk.parents, {"pos": 1 / s, "offset": 1 / s, "quat": 1.0})
+    assert np.isclose(va, vb, rtol=1e-10)
+    with np.testing.assert_raises(ValueError):
+        recipe.QuaterNetLongConfig(num_joints=4, output="dual_quaternion", dq_scale=0.0)
+
+
+def test_loss_gradient_central_differences_with_a_dq_scale():
+    rng = np.random.default_rng(8)
+    batch, sk, net, params, windows = _tiny(rng)
+    batch["inputs"] = dqr.dq_inputs(windows, sk, 0.1)
+    kw = dict(output="dual_quaternion", dq_scale=0.1)
+    _, grads = recipe.loss_and_grads(params, batch, net, sk.offsets, sk.parents, **kw)
+    check_gradients(lambda: recipe.loss_and_grads(params, batch, net, sk.offsets, sk.parents, **kw)[0], params,
+                    grads, **TOL_FD, max_entries=12)

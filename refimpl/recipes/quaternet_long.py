@@ -69,12 +69,17 @@ class QuaterNetLongConfig:
     output: str = "quaternion"
     #: Teacher-forcing ratio decay per epoch (the paper's 0.995; a larger decay suits a short CPU budget).
     tf_decay: float = QUATERNET_TF_DECAY
+    #: ``output=dual_quaternion`` only: the DQs' translation unit as a multiple of the data's unit (1 = QuaterNet
+    #: units of 5.6444 cm; 0.056444 = metres), spec/locomotion.md §11.
+    dq_scale: float = 1.0
 
     def __post_init__(self):
         if self.output not in OUTPUTS:
             raise ValueError(f"output: expected one of {OUTPUTS}, got {self.output!r}")
         if not 0.0 <= float(self.tf_decay) <= 1.0:
             raise ValueError(f"tf_decay: expected a value in [0, 1], got {self.tf_decay}")
+        if not (np.isfinite(float(self.dq_scale)) and float(self.dq_scale) > 0):
+            raise ValueError(f"dq_scale: expected a finite value > 0, got {self.dq_scale}")
         self.network()  # validates the sizes
 
     def network(self) -> quaternet.QuaterNetConfig:
@@ -211,7 +216,8 @@ def ablation_inputs(inputs: np.ndarray, output: str, skeleton) -> np.ndarray:
 
 
 def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quaternet.QuaterNetConfig, offsets,
-                   parents, penalty: float = QUATERNET_PENALTY_WEIGHT, output: str = "quaternion"):
+                   parents, penalty: float = QUATERNET_PENALTY_WEIGHT, output: str = "quaternion",
+                   dq_scale: float = 1.0):
     """The long-term loss and its gradient on one batch.
 
     Quaternions (QN §3.4, §3.7; ref §7.5)::
@@ -236,7 +242,7 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     loss : float (position loss + penalty); grads : dict
     """
     if output == "dual_quaternion":  # Andreou et al. §6.2 (quaternet_long_dq.loss_and_grads)
-        value, grads, _ = quaternet_long_dq.loss_and_grads(params, batch, net, parents)
+        value, grads, _ = quaternet_long_dq.loss_and_grads(params, batch, net, parents, scale=dq_scale)
         return value, grads
     x, P = batch["inputs"], int(batch["prefix"])
     B, L, _ = x.shape
@@ -269,7 +275,7 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
 
 
 def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, inputs, prefix: int,
-            output: str = "quaternion", skeleton=None):
+            output: str = "quaternion", skeleton=None, dq_scale: float = 1.0):
     """Free-running prediction of frames ``P … P + T − 1`` from ``inputs[:, :P]``, with the ground-truth controls
     of ``inputs[:, P:]`` (:func:`refimpl.models.quaternet.predict`); ``inputs`` in the window layout
     ``[q (4J) | offset, height | controls]`` (converted by :func:`ablation_inputs` for the ablations, which need
@@ -280,8 +286,8 @@ def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, in
     rotations (B, T, J, 4) — or positions (B, T, J, 3) for ``output = "positions"`` — and translations (B, T, 2)
     """
     if output == "dual_quaternion":  # local rotations decoded from the DQs (Eq. 12)
-        dq, tr = quaternet_long_dq.rollout(params, net, inputs, prefix, skeleton)
-        return quaternet_long_dq.decode(dq, tr, skeleton)["rotations"], tr
+        dq, tr = quaternet_long_dq.rollout(params, net, inputs, prefix, skeleton, dq_scale)
+        return quaternet_long_dq.decode(dq, tr, skeleton, dq_scale)["rotations"], tr
     dtype = np.asarray(params["h0"]).dtype
     x = np.asarray(inputs)
     B, L, F = x.shape
@@ -317,7 +323,7 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
         b = pose_batch(seqs, ctx.rng, len(idx), P, T, augment=True)
         mask = scheduled_sampling_mask(teacher_forcing_ratio(ctx.epoch, decay=config.tf_decay), T - 1, ctx.rng)
         if config.output == "dual_quaternion":
-            inputs = quaternet_long_dq.dq_inputs(b.inputs, skel)
+            inputs = quaternet_long_dq.dq_inputs(b.inputs, skel, config.dq_scale)
         elif config.output == "quaternion":
             inputs = b.inputs
         else:
@@ -333,8 +339,8 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
 
         def validate(params):
             if config.output == "dual_quaternion":  # FK of the decoded rotations, and the DQs' own positions
-                dq, tr = quaternet_long_dq.rollout(params, net, vin, P, skel)
-                dec = quaternet_long_dq.decode(dq, tr, skel)
+                dq, tr = quaternet_long_dq.rollout(params, net, vin, P, skel, config.dq_scale)
+                dec = quaternet_long_dq.decode(dq, tr, skel, config.dq_scale)
                 perr, verr = position_errors(skel, dec["fk_positions"], tr, vpos)
                 dq_err, _ = position_errors(skel, dec["dq_positions"], tr, vpos)
                 return {"val_position": float(perr.mean()), "val_velocity": float(verr.mean()),
@@ -347,7 +353,8 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
                         init_params=lambda rng: quaternet.init_params(net, rng, dtype=dtype),
                         get_batch=get_batch,
                         loss_and_grads=lambda params, batch: loss_and_grads(params, batch, net, offsets, parents,
-                                                                            output=config.output),
+                                                                            output=config.output,
+                                                                            dq_scale=config.dq_scale),
                         validate=validate,
                         config=dict(config.to_dict(), dtype=np.dtype(dtype).name, **extra))
 
@@ -359,7 +366,7 @@ def make_method(model) -> Callable:
     skel = skeleton_of(model.extra)
 
     def quaternet_long(inputs, prefix):
-        return rollout(model.params, net, inputs, prefix, model.config.output, skel)
+        return rollout(model.params, net, inputs, prefix, model.config.output, skel, model.config.dq_scale)
 
     return quaternet_long
 
@@ -375,8 +382,8 @@ def extra_methods(model) -> dict:
     skel = skeleton_of(model.extra)
 
     def dq_positions(inputs, prefix):
-        dq, tr = quaternet_long_dq.rollout(model.params, net, inputs, prefix, skel)
-        return quaternet_long_dq.decode(dq, tr, skel)["dq_positions"], tr
+        dq, tr = quaternet_long_dq.rollout(model.params, net, inputs, prefix, skel, model.config.dq_scale)
+        return quaternet_long_dq.decode(dq, tr, skel, model.config.dq_scale)["dq_positions"], tr
 
     return {f"{NAME}_dq_positions": dq_positions}
 

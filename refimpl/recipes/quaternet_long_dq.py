@@ -31,23 +31,26 @@ from refimpl.skeleton import current_dq_from_local, local_from_current_dq
 __all__ = ["dq_inputs", "loss_and_grads", "rollout", "decode", "bone_lengths"]
 
 
-def dq_inputs(inputs, skeleton) -> np.ndarray:
+def dq_inputs(inputs, skeleton, scale: float = 1.0) -> np.ndarray:
     """Windows ``[q (4J) | offset, height | controls]`` (B, L, 4J + 8) → ``[C (8J) | offset, height | controls]``
     (B, L, 8J + 8), ``C_j`` the current dual quaternion ``(q_r | q_d)`` of joint j (root at the origin, root
-    DQ = ``(q_0 | 0)``), antipodally continuous along L (all 8 numbers flip with the real part)."""
+    DQ = ``(q_0 | 0)``) of the skeleton with its offsets × ``scale`` (the DQs' translation unit: 1 = the data's
+    units; ``0.056444`` = metres for QuaterNet units), antipodally continuous along L (all 8 numbers flip with
+    the real part)."""
     x = np.asarray(inputs)
     B, Lw, F = x.shape
     J = (F - 8) // 4
     if F != 4 * J + 8 or J != skeleton.num_joints:
         raise ValueError(f"inputs: expected (B, L, 4J + 8) with J = {skeleton.num_joints}, got {x.shape}")
     q = x[..., :4 * J].reshape(B, Lw, J, 4).astype(np.float64)
-    cur = current_dq_from_local(q, np.asarray(skeleton.offsets, np.float64), skeleton.parents)  # (B, L, J, 8)
+    off = np.asarray(skeleton.offsets, np.float64) * float(scale)
+    cur = current_dq_from_local(q, off, skeleton.parents)                                     # (B, L, J, 8)
     cur = np.moveaxis(dq_fix(np.moveaxis(cur, 1, 0)), 0, 1)                                   # continuous in L
     return np.concatenate([cur.reshape(B, Lw, 8 * J), x[..., 4 * J:]], axis=-1).astype(x.dtype)
 
 
 def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quaternet.QuaterNetConfig, parents,
-                   weights: Mapping[str, float] = WEIGHTS_QUATERNET_DQ):
+                   weights: Mapping[str, float] = WEIGHTS_QUATERNET_DQ, scale: float = 1.0):
     """The long-term dual-quaternion loss and its gradient on one batch::
 
         loss = Σ_k w_k L_k(Δ, C̃)  (k ∈ pos, offset, quat, reg; Eq. 13 inside, L_reg on the raw Δ)
@@ -64,6 +67,8 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     net : QuaterNetConfig with ``representation="dual_quaternion"``, absolute mode
     parents : (J,)
     weights : loss name → weight (:data:`refimpl.dq_output.DQ_TERM_NAMES`)
+    scale : the DQs' translation unit (:func:`dq_inputs`); L_pos and L_offset are divided by it (Euclidean
+        distances are homogeneous), so the loss is measured in the data's units whatever the DQs' unit
 
     Returns
     -------
@@ -77,7 +82,8 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     ttr = batch["target_translations"]
     y, pre, cache = quaternet.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
     target = np.asarray(x[:, P:, :R], np.float64).reshape(B, T, J, 8)                      # (B, T, J, 8)
-    value, parts, dc = dq_output_loss_forward(pre.reshape(B, T, J, 8), target, parents, dict(weights), net.eps)
+    w = {k: (v / float(scale) if k in ("pos", "offset") else v) for k, v in weights.items()}
+    value, parts, dc = dq_output_loss_forward(pre.reshape(B, T, J, 8), target, parents, w, net.eps)
     dpre = dq_output_loss_backward(1.0, dc).reshape(B, T, R)
     d = np.asarray(y[..., R:], np.float64) - ttr                                             # (B, T, 2)
     tr_value = float(np.abs(d).mean(axis=(0, 1)).sum())
@@ -88,7 +94,8 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     return value + tr_value, grads, parts
 
 
-def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, inputs, prefix: int, skeleton):
+def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, inputs, prefix: int, skeleton,
+            scale: float = 1.0):
     """Free-running prediction of frames ``P … P + T − 1`` from the windows ``inputs`` (B, P + T, 4J + 8) (converted
     by :func:`dq_inputs`), with the ground-truth controls.
 
@@ -97,15 +104,16 @@ def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, in
     dq : (B, T, J, 8) unit current dual quaternions; translations : (B, T, 2)
     """
     dtype = np.asarray(params["h0"]).dtype
-    x = dq_inputs(inputs, skeleton).astype(dtype)
+    x = dq_inputs(inputs, skeleton, scale).astype(dtype)
     B, L, _ = x.shape
     P, G, R = int(prefix), net.output_size, net.rotation_size
     y = quaternet.predict(params, x[:, :P], L - P, net, controls=np.ascontiguousarray(x[:, P:L - 1, G:]))
     return np.asarray(y[..., :R], np.float64).reshape(B, L - P, net.num_joints, 8), np.asarray(y[..., R:])
 
 
-def decode(dq, translations, skeleton) -> dict:
-    """Local rotations and the two position readings of predicted current DQs (..., J, 8).
+def decode(dq, translations, skeleton, scale: float = 1.0) -> dict:
+    """Local rotations and the two position readings of predicted current DQs (..., J, 8) whose translations are
+    in units of ``scale`` (:func:`dq_inputs`; the positions returned are in the data's units).
 
     Returns
     -------
@@ -117,7 +125,7 @@ def decode(dq, translations, skeleton) -> dict:
     rot = quat_normalize(local_from_current_dq(dq, skeleton.parents)[0])
     root = np.zeros(dq.shape[:-2] + (3,))
     root[..., 1] = tr[..., 1]
-    return {"rotations": rot, "dq_positions": translation_from_dq(dq) + root[..., None, :],
+    return {"rotations": rot, "dq_positions": translation_from_dq(dq) / float(scale) + root[..., None, :],
             "fk_positions": skeleton.forward_kinematics(rot, root)}
 
 

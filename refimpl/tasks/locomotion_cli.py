@@ -33,7 +33,7 @@ def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: st
     seed = pose_model.extra["seed_clip"]
     return generate_walk(pose_model.params, pose_model.config.network(), pace_model.params, pace_model.config,
                          skeleton_of(pose_model.extra), np.asarray(seed["rotations"]), np.asarray(seed["features"]),
-                         path, speed, int(round(seconds * FPS)))
+                         path, speed, int(round(seconds * FPS)), dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
 
 
 def generate_command(args, load_trained: Callable, say: Callable) -> int:

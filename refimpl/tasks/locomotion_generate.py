@@ -144,7 +144,7 @@ def align_seed(rotations: np.ndarray, features: np.ndarray, facing) -> tuple[np.
 
 def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_params: Mapping,
                   pace_config: pace.PaceConfig, skeleton: Skeleton, seed_rotations, seed_features, path: Spline,
-                  speed: float, num_frames: int) -> GeneratedWalk:
+                  speed: float, num_frames: int, dq_scale: float = 1.0) -> GeneratedWalk:
     """Generate ``num_frames`` frames along ``path`` (fewer if an open path ends first).
 
     Parameters
@@ -158,6 +158,7 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
     path : Spline in QuaterNet units
     speed : target average speed (units per frame)
     num_frames : int
+    dq_scale : dual-quaternion networks: the DQs' translation unit (``QuaterNetLongConfig.dq_scale``)
 
     Returns
     -------
@@ -173,7 +174,7 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
     P = rot.shape[0]
     seed = np.concatenate([rot.reshape(P, 4 * J), feats], axis=1)                  # (P, 4J + 8)
     if dual:  # current DQs of the seed (Andreou et al. §6.2)
-        seed = quaternet_long_dq.dq_inputs(seed[None], skeleton)[0]               # (P, 8J + 8)
+        seed = quaternet_long_dq.dq_inputs(seed[None], skeleton, dq_scale)[0]               # (P, 8J + 8)
     seed = seed.astype(dtype)
     h = quaternet.init_state(pose_params, 1, net)
     for t in range(P):
@@ -211,7 +212,7 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
     roots = np.array(roots)
     dq_positions = None
     if dual:  # rotations decoded current → local (Eq. 12); the DQs' own positions (Eq. 8) kept beside them
-        dec = quaternet_long_dq.decode(np.stack(dqs), np.zeros((len(dqs), 2)), skeleton)
+        dec = quaternet_long_dq.decode(np.stack(dqs), np.zeros((len(dqs), 2)), skeleton, dq_scale)
         rots = dec["rotations"]
         dq_positions = dec["dq_positions"] + roots[:, None, :]
     motion = Motion(skeleton, np.stack(rots), roots, 1.0 / FPS, "generated")
