@@ -11,9 +11,13 @@
   teacher-forcing ratio ``0.995^epoch`` (:func:`refimpl.schedules.teacher_forcing_ratio`, from the trainer's
   epoch), one mask per batch, ground-truth controls in free-running steps;
 * :data:`PAPER_OPTIM` — Adam 1e-3, × 0.999 per epoch, gradient-norm clip 0.1; :data:`PAPER_BATCH` 40;
-* :func:`make_method` — free-running prediction ``f(inputs (B, P + T, F), P)`` with the ground-truth controls.
+* :func:`make_method` — free-running prediction ``f(inputs (B, P + T, F), P)`` with the ground-truth controls;
+  :func:`extra_methods` — a dual-quaternion model's positions read from its DQs, for ``refimpl eval``;
+* ``output=dual_quaternion`` (Andreou et al. §6.2): frames of current dual quaternions, L_pos + L_offset + L_quat
+  + 0.01 L_reg, decoding with Eq. 12 — :mod:`refimpl.recipes.quaternet_long_dq` (spec/locomotion.md §11).
 
-Shape legend: B batch, P prefix, T target frames, J joints, F = 4J + 8 input features, G = 4J + 2 outputs.
+Shape legend: B batch, P prefix, T target frames, J joints, F = 4J + 8 input features, G = 4J + 2 outputs
+(8J + 8 and 8J + 2 for dual quaternions).
 """
 from __future__ import annotations
 
@@ -228,6 +232,8 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     (:func:`euler_to_quat_forward`, :func:`axis_angle_to_quat_forward`) before the same FK loss; the penalty
     acts on the placeholder quaternion only. Positions (QN §4.4.3): ``mean ‖p̂_j − p_j‖ + mean |o − õ| +
     mean |h − h̃|`` (the height is inside the FK positions of the other models; here it is its own output).
+    Dual quaternions (Andreou et al. §6.2): :func:`refimpl.recipes.quaternet_long_dq.loss_and_grads` with the
+    DQs' unit ``dq_scale`` (``batch["inputs"]`` from :func:`~refimpl.recipes.quaternet_long_dq.dq_inputs`).
 
     Parameters
     ----------
