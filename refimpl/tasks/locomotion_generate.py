@@ -12,6 +12,9 @@ Loop (per generated frame, from the reference's ``generate_motion``)::
              y, h = step([y | c], h)                 rotations (J quaternions), offset δ, height
              φ ← φ + ω;  s ← s + A;  root xz = path point at s + δ, root y = height
 
+A dual-quaternion network (``QuaterNetConfig.representation``) is fed the seed as current DQs and its outputs
+are decoded per frame (Eq. 12 for the rotations, Eq. 8 for :attr:`GeneratedWalk.dq_positions`).
+
 Shape legend: N generated frames, J joints, P seed frames, M path points.
 """
 from __future__ import annotations
