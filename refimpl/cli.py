@@ -662,7 +662,9 @@ def _eval_locomotion(args, model) -> int:
                          "held-out L1 is its loss_val.csv)")
     _say(f"reading {args.data} ...")
     data = task.load_eval_data(args.data, model.extra)
-    results = evaluate_model(model, data)
+    extra = getattr(model.spec.recipe, "extra_methods", None)  # e.g. a DQ model's positions read from the DQs
+    nets = {**network_methods(model), **(extra(model) if extra else {})}
+    results = task.evaluate(data, task.methods(nets))
     _say(f"held-out windows: {next(iter(results.values()))['windows']} of {data.prefix} + {data.target} frames "
          f"({len(data.files)} files); error in QuaterNet units (1 unit = 5.6444 cm)")
     _say(task.format_results(results))

@@ -25,7 +25,7 @@ from deploy.graph import OPSET, GraphBuilder
 from deploy.gru import gru, gru_step
 from deploy.linear import linear
 from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
-from deploy.quat import quat_normalize
+from deploy.quat import dq_normalize, quat_normalize
 from deploy.recurrent import tiled_state
 
 __all__ = ["NAME", "QUATERNET_PAPER", "export_pose_step", "export_pace"]
@@ -36,6 +36,11 @@ QUATERNET_PAPER = ("Pavllo, Feichtenhofer, Auli, Grangier: Modeling Human Motion
 
 
 def _representation(config: QuaterNetConfig) -> dict:
+    if config.representation == "dual_quaternion":
+        return {"kind": "quaternet_long_dq", "layout": ["rotations (8J, current dual quaternions (q_r | q_d) per "
+                                                       "joint, root-relative, Eq. 13 unit)",
+                                                       "translations (offset, height)", "controls (6, inputs only)"],
+                "num_joints": int(config.num_joints), "units": "QuaterNet units (5.6444 cm)"}
     return {"kind": "quaternet_long", "layout": ["rotations (4J, (w, x, y, z) per joint, local, root absolute)",
                                                 "translations (offset, height)", "controls (6, inputs only)"],
             "num_joints": int(config.num_joints), "units": "QuaterNet units (5.6444 cm)"}
@@ -65,10 +70,11 @@ def export_pose_step(params: Mapping[str, np.ndarray], config: QuaterNetConfig, 
     gin = g.node("Concat", [pose, a], "gru_in", axis=1)                          # (B, I)
     top, h_new = gru_step(g, gin, state, params, "rnn", name="rnn", num_layers=L)  # (B, H), (L, B, H)
     o = linear(g, top, params, "fc", name="fc", rank2=True)                       # (B, G)
-    q, tau = g.node("Split", [o, g.ints([4 * J, O])], "o.split", axis=1, outputs=("q", "tau"))
-    q = g.node("Reshape", [q, g.ints([0, J, 4])], "q.joints")                     # (B, J, 4)
-    q = quat_normalize(g, q, name="q.unit", eps=float(config.eps))
-    q = g.node("Reshape", [q, g.ints([0, 4 * J])], "q.flat")                      # (B, 4J)
+    D = config.joint_width  # 4, or 8 for current dual quaternions (Andreou et al. §6.2: Eq. 13 in the graph)
+    q, tau = g.node("Split", [o, g.ints([D * J, O])], "o.split", axis=1, outputs=("q", "tau"))
+    q = g.node("Reshape", [q, g.ints([0, J, D])], "q.joints")                     # (B, J, D)
+    q = (dq_normalize if D == 8 else quat_normalize)(g, q, name="q.unit", eps=float(config.eps))
+    q = g.node("Reshape", [q, g.ints([0, D * J])], "q.flat")                      # (B, DJ)
     y = g.node("Concat", [q, tau], "y", axis=1)                                   # (B, G)
     g.output(y, "y", ["B", G])
     g.output(h_new, "state_next", [L, "B", H])

@@ -45,7 +45,9 @@ def load_checkpoint(path):
         raise ValueError(f"{path}: expected a quaternet-long or pace checkpoint, got model {meta.get('model')!r}")
     net = QuaterNetConfig.long_term(num_joints=int(cfg["num_joints"]), hidden_size=int(cfg["hidden_size"]),
                                     num_layers=int(cfg["num_layers"]), controls_hidden=int(cfg["controls_hidden"]),
-                                    negative_slope=float(cfg["negative_slope"]))
+                                    negative_slope=float(cfg["negative_slope"]),
+                                    representation="dual_quaternion" if cfg.get("output") == "dual_quaternion"
+                                    else "quaternion")
     return params, net, meta
 
 
@@ -120,6 +122,9 @@ class Runtime:
     def rollout(self, inputs, prefix: int):
         """Free-running prediction with the ground-truth controls (the task's method interface):
         ``inputs (B, P + T, F)`` → ``rotations (B, T, J, 4)``, ``translations (B, T, 2)``."""
+        if (self.step_model.metadata.get("representation") or {}).get("kind") == "quaternet_long_dq":
+            raise ValueError("rollout: a dual-quaternion step model takes current-DQ frames; evaluate it in NumPy "
+                             "(refimpl eval --checkpoint)")
         x = np.asarray(inputs, np.float32)
         B, Ltot, F = x.shape
         G = F - 6

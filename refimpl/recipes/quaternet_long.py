@@ -11,9 +11,13 @@
   teacher-forcing ratio ``0.995^epoch`` (:func:`refimpl.schedules.teacher_forcing_ratio`, from the trainer's
   epoch), one mask per batch, ground-truth controls in free-running steps;
 * :data:`PAPER_OPTIM` — Adam 1e-3, × 0.999 per epoch, gradient-norm clip 0.1; :data:`PAPER_BATCH` 40;
-* :func:`make_method` — free-running prediction ``f(inputs (B, P + T, F), P)`` with the ground-truth controls.
+* :func:`make_method` — free-running prediction ``f(inputs (B, P + T, F), P)`` with the ground-truth controls;
+  :func:`extra_methods` — a dual-quaternion model's positions read from its DQs, for ``refimpl eval``;
+* ``output=dual_quaternion`` (Andreou et al. §6.2): frames of current dual quaternions, L_pos + L_offset + L_quat
+  + 0.01 L_reg, decoding with Eq. 12 — :mod:`refimpl.recipes.quaternet_long_dq` (spec/locomotion.md §11).
 
-Shape legend: B batch, P prefix, T target frames, J joints, F = 4J + 8 input features, G = 4J + 2 outputs.
+Shape legend: B batch, P prefix, T target frames, J joints, F = 4J + 8 input features, G = 4J + 2 outputs
+(8J + 8 and 8J + 2 for dual quaternions).
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, fk_position_loss_backward,
                             quat_norm_loss_backward, quat_norm_loss_forward)
 from refimpl.losses import euclidean_loss_backward, euclidean_loss_forward
 from refimpl.models import quaternet
+from refimpl.recipes import quaternet_long_dq
 from refimpl.nn.quat_layers import quat_mul_backward, quat_mul_forward
 from refimpl.quat import axis_angle_from_quat, euler_from_quat
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
@@ -39,7 +44,7 @@ __all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG
            "OUTPUTS", "QuaterNetLongConfig", "make_config", "euler_to_quat_forward", "euler_to_quat_backward",
            "axis_angle_to_quat_forward", "axis_angle_to_quat_backward", "rotations_from_quat", "quat_from_rotations",
            "quat_from_rotations_backward", "ablation_inputs", "loss_and_grads", "make_adapter", "rollout",
-           "make_method", "export_inputs", "reference_outputs", "verify_onnx"]
+           "make_method", "extra_methods", "export_inputs", "reference_outputs", "verify_onnx"]
 
 NAME = "quaternet-long"
 SUMMARY = ("QuaterNet long-term pose network (Pavllo et al. 2019): GRU with controls and translations, FK "
@@ -52,8 +57,8 @@ PAPER_OPTIM = OptimConfig(**QUATERNET_ADAM, clip_norm=QUATERNET_CLIP_NORM, lr_de
 PAPER_BATCH = 40
 #: Output parameterisations (``--set output=...``; QN §4.4.2-4.4.3, spec/locomotion.md §8): quaternions (the
 #: model), Euler angles (orders xyz, yzx) and axis-angle vectors converted to quaternions before FK, and joint
-#: positions (no FK).
-OUTPUTS = ("quaternion", "euler_xyz", "euler_yzx", "axis_angle", "positions")
+#: positions (no FK); and current dual quaternions (Andreou et al. §6.2: positions read from the DQs, Eq. 8).
+OUTPUTS = ("quaternion", "euler_xyz", "euler_yzx", "axis_angle", "positions", "dual_quaternion")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,12 +73,17 @@ class QuaterNetLongConfig:
     output: str = "quaternion"
     #: Teacher-forcing ratio decay per epoch (the paper's 0.995; a larger decay suits a short CPU budget).
     tf_decay: float = QUATERNET_TF_DECAY
+    #: ``output=dual_quaternion`` only: the DQs' translation unit as a multiple of the data's unit (1 = QuaterNet
+    #: units of 5.6444 cm; 0.056444 = metres), spec/locomotion.md §11.
+    dq_scale: float = 1.0
 
     def __post_init__(self):
         if self.output not in OUTPUTS:
             raise ValueError(f"output: expected one of {OUTPUTS}, got {self.output!r}")
         if not 0.0 <= float(self.tf_decay) <= 1.0:
             raise ValueError(f"tf_decay: expected a value in [0, 1], got {self.tf_decay}")
+        if not (np.isfinite(float(self.dq_scale)) and float(self.dq_scale) > 0):
+            raise ValueError(f"dq_scale: expected a finite value > 0, got {self.dq_scale}")
         self.network()  # validates the sizes
 
     def network(self) -> quaternet.QuaterNetConfig:
@@ -86,6 +96,9 @@ class QuaterNetLongConfig:
                   negative_slope=self.negative_slope)
         if self.output == "quaternion":
             return quaternet.QuaterNetConfig.long_term(num_joints=self.num_joints, **kw)
+        if self.output == "dual_quaternion":
+            return quaternet.QuaterNetConfig.long_term(num_joints=self.num_joints, representation="dual_quaternion",
+                                                       **kw)
         return quaternet.QuaterNetConfig.long_term(num_joints=1, num_outputs=3 * self.num_joints + 2, **kw)
 
     def to_dict(self) -> dict:
@@ -207,7 +220,8 @@ def ablation_inputs(inputs: np.ndarray, output: str, skeleton) -> np.ndarray:
 
 
 def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quaternet.QuaterNetConfig, offsets,
-                   parents, penalty: float = QUATERNET_PENALTY_WEIGHT, output: str = "quaternion"):
+                   parents, penalty: float = QUATERNET_PENALTY_WEIGHT, output: str = "quaternion",
+                   dq_scale: float = 1.0):
     """The long-term loss and its gradient on one batch.
 
     Quaternions (QN §3.4, §3.7; ref §7.5)::
@@ -218,6 +232,8 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     (:func:`euler_to_quat_forward`, :func:`axis_angle_to_quat_forward`) before the same FK loss; the penalty
     acts on the placeholder quaternion only. Positions (QN §4.4.3): ``mean ‖p̂_j − p_j‖ + mean |o − õ| +
     mean |h − h̃|`` (the height is inside the FK positions of the other models; here it is its own output).
+    Dual quaternions (Andreou et al. §6.2): :func:`refimpl.recipes.quaternet_long_dq.loss_and_grads` with the
+    DQs' unit ``dq_scale`` (``batch["inputs"]`` from :func:`~refimpl.recipes.quaternet_long_dq.dq_inputs`).
 
     Parameters
     ----------
@@ -231,6 +247,9 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     -------
     loss : float (position loss + penalty); grads : dict
     """
+    if output == "dual_quaternion":  # Andreou et al. §6.2 (quaternet_long_dq.loss_and_grads)
+        value, grads, _ = quaternet_long_dq.loss_and_grads(params, batch, net, parents, scale=dq_scale)
+        return value, grads
     x, P = batch["inputs"], int(batch["prefix"])
     B, L, _ = x.shape
     T, R = L - P, 4 * net.num_joints
@@ -262,7 +281,7 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
 
 
 def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, inputs, prefix: int,
-            output: str = "quaternion", skeleton=None):
+            output: str = "quaternion", skeleton=None, dq_scale: float = 1.0):
     """Free-running prediction of frames ``P … P + T − 1`` from ``inputs[:, :P]``, with the ground-truth controls
     of ``inputs[:, P:]`` (:func:`refimpl.models.quaternet.predict`); ``inputs`` in the window layout
     ``[q (4J) | offset, height | controls]`` (converted by :func:`ablation_inputs` for the ablations, which need
@@ -272,6 +291,9 @@ def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, in
     -------
     rotations (B, T, J, 4) — or positions (B, T, J, 3) for ``output = "positions"`` — and translations (B, T, 2)
     """
+    if output == "dual_quaternion":  # local rotations decoded from the DQs (Eq. 12)
+        dq, tr = quaternet_long_dq.rollout(params, net, inputs, prefix, skeleton, dq_scale)
+        return quaternet_long_dq.decode(dq, tr, skeleton, dq_scale)["rotations"], tr
     dtype = np.asarray(params["h0"]).dtype
     x = np.asarray(inputs)
     B, L, F = x.shape
@@ -306,7 +328,12 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
     def get_batch(idx, ctx):
         b = pose_batch(seqs, ctx.rng, len(idx), P, T, augment=True)
         mask = scheduled_sampling_mask(teacher_forcing_ratio(ctx.epoch, decay=config.tf_decay), T - 1, ctx.rng)
-        inputs = b.inputs if config.output == "quaternion" else ablation_inputs(b.inputs, config.output, skel)
+        if config.output == "dual_quaternion":
+            inputs = quaternet_long_dq.dq_inputs(b.inputs, skel, config.dq_scale)
+        elif config.output == "quaternion":
+            inputs = b.inputs
+        else:
+            inputs = ablation_inputs(b.inputs, config.output, skel)
         return {"inputs": inputs.astype(dtype), "target_positions": b.target_positions.astype(dtype),
                 "target_translations": b.target_translations.astype(dtype), "mask": mask, "prefix": P}
 
@@ -317,6 +344,13 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
         vin, vpos = vin[sel], vpos[sel]
 
         def validate(params):
+            if config.output == "dual_quaternion":  # FK of the decoded rotations, and the DQs' own positions
+                dq, tr = quaternet_long_dq.rollout(params, net, vin, P, skel, config.dq_scale)
+                dec = quaternet_long_dq.decode(dq, tr, skel, config.dq_scale)
+                perr, verr = position_errors(skel, dec["fk_positions"], tr, vpos)
+                dq_err, _ = position_errors(skel, dec["dq_positions"], tr, vpos)
+                return {"val_position": float(perr.mean()), "val_velocity": float(verr.mean()),
+                        "val_position_dq": float(dq_err.mean())}
             rot, tr = rollout(params, net, vin, P, config.output, skel)
             perr, verr = position_errors(skel, rot, tr, vpos)
             return {"val_position": float(perr.mean()), "val_velocity": float(verr.mean())}
@@ -325,7 +359,8 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
                         init_params=lambda rng: quaternet.init_params(net, rng, dtype=dtype),
                         get_batch=get_batch,
                         loss_and_grads=lambda params, batch: loss_and_grads(params, batch, net, offsets, parents,
-                                                                            output=config.output),
+                                                                            output=config.output,
+                                                                            dq_scale=config.dq_scale),
                         validate=validate,
                         config=dict(config.to_dict(), dtype=np.dtype(dtype).name, **extra))
 
@@ -337,15 +372,34 @@ def make_method(model) -> Callable:
     skel = skeleton_of(model.extra)
 
     def quaternet_long(inputs, prefix):
-        return rollout(model.params, net, inputs, prefix, model.config.output, skel)
+        return rollout(model.params, net, inputs, prefix, model.config.output, skel, model.config.dq_scale)
 
     return quaternet_long
 
 
+def extra_methods(model) -> dict:
+    """Further methods of ``refimpl eval`` beside :func:`make_method`: for a dual-quaternion model,
+    ``quaternet-long_dq_positions`` returns the positions read from the predicted DQs (Eq. 8, root ``(0, h, 0)``)
+    instead of FK of the decoded rotations; none for the other outputs."""
+    if model.config.output != "dual_quaternion":
+        return {}
+    from refimpl.tasks.locomotion import skeleton_of
+    net = model.config.network()
+    skel = skeleton_of(model.extra)
+
+    def dq_positions(inputs, prefix):
+        dq, tr = quaternet_long_dq.rollout(model.params, net, inputs, prefix, skel, model.config.dq_scale)
+        return quaternet_long_dq.decode(dq, tr, skel, model.config.dq_scale)["dq_positions"], tr
+
+    return {f"{NAME}_dq_positions": dq_positions}
+
+
 def export_inputs(model) -> dict:
-    """Keyword arguments of the exporter (``deploy.models.quaternet_long_io.export_dir``); quaternion models only."""
-    if model.config.output != "quaternion":
-        raise UsageError(f"export: only quaternion-output models are exported (this one: {model.config.output})")
+    """Keyword arguments of the exporter (``deploy.models.quaternet_long_io.export_dir``); quaternion and
+    dual-quaternion models (the step graph normalises each joint's 8 numbers with Eq. 13)."""
+    if model.config.output not in ("quaternion", "dual_quaternion"):
+        raise UsageError(f"export: only quaternion- and dual-quaternion-output models are exported (this one: "
+                         f"{model.config.output})")
     return {"metadata": {"frame_rate": float(model.fps or 30.0),
                          "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}}}
 

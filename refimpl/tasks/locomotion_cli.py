@@ -9,8 +9,8 @@ import numpy as np
 
 from refimpl.errors import UsageError
 from refimpl.tasks.locomotion import FPS, QUATERNET_UNIT_CM, rig_of, skeleton_of
-from refimpl.tasks.locomotion_generate import (bone_length_drift, facing_of, foot_skating, generate_walk,
-                                              parse_path, parse_speed, write_outputs)
+from refimpl.tasks.locomotion_generate import (bone_length_drift, dq_bone_length_drift, facing_of, foot_skating,
+                                              generate_walk, parse_path, parse_speed, write_outputs)
 
 __all__ = ["generate_command", "walk_from_checkpoints"]
 
@@ -27,13 +27,13 @@ def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: st
         speed = parse_speed(speed_text)
     except (OSError, ValueError) as exc:
         raise UsageError(str(exc)) from exc
-    if pose_model.config.output != "quaternion":
-        raise UsageError(f"--checkpoint: generation needs a quaternion-output model, got output = "
+    if pose_model.config.output not in ("quaternion", "dual_quaternion"):
+        raise UsageError(f"--checkpoint: generation needs a quaternion or dual-quaternion model, got output = "
                          f"{pose_model.config.output!r} (an ablation)")
     seed = pose_model.extra["seed_clip"]
     return generate_walk(pose_model.params, pose_model.config.network(), pace_model.params, pace_model.config,
                          skeleton_of(pose_model.extra), np.asarray(seed["rotations"]), np.asarray(seed["features"]),
-                         path, speed, int(round(seconds * FPS)))
+                         path, speed, int(round(seconds * FPS)), dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
 
 
 def generate_command(args, load_trained: Callable, say: Callable) -> int:
@@ -61,6 +61,14 @@ def generate_command(args, load_trained: Callable, say: Callable) -> int:
     say(f"facing vs the pace network: median angle {math.degrees(np.median(np.arccos(np.clip(agree, -1, 1)))):.1f}°;"
         f" foot skating {skate['speed_cm_s']:.1f} cm/s in contact ({100 * skate['contact_fraction']:.0f} % of "
         f"foot-frames); bone-length drift {bone_length_drift(m) * QUATERNET_UNIT_CM:.2g} cm")
+    if walk.dq_positions is not None:  # dual quaternions: the positions the network's losses saw (Eq. 8)
+        gap = np.linalg.norm(walk.dq_positions - m.positions(), axis=-1) * QUATERNET_UNIT_CM
+        drift = dq_bone_length_drift(walk.dq_positions, m.skeleton)
+        dq_skate = foot_skating(walk.dq_positions, feet)
+        say(f"dual quaternions: positions read from the DQs (Eq. 8) vs FK of the decoded rotations (Eq. 12): mean "
+            f"{gap.mean():.2f} cm, max {gap.max():.2f} cm; DQ bone-length drift mean {drift['mean'] * QUATERNET_UNIT_CM:.2f}"
+            f" cm ({100 * drift['mean_relative']:.1f} %), max {drift['max'] * QUATERNET_UNIT_CM:.2f} cm (not enforced "
+            f"by the representation); foot skating of the DQ positions {dq_skate['speed_cm_s']:.1f} cm/s")
     for f in (args.gif, args.png, args.controls):
         if f:
             say(f"wrote {f}")

@@ -12,6 +12,9 @@ Loop (per generated frame, from the reference's ``generate_motion``)::
              y, h = step([y | c], h)                 rotations (J quaternions), offset δ, height
              φ ← φ + ω;  s ← s + A;  root xz = path point at s + δ, root y = height
 
+A dual-quaternion network (``QuaterNetConfig.representation``) is fed the seed as current DQs and its outputs
+are decoded per frame (Eq. 12 for the rotations, Eq. 8 for :attr:`GeneratedWalk.dq_positions`).
+
 Shape legend: N generated frames, J joints, P seed frames, M path points.
 """
 from __future__ import annotations
@@ -27,13 +30,14 @@ import numpy as np
 from refimpl.atomic import atomic_write_text
 from refimpl.models import pace, quaternet
 from refimpl.motion import Motion
+from refimpl.recipes import quaternet_long_dq
 from refimpl.quat import quat_mul
 from refimpl.skeleton import Skeleton
 from refimpl.splines import Spline, circle_path, figure_eight_path, line_with_turn_path, read_path_csv
 from refimpl.tasks.locomotion import FPS, QUATERNET_UNIT_CM, SPEEDS, rotate_controls
 
 __all__ = ["GeneratedWalk", "parse_path", "parse_speed", "align_seed", "generate_walk", "foot_skating",
-           "bone_length_drift", "facing_of", "write_outputs", "BUILTIN_PATHS"]
+           "bone_length_drift", "dq_bone_length_drift", "facing_of", "write_outputs", "BUILTIN_PATHS"]
 
 #: Built-in paths of ``--path``, sizes in metres: ``circle[:r=R]`` (default 3 m), ``figure8[:size=S]`` (default
 #: 4 m), ``line-turn[:turn=DEG]`` (6 m straight, a 2 m-radius turn of DEG degrees, default 90, then 6 m); or a CSV
@@ -56,6 +60,9 @@ class GeneratedWalk:
     phase : (N,) φ after each step (radians, wrapped to [0, 2π)).
     path : Spline — the pace network's reparameterised path with its tracks (``amplitude``, ``frequency``,
         ``direction``).
+    dq_positions : (N, J, 3) or None — dual-quaternion networks only: the world positions read from the predicted
+        current DQs (Eq. 8) plus the root; ``motion`` holds the rotations decoded from them (Eq. 12), whose FK
+        positions keep the skeleton's bone lengths while these do not.
     """
 
     motion: Motion
@@ -64,6 +71,7 @@ class GeneratedWalk:
     travelled: np.ndarray
     phase: np.ndarray
     path: Spline
+    dq_positions: np.ndarray | None = None
 
 
 def parse_path(text: str) -> Spline:
@@ -139,24 +147,27 @@ def align_seed(rotations: np.ndarray, features: np.ndarray, facing) -> tuple[np.
 
 def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_params: Mapping,
                   pace_config: pace.PaceConfig, skeleton: Skeleton, seed_rotations, seed_features, path: Spline,
-                  speed: float, num_frames: int) -> GeneratedWalk:
+                  speed: float, num_frames: int, dq_scale: float = 1.0) -> GeneratedWalk:
     """Generate ``num_frames`` frames along ``path`` (fewer if an open path ends first).
 
     Parameters
     ----------
-    pose_params, net : the long-term pose network (``net.num_controls == 6``, ``num_outputs == 2``)
+    pose_params, net : the long-term pose network (``net.num_controls == 6``, ``num_outputs == 2``), over local
+        quaternions or current dual quaternions (``net.representation``; the seed converted with
+        :func:`refimpl.recipes.quaternet_long_dq.dq_inputs`, the outputs decoded with Eq. 12 / Eq. 8)
     pace_params, pace_config : the pace network (bidirectional or delayed, run offline over the whole path)
     skeleton : the training skeleton (J joints, QuaterNet units)
     seed_rotations : (P, J, 4); seed_features : (P, 8) — the conditioning clip
     path : Spline in QuaterNet units
     speed : target average speed (units per frame)
     num_frames : int
+    dq_scale : dual-quaternion networks: the DQs' translation unit (``QuaterNetLongConfig.dq_scale``)
 
     Returns
     -------
     GeneratedWalk
     """
-    J = net.num_joints
+    J, R, dual = net.num_joints, net.rotation_size, net.representation == "dual_quaternion"
     if net.num_controls != 6 or net.num_outputs != 2 or skeleton.num_joints != J:
         raise ValueError(f"net: expected a long-term network of {skeleton.num_joints} joints with 2 translations and "
                          f"6 controls, got {net}")
@@ -164,13 +175,16 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
     dtype = np.asarray(pose_params["h0"]).dtype
     rot, feats = align_seed(seed_rotations, seed_features, tracks.interpolate(0.0, "direction"))
     P = rot.shape[0]
-    seed = np.concatenate([rot.reshape(P, 4 * J), feats], axis=1).astype(dtype)   # (P, 4J + 8)
+    seed = np.concatenate([rot.reshape(P, 4 * J), feats], axis=1)                  # (P, 4J + 8)
+    if dual:  # current DQs of the seed (Andreou et al. §6.2)
+        seed = quaternet_long_dq.dq_inputs(seed[None], skeleton, dq_scale)[0]               # (P, 8J + 8)
+    seed = seed.astype(dtype)
     h = quaternet.init_state(pose_params, 1, net)
     for t in range(P):
         y, h = quaternet.step(pose_params, h, seed[t:t + 1], net)
     phi = math.atan2(feats[-1, 3], feats[-1, 2])
     s = 0.0
-    rots, roots, ctrls, dists, phases, arcs = [], [], [], [], [], []
+    rots, roots, ctrls, dists, phases, arcs, dqs = [], [], [], [], [], [], []
     for _ in range(int(num_frames)):
         tan = tracks.interpolate(s, "tangent")
         tan = tan / (np.linalg.norm(tan) + 1e-9)
@@ -182,23 +196,32 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
         arc = s
         phi = (phi + freq) % (2 * math.pi)
         s += amp
-        nxt = s + float(y[0, 4 * J])
+        nxt = s + float(y[0, R])
         if not tracks.closed and nxt >= tracks.length:
             break
         xz = tracks.interpolate(nxt)
-        q = y[0, :4 * J].astype(np.float64).reshape(J, 4)
-        rots.append(q / np.linalg.norm(q, axis=-1, keepdims=True))
-        roots.append([xz[0], float(y[0, 4 * J + 1]), xz[1]])
+        if dual:
+            dqs.append(y[0, :R].astype(np.float64).reshape(J, 8))
+        else:
+            q = y[0, :R].astype(np.float64).reshape(J, 4)
+            rots.append(q / np.linalg.norm(q, axis=-1, keepdims=True))
+        roots.append([xz[0], float(y[0, R + 1]), xz[1]])
         ctrls.append(c)
         dists.append(nxt)
         arcs.append(arc)
         phases.append(phi)
-    if not rots:
+    if not roots:
         raise ValueError("path: too short for one frame")
-    motion = Motion(skeleton, np.stack(rots), np.array(roots), 1.0 / FPS, "generated")
+    roots = np.array(roots)
+    dq_positions = None
+    if dual:  # rotations decoded current → local (Eq. 12); the DQs' own positions (Eq. 8) kept beside them
+        dec = quaternet_long_dq.decode(np.stack(dqs), np.zeros((len(dqs), 2)), skeleton, dq_scale)
+        rots = dec["rotations"]
+        dq_positions = dec["dq_positions"] + roots[:, None, :]
+    motion = Motion(skeleton, np.stack(rots), roots, 1.0 / FPS, "generated")
     return GeneratedWalk(motion=motion, controls=np.array(ctrls), distance=np.array(dists),
                          travelled=np.array(arcs), phase=np.array(phases),
-                         path=tracks)
+                         path=tracks, dq_positions=dq_positions)
 
 
 def facing_of(walk: GeneratedWalk, rig) -> np.ndarray:
@@ -232,6 +255,19 @@ def foot_skating(positions: np.ndarray, feet, fps: float = FPS, contact_height: 
     sp = np.concatenate(speeds)
     return {"speed_cm_s": float(sp.mean()) if sp.size else float("nan"),
             "contact_fraction": float(np.concatenate(contact).mean())}
+
+
+def dq_bone_length_drift(positions, skeleton: Skeleton) -> dict:
+    """Bone lengths of positions read from dual quaternions (not enforced by the representation) against the
+    skeleton's rest lengths (units): ``{"max": largest |Δ|, "mean": mean |Δ|, "mean_relative": mean |Δ| / rest}``
+    over frames and bones."""
+    par = np.asarray(skeleton.parents)
+    js = np.arange(1, skeleton.num_joints)
+    p = np.asarray(positions, np.float64)
+    rest = np.linalg.norm(np.asarray(skeleton.offsets, np.float64)[js], axis=-1)
+    d = np.abs(np.linalg.norm(p[..., js, :] - p[..., par[js], :], axis=-1) - rest)
+    keep = rest > 0
+    return {"max": float(d.max()), "mean": float(d.mean()), "mean_relative": float((d[..., keep] / rest[keep]).mean())}
 
 
 def bone_length_drift(motion: Motion) -> float:
