@@ -47,6 +47,8 @@ def test_session_spinning_option():
         make_session_options(spinning="yes")
     s = make_session(export_qtg_step(_params(), SMALL), intra_op_threads=2, spinning=True)
     assert s.get_session_options().get_session_config_entry("session.intra_op.allow_spinning") == "1"
+    dm = load_model(export_qtg_step(_params(), SMALL), intra_op_threads=2, spinning=True)
+    assert dm.session.get_session_options().get_session_config_entry("session.intra_op.allow_spinning") == "1"
 
 
 def test_load_model_validates_and_runs(tmp_path):
