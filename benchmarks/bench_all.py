@@ -258,7 +258,8 @@ def rows_from(results: Path, peaks: dict) -> list[dict]:
         num = _get(ro, "numpy_rollout_inference/median_ms")
         tor = _get(ro, "torch_eager/median_ms")
         if B == 1:
-            lim, basis = 30 * peaks["gemv_floor_ms_qtg_step_2.15MB_1thr"], "30 × weight floor (2.15 MB, 1thr)"
+            t = 2 if str(thr) == "2" or (best or "").endswith("_spin") else 1
+            lim, basis = 30 * peaks[f"gemv_floor_ms_qtg_step_2.15MB_{t}thr"], f"30 × weight floor (2.15 MB, {t}thr)"
         else:
             lim, basis = _gemm_limit(2 * 636416 * B * 30 / 1e9, peaks, thr)
         rows.append(_row(f"QTG 30-frame transition, B={B} ({target})", num, tor, f32.get(best),
