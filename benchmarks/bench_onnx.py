@@ -14,7 +14,7 @@ onnxruntime call (seen: the 2-thread fused GRU step at 4-8 ms instead of 0.9 ms 
   each ORT form (max/mean ``|h_new − gru_step_forward|``, float32 NumPy, batch 32, ``x ~ N(0, 1)``,
   ``h = tanh(N(0, 1))``).
 * QTG (default sizes): one step at batch 1 and 32 (step model vs ``refimpl.models.qtg.step``); a whole 30-frame
-  transition at batch 1 and 32: the rollout model in every form (``unrolled``, ``loop``, ``scan``; the compact
+  transition at batch 1, 32 and 64: the rollout model in every form (``unrolled``, ``loop``, ``scan``; the compact
   deployment variant with float32, int8 and int4 weights) against ``rollout_inference`` (the lean NumPy path) and
   ``rollout_forward`` (the training path); the in-graph rollout against a host loop over the step model
   (init + 30 ``run`` calls). Paper: 0.33 ms per transition (Core i7-8700).
@@ -24,7 +24,11 @@ onnxruntime call (seen: the 2-thread fused GRU step at 4-8 ms instead of 0.9 ms 
   own error against the ground truth. Parameters: ``--checkpoint`` (a QTG checkpoint), else a model trained for
   ``--train-steps`` steps on the sample (0: the random initialisation).
 
-NumPy's BLAS is limited to the same number of threads as onnxruntime's intra-op pool (threadpoolctl). PyTorch is
+NumPy's BLAS is limited to the same number of threads as onnxruntime's intra-op pool (threadpoolctl). Besides
+the ``--threads`` sessions (no spinning, the project's default), the fused and int8 GRU steps and the compact
+float32 and int8 rollouts also run in sessions with two threads and spinning worker threads
+(``make_session(..., intra_op_threads=2, spinning=True)``; keys ``*_2thr_spin``), the setting for one session
+driven alone at batch 1. PyTorch is
 timed only when installed (eager mode, ``torch.no_grad()``, the same thread count): ``torch.nn.GRU`` for the GRU
 step, and the QTG rollout written with ``torch.nn.functional`` and ``GRUCell`` (checked against NumPy). Settings recorded in the JSON:
 onnxruntime version and session options, BLAS libraries (threadpoolctl), BLAS environment variables, load
@@ -109,7 +113,8 @@ def _env(threads: int) -> dict:
             "numpy_blas_threads": threads if threadpool_limits is not None else "as configured",
             "ort_session": {"intra_op_num_threads": threads, "inter_op_num_threads": 1,
                             "execution_mode": "sequential", "graph_optimization": "all",
-                            "session.intra_op.allow_spinning": "0"},
+                            "session.intra_op.allow_spinning": "0",
+                            "also": "keys *_2thr_spin: 2 intra-op threads, allow_spinning 1"},
             "torch": (f"{torch.__version__}, {threads} intra-op thread(s), torch.no_grad()" if HAVE_TORCH
                       else "not installed (not timed)")}
 
@@ -196,6 +201,8 @@ def bench_gru(threads: int, rounds: int, min_time: float) -> dict:
         validate_model(m)
         for n in thread_counts:
             sessions[f"ort_{name}_{n}thr"] = make_session(m, intra_op_threads=n)
+        if name in ("fused", "int8"):                     # the deployment setting for one session at batch 1
+            sessions[f"ort_{name}_2thr_spin"] = make_session(m, intra_op_threads=2, spinning=True)
     # the float32 floor: one product reading every weight of the step once (K = I + 3H rows, 3H columns)
     w_all = np.ascontiguousarray(np.concatenate([params[f"gru.weight_{t}_l{k}"] for k in range(L)
                                                  for t in ("ih", "hh")], axis=1).T)  # (I + 3H, 3H) float32
@@ -250,6 +257,8 @@ def _qtg_sessions(params, cfg, threads):
         validate_model(m)
         info[k] = {"nodes": len(m.graph.node), "bytes": len(m.SerializeToString())}
     sessions = {k: make_session(m, **kw) for k, m in models.items()}
+    for k in ("compact_float32", "compact_int8"):          # two threads with spinning worker threads
+        sessions[f"{k}_2thr_spin"] = make_session(models[k], intra_op_threads=2, spinning=True)
     sessions["init"] = make_session(export_qtg_init(params, cfg), **kw)
     sessions["step"] = make_session(export_qtg_step(params, cfg), **kw)
     sessions["step_primitive"] = make_session(export_qtg_step(params, cfg, primitive=True), **kw)
@@ -271,15 +280,17 @@ def bench_qtg(params32, cfg, sessions, rounds, min_time) -> dict:
     trollout = _torch_qtg_rollout(params32, cfg)
     T = cfg.transition_length
     out = {}
-    for B in (1, 32):
+    for B in (1, 32, 64):
         past = rng.standard_normal((B, 2, cfg.pose_size)).astype(np.float32)
         target = rng.standard_normal((B, 2, cfg.pose_size)).astype(np.float32)
         state, tl = init_state(params32, past, target, cfg)
         sf = {"pose": state.pose, "latent_prev": state.latent_prev, "hidden": state.hidden, "target_latent": tl}
-        out[f"step_batch{B}"] = _time({"ort_step": lambda: sessions["step"].run(None, sf),
-                                       "ort_step_primitive": lambda: sessions["step_primitive"].run(None, sf)},
-                                      rounds, min_time)
-        out[f"step_batch{B}"].update(_time({"numpy_step": lambda: step(params32, state, tl, cfg)}, rounds, min_time))
+        if B < 64:
+            out[f"step_batch{B}"] = _time({"ort_step": lambda: sessions["step"].run(None, sf),
+                                           "ort_step_primitive": lambda: sessions["step_primitive"].run(None, sf)},
+                                          rounds, min_time)
+            out[f"step_batch{B}"].update(_time({"numpy_step": lambda: step(params32, state, tl, cfg)}, rounds,
+                                               min_time))
         feeds = {"past": past, "target": target}
         fns = {f"ort_{k}": (lambda s=sessions[k]: s.run(None, feeds))
                for k in sessions if k.startswith(("rollout", "compact"))}
@@ -342,7 +353,7 @@ def accuracy(params64, cfg, sessions, data) -> dict:
         feeds = {"past": past.astype(np.float32), "target": target.astype(np.float32)}
         res = {}
         for k, s in sessions.items():
-            if k.startswith(("rollout", "compact")):
+            if k.startswith(("rollout", "compact")) and not k.endswith("_spin"):
                 pred = s.run(None, feeds)[0].astype(np.float64)
                 res[k] = _errors(pred, ref, truth, stats, skels, sidx)
         host = _host_loop(sessions["init"], sessions["step"], feeds["past"], feeds["target"], cfg.transition_length)
@@ -392,11 +403,12 @@ def _table(result) -> str:
     for k, e in a["errors"].items():
         lines.append(f"  {k:30s} {e['h_new_max_abs']:.2e} / {e['h_new_mean_abs']:.2e}")
     q = result["qtg"]
-    for B in (1, 32):
-        st = q[f"step_batch{B}"]
-        lines.append(f"QTG step, batch {B}: ort {st['ort_step']['median_ms']:.3f} ms (primitive GRU "
-                     f"{st['ort_step_primitive']['median_ms']:.3f}), numpy {st['numpy_step']['median_ms']:.3f} ms "
-                     f"(numpy/ort {st['numpy_step']['median_ms'] / st['ort_step']['median_ms']:.2f}x)")
+    for B in (1, 32, 64):
+        st = q.get(f"step_batch{B}")
+        if st:
+            lines.append(f"QTG step, batch {B}: ort {st['ort_step']['median_ms']:.3f} ms (primitive GRU "
+                         f"{st['ort_step_primitive']['median_ms']:.3f}), numpy {st['numpy_step']['median_ms']:.3f} "
+                         f"ms (numpy/ort {st['numpy_step']['median_ms'] / st['ort_step']['median_ms']:.2f}x)")
         ro = q[f"rollout_batch{B}"]
         base = ro["numpy_rollout_inference"]["median_ms"]
         lines.append(f"QTG 30-frame transition, batch {B}       median ms    min ms   numpy_lean/this")

@@ -85,14 +85,14 @@ class DeployedModel:
         Declared graph inputs/outputs; ``shape`` entries are ints or symbolic names.
     """
 
-    def __init__(self, model, *, intra_op_threads: int = 1, validate: bool = True):
+    def __init__(self, model, *, intra_op_threads: int = 1, validate: bool = True, spinning: bool = False):
         proto = _load_proto(model)
         check_model_size(proto)   # before the checker too: a declared 10 GB constant is refused without reading it
         if validate:
             validate_model(proto)
         self.metadata = read_metadata(proto)
         _check_metadata_types(self.metadata)
-        self.session = make_session(proto, intra_op_threads=intra_op_threads, check_size=False)
+        self.session = make_session(proto, intra_op_threads=intra_op_threads, check_size=False, spinning=spinning)
         self.inputs = [(i.name, list(i.shape), _NP_FROM_ORT.get(i.type, None)) for i in self.session.get_inputs()]
         self.outputs = [(o.name, list(o.shape), _NP_FROM_ORT.get(o.type, None))
                         for o in self.session.get_outputs()]
@@ -183,6 +183,7 @@ class DeployedModel:
         return a
 
 
-def load_model(path, *, intra_op_threads: int = 1, validate: bool = True) -> DeployedModel:
-    """Load ``path`` (or a ModelProto / bytes) as a :class:`DeployedModel` (validated unless ``validate=False``)."""
-    return DeployedModel(path, intra_op_threads=intra_op_threads, validate=validate)
+def load_model(path, *, intra_op_threads: int = 1, validate: bool = True, spinning: bool = False) -> DeployedModel:
+    """Load ``path`` (or a ModelProto / bytes) as a :class:`DeployedModel` (validated unless ``validate=False``;
+    ``intra_op_threads`` and ``spinning`` as :func:`deploy.session.make_session_options`)."""
+    return DeployedModel(path, intra_op_threads=intra_op_threads, validate=validate, spinning=spinning)

@@ -3,7 +3,8 @@
 CPU execution provider; ``intra_op_num_threads`` configurable (default 1: batch-1 steps are latency-bound and a
 second thread mostly adds synchronisation); ``inter_op_num_threads = 1`` with sequential execution;
 ``session.intra_op.allow_spinning = "0"`` so that several sessions (init, step, rollout) driven alternately do not
-fight over the cores with spinning worker threads; full graph optimisation.
+fight over the cores with spinning worker threads (``spinning=True`` turns it on: faster for one session with two
+threads on an idle machine); full graph optimisation.
 
 Model-size guard (``spec/deploy.md`` §7.1, ``spec/robustness.md``): :func:`make_session` first runs
 :func:`check_model_size`, which refuses — before onnxruntime sees the model — a file whose *declared* sizes exceed
@@ -201,7 +202,7 @@ def check_model_size(model: onnx.ModelProto) -> None:
     _check_graph(inferred.graph, "", [0], True)
 
 
-def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all"):
+def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all", spinning: bool = False):
     """``onnxruntime.SessionOptions`` with the project's settings (module docstring).
 
     Parameters
@@ -210,6 +211,11 @@ def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all"
         Threads inside one operator (``>= 1``).
     optimization : {"all", "extended", "basic", "disabled"}
         Graph optimisation level.
+    spinning : bool
+        Let the intra-op worker threads spin between parallel sections (``session.intra_op.allow_spinning =
+        "1"``). Off by default (module docstring). With two threads on an otherwise idle machine and one session
+        driven at a time, spinning cuts the batch-1 latency of many-node graphs (the QTG compact rollout:
+        ``spec/deploy.md`` §9); on a busy machine, or with several sessions used alternately, it wastes a core.
     """
     import onnxruntime as ort
 
@@ -221,19 +227,21 @@ def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all"
               "disabled": ort.GraphOptimizationLevel.ORT_DISABLE_ALL}
     if optimization not in levels:
         raise ValueError(f"optimization: expected one of {sorted(levels)}, got {optimization!r}")
+    if not isinstance(spinning, (bool, np.bool_)):
+        raise ValueError(f"spinning: expected a bool, got {spinning!r}")
     so = ort.SessionOptions()
     so.intra_op_num_threads = int(intra_op_threads)
     so.inter_op_num_threads = 1
     so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     so.graph_optimization_level = levels[optimization]
-    so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    so.add_session_config_entry("session.intra_op.allow_spinning", "1" if spinning else "0")
     so.add_session_config_entry("session.inter_op.allow_spinning", "0")
     so.log_severity_level = 3
     return so
 
 
 def make_session(model: onnx.ModelProto | bytes | str | os.PathLike, *, intra_op_threads: int = 1,
-                 optimization: str = "all", check_size: bool = True):
+                 optimization: str = "all", check_size: bool = True, spinning: bool = False):
     """An ``onnxruntime.InferenceSession`` on the CPU provider with :func:`make_session_options`, after
     :func:`check_model_size` (unless ``check_size=False``: for a caller that has just run it, like
     ``deploy.runtime.load_model``; no other validation: ``deploy.validate.validate_model``).
@@ -255,7 +263,7 @@ def make_session(model: onnx.ModelProto | bytes | str | os.PathLike, *, intra_op
     if check_size:
         check_model_size(model)
     model = model.SerializeToString()
-    options = make_session_options(intra_op_threads, optimization=optimization)
+    options = make_session_options(intra_op_threads, optimization=optimization, spinning=spinning)
     try:
         return ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # onnxruntime raises its own Fail/InvalidGraph/NotImplemented classes

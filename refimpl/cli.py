@@ -733,8 +733,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"refimpl {__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
     parser.add_argument("--blas-threads", type=nonneg_int, default=1,
-                        help="BLAS threads for NumPy (default 1, fastest for these small networks; 0 = library "
-                             "default; needs threadpoolctl)")
+                        help="BLAS threads for NumPy (default 1: measured fastest on the shared 2-core machine, "
+                             "where two threads were 1.2-20x slower per training step while other jobs ran; on "
+                             "an idle machine 2 ties (QTG) or is up to 1.6x faster (QuaterNet CNN) for training; "
+                             "benchmarks/bench_threads.py; 0 = library default; needs threadpoolctl)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     p = sub.add_parser("info", help="what a .bvh, exp-map .txt, checkpoint .npz or .onnx file holds",

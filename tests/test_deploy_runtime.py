@@ -39,6 +39,18 @@ def test_session_options():
         make_session_options(optimization="fast")
 
 
+def test_session_spinning_option():
+    """spec/deploy.md §7: spinning=True allows the intra-op threads to spin; a session made with it runs."""
+    so = make_session_options(2, spinning=True)
+    assert so.get_session_config_entry("session.intra_op.allow_spinning") == "1"
+    with pytest.raises(ValueError, match="spinning"):
+        make_session_options(spinning="yes")
+    s = make_session(export_qtg_step(_params(), SMALL), intra_op_threads=2, spinning=True)
+    assert s.get_session_options().get_session_config_entry("session.intra_op.allow_spinning") == "1"
+    dm = load_model(export_qtg_step(_params(), SMALL), intra_op_threads=2, spinning=True)
+    assert dm.session.get_session_options().get_session_config_entry("session.intra_op.allow_spinning") == "1"
+
+
 def test_load_model_validates_and_runs(tmp_path):
     """spec/deploy.md §7: load_model validates, decodes metadata and checks feeds (names, shapes, finiteness)."""
     path = tmp_path / "step.onnx"

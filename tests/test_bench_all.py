@@ -1,0 +1,107 @@
+"""benchmarks/bench_all.py (issue #17's table) and benchmarks/bench_quaternet_cnn.py: the parts that are not timing."""
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load(name):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+PEAKS = {"gemm_f32_gflops_1thr": 100.0, "gemm_f32_gflops_2thr": 200.0, "copy_gb_s_1thr": 20.0,
+         "copy_gb_s_2thr": 30.0, "gemv_floor_ms_qtg_step_2.15MB_1thr": 0.04, "gemv_floor_ms_qtg_step_2.15MB_2thr": 0.03,
+         "gemv_floor_ms_gru2x1000_step_37.5MB_1thr": 1.0, "gemv_floor_ms_gru2x1000_step_37.5MB_2thr": 0.6}
+
+
+def test_rows_ratios_limits_and_missing_fields(tmp_path):
+    """Rows come from the benchmarks' JSON; limits from the peaks; absent files are reported as missing."""
+    ba = _load("bench_all")
+    (tmp_path / "bench_adam.json").write_text(json.dumps({
+        "n_params": 1_000_000, "bytes_per_param": 28, "torch_threads": 2,
+        "summary": {"numpy_2threads": {"median": 3.0}, "torch_fused": {"median": 2.0},
+                    "numpy_over_torch_fused": {"median": 1.4}}}))
+    (tmp_path / "bench_gru_train.json").write_text(json.dumps({
+        "config": {"B": 32, "T": 60}, "matmul_gflop_per_iteration": 100.0,
+        "numpy": {"float32": {"ms_median": {"iteration": 1000.0}}}, "torch": {"ms_median": 1250.0, "threads": 2}}))
+    rows = {r["workload"].split(" (")[0].split(",")[0]: r for r in ba.rows_from(tmp_path, PEAKS)}
+    adam = rows["Adam"]
+    assert adam["numpy_ms"] == 3.0 and adam["torch_ms"] == 2.0 and adam["ratio"] == 1.4 and adam["ratio_paired"]
+    assert adam["limit_ms"] == pytest.approx(28 * 1e6 / 30e9 * 1e3)                     # bytes / bandwidth
+    assert adam["share_of_limit"] == pytest.approx(adam["limit_ms"] / 3.0)
+    gru = rows["QuaterNet GRU 2×1000 training iteration"]
+    assert gru["ratio"] == pytest.approx(0.8) and not gru["ratio_paired"]
+    assert gru["limit_ms"] == pytest.approx(100.0 / 200.0 * 1e3)                      # GFLOP / 2-thread peak
+    assert any(r["missing"] for r in rows.values())                                     # the absent benchmarks
+    text = ba.table(list(rows.values()), PEAKS, {"start": (1.0, 1.0, 1.0)})
+    assert "| Adam" in text and "missing: bench_onnx.json" in text and "~0.80" in text
+
+
+def test_command_uses_only_the_options_a_benchmark_has(tmp_path):
+    ba = _load("bench_all")
+    args = SimpleNamespace(rounds=2, threads=2, onnx_train_steps=0)
+    cmd = ba.command("adam", args, "usage: [--rounds ROUNDS] [--threads THREADS] [--out OUT]\n", tmp_path)
+    assert cmd[2:] == ["--rounds", "2", "--threads", "2", "--out", str(tmp_path / "bench_adam.json")]
+    cmd = ba.command("locomotion", args, "usage: [--rounds ROUNDS]\n", tmp_path)
+    assert cmd[2:] == ["--rounds", "2"]
+    cmd = ba.command("qtg", args, "usage: [--train] [--train-rounds N] [--rounds R] [--out OUT]\n", tmp_path)
+    assert cmd[2:5] == ["--train", "--train-rounds", "2"]
+
+
+def test_work_counts():
+    """QuaterNet's GRU 2×1000 is 19.0 MFLOP per frame (performance_facts.md); the CNN iteration's count."""
+    ba, bc = _load("bench_all"), _load("bench_quaternet_cnn")
+    assert 2 * ba.gru_macs_per_frame(128, 1000, 2, 128) == pytest.approx(19.0e6, rel=2e-3)
+    from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
+    cfg = QuaterNetCNNConfig()
+    per_frame = 2 * (128 * 1024 + 3 * 1024 * 1024 + 1024 * 128)                      # MACs, K = 2 taps
+    no_dx0 = per_frame - 2 * 128 * 1024
+    mask = np.ones(9, bool)
+    assert bc.matmul_gflop(cfg, 60, 41, 32, 10, mask) == pytest.approx(2 * 60 * 41 * (2 * per_frame + no_dx0) / 1e9)
+    mask[-2:] = False                                                                  # + two windows of R frames
+    assert bc.matmul_gflop(cfg, 60, 41, 32, 10, mask) == pytest.approx(
+        2 * (60 * 41 * (2 * per_frame + no_dx0) + 60 * 64 * per_frame) / 1e9)
+
+
+def test_cnn_benchmark_loss_gradient():
+    """The benchmark's loss cotangents equal central differences (float64)."""
+    bc = _load("bench_quaternet_cnn")
+    rng = np.random.default_rng(0)
+    y, pre, fut = (rng.standard_normal((2, 3, 8)) for _ in range(3))
+    _, dy, dpre = bc._numpy_loss(y, pre, fut, 2)
+    for arr, grad in ((y, dy), (pre, dpre)):
+        for idx in [(0, 0, 0), (1, 2, 7), (0, 1, 3)]:
+            old = arr[idx]
+            arr[idx] = old + 1e-6
+            up = bc._numpy_loss(y, pre, fut, 2)[0]
+            arr[idx] = old - 1e-6
+            down = bc._numpy_loss(y, pre, fut, 2)[0]
+            arr[idx] = old
+            assert grad[idx] == pytest.approx((up - down) / 2e-6, rel=1e-6, abs=1e-9)
+
+
+def test_cnn_benchmark_matches_pytorch_small():
+    """The PyTorch side of the CNN benchmark computes the same iteration (float64, a small network)."""
+    torch = pytest.importorskip("torch")
+    bc = _load("bench_quaternet_cnn")
+    from refimpl.models import quaternet_cnn as cnn
+    cfg = cnn.QuaterNetCNNConfig(num_joints=3, channels=16)
+    params = cnn.init_params(cfg, np.random.default_rng(0), dtype=np.float64)
+    prefix, future, mask = bc._data(cfg, 2, cfg.receptive_field, 10, 3)
+    old = torch.get_default_dtype()
+    torch.set_default_dtype(torch.float64)
+    try:
+        chk = bc.check(torch, params, cfg, prefix.astype(np.float64), future.astype(np.float64), mask)
+    finally:
+        torch.set_default_dtype(old)
+    assert chk["loss_rel"] < 1e-12 and chk["y_max_rel"] < 1e-12 and chk["grads_max_rel"] < 1e-10
