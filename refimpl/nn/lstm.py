@@ -260,20 +260,27 @@ def _layer_forward(xf, h0, c0, w_ih, w_hh, b_ih, b_hh):
             gt = gf[t]  # (4H, B)
             np.matmul(w_hh, hf[:, t], out=gt)  # W_hh h_{t-1}
             gt += gi[:, t]
-            for s in (gt[:2 * hid], gt[3 * hid:]):  # i, f | o: 1 / (1 + exp(-a)), in place
-                np.negative(s, out=s)
-                np.exp(s, out=s)
-                s += 1
-                np.reciprocal(s, out=s)
-            i, f, gg, o = gt[:hid], gt[hid:2 * hid], gt[2 * hid:3 * hid], gt[3 * hid:]
-            np.tanh(gg, out=gg)
-            c_new, tct = cf[t + 1], tcf[t]
-            np.multiply(f, cf[t], out=c_new)  # c' = f c + i g
-            np.multiply(i, gg, out=tct)
-            c_new += tct
-            np.tanh(c_new, out=tct)
-            np.multiply(o, tct, out=hf[:, t + 1])  # h' = o tanh(c')
+            _activate_fm(gt, cf[t], cf[t + 1], tcf[t], hf[:, t + 1])
     return hf, cf, gf, tcf
+
+
+def _activate_fm(g, c, c_new, tc, h_new):
+    """Activations and state update of one step, feature-major (no checks; call inside ``np.errstate(over=
+    "ignore")``). g (4H, B) holds the pre-activations on entry and the activated gates [i ; f ; g ; o] on exit;
+    c (H, B) previous cell state; writes c_new, tc = tanh(c_new), h_new (H, B; h_new may be a strided view)."""
+    hid = c.shape[0]
+    for s in (g[:2 * hid], g[3 * hid:]):  # i, f | o: 1 / (1 + exp(-a)), in place
+        np.negative(s, out=s)
+        np.exp(s, out=s)
+        s += 1
+        np.reciprocal(s, out=s)
+    i, f, gg, o = g[:hid], g[hid:2 * hid], g[2 * hid:3 * hid], g[3 * hid:]
+    np.tanh(gg, out=gg)
+    np.multiply(f, c, out=c_new)  # c' = f c + i g
+    np.multiply(i, gg, out=tc)
+    c_new += tc
+    np.tanh(c_new, out=tc)
+    np.multiply(o, tc, out=h_new)  # h' = o tanh(c')
 
 
 def _layer_backward(dyf, dh_last, dc_last, xf, hf, cf, gf, tcf, w_ih, w_hh):
@@ -297,32 +304,10 @@ def _layer_backward(dyf, dh_last, dc_last, xf, hf, cf, gf, tcf, w_ih, w_hh):
     dh = np.zeros((hid, batch), dtype=dt) if dh_last is None else np.array(dh_last.T, dtype=dt, order="C")
     dc = np.zeros((hid, batch), dtype=dt) if dc_last is None else np.array(dc_last.T, dtype=dt, order="C")
     tmp = np.empty((hid, batch), dtype=dt)
-    dif, dgg, do = dgs[:2 * hid], dgs[2 * hid:3 * hid], dgs[3 * hid:]
-    dif2 = dif.reshape(2, hid, batch)  # [da_i ; da_f] as two slabs, scaled by dc in one broadcast pass
     for t in range(t_len - 1, -1, -1):
         if t < n_dy:
             dh += dyf[:, t]
-        gt, tct = gf[t], tcf[t]
-        i, f, gg, o = gt[:hid], gt[hid:2 * hid], gt[2 * hid:3 * hid], gt[3 * hid:]
-        np.subtract(1, o, out=do)  # da_o = dh tanh(c') o (1 - o)
-        do *= o
-        do *= tct
-        do *= dh
-        np.multiply(tct, tct, out=tmp)  # dc += dh o (1 - tanh(c')^2)
-        np.subtract(1, tmp, out=tmp)
-        tmp *= o
-        tmp *= dh
-        dc += tmp
-        np.subtract(1, gt[:2 * hid], out=dif)  # [i (1 - i) ; f (1 - f)]
-        dif *= gt[:2 * hid]
-        dif[:hid] *= gg  # da_i = dc g i (1 - i)
-        dif[hid:] *= cf[t]  # da_f = dc c f (1 - f)
-        dif2 *= dc
-        np.multiply(gg, gg, out=dgg)  # da_g = dc i (1 - g^2)
-        np.subtract(1, dgg, out=dgg)
-        dgg *= i
-        dgg *= dc
-        dc *= f  # dc_prev = dc f
+        _gates_backward_fm(dh, dc, cf[t], gf[t], tcf[t], dgs, tmp)
         np.matmul(whh_t, dgs, out=dh)  # dh_prev = W_hh^T dG_t
         dgf[:, t] = dgs
     dg2 = dgf.reshape(4 * hid, t_len * batch)  # (4H, T*B)
@@ -331,6 +316,40 @@ def _layer_backward(dyf, dh_last, dc_last, xf, hf, cf, gf, tcf, w_ih, w_hh):
     dxf = (w_ih.T @ dg2).reshape(in_size, t_len, batch)  # (I, T, B)
     db = dg2 @ np.ones(t_len * batch, dtype=dt)  # (4H,) = sum over steps and batch, one GEMV
     return dxf, dh, dc, dw_ih, dw_hh, db
+
+
+def _gates_backward_fm(dh, dc, c, g, tc, dg, tmp):
+    """The gate cotangents of one step, feature-major (no checks; 19 in-place ufunc calls). dh, dc (H, B): total
+    cotangents of h', c'; dc is overwritten with the cotangent of the previous c (``dc f``), dh is only read (the
+    caller forms ``dh_prev = W_hh^T dG``). c (H, B) previous cell state, g (4H, B) activated gates [i ; f ; g ; o],
+    tc (H, B) = tanh(c'). Writes dg (4H, B, C-contiguous) = [da_i ; da_f ; da_g ; da_o]; tmp (H, B) is scratch::
+
+        da_o = dh tanh(c') o (1 - o)     dc += dh o (1 - tanh(c')^2)
+        da_i = dc g i (1 - i)            da_f = dc c f (1 - f)        da_g = dc i (1 - g^2)
+    """
+    hid = c.shape[0]
+    i, f, gg, o = g[:hid], g[hid:2 * hid], g[2 * hid:3 * hid], g[3 * hid:]
+    dif, dgg, do = dg[:2 * hid], dg[2 * hid:3 * hid], dg[3 * hid:]
+    np.subtract(1, o, out=do)  # da_o
+    do *= o
+    do *= tc
+    do *= dh
+    np.multiply(tc, tc, out=tmp)  # dc += dh o (1 - tanh(c')^2)
+    np.subtract(1, tmp, out=tmp)
+    tmp *= o
+    tmp *= dh
+    dc += tmp
+    np.subtract(1, g[:2 * hid], out=dif)  # [i (1 - i) ; f (1 - f)] on the contiguous [i ; f] slab
+    dif *= g[:2 * hid]
+    dif[:hid] *= gg  # da_i = dc g i (1 - i)
+    dif[hid:] *= c  # da_f = dc c f (1 - f)
+    dif2 = dif.reshape(2, hid, -1)  # [da_i ; da_f] as two (H, B) slabs (a view: dg is C-contiguous)
+    dif2 *= dc  # one broadcast pass
+    np.multiply(gg, gg, out=dgg)  # da_g
+    np.subtract(1, dgg, out=dgg)
+    dgg *= i
+    dgg *= dc
+    dc *= f  # dc_prev = dc f
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -779,6 +798,6 @@ def _lstm_backward_naive(dy, dstate_n, x, state, params, prefix, num_layers=1, s
     return dx, (dh0, dc0), grads
 
 
-#: Kernel-tier names (no checks; used by refimpl.models.acrnn_fast).
-cell_activate = _cell_activate
-cell_gates_backward = _cell_gates_backward
+#: Kernel-tier names (no checks; feature-major step kernels, used by refimpl.models.acrnn_fast).
+activate_fm = _activate_fm
+gates_backward_fm = _gates_backward_fm
