@@ -25,10 +25,14 @@ state is the output, so with L layers ``y_t`` depends on ``x_0 .. x_{t-L+1}`` on
 Shapes: B batch, T time, I input size, H hidden size, L layers. ``x (B, T, I)`` batch-first;
 ``h0, c0, h_n, c_n (L, B, H)``; ``y (B, T, H)``. No bidirectional variant (no network here uses one).
 
-Implementation as in :mod:`refimpl.nn.gru`: layer by layer, one GEMM for all input projections of a layer
-(both biases folded in), weights transposed once per call, one GEMM each for ``dW_hh``, ``dW_ih``, ``dx``
-after the BPTT loop. The skew is only a shift of the input sequence: layer k's inputs are
-``[h0[k-1], h^{k-1}_0, ..., h^{k-1}_{T-2}]`` instead of ``[h^{k-1}_0, ..., h^{k-1}_{T-1}]``.
+Implementation (spec/layers.md §5.6): layer by layer, with the fast kernels ``_layer_forward`` /
+``_layer_backward`` in a feature-major layout (the batch is the last, contiguous axis: states ``(H, T+1, B)``,
+gates ``(T, 4H, B)``), so that every per-step product has the weight as its left operand (``W_hh @ h_{t-1}``,
+``W_hh^T @ dG_t``); one GEMM for all input projections of a layer (both biases folded in), one GEMM each for
+``dW_hh``, ``dW_ih``, ``dx`` after the BPTT loop. The readable batch-major kernels ``_layer_forward_reference`` /
+``_layer_backward_reference`` (one ``_cell_forward`` / ``_cell_backward`` call per step) are kept beside them under an
+equality test and reached through ``_lstm_forward_reference``. The skew is only a shift of the input sequence:
+layer k's inputs are ``[h0[k-1], h^{k-1}_0, ..., h^{k-1}_{T-2}]`` instead of ``[h^{k-1}_0, ..., h^{k-1}_{T-1}]``.
 ``_lstm_forward_naive`` / ``_lstm_backward_naive`` (time-outer, per-gate loops, as acRNN's code steps its
 cells) are the test oracles.
 
@@ -226,11 +230,11 @@ def _cell_gates_backward(dh, dc, c, g, tc, dg, tmp):
 # Layouts (feature-major: the batch is the last, contiguous axis): inputs xf (I, T, B), states hf (H, T+1, B)
 # (index 0 along T = initial state), cell states cf (T+1, H, B), gates gf (T, 4H, B), tanh(c) tcf (T, H, B),
 # gate cotangents dgf (4H, T, B). Every per-step product then has the weight as its LEFT operand,
-# ``W_hh (4H, H) @ h_{t-1} (H, B)`` and ``W_hh^T (H, 4H) @ dG_t (4H, B)``, which OpenBLAS splits over its two
-# threads without sharing a packed panel between them (measured: 1.3-2.7x faster per step than
-# ``(B, H) @ (H, 4H)`` with two threads on the shared VM; spec/layers.md §5.6), each gate block
-# ``[i | f | g | o]`` of a step is one contiguous (H, B) slab, and ``xf.reshape(I, T*B)``, ``hf[:, :T]``,
-# ``dgf.reshape(4H, T*B)`` are the (., T*B) matrices of the one-GEMM-per-sequence products without a copy.
+# ``W_hh (4H, H) @ h_{t-1} (H, B)`` and ``W_hh^T (H, 4H) @ dG_t (4H, B)`` (with two OpenBLAS threads on the shared,
+# loaded VM these ran 1.6x (best) to 2.7x (median) faster than ``(B, H) @ (H, 4H)``; with one thread the forward
+# one 25 % slower; spec/layers.md §5.6), each gate block ``[i | f | g | o]`` of a step is one contiguous (H, B)
+# slab, and ``xf.reshape(I, T*B)``, ``hf[:, :T]``, ``dgf.reshape(4H, T*B)`` are the (., T*B) matrices of the
+# one-GEMM-per-sequence products without a copy.
 
 
 def _layer_forward(xf, h0, c0, w_ih, w_hh, b_ih, b_hh):
@@ -353,7 +357,7 @@ def _gates_backward_fm(dh, dc, c, g, tc, dg, tmp):
 
 
 # ----------------------------------------------------------------------------------------------------------
-# one layer over the whole sequence (time-major): the readable reference kernels (spec/layers.md §5.6)
+# one layer over the whole sequence (time-major, batch-major): the readable reference kernels (spec/layers.md §5.6)
 
 
 def _layer_forward_reference(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
