@@ -112,6 +112,11 @@ def numpy_loss_and_grads(params, x, target, skewed: bool, reference: bool):
 
 def numpy_iteration(params, x, target, state, reference: bool) -> dict:
     _, _, grads, _, tf, tb = numpy_loss_and_grads(params, x, target, True, reference)
+    return _with_adam(tf, tb, params, grads, state)
+
+
+def _with_adam(tf, tb, params, grads, state) -> dict:
+    """One timed Adam step after a forward (tf s) and a backward (tb s): the iteration's times."""
     ta = _timed(lambda: adam_step(params, grads, state, **ACRNN_ADAM))
     return {"forward": tf, "backward": tb, "adam": ta, "iteration": tf + tb + ta}
 
@@ -120,15 +125,29 @@ def numpy_iteration(params, x, target, state, reference: bool) -> dict:
 # PyTorch
 
 
-def torch_model(torch, params):
+def torch_model(torch, params, rnn: str = "rnn", head: str = "fc"):
+    """``nn.LSTM`` + ``nn.Linear`` holding the NumPy parameters ``{rnn}.*`` and ``{head}.*``."""
     lstm = torch.nn.LSTM(I, H, L, batch_first=True)
     fc = torch.nn.Linear(H, O)
     with torch.no_grad():
         for name, p in lstm.named_parameters():
-            p.copy_(torch.from_numpy(params["rnn." + name]))
-        fc.weight.copy_(torch.from_numpy(params["fc.weight"]))
-        fc.bias.copy_(torch.from_numpy(params["fc.bias"]))
+            p.copy_(torch.from_numpy(params[f"{rnn}.{name}"]))
+        fc.weight.copy_(torch.from_numpy(params[f"{head}.weight"]))
+        fc.bias.copy_(torch.from_numpy(params[f"{head}.bias"]))
     return lstm, fc
+
+
+def _torch_timed_step(opt, loss_fn) -> dict:
+    """One timed PyTorch iteration: zero the gradients, ``loss_fn()`` (the forward), backward, ``opt.step()``."""
+    t0 = time.perf_counter()
+    opt.zero_grad(set_to_none=True)
+    loss = loss_fn()
+    t1 = time.perf_counter()
+    loss.backward()
+    t2 = time.perf_counter()
+    opt.step()
+    t3 = time.perf_counter()
+    return {"forward": t1 - t0, "backward": t2 - t1, "adam": t3 - t2, "iteration": t3 - t0}
 
 
 def _rel_err(a, b) -> float:
@@ -190,19 +209,7 @@ def torch_iteration_fn(torch, params, x, target):
     ps = list(lstm.parameters()) + list(fc.parameters())
     opt = torch.optim.Adam(ps, lr=ACRNN_ADAM["lr"])
     xt, tt = torch.from_numpy(x), torch.from_numpy(target)
-
-    def it() -> dict:
-        t0 = time.perf_counter()
-        opt.zero_grad(set_to_none=True)
-        y, _ = lstm(xt)
-        loss = torch.nn.functional.mse_loss(fc(y), tt)
-        t1 = time.perf_counter()
-        loss.backward()
-        t2 = time.perf_counter()
-        opt.step()
-        t3 = time.perf_counter()
-        return {"forward": t1 - t0, "backward": t2 - t1, "adam": t3 - t2, "iteration": t3 - t0}
-    return it
+    return lambda: _torch_timed_step(opt, lambda: torch.nn.functional.mse_loss(fc(lstm(xt)[0]), tt))
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -247,19 +254,7 @@ def acrnn_numpy_loss_and_grads(params, cfg, frames):
 
 def acrnn_numpy_iteration(params, cfg, frames, state) -> dict:
     _, _, grads, tf, tb = acrnn_numpy_loss_and_grads(params, cfg, frames)
-    ta = _timed(lambda: adam_step(params, grads, state, **ACRNN_ADAM))
-    return {"forward": tf, "backward": tb, "adam": ta, "iteration": tf + tb + ta}
-
-
-def acrnn_torch_model(torch, params):
-    lstm = torch.nn.LSTM(I, H, L, batch_first=True)
-    fc = torch.nn.Linear(H, I)
-    with torch.no_grad():
-        for name, p in lstm.named_parameters():
-            p.copy_(torch.from_numpy(params["lstm." + name]))
-        fc.weight.copy_(torch.from_numpy(params["decoder.weight"]))
-        fc.bias.copy_(torch.from_numpy(params["decoder.bias"]))
-    return lstm, fc
+    return _with_adam(tf, tb, params, grads, state)
 
 
 def acrnn_torch_forward(torch, lstm, fc, frames_t, mask):
@@ -283,7 +278,7 @@ def acrnn_torch_forward(torch, lstm, fc, frames_t, mask):
 
 def acrnn_check_against_torch(torch, params, cfg, frames) -> dict:
     """Float32 agreement of the auto-conditioned rollout, loss and every gradient with PyTorch (same weights)."""
-    lstm, fc = acrnn_torch_model(torch, params)
+    lstm, fc = torch_model(torch, params, "lstm", "decoder")
     ft = torch.from_numpy(frames)
     pred_t = acrnn_torch_forward(torch, lstm, fc, ft, cfg.mask(frames.shape[1] - 1))
     loss_t = torch.nn.functional.mse_loss(pred_t, ft[:, 1:])
@@ -299,22 +294,12 @@ def acrnn_check_against_torch(torch, params, cfg, frames) -> dict:
 
 
 def acrnn_torch_iteration_fn(torch, params, cfg, frames):
-    lstm, fc = acrnn_torch_model(torch, params)
+    lstm, fc = torch_model(torch, params, "lstm", "decoder")
     opt = torch.optim.Adam(list(lstm.parameters()) + list(fc.parameters()), lr=ACRNN_ADAM["lr"])
     ft = torch.from_numpy(frames)
     mask = cfg.mask(frames.shape[1] - 1)
-
-    def it() -> dict:
-        t0 = time.perf_counter()
-        opt.zero_grad(set_to_none=True)
-        loss = torch.nn.functional.mse_loss(acrnn_torch_forward(torch, lstm, fc, ft, mask), ft[:, 1:])
-        t1 = time.perf_counter()
-        loss.backward()
-        t2 = time.perf_counter()
-        opt.step()
-        t3 = time.perf_counter()
-        return {"forward": t1 - t0, "backward": t2 - t1, "adam": t3 - t2, "iteration": t3 - t0}
-    return it
+    return lambda: _torch_timed_step(
+        opt, lambda: torch.nn.functional.mse_loss(acrnn_torch_forward(torch, lstm, fc, ft, mask), ft[:, 1:]))
 
 
 # ----------------------------------------------------------------------------------------------------------
