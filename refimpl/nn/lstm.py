@@ -25,10 +25,14 @@ state is the output, so with L layers ``y_t`` depends on ``x_0 .. x_{t-L+1}`` on
 Shapes: B batch, T time, I input size, H hidden size, L layers. ``x (B, T, I)`` batch-first;
 ``h0, c0, h_n, c_n (L, B, H)``; ``y (B, T, H)``. No bidirectional variant (no network here uses one).
 
-Implementation as in :mod:`refimpl.nn.gru`: layer by layer, one GEMM for all input projections of a layer
-(both biases folded in), weights transposed once per call, one GEMM each for ``dW_hh``, ``dW_ih``, ``dx``
-after the BPTT loop. The skew is only a shift of the input sequence: layer k's inputs are
-``[h0[k-1], h^{k-1}_0, ..., h^{k-1}_{T-2}]`` instead of ``[h^{k-1}_0, ..., h^{k-1}_{T-1}]``.
+Implementation (spec/layers.md §5.6): layer by layer, with the fast kernels ``_layer_forward`` /
+``_layer_backward`` in a feature-major layout (the batch is the last, contiguous axis: states ``(H, T+1, B)``,
+gates ``(T, 4H, B)``), so that every per-step product has the weight as its left operand (``W_hh @ h_{t-1}``,
+``W_hh^T @ dG_t``); one GEMM for all input projections of a layer (both biases folded in), one GEMM each for
+``dW_hh``, ``dW_ih``, ``dx`` after the BPTT loop. The readable batch-major kernels ``_layer_forward_reference`` /
+``_layer_backward_reference`` (one ``_cell_forward`` / ``_cell_backward`` call per step) are kept beside them under an
+equality test and reached through ``_lstm_forward_reference``. The skew is only a shift of the input sequence:
+layer k's inputs are ``[h0[k-1], h^{k-1}_0, ..., h^{k-1}_{T-2}]`` instead of ``[h^{k-1}_0, ..., h^{k-1}_{T-1}]``.
 ``_lstm_forward_naive`` / ``_lstm_backward_naive`` (time-outer, per-gate loops, as acRNN's code steps its
 cells) are the test oracles.
 
@@ -221,94 +225,139 @@ def _cell_gates_backward(dh, dc, c, g, tc, dg, tmp):
 
 
 # ----------------------------------------------------------------------------------------------------------
-# one layer over the whole sequence (time-major): the fast kernels (spec/layers.md §5.6)
+# one layer over the whole sequence, feature-major: the fast kernels (spec/layers.md §5.6)
+#
+# Layouts (feature-major: the batch is the last, contiguous axis): inputs xf (I, T, B), states hf (H, T+1, B)
+# (index 0 along T = initial state), cell states cf (T+1, H, B), gates gf (T, 4H, B), tanh(c) tcf (T, H, B),
+# gate cotangents dgf (4H, T, B). Every per-step product then has the weight as its LEFT operand,
+# ``W_hh (4H, H) @ h_{t-1} (H, B)`` and ``W_hh^T (H, 4H) @ dG_t (4H, B)`` (with two OpenBLAS threads on the shared,
+# loaded VM these ran 1.6x (best) to 2.7x (median) faster than ``(B, H) @ (H, 4H)``; with one thread the forward
+# one 25 % slower; spec/layers.md §5.6), each gate block ``[i | f | g | o]`` of a step is one contiguous (H, B)
+# slab, and ``xf.reshape(I, T*B)``, ``hf[:, :T]``, ``dgf.reshape(4H, T*B)`` are the (., T*B) matrices of the
+# one-GEMM-per-sequence products without a copy.
 
 
-def _layer_forward(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
-    """One layer over the sequence. xs (T, B, I). Returns hs, cs (T+1, B, H) (index 0 = initial state),
-    g (T, B, 4H) activated gates [i | f | g | o], tc (T, B, H) = tanh(c_t).
+def _layer_forward(xf, h0, c0, w_ih, w_hh, b_ih, b_hh):
+    """One layer over the sequence, feature-major. xf (I, T, B) (a view whose (T, B) axes merge, e.g. a slice of
+    the layer below's ``hf``); h0, c0 (B, H). Returns hf (H, T+1, B) (index 0 = h0), cf (T+1, H, B),
+    gf (T, 4H, B) activated gates [i | f | g | o], tcf (T, H, B) = tanh(c_t).
 
-    Same arithmetic as :func:`_layer_forward_reference`, with fewer passes over memory: the gate pre-activations
-    are accumulated in place into the buffer of the input projections (one GEMM for all steps, both biases
-    folded in), which then holds the activated gates (no second (T, B, 4H) array); the recurrent product of
-    every step goes into ONE reused (B, 4H) scratch that stays in cache; the floating-point error state is
-    set once per layer, not once per sigmoid call.
+    Same arithmetic as :func:`_layer_forward_reference` (module docstring equations): one GEMM
+    ``W_ih @ X`` (4H, T*B) for the input projections of all steps with ``b_ih + b_hh`` folded in; per step
+    ``G_t = W_hh @ h_{t-1} + GI_t`` written straight into the gate cache and activated in place; the
+    floating-point error state set once per layer.
     """
-    t_len, batch, in_size = xs.shape
+    in_size, t_len, batch = xf.shape
     hid = w_hh.shape[1]
-    dt = xs.dtype
-    g = _matmul_wt(xs.reshape(t_len * batch, in_size), w_ih)  # (T*B, 4H), one GEMM for all steps
-    g += b_ih + b_hh
-    g = g.reshape(t_len, batch, 4 * hid)  # pre-activations (input part), activated gates after the loop
-    whh_t = np.ascontiguousarray(w_hh.T)  # (H, 4H), transposed once per call
-    hs = np.empty((t_len + 1, batch, hid), dtype=dt)
-    cs = np.empty((t_len + 1, batch, hid), dtype=dt)
-    hs[0], cs[0] = h0, c0
-    tc = np.empty((t_len, batch, hid), dtype=dt)
-    rec = np.empty((batch, 4 * hid), dtype=dt)  # W_hh h_{t-1}, reused every step
+    dt = xf.dtype
+    gi = np.matmul(w_ih, xf.reshape(in_size, t_len * batch))  # (4H, T*B), one GEMM for all steps
+    gi += (b_ih + b_hh)[:, None]
+    gi = gi.reshape(4 * hid, t_len, batch)
+    hf = np.empty((hid, t_len + 1, batch), dtype=dt)
+    cf = np.empty((t_len + 1, hid, batch), dtype=dt)
+    hf[:, 0] = h0.T
+    cf[0] = c0.T
+    gf = np.empty((t_len, 4 * hid, batch), dtype=dt)
+    tcf = np.empty((t_len, hid, batch), dtype=dt)
     with np.errstate(over="ignore"):  # exp(-a) -> inf for a < -88 (float32) gives sigmoid 0 exactly
         for t in range(t_len):
-            gt = g[t]  # (B, 4H)
-            np.matmul(hs[t], whh_t, out=rec)
-            gt += rec
-            for s in (gt[:, :2 * hid], gt[:, 3 * hid:]):  # i, f | o: 1 / (1 + exp(-a)), in place
-                np.negative(s, out=s)
-                np.exp(s, out=s)
-                s += 1
-                np.reciprocal(s, out=s)
-            gg = gt[:, 2 * hid:3 * hid]
-            np.tanh(gg, out=gg)
-            c_new, tct = cs[t + 1], tc[t]
-            np.multiply(gt[:, hid:2 * hid], cs[t], out=c_new)  # c' = f c + i g
-            np.multiply(gt[:, :hid], gg, out=tct)
-            c_new += tct
-            np.tanh(c_new, out=tct)
-            np.multiply(gt[:, 3 * hid:], tct, out=hs[t + 1])  # h' = o tanh(c')
-    return hs, cs, g, tc
+            gt = gf[t]  # (4H, B)
+            np.matmul(w_hh, hf[:, t], out=gt)  # W_hh h_{t-1}
+            gt += gi[:, t]
+            _activate_fm(gt, cf[t], cf[t + 1], tcf[t], hf[:, t + 1])
+    return hf, cf, gf, tcf
 
 
-def _layer_backward(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
-    """BPTT through one layer. dys (T', B, H) cotangents of the outputs h_1..h_T' (T' <= T: the skewed stack
-    passes the layer above's input cotangents shifted by one step, without a copy; may be a view); dh_last,
-    dc_last (B, H) or None. Returns dxs (T, B, I), dh0, dc0, dW_ih, dW_hh, db (the same for b_ih and b_hh).
+def _activate_fm(g, c, c_new, tc, h_new):
+    """Activations and state update of one step, feature-major (no checks; call inside ``np.errstate(over=
+    "ignore")``). g (4H, B) holds the pre-activations on entry and the activated gates [i ; f ; g ; o] on exit;
+    c (H, B) previous cell state; writes c_new, tc = tanh(c_new), h_new (H, B; h_new may be a strided view)."""
+    hid = c.shape[0]
+    for s in (g[:2 * hid], g[3 * hid:]):  # i, f | o: 1 / (1 + exp(-a)), in place
+        np.negative(s, out=s)
+        np.exp(s, out=s)
+        s += 1
+        np.reciprocal(s, out=s)
+    i, f, gg, o = g[:hid], g[hid:2 * hid], g[2 * hid:3 * hid], g[3 * hid:]
+    np.tanh(gg, out=gg)
+    np.multiply(f, c, out=c_new)  # c' = f c + i g
+    np.multiply(i, gg, out=tc)
+    c_new += tc
+    np.tanh(c_new, out=tc)
+    np.multiply(o, tc, out=h_new)  # h' = o tanh(c')
 
-    Same arithmetic as :func:`_layer_backward_reference` up to the grouping of products: the sigmoid
-    derivatives of the contiguous [i | f] block are formed in one pass each, and [da_i | da_f] is multiplied by
-    ``dc`` in one broadcast pass (19 elementwise calls per step instead of 22); ``dW_hh``, ``dW_ih``, ``dx``
-    are one GEMM each over all steps, the bias gradient one matrix-vector product.
+
+def _layer_backward(dyf, dh_last, dc_last, xf, hf, cf, gf, tcf, w_ih, w_hh):
+    """BPTT through one layer, feature-major. dyf (H, T', B) cotangents of the outputs h_1..h_T' (T' <= T; the
+    skewed stack passes the layer above's input cotangents shifted by one step as a view); dh_last, dc_last
+    (B, H) or None. Returns dxf (I, T, B), dh0, dc0 (H, B), dW_ih, dW_hh, db (the same for b_ih and b_hh).
+
+    Same arithmetic as :func:`_layer_backward_reference`: per step the gate cotangents are formed in one
+    reused (4H, B) scratch (19 in-place ufunc calls: ``i(1 - i)``, ``f(1 - f)`` in one pass over the contiguous
+    [i | f] slab, [da_i | da_f] scaled by ``dc`` in one broadcast pass), ``dh_{t-1} = W_hh^T dG_t`` is one GEMM,
+    and the scratch is copied into ``dgf[:, t]``; after the loop ``dW_hh = dG H_prev^T``, ``dW_ih = dG X^T``,
+    ``dX = W_ih^T dG`` are one GEMM each over all ``T*B`` columns and ``db = dG 1`` one matrix-vector product.
     """
-    t_len, batch, in_size = xs.shape
+    in_size, t_len, batch = xf.shape
     hid = w_hh.shape[1]
-    dt = xs.dtype
-    n_dy = len(dys)
-    dg = np.empty((t_len, batch, 4 * hid), dtype=dt)
-    dh = np.zeros((batch, hid), dtype=dt) if dh_last is None else np.array(dh_last, dtype=dt)
-    dc = np.zeros((batch, hid), dtype=dt) if dc_last is None else np.array(dc_last, dtype=dt)
-    tmp = np.empty((batch, hid), dtype=dt)
-    dc_b = dc.reshape(batch, 1, hid)  # (B, 1, H) view of dc, broadcast over the [i | f] pair
+    dt = xf.dtype
+    n_dy = 0 if dyf is None else dyf.shape[1]
+    whh_t = np.ascontiguousarray(w_hh.T)  # (H, 4H), transposed once per call
+    dgf = np.empty((4 * hid, t_len, batch), dtype=dt)
+    dgs = np.empty((4 * hid, batch), dtype=dt)  # this step's [da_i | da_f | da_g | da_o]
+    dh = np.zeros((hid, batch), dtype=dt) if dh_last is None else np.array(dh_last.T, dtype=dt, order="C")
+    dc = np.zeros((hid, batch), dtype=dt) if dc_last is None else np.array(dc_last.T, dtype=dt, order="C")
+    tmp = np.empty((hid, batch), dtype=dt)
     for t in range(t_len - 1, -1, -1):
         if t < n_dy:
-            dh += dys[t]
-        gt, dgt, tct = g[t], dg[t], tc[t]
-        i, f, gg, o = gt[:, :hid], gt[:, hid:2 * hid], gt[:, 2 * hid:3 * hid], gt[:, 3 * hid:]
-        dif, dgg, do = dgt[:, :2 * hid], dgt[:, 2 * hid:3 * hid], dgt[:, 3 * hid:]
-        _output_gate_backward(dh, dc, o, tct, do, tmp)  # da_o; dc += dh o (1 - tanh(c')^2)
-        np.subtract(1, gt[:, :2 * hid], out=dif)  # [i (1 - i) | f (1 - f)]
-        dif *= gt[:, :2 * hid]
-        dif[:, :hid] *= gg  # da_i = dc g i (1 - i)
-        dif[:, hid:] *= cs[t]  # da_f = dc c f (1 - f)
-        dgt.reshape(batch, 4, hid)[:, :2] *= dc_b  # [da_i | da_f] *= dc (a view: dgt is C-contiguous)
-        _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dgt, w_hh)  # da_g; dc_prev = dc f; dh_prev = dg W_hh
-    dg2 = dg.reshape(t_len * batch, 4 * hid)  # (T*B, 4H)
-    dw_hh = dg2.T @ hs[:-1].reshape(t_len * batch, hid)  # (4H, H), one GEMM over all steps
-    dw_ih = dg2.T @ xs.reshape(t_len * batch, in_size)  # (4H, I)
-    dxs = (dg2 @ w_ih).reshape(t_len, batch, in_size)  # (T, B, I)
-    db = np.ones(t_len * batch, dtype=dt) @ dg2  # (4H,) = sum over steps and batch, one GEMV
-    return dxs, dh, dc, dw_ih, dw_hh, db
+            dh += dyf[:, t]
+        _gates_backward_fm(dh, dc, cf[t], gf[t], tcf[t], dgs, tmp)
+        np.matmul(whh_t, dgs, out=dh)  # dh_prev = W_hh^T dG_t
+        dgf[:, t] = dgs
+    dg2 = dgf.reshape(4 * hid, t_len * batch)  # (4H, T*B)
+    dw_hh = dg2 @ hf[:, :t_len].reshape(hid, t_len * batch).T  # (4H, H), one GEMM over all steps
+    dw_ih = dg2 @ xf.reshape(in_size, t_len * batch).T  # (4H, I)
+    dxf = (w_ih.T @ dg2).reshape(in_size, t_len, batch)  # (I, T, B)
+    db = dg2 @ np.ones(t_len * batch, dtype=dt)  # (4H,) = sum over steps and batch, one GEMV
+    return dxf, dh, dc, dw_ih, dw_hh, db
+
+
+def _gates_backward_fm(dh, dc, c, g, tc, dg, tmp):
+    """The gate cotangents of one step, feature-major (no checks; 19 in-place ufunc calls). dh, dc (H, B): total
+    cotangents of h', c'; dc is overwritten with the cotangent of the previous c (``dc f``), dh is only read (the
+    caller forms ``dh_prev = W_hh^T dG``). c (H, B) previous cell state, g (4H, B) activated gates [i ; f ; g ; o],
+    tc (H, B) = tanh(c'). Writes dg (4H, B, C-contiguous) = [da_i ; da_f ; da_g ; da_o]; tmp (H, B) is scratch::
+
+        da_o = dh tanh(c') o (1 - o)     dc += dh o (1 - tanh(c')^2)
+        da_i = dc g i (1 - i)            da_f = dc c f (1 - f)        da_g = dc i (1 - g^2)
+    """
+    hid = c.shape[0]
+    i, f, gg, o = g[:hid], g[hid:2 * hid], g[2 * hid:3 * hid], g[3 * hid:]
+    dif, dgg, do = dg[:2 * hid], dg[2 * hid:3 * hid], dg[3 * hid:]
+    np.subtract(1, o, out=do)  # da_o
+    do *= o
+    do *= tc
+    do *= dh
+    np.multiply(tc, tc, out=tmp)  # dc += dh o (1 - tanh(c')^2)
+    np.subtract(1, tmp, out=tmp)
+    tmp *= o
+    tmp *= dh
+    dc += tmp
+    np.subtract(1, g[:2 * hid], out=dif)  # [i (1 - i) ; f (1 - f)] on the contiguous [i ; f] slab
+    dif *= g[:2 * hid]
+    dif[:hid] *= gg  # da_i = dc g i (1 - i)
+    dif[hid:] *= c  # da_f = dc c f (1 - f)
+    dif2 = dif.reshape(2, hid, -1)  # [da_i ; da_f] as two (H, B) slabs (a view: dg is C-contiguous)
+    dif2 *= dc  # one broadcast pass
+    np.multiply(gg, gg, out=dgg)  # da_g
+    np.subtract(1, dgg, out=dgg)
+    dgg *= i
+    dgg *= dc
+    dc *= f  # dc_prev = dc f
 
 
 # ----------------------------------------------------------------------------------------------------------
-# one layer over the whole sequence (time-major): the readable reference kernels (spec/layers.md §5.6)
+# one layer over the whole sequence (time-major, batch-major): the readable reference kernels (spec/layers.md §5.6)
 
 
 def _layer_forward_reference(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
@@ -399,22 +448,31 @@ def lstm_forward(x: np.ndarray, state: tuple, params: Mapping[str, np.ndarray], 
 
 
 def _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed, reference):
-    """The layer loop of :func:`lstm_forward` (inputs checked), with the fast or the reference layer kernels."""
+    """The layer loop of :func:`lstm_forward` (inputs checked), with the fast (feature-major) or the reference
+    (batch-major) layer kernels. The cache's ``layers[k]`` holds layer k's ``(inputs, hs, cs, g, tc)`` in the
+    kernels' layout."""
     batch, t_len, in_size = x.shape
-    hid = h0.shape[-1]
-    layer_forward = _layer_forward_reference if reference else _layer_forward
-    xs = np.array(x.transpose(1, 0, 2), order="C")  # (T, B, I), always a copy
     h_n = np.empty_like(h0)
     c_n = np.empty_like(c0)
     layers = []
-    for k in range(num_layers):
-        hs, cs, g, tc = layer_forward(xs, h0[k], c0[k], *weights[k])
-        layers.append((xs, hs, cs, g, tc))
-        h_n[k], c_n[k] = hs[-1], cs[-1]
-        xs = hs[:-1] if skewed else hs[1:]  # (T, B, H) contiguous views: the next layer's inputs
-    y = np.array(hs[1:].transpose(1, 0, 2), order="C")  # (B, T, H)
+    if reference:
+        xs = np.array(x.transpose(1, 0, 2), order="C")  # (T, B, I), always a copy
+        for k in range(num_layers):
+            hs, cs, g, tc = _layer_forward_reference(xs, h0[k], c0[k], *weights[k])
+            layers.append((xs, hs, cs, g, tc))
+            h_n[k], c_n[k] = hs[-1], cs[-1]
+            xs = hs[:-1] if skewed else hs[1:]  # (T, B, H) contiguous views: the next layer's inputs
+        y = np.array(hs[1:].transpose(1, 0, 2), order="C")  # (B, T, H)
+    else:
+        xf = np.array(x.transpose(2, 1, 0), order="C")  # (I, T, B), always a copy
+        for k in range(num_layers):
+            hf, cf, gf, tcf = _layer_forward(xf, h0[k], c0[k], *weights[k])
+            layers.append((xf, hf, cf, gf, tcf))
+            h_n[k], c_n[k] = hf[:, -1].T, cf[-1].T
+            xf = hf[:, :-1] if skewed else hf[:, 1:]  # (H, T, B) views: the next layer's inputs
+        y = np.array(hf[:, 1:].transpose(2, 1, 0), order="C")  # (B, T, H)
     cache = dict(layers=layers, weights=weights, prefix=prefix, num_layers=num_layers, skewed=skewed,
-                 shape=(batch, t_len, in_size, hid), reference=reference)
+                 shape=(batch, t_len, in_size, h0.shape[-1]), reference=reference)
     return y, (h_n, c_n), cache
 
 
@@ -449,12 +507,10 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
     layers, weights, prefix = cache["layers"], cache["weights"], cache["prefix"]
     num_layers, skewed = cache["num_layers"], cache["skewed"]
     batch, t_len, in_size, hid = cache["shape"]
+    reference = cache.get("reference", False)
     dt = layers[0][0].dtype
-    if dy is None:
-        dys = np.zeros((0, batch, hid), dtype=dt)  # no output cotangent at any step (the kernels read len(dys))
-    else:
+    if dy is not None:
         dy = check_float_array(dy, "dy", (batch, t_len, hid))
-        dys = dy.transpose(1, 0, 2)  # (T, B, H) view
     dh_n = dc_n = None
     if dstate_n is not None:
         if not (isinstance(dstate_n, (tuple, list)) and len(dstate_n) == 2):
@@ -464,17 +520,21 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
             dh_n = check_float_array(dh_n, "dstate_n[0] (dh_n)", (num_layers, batch, hid))
         if dc_n is not None:
             dc_n = check_float_array(dc_n, "dstate_n[1] (dc_n)", (num_layers, batch, hid))
+    if reference:  # batch-major (T, B, H) cotangents
+        dys = np.zeros((0, batch, hid), dtype=dt) if dy is None else dy.transpose(1, 0, 2)  # view
+        layer_backward = _layer_backward_reference
+    else:  # feature-major (H, T, B)
+        dys = None if dy is None else np.array(dy.transpose(2, 1, 0), dtype=dt, order="C")
+        layer_backward = _layer_backward
     dh0 = np.empty((num_layers, batch, hid), dtype=dt)
     dc0 = np.empty((num_layers, batch, hid), dtype=dt)
     grads = {}
-    layer_backward = _layer_backward_reference if cache.get("reference") else _layer_backward
     skew_dh0 = None  # skewed: cotangent of h0[k] through layer k+1's first input
     for k in range(num_layers - 1, -1, -1):
-        xs, hs, cs, g, tc = layers[k]
         w_ih, w_hh, _, _ = weights[k]
-        dxs, dh0[k], dc0[k], dw_ih, dw_hh, db = layer_backward(
-            dys, None if dh_n is None else dh_n[k], None if dc_n is None else dc_n[k],
-            xs, hs, cs, g, tc, w_ih, w_hh)
+        dxs, dh_k, dc_k, dw_ih, dw_hh, db = layer_backward(
+            dys, None if dh_n is None else dh_n[k], None if dc_n is None else dc_n[k], *layers[k], w_ih, w_hh)
+        dh0[k], dc0[k] = (dh_k, dc_k) if reference else (dh_k.T, dc_k.T)
         if skew_dh0 is not None:
             dh0[k] += skew_dh0
         grads[param_name(prefix, f"weight_ih_l{k}")] = dw_ih
@@ -482,12 +542,13 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
         grads[param_name(prefix, f"bias_ih_l{k}")] = db
         grads[param_name(prefix, f"bias_hh_l{k}")] = db.copy()
         if skewed and k > 0:
-            # inputs were [h0[k-1], h_0, ..., h_{T-2}] of layer k-1
-            skew_dh0 = dxs[0]
-            dys = dxs[1:]  # (T-1, B, H): cotangents of h_0 .. h_{T-2} of layer k-1; h_{T-1} gets none
+            # inputs were [h0[k-1], h_0, ..., h_{T-2}] of layer k-1: the first input's cotangent goes to dh0[k-1],
+            # the others to the outputs of layer k-1 one step earlier (h_{T-1} gets none); views, no copies
+            skew_dh0 = dxs[0] if reference else dxs[:, 0].T
+            dys = dxs[1:] if reference else dxs[:, 1:]
         else:
             dys = dxs
-    dx = np.ascontiguousarray(dys.transpose(1, 0, 2))  # (B, T, I)
+    dx = np.ascontiguousarray(dys.transpose(1, 0, 2) if reference else dys.transpose(2, 1, 0))  # (B, T, I)
     return dx, (dh0, dc0), grads
 
 
@@ -741,6 +802,6 @@ def _lstm_backward_naive(dy, dstate_n, x, state, params, prefix, num_layers=1, s
     return dx, (dh0, dc0), grads
 
 
-#: Kernel-tier names (no checks; used by refimpl.models.acrnn_fast).
-cell_activate = _cell_activate
-cell_gates_backward = _cell_gates_backward
+#: Kernel-tier names (no checks; feature-major step kernels, used by refimpl.models.acrnn_fast).
+activate_fm = _activate_fm
+gates_backward_fm = _gates_backward_fm
