@@ -267,6 +267,14 @@ def test_train_eval_generate_export_dq(capsys, dq_run, tmp_path):
     got = rt.step(x0, h)
     assert np.allclose(got[0], y, rtol=TOL_ORT_STEP["rtol"], atol=TOL_ORT_STEP["atol"] * np.abs(y).max())
     assert np.allclose(got[1], hn, **TOL_ORT_STEP)
+    code, out, _ = _run(capsys, "eval", "--checkpoint", dq_run / "checkpoint.npz", "--onnx", onnx_dir,
+                        "--actions", "walking", "--json", js)
+    doc = {d["method"]: d for d in json.loads(js.read_text())}
+    assert code == EXIT_OK and set(doc) >= {"quaternet", "quaternet_onnx"}
+    # the ONNX method feeds the raw prefix (no canonicalisation), the NumPy one the canonical one: the same
+    # rotations, float32 against float32 (the later frames of this barely trained network drift apart, and one
+    # Euler branch change costs ~2π, so only the first horizons are compared)
+    assert np.allclose(doc["quaternet_onnx"]["average"][:3], doc["quaternet"]["average"][:3], rtol=1e-3)
 
 
 def test_deploy_dq_mul_matches_numpy():

@@ -877,11 +877,29 @@ def skeleton_of(dataset: str) -> Skeleton:
     raise ValueError(f"dataset: expected 'h36m' or 'cmu', got {dataset!r}")
 
 
+def _dq_skeleton_of_runtime(runtime):
+    """The dataset skeleton of exported models whose frames are dual quaternions (metadata representation
+    ``quaternet_dq_frame``), else None."""
+    for m in (getattr(runtime, "predict_model", None), getattr(runtime, "step_model", None)):
+        meta = getattr(m, "metadata", None) or {}
+        if (meta.get("representation") or {}).get("name") == "quaternet_dq_frame":
+            return skeleton_of(meta.get("dataset", "cmu"))
+    return None
+
+
 def onnx_method(runtime) -> Callable:
     """``method(prefix (B, P, J, 4), n_future) -> (B, n_future, J, 4)`` running an exported predictor
-    (``runtime.predict``)."""
+    (``runtime.predict``; for dual-quaternion frames, the prefix's current DQs in and the decoded local rotations
+    out, spec/quaternet.md §9)."""
+    skeleton = _dq_skeleton_of_runtime(runtime)
+
     def network_onnx(prefix, n_future):
         x = np.asarray(prefix, dtype=np.float64)
+        if skeleton is not None:  # QuaterNet with dual quaternions: current DQs in, decoded local rotations out
+            from refimpl.dq_prediction import dq_frames_from_rotations, rotations_from_dq_frames
+
+            y = np.asarray(runtime.predict(dq_frames_from_rotations(x, skeleton), int(n_future)), np.float64)
+            return rotations_from_dq_frames(y, skeleton.parents)
         return np.asarray(runtime.predict(x, int(n_future)), dtype=np.float64)
 
     return network_onnx
