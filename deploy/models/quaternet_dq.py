@@ -22,12 +22,15 @@ import numpy as np
 
 from deploy.graph import GraphBuilder
 from deploy.linear import linear
-from deploy.quat import _MUL_INDEX, _MUL_SIGN, dq_normalize
+from deploy.quat import dq_normalize
 
 __all__ = ["dq_mul", "quaternet_dq_head", "dq_frame_representation"]
 
 _INT64_MAX = 2 ** 63 - 1
 
+# L(q)[i, j] = _MUL_SIGN[i, j] * q[_MUL_INDEX[i, j]] (the Hamilton product q ⊗ r = L(q) r, as deploy.quat.quat_mul)
+_MUL_INDEX = np.array([[0, 1, 2, 3], [1, 0, 3, 2], [2, 3, 0, 1], [3, 2, 1, 0]], dtype=np.int64)
+_MUL_SIGN = np.array([[1, -1, -1, -1], [1, 1, -1, 1], [1, 1, 1, -1], [1, -1, 1, 1]], dtype=np.float64)
 # L8(a)[i, j] = _DQ_SIGN[i, j] * a[_DQ_INDEX[i, j]], so that (a ⊗ b)_i = Σ_j L8(a)[i, j] b_j
 _DQ_INDEX = np.zeros((8, 8), dtype=np.int64)
 _DQ_SIGN = np.zeros((8, 8), dtype=np.float64)
