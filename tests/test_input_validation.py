@@ -73,6 +73,7 @@ PROFILES = [
                  "offsets": lambda: _rng.standard_normal((J, 3)), "parents": lambda: PARENTS}),
     ("layers", {"q": lambda: _uq(2, J), "a": lambda: _uq(2, J), "b": lambda: _uq(2, J), "delta": lambda: _uq(2, J),
                 "q_in": lambda: _uq(2, J), "dq": lambda: _udq(2, J) * 1.1}),
+    ("dq-layers", {"delta": lambda: _udq(2, J) * 1.1, "d_in": lambda: _udq(2, J)}),
     ("kinematics", {"rotations": lambda: _uq(2, J), "root_positions": lambda: _rng.standard_normal((2, 3)),
                     "offsets": lambda: _rng.standard_normal((J, 3)), "parents": lambda: PARENTS,
                     "translations": lambda: _rng.standard_normal((2, J, 3)), "local_dqs": lambda: _udq(2, J),
