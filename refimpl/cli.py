@@ -331,12 +331,15 @@ def _eval_prediction(args, model) -> int:
     if model is not None and model.extra.get("dataset") != data.dataset:
         raise UsageError(f"--data {args.data} is {data.dataset}, the model was trained on {model.extra.get('dataset')}")
     try:
-        protocol = prediction.eval_protocol(data.dataset, args.protocol, args.samples_per_sequence)
+        actions = prediction.eval_actions(args)
+        protocol = prediction.eval_protocol(data.dataset, args.protocol, args.samples_per_sequence,
+                                            horizons=getattr(args, "horizons", "default"), data=data, actions=actions)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     networks = network_methods(model, onnx_dir=args.onnx) if (model is not None or args.onnx) else {}
     try:
-        results = prediction.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line)
+        results = prediction.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line,
+                                          actions=actions)
     except ValueError as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
     if model is not None:

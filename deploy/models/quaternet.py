@@ -77,6 +77,9 @@ def quaternet_representation(num_joints: int, num_outputs: int = 0, num_controls
 def _metadata(g, name, role, config, io, skeleton, frame_rate, metadata, variant="float"):
     rep = quaternet_representation(config.num_joints, getattr(config, "num_outputs", 0),
                                    getattr(config, "num_controls", 0))
+    if getattr(config, "representation", "quaternion") == "dual_quaternion":
+        from deploy.models.quaternet_dq import dq_frame_representation
+        rep = dq_frame_representation(config.num_joints, config.num_outputs, config.num_controls)
     return build_metadata(g, name=name, role=role, config=config.to_dict(), io=io, representation=rep,
                           normalization=None, skeleton=skeleton, frame_rate=frame_rate,
                           source_paper=QUATERNET_PAPER, variant=variant, extra=metadata)
@@ -112,6 +115,9 @@ def _gru_input(g, x, params, config, *, name):
 
 def _head(g, top, x, params, config, *, name):
     """``y (B, G)`` from the top GRU output ``top (B, H)`` and the fed frame ``x (B, F)``."""
+    if getattr(config, "representation", "quaternion") == "dual_quaternion":  # spec/quaternet.md §9
+        from deploy.models.quaternet_dq import quaternet_dq_head
+        return quaternet_dq_head(g, top, x, params, config, name=name)
     J, R = config.num_joints, config.rotation_size
     o = linear(g, top, params, "fc", name=f"{name}.fc", wname="fc", rank2=True)   # (B, G)
     delta = o if config.num_outputs == 0 else _slice(g, o, 0, R, -1, f"{name}.delta")  # (B, 4J)

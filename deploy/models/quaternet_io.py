@@ -41,7 +41,9 @@ def load_quaternet_checkpoint(path):
     """``(params, QuaterNetConfig, meta)`` from a ``refimpl train`` checkpoint (``--model quaternet``) or a plain
     state-dict ``.npz`` (the config's defaults: the paper's short-term model)."""
     params, meta = _read(path)
-    return params, config_from_meta(QuaterNetConfig, meta), meta
+    legacy = {"quat": "quaternion"}  # the registry's representation name, stored by checkpoints before §9
+    return params, config_from_meta(QuaterNetConfig, meta, lambda c: {
+        **c, **({"representation": legacy[c["representation"]]} if c.get("representation") in legacy else {})}), meta
 
 
 def load_cnn_checkpoint(path):

@@ -49,7 +49,7 @@ __all__ = [
     "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of",
     "onnx_method", "methods", "evaluate_all", "task_evaluate", "canonical_prefix", "training_windows",
     "usable_training", "eval_protocol", "average_curves", "stride_of", "load_clip", "Prediction",
-    "make_prediction", "render_prediction", "verify_inputs",
+    "make_prediction", "render_prediction", "verify_inputs", "TABLE2_HORIZONS_MS", "table2_protocol", "eval_actions",
 ]
 
 # The published evaluation's action order (quaternet_reference_code.md §6.6).
@@ -312,6 +312,10 @@ class Protocol:
         Reported horizons; frame ``k`` (0-based) of the prediction is at ``(k + 1) · frame_ms``.
     frame_ms : float
         Milliseconds per frame used to label horizons (40 at 25 Hz).
+    round_horizons : bool
+        False (default): every horizon must be a whole number of frames. True (:func:`table2_protocol`, at the
+        data's real frame rate): the nearest frame, ``max(1, round(ms / frame_ms))``; its real time is
+        :attr:`horizon_times_ms`.
     """
 
     name: str
@@ -322,6 +326,7 @@ class Protocol:
     seed: int = SEED
     horizons_ms: tuple = (80, 160, 320, 400, 560, 1000, 2000, 3000, 4000)
     frame_ms: float = 40.0
+    round_horizons: bool = False
 
     def __post_init__(self):
         for field in ("samples_per_sequence", "prefix_length", "target_length"):
@@ -341,11 +346,73 @@ class Protocol:
         frames = []
         for ms in self.horizons_ms:
             k = ms / self.frame_ms
+            if self.round_horizons:
+                k = max(1, int(round(k)))
+                if k > self.target_length:
+                    raise ValueError(f"horizons_ms: {ms} ms is frame {k} at {self.frame_ms:.4g} ms per frame, "
+                                     f"beyond the {self.target_length}-frame target")
             if abs(k - round(k)) > 1e-9 or not 1 <= round(k) <= self.target_length:
                 raise ValueError(f"horizons_ms: {ms} ms is not a multiple of {self.frame_ms} ms within the "
                                  f"{self.target_length}-frame target")
             frames.append(int(round(k)) - 1)
         return tuple(frames)
+
+    @property
+    def horizon_times_ms(self) -> tuple:
+        """Time of each horizon's frame, ``(k + 1) · frame_ms`` (equal to ``horizons_ms`` unless rounded)."""
+        return tuple((k + 1) * self.frame_ms for k in self.horizon_frames)
+
+
+#: The horizons of the dual-quaternion paper's Table 2 (Andreou et al.), out to 4 s.
+TABLE2_HORIZONS_MS = (80, 160, 320, 400, 600, 800, 1000, 2000, 3000, 4000)
+
+
+def table2_protocol(data: "PredictionData", name: str = "standard", samples_per_sequence: int | None = None, *,
+                    prefix_length: int = 50, actions: Sequence[str] | None = None,
+                    horizons_ms: Sequence[float] = TABLE2_HORIZONS_MS) -> Protocol:
+    """The long-horizon protocol (Table 2 of the dual-quaternion paper: 80 ms … 4 s) at the data's real rate.
+
+    Each horizon becomes the nearest frame at ``data.frame_time`` (``round(ms / frame_ms)``, at least 1; CMU at
+    60 fps: 80 ms → frame 5 = 83 ms, 160 → 10 = 167 ms, 320 → 19 = 317 ms, the others exact). A window needs
+    ``P + K`` frames with starts in ``[low, T − P − K)`` (``low`` as :func:`make_protocol`: 16 for H3.6M, 0 for
+    CMU), so the horizons kept are those whose frame ``K`` fits the shortest test sequence of every evaluated
+    action (``K <= T_min − P − low − 1``); ``target_length`` = the last kept horizon's frame. The sampler, seed
+    and samples per sequence are those of :func:`make_protocol` (``name`` standard = 4, dense = 128).
+
+    Parameters
+    ----------
+    data : PredictionData
+    name : str
+        ``"standard"`` or ``"dense"``.
+    samples_per_sequence : int, optional
+    prefix_length : int
+        P (50, the models' training prefix).
+    actions : sequence of str, optional
+        The actions the horizons must fit (default every test action).
+    horizons_ms : sequence of float
+
+    Raises
+    ------
+    ValueError
+        Not even the first horizon fits (names the shortest sequence).
+    """
+    if name not in ("standard", "dense"):
+        raise ValueError(f"protocol: expected 'standard' or 'dense', got {name!r}")
+    base = make_protocol(data.dataset, dense=name == "dense", samples_per_sequence=samples_per_sequence)
+    acts = data.test_actions() if actions is None else tuple(actions)
+    seqs = [s for s in data.test if s.action in acts]
+    if not seqs:
+        raise ValueError(f"actions: no test sequence for {list(acts)}; present: {list(data.test_actions())}")
+    shortest = min(seqs, key=lambda s: s.num_frames)
+    k_max = shortest.num_frames - prefix_length - base.low - 1
+    frame_ms = float(data.frame_time) * 1000.0
+    frames = [max(1, int(round(ms / frame_ms))) for ms in horizons_ms]
+    kept = [(ms, k) for ms, k in zip(horizons_ms, frames) if k <= k_max]
+    if not kept:
+        raise ValueError(f"{shortest.path}: {shortest.num_frames} frames leave at most {max(k_max, 0)} predicted "
+                         f"frames after a {prefix_length}-frame prefix; {horizons_ms[0]} ms needs {frames[0]}")
+    return dataclasses.replace(base, prefix_length=prefix_length, target_length=max(k for _, k in kept),
+                               horizons_ms=tuple(ms for ms, _ in kept), frame_ms=frame_ms, round_horizons=True)
 
 
 def make_protocol(dataset: str = "h36m", dense: bool = False, samples_per_sequence: int | None = None
@@ -653,7 +720,12 @@ def format_table(results: Sequence[PredictionResult], decimals: int = 2) -> str:
     windows = sorted({n for r in results for n in r.windows_per_action.values()})
     lines = [f"dataset {first.dataset}, protocol {first.protocol.name} ({first.protocol.samples_per_sequence} "
              f"samples per sequence, {'/'.join(map(str, windows))} windows per action)"]
-    if abs(first.frame_time * 1000 - first.protocol.frame_ms) > 1e-6:
+    if first.protocol.round_horizons:
+        lines.append("horizon frames at " + f"{first.protocol.frame_ms:.4g} ms per frame: " + ", ".join(
+            f"{h:g} ms = frame {k + 1} ({t:.0f} ms)" for h, k, t in zip(first.protocol.horizons_ms,
+                                                                      first.protocol.horizon_frames,
+                                                                      first.protocol.horizon_times_ms)))
+    elif abs(first.frame_time * 1000 - first.protocol.frame_ms) > 1e-6:
         lines.append(f"horizons at a nominal {first.protocol.frame_ms:g} ms per frame; the data has "
                      f"{first.frame_time * 1000:.1f} ms per frame")
     lines.append(row("milliseconds", hs))
@@ -670,7 +742,8 @@ def format_table(results: Sequence[PredictionResult], decimals: int = 2) -> str:
 def results_to_dict(result: PredictionResult) -> dict:
     """The JSON object of one result: ``{"dataset", "protocol", "method", "samples_per_sequence",
     "horizons_ms", "actions": {action: [error per horizon]}, "average": [...]}`` plus ``"horizon_frames"``
-    (0-based), ``"frame_ms"`` (the labels' ms per frame), ``"prefix_length"``, ``"target_length"``, ``"seed"``,
+    (0-based), ``"horizon_times_ms"`` (the real time of each horizon's frame at ``frame_ms``), ``"frame_ms"``
+    (the labels' ms per frame), ``"prefix_length"``, ``"target_length"``, ``"seed"``,
     ``"windows_per_action"`` and ``"data_frame_time_s"`` (the data's real seconds per frame)."""
     p = result.protocol
     return {"dataset": result.dataset, "protocol": p.name, "method": result.method,
@@ -679,6 +752,7 @@ def results_to_dict(result: PredictionResult) -> dict:
             "actions": result.actions, "average": result.average,
             "horizon_frames": list(p.horizon_frames), "frame_ms": float(p.frame_ms),
             "prefix_length": int(p.prefix_length), "target_length": int(p.target_length), "seed": int(p.seed),
+            "horizon_times_ms": [float(t) for t in p.horizon_times_ms],
             "windows_per_action": dict(result.windows_per_action),
             "data_frame_time_s": float(result.frame_time)}
 
@@ -716,6 +790,12 @@ def add_eval_options(parser) -> None:
                         help="prediction task: 4 (standard, Table 1) or 128 (dense, Table 2) samples per sequence")
     parser.add_argument("--samples-per-sequence", type=int, default=None,
                         help="prediction task: override the protocol's samples per sequence")
+    parser.add_argument("--horizons", default="default", choices=("default", "table2"),
+                        help="prediction task: the dataset's horizons (default) or the dual-quaternion paper's "
+                             "Table 2 horizons 80 ms ... 4 s at the data's real frame rate, those the test files "
+                             "allow (table2)")
+    parser.add_argument("--actions", default=None,
+                        help="prediction task: comma-separated test actions to evaluate (default all)")
 
 
 def resolve_data(data: str, *, downsample: int = 2) -> PredictionData:
@@ -797,11 +877,29 @@ def skeleton_of(dataset: str) -> Skeleton:
     raise ValueError(f"dataset: expected 'h36m' or 'cmu', got {dataset!r}")
 
 
+def _dq_skeleton_of_runtime(runtime):
+    """The dataset skeleton of exported models whose frames are dual quaternions (metadata representation
+    ``quaternet_dq_frame``), else None."""
+    for m in (getattr(runtime, "predict_model", None), getattr(runtime, "step_model", None)):
+        meta = getattr(m, "metadata", None) or {}
+        if (meta.get("representation") or {}).get("name") == "quaternet_dq_frame":
+            return skeleton_of(meta.get("dataset", "cmu"))
+    return None
+
+
 def onnx_method(runtime) -> Callable:
     """``method(prefix (B, P, J, 4), n_future) -> (B, n_future, J, 4)`` running an exported predictor
-    (``runtime.predict``)."""
+    (``runtime.predict``; for dual-quaternion frames, the prefix's current DQs in and the decoded local rotations
+    out, spec/quaternet.md §9)."""
+    skeleton = _dq_skeleton_of_runtime(runtime)
+
     def network_onnx(prefix, n_future):
         x = np.asarray(prefix, dtype=np.float64)
+        if skeleton is not None:  # QuaterNet with dual quaternions: current DQs in, decoded local rotations out
+            from refimpl.dq_prediction import dq_frames_from_rotations, rotations_from_dq_frames
+
+            y = np.asarray(runtime.predict(dq_frames_from_rotations(x, skeleton), int(n_future)), np.float64)
+            return rotations_from_dq_frames(y, skeleton.parents)
         return np.asarray(runtime.predict(x, int(n_future)), dtype=np.float64)
 
     return network_onnx
@@ -815,11 +913,12 @@ def methods(networks: Mapping[str, Callable] | None = None, *, fps: float | None
 
 
 def evaluate_all(data: PredictionData, methods_by_name: Mapping[str, Callable], protocol: Protocol | None = None,
-                 *, progress: Callable[[str], None] | None = None) -> list:
-    """:func:`evaluate` of every method under ``protocol`` (default: the dataset's standard one); a list of
-    :class:`PredictionResult` in the methods' order."""
+                 *, progress: Callable[[str], None] | None = None, actions: Sequence[str] | None = None) -> list:
+    """:func:`evaluate` of every method under ``protocol`` (default: the dataset's standard one) on ``actions``
+    (default all); a list of :class:`PredictionResult` in the methods' order."""
     protocol = make_protocol(data.dataset) if protocol is None else protocol
-    return [evaluate(m, data, protocol, method_name=name, progress=progress) for name, m in methods_by_name.items()]
+    return [evaluate(m, data, protocol, method_name=name, progress=progress, actions=actions)
+            for name, m in methods_by_name.items()]
 
 
 def task_evaluate(test_ds: PredictionData, methods_by_name: Mapping[str, Callable]) -> list:
@@ -863,11 +962,28 @@ def usable_training(data: PredictionData, length: int) -> PredictionData:
     return dataclasses.replace(data, train=keep)
 
 
-def eval_protocol(dataset: str, name: str = "standard", samples_per_sequence: int | None = None) -> Protocol:
-    """``refimpl eval``'s ``--protocol standard|dense`` (and ``--samples-per-sequence``) for a dataset."""
+def eval_protocol(dataset: str, name: str = "standard", samples_per_sequence: int | None = None, *,
+                  horizons: str = "default", data: "PredictionData | None" = None,
+                  actions: Sequence[str] | None = None) -> Protocol:
+    """``refimpl eval``'s ``--protocol standard|dense`` (and ``--samples-per-sequence``) for a dataset;
+    ``horizons="table2"`` (``--horizons table2``): :func:`table2_protocol` of ``data`` (required) and ``actions``."""
     if name not in ("standard", "dense"):
         raise ValueError(f"protocol: expected 'standard' or 'dense', got {name!r}")
+    if horizons == "table2":
+        if data is None:
+            raise ValueError("data: required for the table2 horizons (they depend on its frame rate)")
+        return table2_protocol(data, name, samples_per_sequence, actions=actions)
+    if horizons != "default":
+        raise ValueError(f"horizons: expected 'default' or 'table2', got {horizons!r}")
     return make_protocol(dataset, dense=name == "dense", samples_per_sequence=samples_per_sequence)
+
+
+def eval_actions(args) -> tuple | None:
+    """The actions of ``--actions`` (comma-separated), or None (every test action)."""
+    text = getattr(args, "actions", None)
+    if not text:
+        return None
+    return tuple(a.strip() for a in text.split(",") if a.strip())
 
 
 def average_curves(results: Sequence[PredictionResult]) -> dict:

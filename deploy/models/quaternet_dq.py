@@ -1,0 +1,88 @@
+"""The dual-quaternion head of the QuaterNet export (``QuaterNetConfig(representation="dual_quaternion")``;
+spec/quaternet.md §9, spec/deploy.md §11).
+
+``deploy/models/quaternet.py`` builds every part of the graph that does not depend on the joint representation
+(GRU input, GRU layers, the unrolled predictor) and calls :func:`quaternet_dq_head` for a dual-quaternion
+network. One head::
+
+    o  = fc(top) = [ΔD (8J) | τ (O)]                        Gemm, Slice
+    D̂  = N(ΔD_j ⊗ D_in,j) (velocity) or N(ΔD_j) (absolute)  dq_mul (Gather, Mul, MatMul), dq_normalize (Eq. 13)
+    y  = [D̂ (8J) | τ]                                       Concat
+
+The dual-quaternion product ``a ⊗ b = (a_r ⊗ b_r | a_r ⊗ b_d + a_d ⊗ b_r)`` is one 8 × 8 matrix product
+``L₈(a) b`` with ``L₈(a) = [[L(a_r), 0], [L(a_d), L(a_r)]]``, gathered from ``a`` in one node as the quaternion
+product of ``deploy.quat.quat_mul``. Inputs and outputs of the exported models are the network's own frames:
+current (root-relative) unit dual quaternions ``(q_r | q_d)`` per joint, joint-major.
+
+Shape legend: B batch, J joints, H hidden size, O translations, G = 8J + O.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from deploy.graph import GraphBuilder
+from deploy.linear import linear
+from deploy.quat import dq_normalize
+
+__all__ = ["dq_mul", "quaternet_dq_head", "dq_frame_representation"]
+
+_INT64_MAX = 2 ** 63 - 1
+
+# L(q)[i, j] = _MUL_SIGN[i, j] * q[_MUL_INDEX[i, j]] (the Hamilton product q ⊗ r = L(q) r, as deploy.quat.quat_mul)
+_MUL_INDEX = np.array([[0, 1, 2, 3], [1, 0, 3, 2], [2, 3, 0, 1], [3, 2, 1, 0]], dtype=np.int64)
+_MUL_SIGN = np.array([[1, -1, -1, -1], [1, 1, -1, 1], [1, 1, 1, -1], [1, -1, 1, 1]], dtype=np.float64)
+# L8(a)[i, j] = _DQ_SIGN[i, j] * a[_DQ_INDEX[i, j]], so that (a ⊗ b)_i = Σ_j L8(a)[i, j] b_j
+_DQ_INDEX = np.zeros((8, 8), dtype=np.int64)
+_DQ_SIGN = np.zeros((8, 8), dtype=np.float64)
+_DQ_INDEX[:4, :4], _DQ_SIGN[:4, :4] = _MUL_INDEX, _MUL_SIGN          # real part: L(a_r) b_r
+_DQ_INDEX[4:, 4:], _DQ_SIGN[4:, 4:] = _MUL_INDEX, _MUL_SIGN          # dual part: L(a_r) b_d
+_DQ_INDEX[4:, :4], _DQ_SIGN[4:, :4] = _MUL_INDEX + 4, _MUL_SIGN      #          + L(a_d) b_r
+
+
+def dq_mul(g: GraphBuilder, a: str, b: str, *, name: str) -> str:
+    """Dual-quaternion product ``a ⊗ b`` of ``(..., 8)`` tensors, as ``refimpl.dualquat.dq_mul``:
+    ``(a_r ⊗ b_r | a_r ⊗ b_d + a_d ⊗ b_r)``, computed as ``L₈(a) b``."""
+    la = g.node("Gather", [a, g.shared("const.dq_mul.index", _DQ_INDEX)], f"{name}.gather", axis=-1)  # (..., 8, 8)
+    la = g.node("Mul", [la, g.shared("const.dq_mul.sign", _DQ_SIGN)], f"{name}.L8")   # (..., 8, 8)
+    bc = g.node("Unsqueeze", [b, g.ints([-1])], f"{name}.b_col")         # (..., 8, 1)
+    out = g.node("MatMul", [la, bc], f"{name}.matmul")                   # (..., 8, 1)
+    return g.node("Squeeze", [out, g.ints([-1])], name)                  # (..., 8)
+
+
+def _slice(g, x, start, stop, axis, name):
+    return g.node("Slice", [x, g.ints([start]), g.ints([stop]), g.ints([axis])], name)
+
+
+def quaternet_dq_head(g: GraphBuilder, top: str, x: str, params, config, *, name: str) -> str:
+    """``y (B, G)`` from the top GRU output ``top (B, H)`` and the fed frame ``x (B, F)``: the head of
+    ``refimpl.models.quaternet`` for dual quaternions (``_head_forward``: Eq. 13 and, in velocity mode, the
+    dual-quaternion product with the fed frame's joint)."""
+    J, R = config.num_joints, config.rotation_size
+    o = linear(g, top, params, "fc", name=f"{name}.fc", wname="fc", rank2=True)   # (B, G)
+    delta = o if config.num_outputs == 0 else _slice(g, o, 0, R, -1, f"{name}.delta")  # (B, 8J)
+    d8 = g.node("Reshape", [delta, g.ints([0, J, 8])], f"{name}.delta_j")        # (B, J, 8)
+    if config.velocity:
+        d_in = x if config.input_size == R else _slice(g, x, 0, R, -1, f"{name}.d_in_flat")
+        d_in = g.node("Reshape", [d_in, g.ints([0, J, 8])], f"{name}.d_in")      # (B, J, 8)
+        d8 = dq_mul(g, d8, d_in, name=f"{name}.dqmul")                           # (B, J, 8)
+    q = dq_normalize(g, d8, name=f"{name}.dqnorm", eps=config.eps)               # (B, J, 8)
+    q = g.node("Reshape", [q, g.ints([0, R])], f"{name}.q")                      # (B, 8J)
+    if config.num_outputs == 0:
+        return q
+    tau = _slice(g, o, R, _INT64_MAX, -1, f"{name}.tau")                          # (B, O)
+    return g.node("Concat", [q, tau], f"{name}.y", axis=-1)                      # (B, G)
+
+
+def dq_frame_representation(num_joints: int, num_outputs: int = 0, num_controls: int = 0) -> dict:
+    """Layout of a dual-quaternion QuaterNet frame: ``8J`` current dual quaternions, then ``O`` translations,
+    then ``C`` controls (the metadata's ``representation``)."""
+    R = 8 * num_joints
+    fields = [{"name": "joint_dual_quaternions", "start": 0, "size": R, "joints": int(num_joints),
+               "dual_quaternion": "(q_r | q_d), each (w, x, y, z), Hamilton; current (relative to the root "
+                                  "joint), unit: |q_r| = 1, <q_r, q_d> = 0; translation t = 2 q_d q_r*"}]
+    if num_outputs:
+        fields.append({"name": "translations", "start": R, "size": int(num_outputs)})
+    if num_controls:
+        fields.append({"name": "controls", "start": R + num_outputs, "size": int(num_controls),
+                       "meaning": "inputs only"})
+    return {"name": "quaternet_dq_frame", "size": R + num_outputs + num_controls, "fields": fields}
