@@ -735,11 +735,12 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
     parser.add_argument("--version", action="version", version=f"refimpl {__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=nonneg_int, default=1,
-                        help="BLAS threads for NumPy (default 1: measured fastest on the shared 2-core machine, "
-                             "where two threads were 1.2-20x slower per training step while other jobs ran; on "
-                             "an idle machine 2 ties (QTG) or is up to 1.6x faster (QuaterNet CNN) for training; "
-                             "benchmarks/bench_threads.py; 0 = library default; needs threadpoolctl)")
+    parser.add_argument("--blas-threads", type=nonneg_int, default=2,
+                        help="BLAS threads for NumPy (default 2: measured fastest on an idle 2-core machine, "
+                             "0.58-0.74x the one-thread time per training step of every network and equal or "
+                             "faster at batch 1, benchmarks/bench_threads.py; pass 1 when other jobs share the "
+                             "cores, where two threads were 1.2-20x slower; 0 = library default; needs "
+                             "threadpoolctl)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     p = sub.add_parser("info", help="what a .bvh, exp-map .txt, checkpoint .npz or .onnx file holds",
