@@ -49,7 +49,8 @@ from deploy.graph import OPSET, GraphBuilder
 from deploy.gru import gru, gru_step
 from deploy.linear import linear
 from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
-from deploy.quat import quat_mul, quat_normalize
+from deploy.models.quaternet_dq import dq_frame_representation, dq_mul
+from deploy.quat import dq_normalize, quat_mul, quat_normalize
 from deploy.recurrent import tiled_state
 
 __all__ = ["QUATERNET_PAPER", "quaternet_representation", "export_quaternet_init", "export_quaternet_step",
@@ -78,7 +79,6 @@ def _metadata(g, name, role, config, io, skeleton, frame_rate, metadata, variant
     rep = quaternet_representation(config.num_joints, getattr(config, "num_outputs", 0),
                                    getattr(config, "num_controls", 0))
     if getattr(config, "representation", "quaternion") == "dual_quaternion":
-        from deploy.models.quaternet_dq import dq_frame_representation
         rep = dq_frame_representation(config.num_joints, config.num_outputs, config.num_controls)
     return build_metadata(g, name=name, role=role, config=config.to_dict(), io=io, representation=rep,
                           normalization=None, skeleton=skeleton, frame_rate=frame_rate,
@@ -114,20 +114,21 @@ def _gru_input(g, x, params, config, *, name):
 
 
 def _head(g, top, x, params, config, *, name):
-    """``y (B, G)`` from the top GRU output ``top (B, H)`` and the fed frame ``x (B, F)``."""
-    if getattr(config, "representation", "quaternion") == "dual_quaternion":  # spec/quaternet.md §9
-        from deploy.models.quaternet_dq import quaternet_dq_head
-        return quaternet_dq_head(g, top, x, params, config, name=name)
+    """``y (B, G)`` from the top GRU output ``top (B, H)`` and the fed frame ``x (B, F)`` (``rnn._head_forward``):
+    per joint block of width D, ``normalize(Δ ⊗ q_in)`` (velocity) or ``normalize(Δ)``; for dual quaternions
+    (D = 8, spec/quaternet.md §9) the product is the dual-quaternion one and the normalisation Eq. 13."""
     J, R = config.num_joints, config.rotation_size
+    dual = getattr(config, "representation", "quaternion") == "dual_quaternion"
+    D, mul, norm = (8, dq_mul, dq_normalize) if dual else (4, quat_mul, quat_normalize)
     o = linear(g, top, params, "fc", name=f"{name}.fc", wname="fc", rank2=True)   # (B, G)
-    delta = o if config.num_outputs == 0 else _slice(g, o, 0, R, -1, f"{name}.delta")  # (B, 4J)
-    d4 = g.node("Reshape", [delta, g.ints([0, J, 4])], f"{name}.delta_j")        # (B, J, 4)
+    delta = o if config.num_outputs == 0 else _slice(g, o, 0, R, -1, f"{name}.delta")  # (B, DJ)
+    dj = g.node("Reshape", [delta, g.ints([0, J, D])], f"{name}.delta_j")        # (B, J, D)
     if config.velocity:
         q_in = x if config.input_size == R else _slice(g, x, 0, R, -1, f"{name}.q_in_flat")
-        q_in = g.node("Reshape", [q_in, g.ints([0, J, 4])], f"{name}.q_in")      # (B, J, 4)
-        d4 = quat_mul(g, d4, q_in, name=f"{name}.qmul")                          # (B, J, 4)
-    q = quat_normalize(g, d4, name=f"{name}.qnorm", eps=config.eps)              # (B, J, 4)
-    q = g.node("Reshape", [q, g.ints([0, R])], f"{name}.q")                      # (B, 4J)
+        q_in = g.node("Reshape", [q_in, g.ints([0, J, D])], f"{name}.q_in")      # (B, J, D)
+        dj = mul(g, dj, q_in, name=f"{name}.{'dqmul' if dual else 'qmul'}")      # (B, J, D)
+    q = norm(g, dj, name=f"{name}.{'dqnorm' if dual else 'qnorm'}", eps=config.eps)  # (B, J, D)
+    q = g.node("Reshape", [q, g.ints([0, R])], f"{name}.q")                      # (B, DJ)
     if config.num_outputs == 0:
         return q
     tau = _slice(g, o, R, _INT64_MAX, -1, f"{name}.tau")                          # (B, O)

@@ -1,9 +1,7 @@
-"""The dual-quaternion head of the QuaterNet export (``QuaterNetConfig(representation="dual_quaternion")``;
-spec/quaternet.md §9, spec/deploy.md §11).
+"""Dual-quaternion pieces of the QuaterNet export (``QuaterNetConfig(representation="dual_quaternion")``;
+spec/quaternet.md §9, spec/deploy.md §11): the dual-quaternion product and the frame layout.
 
-``deploy/models/quaternet.py`` builds every part of the graph that does not depend on the joint representation
-(GRU input, GRU layers, the unrolled predictor) and calls :func:`quaternet_dq_head` for a dual-quaternion
-network. One head::
+``deploy/models/quaternet.py`` builds the whole graph; its head, for a dual-quaternion network::
 
     o  = fc(top) = [ΔD (8J) | τ (O)]                        Gemm, Slice
     D̂  = N(ΔD_j ⊗ D_in,j) (velocity) or N(ΔD_j) (absolute)  dq_mul (Gather, Mul, MatMul), dq_normalize (Eq. 13)
@@ -21,12 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from deploy.graph import GraphBuilder
-from deploy.linear import linear
-from deploy.quat import dq_normalize
 
-__all__ = ["dq_mul", "quaternet_dq_head", "dq_frame_representation"]
-
-_INT64_MAX = 2 ** 63 - 1
+__all__ = ["dq_mul", "dq_frame_representation"]
 
 # L(q)[i, j] = _MUL_SIGN[i, j] * q[_MUL_INDEX[i, j]] (the Hamilton product q ⊗ r = L(q) r, as deploy.quat.quat_mul)
 _MUL_INDEX = np.array([[0, 1, 2, 3], [1, 0, 3, 2], [2, 3, 0, 1], [3, 2, 1, 0]], dtype=np.int64)
@@ -47,30 +41,6 @@ def dq_mul(g: GraphBuilder, a: str, b: str, *, name: str) -> str:
     bc = g.node("Unsqueeze", [b, g.ints([-1])], f"{name}.b_col")         # (..., 8, 1)
     out = g.node("MatMul", [la, bc], f"{name}.matmul")                   # (..., 8, 1)
     return g.node("Squeeze", [out, g.ints([-1])], name)                  # (..., 8)
-
-
-def _slice(g, x, start, stop, axis, name):
-    return g.node("Slice", [x, g.ints([start]), g.ints([stop]), g.ints([axis])], name)
-
-
-def quaternet_dq_head(g: GraphBuilder, top: str, x: str, params, config, *, name: str) -> str:
-    """``y (B, G)`` from the top GRU output ``top (B, H)`` and the fed frame ``x (B, F)``: the head of
-    ``refimpl.models.quaternet`` for dual quaternions (``_head_forward``: Eq. 13 and, in velocity mode, the
-    dual-quaternion product with the fed frame's joint)."""
-    J, R = config.num_joints, config.rotation_size
-    o = linear(g, top, params, "fc", name=f"{name}.fc", wname="fc", rank2=True)   # (B, G)
-    delta = o if config.num_outputs == 0 else _slice(g, o, 0, R, -1, f"{name}.delta")  # (B, 8J)
-    d8 = g.node("Reshape", [delta, g.ints([0, J, 8])], f"{name}.delta_j")        # (B, J, 8)
-    if config.velocity:
-        d_in = x if config.input_size == R else _slice(g, x, 0, R, -1, f"{name}.d_in_flat")
-        d_in = g.node("Reshape", [d_in, g.ints([0, J, 8])], f"{name}.d_in")      # (B, J, 8)
-        d8 = dq_mul(g, d8, d_in, name=f"{name}.dqmul")                           # (B, J, 8)
-    q = dq_normalize(g, d8, name=f"{name}.dqnorm", eps=config.eps)               # (B, J, 8)
-    q = g.node("Reshape", [q, g.ints([0, R])], f"{name}.q")                      # (B, 8J)
-    if config.num_outputs == 0:
-        return q
-    tau = _slice(g, o, R, _INT64_MAX, -1, f"{name}.tau")                          # (B, O)
-    return g.node("Concat", [q, tau], f"{name}.y", axis=-1)                      # (B, G)
 
 
 def dq_frame_representation(num_joints: int, num_outputs: int = 0, num_controls: int = 0) -> dict:
