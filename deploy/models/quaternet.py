@@ -49,7 +49,7 @@ from deploy.graph import OPSET, GraphBuilder
 from deploy.gru import gru, gru_step
 from deploy.linear import linear
 from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
-from deploy.models.quaternet_dq import dq_frame_representation, dq_mul
+from deploy.models.quaternet_dq import dq_mul
 from deploy.quat import dq_normalize, quat_mul, quat_normalize
 from deploy.recurrent import tiled_state
 
@@ -62,24 +62,31 @@ QUATERNET_PAPER = ("Pavllo, Feichtenhofer, Auli, Grangier: Modeling Human Motion
 _INT64_MAX = 2 ** 63 - 1
 
 
-def quaternet_representation(num_joints: int, num_outputs: int = 0, num_controls: int = 0) -> dict:
-    """Layout of a QuaterNet frame: ``4J`` joint quaternions, then ``O`` translations, then ``C`` controls."""
-    R = 4 * num_joints
-    fields = [{"name": "joint_rotations", "start": 0, "size": R, "joints": int(num_joints),
-               "quaternion": "(w, x, y, z), Hamilton, local to the parent joint, unit length"}]
+def quaternet_representation(num_joints: int, num_outputs: int = 0, num_controls: int = 0,
+                             representation: str = "quaternion") -> dict:
+    """Layout of a QuaterNet frame: ``4J`` joint quaternions (or ``8J`` current dual quaternions for
+    ``representation="dual_quaternion"``, spec/quaternet.md §9), then ``O`` translations, then ``C`` controls."""
+    if representation == "dual_quaternion":
+        R, name = 8 * num_joints, "quaternet_dq_frame"
+        fields = [{"name": "joint_dual_quaternions", "start": 0, "size": R, "joints": int(num_joints),
+                   "dual_quaternion": "(q_r | q_d), each (w, x, y, z), Hamilton; current (relative to the root "
+                                      "joint), unit: |q_r| = 1, <q_r, q_d> = 0; translation t = 2 q_d q_r*"}]
+    else:
+        R, name = 4 * num_joints, "quaternet_frame"
+        fields = [{"name": "joint_rotations", "start": 0, "size": R, "joints": int(num_joints),
+                   "quaternion": "(w, x, y, z), Hamilton, local to the parent joint, unit length"}]
     if num_outputs:
         fields.append({"name": "translations", "start": R, "size": int(num_outputs)})
     if num_controls:
         fields.append({"name": "controls", "start": R + num_outputs, "size": int(num_controls),
                        "meaning": "inputs only"})
-    return {"name": "quaternet_frame", "size": R + num_outputs + num_controls, "fields": fields}
+    return {"name": name, "size": R + num_outputs + num_controls, "fields": fields}
 
 
 def _metadata(g, name, role, config, io, skeleton, frame_rate, metadata, variant="float"):
     rep = quaternet_representation(config.num_joints, getattr(config, "num_outputs", 0),
-                                   getattr(config, "num_controls", 0))
-    if getattr(config, "representation", "quaternion") == "dual_quaternion":
-        rep = dq_frame_representation(config.num_joints, config.num_outputs, config.num_controls)
+                                   getattr(config, "num_controls", 0),
+                                   getattr(config, "representation", "quaternion"))
     return build_metadata(g, name=name, role=role, config=config.to_dict(), io=io, representation=rep,
                           normalization=None, skeleton=skeleton, frame_rate=frame_rate,
                           source_paper=QUATERNET_PAPER, variant=variant, extra=metadata)

@@ -1,5 +1,5 @@
 """Dual-quaternion pieces of the QuaterNet export (``QuaterNetConfig(representation="dual_quaternion")``;
-spec/quaternet.md §9, spec/deploy.md §11): the dual-quaternion product and the frame layout.
+spec/quaternet.md §9, spec/deploy.md §11): the dual-quaternion product.
 
 ``deploy/models/quaternet.py`` builds the whole graph; its head, for a dual-quaternion network::
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from deploy.graph import GraphBuilder
 
-__all__ = ["dq_mul", "dq_frame_representation"]
+__all__ = ["dq_mul"]
 
 # L(q)[i, j] = _MUL_SIGN[i, j] * q[_MUL_INDEX[i, j]] (the Hamilton product q ⊗ r = L(q) r, as deploy.quat.quat_mul)
 _MUL_INDEX = np.array([[0, 1, 2, 3], [1, 0, 3, 2], [2, 3, 0, 1], [3, 2, 1, 0]], dtype=np.int64)
@@ -41,18 +41,3 @@ def dq_mul(g: GraphBuilder, a: str, b: str, *, name: str) -> str:
     bc = g.node("Unsqueeze", [b, g.ints([-1])], f"{name}.b_col")         # (..., 8, 1)
     out = g.node("MatMul", [la, bc], f"{name}.matmul")                   # (..., 8, 1)
     return g.node("Squeeze", [out, g.ints([-1])], name)                  # (..., 8)
-
-
-def dq_frame_representation(num_joints: int, num_outputs: int = 0, num_controls: int = 0) -> dict:
-    """Layout of a dual-quaternion QuaterNet frame: ``8J`` current dual quaternions, then ``O`` translations,
-    then ``C`` controls (the metadata's ``representation``)."""
-    R = 8 * num_joints
-    fields = [{"name": "joint_dual_quaternions", "start": 0, "size": R, "joints": int(num_joints),
-               "dual_quaternion": "(q_r | q_d), each (w, x, y, z), Hamilton; current (relative to the root "
-                                  "joint), unit: |q_r| = 1, <q_r, q_d> = 0; translation t = 2 q_d q_r*"}]
-    if num_outputs:
-        fields.append({"name": "translations", "start": R, "size": int(num_outputs)})
-    if num_controls:
-        fields.append({"name": "controls", "start": R + num_outputs, "size": int(num_controls),
-                       "meaning": "inputs only"})
-    return {"name": "quaternet_dq_frame", "size": R + num_outputs + num_controls, "fields": fields}
