@@ -50,8 +50,16 @@ def add_data_options(p, default="sample") -> None:
 # --set FIELD=VALUE overrides of a model config (every recipe's make_config)
 # ----------------------------------------------------------------------------------------------------------------
 
+#: Accepted spellings of a boolean ``--set`` value (anything else is a usage error, never silently False).
+_BOOL_WORDS = {"1": True, "true": True, "yes": True, "on": True, "0": False, "false": False, "no": False, "off": False}
+
+
 def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) -> dict:
-    """``["gru_hidden=128", "encoder_sizes=128,64"]`` -> typed values, by the type of the default."""
+    """``["gru_hidden=128", "encoder_sizes=128,64"]`` -> typed values, by the type of the default.
+
+    Tuples are comma-separated integers; booleans one of ``1/0, true/false, yes/no, on/off`` (any case); ints,
+    floats and strings as written. Raises ``UsageError`` naming the item for an unknown field, a missing ``=`` or
+    a value of the wrong type."""
     fields = {f.name for f in dataclasses.fields(config_type)}
     out = {}
     for item in overrides or ():
@@ -64,7 +72,10 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
             if isinstance(default, tuple):
                 out[key] = tuple(int(v) for v in value.split(",") if v.strip())
             elif isinstance(default, bool):
-                out[key] = value.lower() in ("1", "true", "yes")
+                word = value.strip().lower()
+                if word not in _BOOL_WORDS:
+                    raise ValueError(word)
+                out[key] = _BOOL_WORDS[word]
             elif isinstance(default, int):
                 out[key] = int(value)
             elif isinstance(default, float):
