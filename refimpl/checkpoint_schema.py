@@ -14,7 +14,8 @@ the *content* of a ``refimpl train`` checkpoint, generically for every registere
   a positive int, ``dtype`` ``"float32"``/``"float64"``, ``representation`` a string;
 * the parameters: exactly the names and shapes the config implies (the recipe's ``param_shapes(config)``, else
   the config module's ``param_shapes``, else its ``init_params`` on a tiny generator), one floating dtype
-  (float32 or float64, the stored ``dtype`` when there is one), all finite;
+  (float32 or float64, the stored ``dtype`` when there is one), all finite and of magnitude at most
+  :data:`MAX_PARAM_ABS`;
 * optimiser state (``optim.*``) and the sampler permutation, when :func:`validate_training_state` is asked.
 
 Every problem is a ``ValueError`` whose message starts with the file and names the field
@@ -31,7 +32,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["TASK_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "validate_model_config", "expected_param_shapes", "validate_params",
+__all__ = ["TASK_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "MAX_PARAM_ABS", "validate_model_config", "expected_param_shapes", "validate_params",
            "validate_task_fields", "validate_trained", "validate_training_state"]
 
 #: Largest integer any config field (or entry of a size list) may hold, and the longest size list: bounds the
@@ -43,6 +44,11 @@ MAX_CONFIG_LIST = 1_000
 #: Largest integer a config field may hold when the parameter shapes have to be found by running the model's
 #: ``init_params`` (a recipe without ``param_shapes``): it bounds the memory of that fallback.
 MAX_FALLBACK_SIZE = 4096
+
+#: Largest magnitude of a network parameter. Trained networks of this project stay below ~10² (any weight above
+#: this comes from a damaged or crafted file); a finite 3e38 bias already overflows float32 in the first product
+#: and would surface later as a non-finite output deep inside an evaluation instead of at the file.
+MAX_PARAM_ABS = 1e6
 
 
 def _kind(v) -> str:
@@ -193,6 +199,9 @@ def validate_params(params: Mapping[str, np.ndarray], shapes: Mapping[str, tuple
             raise ValueError(f"{where}: {prefix}{name}: dtype {a.dtype} differs from the other parameters' {found}")
         if not np.isfinite(a).all():
             raise ValueError(f"{where}: {prefix}{name}: contains NaN or inf")
+        if a.size and float(np.max(np.abs(a))) > MAX_PARAM_ABS:
+            raise ValueError(f"{where}: {prefix}{name}: magnitude {float(np.max(np.abs(a))):.3g} beyond "
+                             f"{MAX_PARAM_ABS:g} (a damaged, crafted or diverged checkpoint)")
     if found is not None and dtype is not None and found != np.dtype(dtype):
         raise ValueError(f"{where}: model_config.dtype is {dtype!r} but the parameters are {found}")
     return found

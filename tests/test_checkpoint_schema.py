@@ -77,8 +77,13 @@ def _inf(arrays):
     arrays["param.dec.0.bias"] = a
 
 
+def _huge(arrays):
+    arrays["param.dec.0.bias"] = np.full(arrays["param.dec.0.bias"].shape, 3e38, np.float32)
+
+
 CASES = {
     # the parameters
+    "param huge": (_param(_huge), "param.dec.0.bias"),  # finite, but overflows float32 in the first product
     "param NaN": (_param(_nan), "param.gru.weight_hh_l0"),
     "param inf": (_param(_inf), "param.dec.0.bias"),
     "param missing": (_param(lambda a: a.pop("param.vel.bias")), "param.vel.bias"),
