@@ -95,10 +95,24 @@ def _torch_model(params, config, threads):
     return torch, step, predict, train_iter
 
 
+#: Calls per timed block of a step variant: one cold call after a training iteration of another framework measures
+#: its thread pools waking and its weights coming back from DRAM, not the step (performance_facts.md).
+STEP_CALLS = 20
+#: Pause before every timed block, so spinning BLAS/OpenMP threads of the previous variant settle.
+SETTLE_S = 0.15
+
+
 def _time(fn, rounds, results, name):
+    """Time ``fn``: the mean of :data:`STEP_CALLS` calls after one warm-up call for the step variants, one call
+    otherwise; each block after a :data:`SETTLE_S` pause."""
+    calls = STEP_CALLS if name.startswith("step") else 1
+    time.sleep(SETTLE_S)
+    if calls > 1:
+        fn()
     t0 = time.perf_counter()
-    fn()
-    results.setdefault(name, []).append(time.perf_counter() - t0)
+    for _ in range(calls):
+        fn()
+    results.setdefault(name, []).append((time.perf_counter() - t0) / calls)
 
 
 def main(argv=None) -> int:
