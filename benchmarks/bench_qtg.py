@@ -194,6 +194,21 @@ def _train_check(torch, params, past, target, truth, cfg) -> dict:
             "worst_grad": max(grads, key=lambda k: rel(grads[k], tgrads[k]))}
 
 
+def _time_block(row: dict, name: str, fn, steps: int, calls: int = 1) -> None:
+    """After a settle pause, ``steps`` timings of ``calls`` calls of ``fn``; writes the medians per call into
+    ``row[name + "_ms"]`` (wall) and ``row[name + "_cpu_ms"]`` (CPU time of all threads: robust to other load)."""
+    time.sleep(SETTLE)
+    ts, cs = [], []
+    for _ in range(steps):
+        t0, c0 = time.perf_counter(), time.process_time()
+        for _ in range(calls):
+            fn()
+        ts.append((time.perf_counter() - t0) / calls)
+        cs.append((time.process_time() - c0) / calls)
+    row[name + "_ms"] = 1e3 * statistics.median(ts)
+    row[name + "_cpu_ms"] = 1e3 * statistics.median(cs)
+
+
 def bench_train(args, cfg) -> dict:
     """Paired, interleaved rounds of the NumPy and PyTorch training steps (see the module docstring)."""
     import torch
@@ -217,15 +232,7 @@ def bench_train(args, cfg) -> dict:
         order = names[r % 2:] + names[:r % 2]
         row = {"order": order}
         for name in order:
-            time.sleep(SETTLE)
-            ts, cs = [], []
-            for _ in range(args.steps):
-                t0, c0 = time.perf_counter(), time.process_time()
-                variants[name]()
-                ts.append(time.perf_counter() - t0)
-                cs.append(time.process_time() - c0)
-            row[name + "_ms"] = 1e3 * statistics.median(ts)
-            row[name + "_cpu_ms"] = 1e3 * statistics.median(cs)  # CPU time of all threads: robust to other load
+            _time_block(row, name, variants[name], args.steps)
         row["numpy_over_torch"] = row["numpy_ms"] / row["torch_ms"]
         row["numpy_over_torch_cpu"] = row["numpy_cpu_ms"] / row["torch_cpu_ms"]
         row["loadavg_1min"] = os.getloadavg()[0]
@@ -276,16 +283,7 @@ def bench_ort(args, cfg) -> dict:
             order = names[r % len(names):] + names[:r % len(names)]
             row = {"order": order}
             for name in order:
-                time.sleep(SETTLE)
-                ts, cs = [], []
-                for _ in range(args.steps):
-                    t0, c0 = time.perf_counter(), time.process_time()
-                    for _ in range(20):
-                        variants[name]()
-                    ts.append((time.perf_counter() - t0) / 20)
-                    cs.append((time.process_time() - c0) / 20)
-                row[name + "_ms"] = 1e3 * statistics.median(ts)
-                row[name + "_cpu_ms"] = 1e3 * statistics.median(cs)
+                _time_block(row, name, variants[name], args.steps, calls=20)
             for k in sessions:
                 row[f"numpy_over_{k}"] = row["numpy_ms"] / row[k + "_ms"]
                 row[f"numpy_over_{k}_cpu"] = row["numpy_cpu_ms"] / row[k + "_cpu_ms"]

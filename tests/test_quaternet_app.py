@@ -64,6 +64,12 @@ def test_paper_settings_are_the_defaults():
                                                                                              "euler")
     assert rnn_recipe.PAPER_BATCH == 60 and c.network.hidden_size == 1000 and c.network.velocity
     assert rnn_recipe.ShortTermConfig(schedule="teacher_forcing").loss_kind == "quat"
+    # one rule for both recipes (refimpl.recipes.quaternet.resolve_loss): "auto" follows the schedule
+    assert [rnn_recipe.resolve_loss(lo, sc) for lo, sc in (("auto", "teacher_forcing"), ("auto", "scheduled"),
+                                                              ("euler", "teacher_forcing"), ("quat", "scheduled"))] \
+        == ["quat", "euler", "euler", "quat"]
+    assert cnn_recipe.CNNShortTermConfig(schedule="teacher_forcing").loss_kind == "quat"
+    assert cnn_recipe.CNNShortTermConfig().loss_kind == "euler"
     assert cnn_recipe.CNNShortTermConfig().prefix_length == 32
     assert cnn_recipe.CNNShortTermConfig().network.receptive_field == 32
 

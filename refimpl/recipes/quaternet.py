@@ -43,7 +43,7 @@ from refimpl.train import ModelAdapter, OptimConfig
 __all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
            "PAPER_BATCH",
            "PAPER_PREFIX", "PAPER_TARGET", "PAPER_EPOCHS", "SCHEDULES", "LOSSES", "ShortTermConfig", "make_config",
-           "make_adapter", "loss_terms", "teacher_forcing_mask", "network_method", "raw_outputs", "predictor",
+           "make_adapter", "loss_terms", "resolve_loss", "teacher_forcing_mask", "network_method", "raw_outputs", "predictor",
            "make_method", "export_inputs", "reference_outputs", "verify_onnx", "dq_loss_terms", "dq_network_method",
            "network_frames"]
 
@@ -135,16 +135,22 @@ class ShortTermConfig:
 
     @property
     def loss_kind(self) -> str:
-        """``euler`` or ``quat`` (``auto`` resolved)."""
-        if self.loss != "auto":
-            return self.loss
-        return "quat" if self.schedule == "teacher_forcing" else "euler"
+        """``euler`` or ``quat`` (``auto`` resolved by :func:`resolve_loss`)."""
+        return resolve_loss(self.loss, self.schedule)
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
 CONFIG_TYPE = ShortTermConfig
+
+
+def resolve_loss(loss: str, schedule: str) -> str:
+    """The loss of a short-term config: ``loss`` unless ``"auto"``, which is ``"quat"`` under pure teacher forcing
+    and ``"euler"`` under scheduled sampling (the recurrent and the convolutional recipe alike)."""
+    if loss != "auto":
+        return loss
+    return "quat" if schedule == "teacher_forcing" else "euler"
 
 
 def param_shapes(config) -> dict:

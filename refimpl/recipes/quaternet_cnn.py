@@ -91,9 +91,8 @@ class CNNShortTermConfig:
 
     @property
     def loss_kind(self) -> str:
-        if self.loss != "auto":
-            return self.loss
-        return "quat" if self.schedule == "teacher_forcing" else "euler"
+        """``euler`` or ``quat`` (:func:`refimpl.recipes.quaternet.resolve_loss`)."""
+        return rnn_recipe.resolve_loss(self.loss, self.schedule)
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
