@@ -20,7 +20,6 @@ import json
 import os
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -30,6 +29,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.models import acrnn, acrnn_fast  # noqa: E402
 
 
@@ -135,6 +135,7 @@ def main():
     ap.add_argument("--train-hidden", type=int, default=1024)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_acrnn.json"))
     a = ap.parse_args()
+    retain_freed_memory()  # the command line's allocator setting (spec/cli.md §1, benchmarks/bench_allocator.py)
     res = {"step_batch1": bench_step(a.rounds, a.hidden, a.frame_size), "load_average": os.getloadavg()}
     s = res["step_batch1"]
     print(f"step, batch 1, 3 x {a.hidden} LSTM, F = {a.frame_size}, float32, 1 thread (median of {a.rounds}; load average {os.getloadavg()[0]:.1f}):", flush=True)

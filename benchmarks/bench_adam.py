@@ -42,6 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import refimpl.optim as optim  # noqa: E402
+from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.nn.gru import gru_init  # noqa: E402
 from refimpl.nn.linear import linear_init  # noqa: E402
@@ -141,6 +142,7 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=2, help="torch threads (numpy: see the variants)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "bench_adam.json")
     args = ap.parse_args(argv)
+    retain_freed_memory()  # the command line's allocator setting (spec/cli.md §1, benchmarks/bench_allocator.py)
     try:
         import torch
         torch.set_num_threads(args.threads)

@@ -40,6 +40,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init  # noqa: E402
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init  # noqa: E402
 from refimpl.nn.params import count_parameters, init_normal, merge_grads  # noqa: E402
@@ -229,6 +230,7 @@ def main(argv=None) -> int:
                     help="limit the BLAS threads through threadpoolctl (default: the library's own setting)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "bench_gru_train.json")
     args = ap.parse_args(argv)
+    retain_freed_memory()  # the command line's allocator setting (spec/cli.md §1, benchmarks/bench_allocator.py)
     if args.threads is not None:
         from threadpoolctl import threadpool_limits
         threadpool_limits(limits=args.threads, user_api="blas")

@@ -55,6 +55,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.models import acrnn, acrnn_fast  # noqa: E402
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init  # noqa: E402
@@ -317,6 +318,7 @@ def main(argv=None) -> int:
                     "script out quickly)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "bench_lstm_train.json")
     args = ap.parse_args(argv)
+    retain_freed_memory()  # the command line's allocator setting (spec/cli.md §1, benchmarks/bench_allocator.py)
     try:
         from threadpoolctl import threadpool_info, threadpool_limits
         threadpool_limits(limits=args.threads, user_api="blas")

@@ -63,6 +63,7 @@ from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_st
 from deploy.models.qtg_compact import export_qtg_rollout_compact  # noqa: E402
 from deploy.runtime import make_session  # noqa: E402
 from deploy.validate import validate_model  # noqa: E402
+from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.models.qtg import QTGConfig, init_params, init_state, step  # noqa: E402
 from refimpl.models.qtg_fast import prepare_inference, rollout_forward, rollout_inference  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
@@ -437,6 +438,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--quick", action="store_true", help="3 rounds, short rounds, no training")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_onnx.json"))
     args = ap.parse_args(argv)
+    retain_freed_memory()  # the command line's allocator setting (spec/cli.md §1, benchmarks/bench_allocator.py)
     if args.quick:
         args.rounds, args.min_time, args.train_steps = 3, 0.03, 0
     load_before = os.getloadavg()

@@ -46,6 +46,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.models.qtg import (QTGConfig, count_parameters, init_params, macs_per_frame,  # noqa: E402
                                 rtn_macs_per_frame)
 from refimpl.models.qtg_fast import (prepare_inference, rollout_backward, rollout_forward,  # noqa: E402
@@ -322,6 +323,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--steps", type=int, default=5, help="training steps per round and variant")
     ap.add_argument("--threads", type=int, default=2, help="training: PyTorch intra-op and NumPy BLAS threads")
     args = ap.parse_args(argv)
+    retain_freed_memory()  # the command line's allocator setting (spec/cli.md §1, benchmarks/bench_allocator.py)
 
     cfg = QTGConfig()
     T = args.T

@@ -35,6 +35,7 @@ sys.path.insert(0, str(ROOT))
 from deploy.graph import save_model  # noqa: E402
 from deploy.models.quaternet import export_quaternet_predict, export_quaternet_step  # noqa: E402
 from deploy.runtime import load_model  # noqa: E402
+from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.models import quaternet as net  # noqa: E402
 from refimpl.recipes.quaternet import ShortTermConfig, loss_terms  # noqa: E402
@@ -121,6 +122,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="hidden 256 instead of 1000, 3 rounds")
     args = ap.parse_args(argv)
+    retain_freed_memory()  # the command line's allocator setting (spec/cli.md §1, benchmarks/bench_allocator.py)
     rounds = 3 if args.quick else args.rounds
     config = ShortTermConfig(hidden_size=256 if args.quick else 1000).network
     rng = np.random.default_rng(0)

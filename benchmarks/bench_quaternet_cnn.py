@@ -42,6 +42,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.models import quaternet_cnn as cnn  # noqa: E402
 from refimpl.optim import adam_init, adam_step, clip_grad_norm  # noqa: E402
@@ -192,6 +193,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--channels", type=int, default=1024, help="paper 1024; smaller only to try the script")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_quaternet_cnn.json"))
     args = ap.parse_args(argv)
+    retain_freed_memory()  # the command line's allocator setting (spec/cli.md §1, benchmarks/bench_allocator.py)
     import torch
     torch.set_num_threads(args.threads)
     if threadpool_limits is not None:
