@@ -6,6 +6,9 @@ Variants, interleaved in every round (order rotated between rounds, 0.15 s of se
 * ``numpy_1thread``: the same with ``threads=1``;
 * ``numpy_block_32768``: the same with L2-sized blocks of 32,768 elements (p, g, m, v blocks = 512 KiB);
 * ``numpy_naive``: ``_adam_step_naive``, torch's formulas on whole arrays with temporaries (the oracle);
+* ``numpy_12_adds``: ``adam_step``'s machinery (blocks, threads, scratch, validation) with its 12 ufunc passes per
+  block replaced by 12 ``np.add`` passes on the same operands (no sqrt, no division): the floor of any NumPy Adam
+  that makes 12 passes, as ``twelve_adds_over_torch_fused`` (not an Adam: its numbers are thrown away);
 * ``torch_fused``, ``torch_foreach``, ``torch_default``: ``torch.optim.Adam`` with ``fused=True``,
   ``foreach=True`` and the default (single-tensor loop on CPU), when ``torch`` is importable.
 
@@ -95,6 +98,30 @@ def numpy_variant(params, grads, **kw):
     return step
 
 
+def _twelve_adds(p, g, m, v, t, *scalars) -> None:
+    """12 ``np.add`` passes with ``_adam_block``'s operands and outputs (values meaningless: a timing floor)."""
+    add = np.add
+    for _ in range(3):
+        add(g, m, t)
+        add(m, t, t)
+        add(t, v, t)
+        add(p, t, t)
+
+
+def twelve_adds_variant(params, grads):
+    p = {k: v.copy() for k, v in params.items()}
+    st = optim.adam_init(p)
+
+    def step():
+        old = optim._adam_block
+        optim._adam_block = _twelve_adds
+        try:
+            optim.adam_step(p, grads, st, lr=LR, threads=2)
+        finally:
+            optim._adam_block = old
+    return step
+
+
 def naive_variant(params, grads):
     p = {k: v.copy() for k, v in params.items()}
     st = optim.adam_init(p)
@@ -159,7 +186,8 @@ def main(argv=None) -> int:
     variants = {"numpy_2threads": numpy_variant(params, grads, threads=2),
                 "numpy_1thread": numpy_variant(params, grads, threads=1),
                 "numpy_block_32768": numpy_variant(params, grads, threads=2, block=32768),
-                "numpy_naive": naive_variant(params, grads)}
+                "numpy_naive": naive_variant(params, grads),
+                "numpy_12_adds": twelve_adds_variant(params, grads)}
     if torch is not None:
         for name, kw in (("torch_fused", {"fused": True}), ("torch_foreach", {"foreach": True}),
                          ("torch_default", {})):
@@ -181,6 +209,7 @@ def main(argv=None) -> int:
         row["memory_floor_ms"] = BYTES_PER_PARAM * n / (row["stream_gb_s"] * 1e9) * 1e3
         if torch is not None:
             row["numpy_over_torch_fused"] = row["numpy_2threads"] / row["torch_fused"]
+            row["twelve_adds_over_torch_fused"] = row["numpy_12_adds"] / row["torch_fused"]
         row["numpy_over_floor"] = row["numpy_2threads"] / row["memory_floor_ms"]
         rounds.append(row)
         print(f"round {r + 1}: " + ", ".join(f"{k} {row[k]:.1f} ms" for k in names)
@@ -194,6 +223,7 @@ def main(argv=None) -> int:
     summary = {k: rng_of(k) for k in names + ["memory_floor_ms", "stream_gb_s", "numpy_over_floor"]}
     if torch is not None:
         summary["numpy_over_torch_fused"] = rng_of("numpy_over_torch_fused")
+        summary["twelve_adds_over_torch_fused"] = rng_of("twelve_adds_over_torch_fused")
     load_end = os.getloadavg()
     print("summary (min / median / max over rounds):")
     for k, v in summary.items():

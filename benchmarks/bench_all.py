@@ -213,10 +213,15 @@ def _load(results: Path, name: str):
 
 
 def _row(workload, numpy=None, torch=None, ort=None, ratio=None, paired=False, limit=None, basis="", threads="",
-         missing=(), ort_is_project=False, note=""):
+         missing=(), ort_is_project=False, note="", goal=None):
+    """One table row; ``goal``: the issue's ratio goal NumPy / PyTorch (training rows), for the share it needs."""
     return {"workload": workload, "numpy_ms": numpy, "torch_ms": torch, "ort_ms": ort, "ratio": ratio,
             "ratio_paired": paired, "limit_ms": limit, "limit_basis": basis, "threads": threads,
-            "missing": list(missing), "ort_is_project": ort_is_project, "note": note}
+            "missing": list(missing), "ort_is_project": ort_is_project, "note": note, "goal": goal}
+
+
+def _floor_note(label, value):
+    return f"{label} {value:.2f}×" if value is not None else ""
 
 
 def _gemm_limit(gflop, peaks, threads):
@@ -239,9 +244,10 @@ def rows_from(results: Path, peaks: dict) -> list[dict]:
         med = lambda key: statistics.median(r[key] for r in tr["rounds"])  # noqa: E731
         gflop = 3 * 2 * 636416 * B * T / 1e9
         lim, basis = _gemm_limit(gflop, peaks, tr.get("threads", 2))
-        rows.append(_row(f"QTG training step, paper size, B={B}", med("numpy_ms"), med("torch_ms"),
+        rows.append(_row(f"QTG training step, paper size, B={B} (≤ 0.5×)", med("numpy_ms"), med("torch_ms"),
                          ratio=_get(tr, "numpy_over_torch/median"), paired=True, limit=lim, basis=basis,
-                         threads=f"{tr.get('threads')} (numpy: BLAS default)"))
+                         threads=f"{tr.get('threads')}", goal=0.5,
+                         note=_floor_note("its matrix products alone / PyTorch", _get(tr, "products_over_torch/median"))))
     else:
         rows.append(_row("QTG training step, paper size, B=32", missing=["bench_qtg_train.json: train (bench_qtg has "
                                                                         "no --train on this branch)"]))
@@ -309,7 +315,7 @@ def rows_from(results: Path, peaks: dict) -> list[dict]:
         lim, basis = _gemm_limit(cn["matmul_gflop_per_iteration"], peaks, cn["threads"])
         rows.append(_row(f"QuaterNet CNN training iteration, B={cn['config']['batch']} (≤ 0.67× PyTorch)",
                          s["numpy_ms"]["median"], s["torch_ms"]["median"], ratio=s["numpy_over_torch"]["median"],
-                         paired=True, limit=lim, basis=basis, threads=str(cn["threads"])))
+                         paired=True, limit=lim, basis=basis, threads=str(cn["threads"]), goal=0.67))
     else:
         rows.append(_row("QuaterNet CNN training iteration", missing=["bench_quaternet_cnn.json"]))
     # --- GRU training (bench_gru_train) -------------------------------------------------------------------
@@ -322,7 +328,7 @@ def rows_from(results: Path, peaks: dict) -> list[dict]:
         lim, basis = _gemm_limit(gflop, peaks, thr_g)
         rows.append(_row(f"QuaterNet GRU 2×1000 training iteration, B={c.get('B')} T={c.get('T')} (≤ 0.6×)", num,
                          tor, ratio=num / tor if tor else None, limit=lim, basis=basis, threads=str(thr_g),
-                         missing=[] if tor else ["bench_gru_train.json: torch/ms_median"]))
+                         missing=[] if tor else ["bench_gru_train.json: torch/ms_median"], goal=0.6))
     else:
         rows.append(_row("QuaterNet GRU training iteration", missing=["bench_gru_train.json: numpy/float32"]))
     # --- LSTM training (bench_lstm_train) and step (bench_acrnn) ------------------------------------------------
@@ -335,7 +341,7 @@ def rows_from(results: Path, peaks: dict) -> list[dict]:
         rows.append(_row(f"acRNN LSTM 3×1024 training iteration, B={c.get('B')} T={c.get('T')} (≤ 0.85×)",
                          num * 1e3 if num else None, tor * 1e3 if tor else None,
                          ratio=_get(lt, "summary/fast_over_torch/median"), paired=True, limit=lim, basis=basis,
-                         threads=str(_get(lt, "threads"))))
+                         threads=str(_get(lt, "threads")), goal=0.85))
     else:
         rows.append(_row("acRNN LSTM training iteration", missing=["bench_lstm_train.json: summary"]))
     ac = _load(results, "bench_acrnn.json")
@@ -358,7 +364,9 @@ def rows_from(results: Path, peaks: dict) -> list[dict]:
         rows.append(_row(f"Adam, {n / 1e6:.1f} M parameters (≤ 1.5× fused)", _get(s, f"{num_key}/median"),
                          _get(s, "torch_fused/median"), ratio=_get(s, "numpy_over_torch_fused/median"), paired=True,
                          limit=lim, basis="28 B/parameter / DRAM bandwidth (2thr)",
-                         threads=f"numpy {num_key}, torch {_get(ad, 'torch_threads')}", note="PyTorch: fused Adam"))
+                         threads=f"numpy {num_key}, torch {_get(ad, 'torch_threads')}",
+                         note="; ".join(x for x in ("PyTorch: fused Adam", _floor_note(
+                             "12 np.add passes alone / fused", _get(s, "twelve_adds_over_torch_fused/median"))) if x)))
     else:
         rows.append(_row("Adam", missing=["bench_adam.json: summary"]))
     # --- locomotion (bench_locomotion) ----------------------------------------------------------------------
@@ -376,6 +384,13 @@ def rows_from(results: Path, peaks: dict) -> list[dict]:
         mine = [v for v in (row["numpy_ms"], row["ort_ms"] if row["ort_is_project"] or row["ort_ms"] else None)
                 if v]
         row["share_of_limit"] = (row["limit_ms"] / min(mine)) if row["limit_ms"] and mine else None
+        if row["goal"] and row["limit_ms"] and row["torch_ms"]:
+            # NumPy at goal × PyTorch's time would run at (PyTorch's share) / goal of the limit
+            row["torch_share_of_limit"] = row["limit_ms"] / row["torch_ms"]
+            row["share_needed_for_goal"] = row["torch_share_of_limit"] / row["goal"]
+            need = (f"PyTorch at {100 * row['torch_share_of_limit']:.0f} % of the limit, so ≤ {row['goal']}× needs "
+                    f"{100 * row['share_needed_for_goal']:.0f} %")
+            row["note"] = "; ".join(x for x in (row["note"], need) if x)
     return rows
 
 

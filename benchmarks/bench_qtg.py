@@ -17,7 +17,9 @@ parameters, batch and thread count (``--threads``, NumPy's BLAS limited to it th
 per round (0.15 s settling between them), each round's time the median of ``--steps`` consecutive steps; the
 ratio NumPy / PyTorch is paired per round, for the wall time and for the process CPU time (all threads; with one
 thread the CPU-time ratio is the one that other jobs on the machine disturb least). Before timing, the
-loss and every gradient are compared with PyTorch's (float32 precision). Written into the JSON under ``train``.
+loss and every gradient are compared with PyTorch's (float32 precision). A third variant in the same rounds,
+``products``, runs only the step's matrix products (same shapes, layouts and order; ``_products_floor``): the
+floor of this design with this BLAS, reported as ``products_over_torch``. Written into the JSON under ``train``.
 
 With ``--ort``: ``rollout_inference`` at batch 1 against onnxruntime running the exports of ``deploy``
 (``export_qtg_rollout_compact`` float32 and the unrolled ``export_qtg_rollout``), one thread each, interleaved,
@@ -195,6 +197,56 @@ def _train_check(torch, params, past, target, truth, cfg) -> dict:
             "worst_grad": max(grads, key=lambda k: rel(grads[k], tgrads[k]))}
 
 
+def _products_floor(cfg, B: int, T: int, dtype=np.float32):
+    """The matrix products of one training step (``rollout_forward`` + ``rollout_backward``, spec/qtg.md §4) with
+    the same shapes, operand layouts and order, and nothing else: a callable that runs them, and their GFLOP.
+
+    Per step of the forward: encoder (2), ``z_t [W1 − W2 ; W1]ᵀ``, ``s_{t+1} [W_hh ; W_v]ᵀ``, decoder (2), each as
+    ``matmul_wt`` computes it (``W @ xᵀ`` into the transposed output); per step of the backward: decoder (2),
+    ``[W_hh ; W_v]``, ``[W1 − W2 ; W1]`` (two products in one broadcast call), encoder (2; the first one not at
+    t = 0); the context encoding and target term once; after the loop one ``daᵀ x`` product per weight over all
+    stacked rows. The time of this is the floor of any implementation that keeps this BLAS and these products.
+    """
+    rng = np.random.default_rng(3)
+    P, Z, H, (E1, E2), (D1,) = cfg.pose_size, cfg.latent_size, cfg.gru_hidden, cfg.encoder_sizes, cfg.decoder_sizes
+    H3 = 3 * H
+
+    def a(*shape):
+        return rng.standard_normal(shape).astype(dtype)
+
+    dense_f = [(a(E1, P), a(B, P), a(B, E1)), (a(E2, E1), a(B, E1), a(B, E2)), (a(2 * H3, Z), a(B, Z), a(B, 2 * H3)),
+               (a(H3 + Z, H), a(B, H), a(B, H3 + Z)), (a(D1, Z), a(B, Z), a(B, D1)), (a(P, D1), a(B, D1), a(B, P))]
+    ctx_f = [(a(E1, P), a(3 * B, P), a(3 * B, E1)), (a(E2, E1), a(3 * B, E1), a(3 * B, E2)),
+             (a(H3, 2 * Z), a(B, 2 * Z), a(B, H3)), (a(H3, Z), a(B, Z), a(B, H3))]
+    back = [(a(B, P), a(P, D1), a(B, D1)), (a(B, D1), a(D1, Z), a(B, Z)), (a(B, H3 + Z), a(H3 + Z, H), a(B, H)),
+            (a(B, H3), a(2, H3, Z), a(2, B, Z)), (a(B, E2), a(E2, E1), a(B, E1))]
+    back_enc0 = (a(B, E1), a(E1, P), a(B, P))
+    n_enc, n_gru = (T + 3) * B, T * B
+    wgrad = [(a(n_enc, E1), a(n_enc, P)), (a(n_enc, E2), a(n_enc, E1)), (a(n_gru, H3), a(n_gru, 3 * Z)),
+             (a(n_gru, H3), a(n_gru, H)), (a(n_gru, Z), a(n_gru, H)), (a(n_gru, D1), a(n_gru, Z)),
+             (a(n_gru, P), a(n_gru, D1))]
+    mm = np.matmul
+
+    def run():
+        for w, x, o in ctx_f:
+            mm(w, x.T, out=o.T)
+        for _ in range(T):
+            for w, x, o in dense_f:
+                mm(w, x.T, out=o.T)
+        for t in range(T - 1, -1, -1):
+            for x, w, o in back:
+                mm(x, w, out=o)
+            if t:
+                mm(back_enc0[0], back_enc0[1], out=back_enc0[2])
+        for da, x in wgrad:
+            da.T @ x
+
+    flops = 2 * (sum(w.size * x.shape[0] for w, x, _ in ctx_f) + T * sum(w.size * x.shape[0] for w, x, _ in dense_f)
+                 + T * sum(x.size * w.shape[-1] * (w.shape[0] if w.ndim == 3 else 1) for x, w, _ in back)
+                 + (T - 1) * back_enc0[0].size * P + sum(da.size * x.shape[1] for da, x in wgrad))
+    return run, flops / 1e9
+
+
 def _time_block(row: dict, name: str, fn, steps: int, calls: int = 1) -> None:
     """After a settle pause, ``steps`` timings of ``calls`` calls of ``fn``; writes the medians per call into
     ``row[name + "_ms"]`` (wall) and ``row[name + "_cpu_ms"]`` (CPU time of all threads: robust to other load)."""
@@ -222,43 +274,80 @@ def bench_train(args, cfg) -> dict:
     check = _train_check(torch, params, past, target, truth, cfg)
     print("train check vs PyTorch: " + ", ".join(f"{k} {v:.2e}" if isinstance(v, float) else f"{k} {v}"
                                                  for k, v in check.items()), flush=True)
+    products, products_gflop = _products_floor(cfg, B, T)
     variants = {"numpy": _numpy_train_step({k: v.copy() for k, v in params.items()}, past, target, truth, cfg),
-                "torch": _torch_train_step(torch, _torch_qtg(torch, params, cfg), past, target, truth)}
+                "torch": _torch_train_step(torch, _torch_qtg(torch, params, cfg), past, target, truth),
+                "products": products}
+    print(f"the step's matrix products alone: {products_gflop:.2f} GFLOP (forward + backward of the model: "
+          f"{6 * B * T * macs_per_frame(cfg) / 1e9:.2f})", flush=True)
     for fn in variants.values():
         fn()
     load_start = os.getloadavg()
     rounds = []
     names = list(variants)
     for r in range(args.train_rounds):
-        order = names[r % 2:] + names[:r % 2]
+        order = names[r % len(names):] + names[:r % len(names)]
         row = {"order": order}
         for name in order:
             _time_block(row, name, variants[name], args.steps)
         row["numpy_over_torch"] = row["numpy_ms"] / row["torch_ms"]
         row["numpy_over_torch_cpu"] = row["numpy_cpu_ms"] / row["torch_cpu_ms"]
+        row["products_over_torch"] = row["products_ms"] / row["torch_ms"]
+        row["products_gflops"] = products_gflop / row["products_ms"] * 1e3
         row["loadavg_1min"] = os.getloadavg()[0]
         rounds.append(row)
         print(f"train round {r + 1}: numpy {row['numpy_ms']:.1f} ms (CPU {row['numpy_cpu_ms']:.1f}), torch "
               f"{row['torch_ms']:.1f} ms (CPU {row['torch_cpu_ms']:.1f}); ratio {row['numpy_over_torch']:.2f}, "
-              f"CPU-time ratio {row['numpy_over_torch_cpu']:.2f} (load {row['loadavg_1min']:.1f})", flush=True)
+              f"CPU-time ratio {row['numpy_over_torch_cpu']:.2f}; products alone {row['products_ms']:.1f} ms "
+              f"({row['products_gflops']:.0f} GF/s, {row['products_over_torch']:.2f} x torch) "
+              f"(load {row['loadavg_1min']:.1f})", flush=True)
     ratios = [r["numpy_over_torch"] for r in rounds]
     cpu_ratios = [r["numpy_over_torch_cpu"] for r in rounds]
     out = {"batch": B, "T": T, "threads": args.threads, "torch": torch.__version__, "check": check,
            "rounds": rounds, "loadavg_start": load_start, "loadavg_end": os.getloadavg(),
            "numpy_over_torch": {"min": min(ratios), "median": statistics.median(ratios), "max": max(ratios)},
            "numpy_over_torch_cpu": {"min": min(cpu_ratios), "median": statistics.median(cpu_ratios),
-                                    "max": max(cpu_ratios)}}
-    for key in ("numpy_over_torch", "numpy_over_torch_cpu"):
+                                    "max": max(cpu_ratios)},
+           "products_gflop": products_gflop}
+    for key in ("products_over_torch", "products_gflops"):
+        vals = [r[key] for r in rounds]
+        out[key] = {"min": min(vals), "median": statistics.median(vals), "max": max(vals)}
+    for key in ("numpy_over_torch", "numpy_over_torch_cpu", "products_over_torch", "products_gflops"):
         print(f"train {key} (min / median / max): " + " / ".join(f"{v:.2f}" for v in out[key].values()))
     return out
 
 
 # ------------------------------------------------------------------------------- inference against onnxruntime
+def _inference_products(model, T: int):
+    """Only the matrix products of :func:`rollout_inference` at batch 1 (its prepared weights, shapes, order):
+    the context encoding and target term once, then per step the encoder (2), ``z_t`` times the z product, the
+    top state times the h product and the decoder (2). The floor of that code's design with this BLAS."""
+    rng = np.random.default_rng(4)
+    dt = model.dtype
+    pairs = [(rng.standard_normal((3, a.shape[0] - 1)).astype(dt), a[:-1]) for a in model.enc]
+    pairs += [(rng.standard_normal((1, model.target_product.shape[0])).astype(dt), model.target_product),
+              (rng.standard_normal((1, model.z_product.shape[0])).astype(dt), model.z_product[:, model.z_product.shape[1] // 2:])]
+    step = [(rng.standard_normal((1, a.shape[0])).astype(dt), a) for a in model.enc]
+    step += [(rng.standard_normal((1, w.shape[0])).astype(dt), w) for w in (model.z_product, model.h_product)]
+    step += [(rng.standard_normal((1, a.shape[0])).astype(dt), a) for a in model.dec]
+    outs = {id(w): np.empty((x.shape[0], w.shape[1]), dtype=dt) for x, w in pairs + step}
+    mm = np.matmul
+
+    def run():
+        for x, w in pairs:
+            mm(x, w, out=outs[id(w)])
+        for _ in range(T):
+            for x, w in step:
+                mm(x, w, out=outs[id(w)])
+    return run
+
+
 def bench_ort(args, cfg) -> dict:
     """NumPy ``rollout_inference`` vs the onnxruntime exports (``deploy``) of the same float32 30-frame transition
     at batch 1, one thread each (NumPy's BLAS limited through threadpoolctl when available), interleaved per
     round (order rotated), each round's value the median over ``--steps`` blocks of 20 calls; wall and process
-    CPU time, ratios paired per round. Checks the exports' poses against NumPy first."""
+    CPU time, ratios paired per round. Checks the exports' poses against NumPy first. ``numpy_products``
+    (:func:`_inference_products`) times the NumPy path's matrix products alone."""
     from deploy.models.qtg import export_qtg_rollout
     from deploy.models.qtg_compact import export_qtg_rollout_compact
     from deploy.session import make_session
@@ -274,7 +363,8 @@ def bench_ort(args, cfg) -> dict:
     check = {k: float(np.max(np.abs(s.run(None, feeds)[0] - ref))) for k, s in sessions.items()}
     print("onnxruntime vs NumPy max |difference| of the poses: "
           + ", ".join(f"{k} {v:.1e}" for k, v in check.items()), flush=True)
-    variants = {"numpy": lambda: rollout_inference(model, past, target)}
+    variants = {"numpy": lambda: rollout_inference(model, past, target),
+                "numpy_products": _inference_products(model, cfg.transition_length)}
     variants.update({k: (lambda s=s: s.run(None, feeds)) for k, s in sessions.items()})
     names = list(variants)
     rounds = []
@@ -286,13 +376,15 @@ def bench_ort(args, cfg) -> dict:
             for name in order:
                 _time_block(row, name, variants[name], args.steps, calls=20)
             for k in sessions:
+                row[f"numpy_products_over_{k}"] = row["numpy_products_ms"] / row[k + "_ms"]
                 row[f"numpy_over_{k}"] = row["numpy_ms"] / row[k + "_ms"]
                 row[f"numpy_over_{k}_cpu"] = row["numpy_cpu_ms"] / row[k + "_cpu_ms"]
             row["loadavg_1min"] = os.getloadavg()[0]
             rounds.append(row)
             print(f"ort round {r + 1}: " + ", ".join(f"{k} {row[k + '_ms']:.2f} ms (CPU {row[k + '_cpu_ms']:.2f})"
                                                      for k in names)
-                  + f"; NumPy / compact {row['numpy_over_ort_compact_float32']:.2f} "
+                  + f"; NumPy / compact {row['numpy_over_ort_compact_float32']:.2f}, its products alone / compact "
+                  f"{row['numpy_products_over_ort_compact_float32']:.2f} "
                   f"(CPU {row['numpy_over_ort_compact_float32_cpu']:.2f}) (load {row['loadavg_1min']:.1f})",
                   flush=True)
     finally:

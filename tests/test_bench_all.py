@@ -30,18 +30,31 @@ def test_rows_ratios_limits_and_missing_fields(tmp_path):
     (tmp_path / "bench_adam.json").write_text(json.dumps({
         "n_params": 1_000_000, "bytes_per_param": 28, "torch_threads": 2,
         "summary": {"numpy_2threads": {"median": 3.0}, "torch_fused": {"median": 2.0},
-                    "numpy_over_torch_fused": {"median": 1.4}}}))
+                    "numpy_over_torch_fused": {"median": 1.4}, "twelve_adds_over_torch_fused": {"median": 1.35}}}))
     (tmp_path / "bench_gru_train.json").write_text(json.dumps({
         "config": {"B": 32, "T": 60}, "matmul_gflop_per_iteration": 100.0,
         "numpy": {"float32": {"ms_median": {"iteration": 1000.0}}}, "torch": {"ms_median": 1250.0, "threads": 2}}))
+    (tmp_path / "bench_qtg_train.json").write_text(json.dumps({"train": {
+        "batch": 32, "T": 30, "threads": 2, "rounds": [{"numpy_ms": 40.0, "torch_ms": 58.0}],
+        "numpy_over_torch": {"median": 0.69}, "products_over_torch": {"median": 0.43}}}))
     rows = {r["workload"].split(" (")[0].split(",")[0]: r for r in ba.rows_from(tmp_path, PEAKS)}
+    qtg = rows["QTG training step"]
+    assert qtg["numpy_ms"] == 40.0 and qtg["ratio"] == 0.69 and qtg["goal"] == 0.5
+    assert qtg["limit_ms"] == pytest.approx(6 * 636416 * 32 * 30 / 1e9 / 200.0 * 1e3)
+    assert "its matrix products alone / PyTorch 0.43×" in qtg["note"]
+    assert qtg["share_needed_for_goal"] == pytest.approx(qtg["limit_ms"] / 58.0 / 0.5)
     adam = rows["Adam"]
     assert adam["numpy_ms"] == 3.0 and adam["torch_ms"] == 2.0 and adam["ratio"] == 1.4 and adam["ratio_paired"]
     assert adam["limit_ms"] == pytest.approx(28 * 1e6 / 30e9 * 1e3)                     # bytes / bandwidth
     assert adam["share_of_limit"] == pytest.approx(adam["limit_ms"] / 3.0)
+    assert "12 np.add passes alone / fused 1.35×" in adam["note"]
     gru = rows["QuaterNet GRU 2×1000 training iteration"]
     assert gru["ratio"] == pytest.approx(0.8) and not gru["ratio_paired"]
     assert gru["limit_ms"] == pytest.approx(100.0 / 200.0 * 1e3)                      # GFLOP / 2-thread peak
+    # PyTorch takes 1250 ms for a 500 ms limit (40 %): NumPy at 0.6 x PyTorch would need 40 / 0.6 = 67 %
+    assert gru["torch_share_of_limit"] == pytest.approx(0.4)
+    assert gru["share_needed_for_goal"] == pytest.approx(0.4 / 0.6)
+    assert "PyTorch at 40 % of the limit, so ≤ 0.6× needs 67 %" in gru["note"]
     assert any(r["missing"] for r in rows.values())                                     # the absent benchmarks
     text = ba.table(list(rows.values()), PEAKS, {"start": (1.0, 1.0, 1.0)})
     assert "| Adam" in text and "missing: bench_onnx.json" in text and "~0.80" in text
