@@ -392,7 +392,7 @@ def bench_ort(args, cfg) -> dict:
             limits.restore_original_limits()
     summary = {}
     for key in rounds[0]:
-        if key.startswith("numpy_over"):
+        if key.startswith(("numpy_over", "numpy_products_over")):
             vals = [r[key] for r in rounds]
             summary[key] = {"min": min(vals), "median": statistics.median(vals), "max": max(vals)}
     for k, v in summary.items():

@@ -4,8 +4,9 @@ Every training step of a NumPy network allocates its caches afresh (a QTG step a
 0.1-4 MB) and frees them at the end of the step. glibc's ``malloc`` serves blocks above its *mmap threshold*
 (128 KiB at start, raised dynamically up to 32 MiB) with fresh ``mmap`` pages and returns the free top of its heap
 to the system once it exceeds the *trim threshold*. Either way the next step's arrays land on pages the kernel
-must fault in and zero again: measured on the 2-vCPU development VM, ≈ 8,800 page faults per QTG training step,
-1.4× the step's time (``benchmarks/bench_allocator.py``).
+must fault in and zero again: measured on the 2-vCPU development VM, 4,800-8,800 page faults per QTG training
+step, up to 1.3× the step's time (``benchmarks/bench_allocator.py``; glibc's dynamic threshold is path dependent,
+and some processes happen to settle where a step faults nothing).
 
 :func:`retain_freed_memory` sets both thresholds once for the process (``mallopt``): blocks up to
 ``mmap_threshold`` come from the heap, and up to ``trim_threshold`` bytes of freed heap stay with the process, so

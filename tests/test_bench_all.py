@@ -37,7 +37,17 @@ def test_rows_ratios_limits_and_missing_fields(tmp_path):
     (tmp_path / "bench_qtg_train.json").write_text(json.dumps({"train": {
         "batch": 32, "T": 30, "threads": 2, "rounds": [{"numpy_ms": 40.0, "torch_ms": 58.0}],
         "numpy_over_torch": {"median": 0.69}, "products_over_torch": {"median": 0.43}}}))
+    (tmp_path / "bench_lstm_train.json").write_text(json.dumps({
+        "config": {"B": 32, "T": 100, "acrnn": {"matmul_gflop": 400.0}}, "threads": 2,
+        "matmul_gflop_per_iteration": 427.0,
+        "summary": {"seconds.numpy_fast": {"median": 3.2}, "seconds.torch": {"median": 2.7},
+                    "fast_over_torch": {"median": 1.18}, "seconds.acrnn_numpy": {"median": 4.1},
+                    "seconds.acrnn_torch": {"median": 8.5}, "acrnn_numpy_over_torch": {"median": 0.48}}}))
     rows = {r["workload"].split(" (")[0].split(",")[0]: r for r in ba.rows_from(tmp_path, PEAKS)}
+    ac = rows["acRNN training iteration"]
+    assert ac["numpy_ms"] == 4100.0 and ac["torch_ms"] == 8500.0 and ac["ratio"] == 0.48
+    assert ac["limit_ms"] == pytest.approx(400.0 / 200.0 * 1e3)
+    assert rows["LSTM 3×1024 sequence training iteration"]["ratio"] == 1.18
     qtg = rows["QTG training step"]
     assert qtg["numpy_ms"] == 40.0 and qtg["ratio"] == 0.69 and qtg["goal"] == 0.5
     assert qtg["limit_ms"] == pytest.approx(6 * 636416 * 32 * 30 / 1e9 / 200.0 * 1e3)
