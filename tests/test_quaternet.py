@@ -103,7 +103,8 @@ def test_forward_equals_loop_of_steps(cfg):
     rng = np.random.default_rng(1)
     params = init_params(cfg, rng)
     prefix, future = _frames(rng, cfg, 3, 4), _frames(rng, cfg, 3, 6)
-    for mask in (np.ones(5, bool), np.zeros(5, bool), np.array([True, False, False, True, False])):
+    for mask in (np.ones(5, bool), np.zeros(5, bool), np.array([True, False, False, True, False]),
+                 np.array([True, True, False, True, True]), np.array([False, True, True, True, False])):
         y, pre, _ = forward(params, prefix, future, mask, cfg)
         assert y.shape == (3, 6, cfg.output_size) and pre.shape == (3, 6, cfg.rotation_size)
         assert_close(y, _forward_per_step(params, prefix, future, mask, cfg), **TOL_EXACT, name=str(mask))
@@ -204,7 +205,7 @@ def _loss_and_backward(cfg, rng, mask, B=2, P=3, T=4):
 
 
 @pytest.mark.parametrize("cfg", CONFIGS)
-@pytest.mark.parametrize("mask", [[False, False, False], [True, False, True], [True, True, True]])
+@pytest.mark.parametrize("mask", [[False, False, False], [True, False, True], [True, True, True], [True, True, False]])
 def test_gradients_central_differences(cfg, mask):
     """spec/quaternet.md §3.2: BPTT through fed-back predictions (no detach), the QMul's q_in, controls, h0.
 
@@ -345,13 +346,17 @@ def test_property_forward_step_oracle_and_vjp(cfg, P, T, B, seed):
 
 
 @pytest.mark.parametrize("cfg", CONFIGS)
-def test_backward_equals_per_step_oracle(cfg):
-    """spec/quaternet.md §3.2: the vectorised-prefix backward == every frame back-propagated one step at a time."""
+@pytest.mark.parametrize("mask", [[False, True, False, False], [True, True, False, True], [False, True, True, True],
+                                  [True, True, True, True], [True, False, True, True]])
+def test_backward_equals_per_step_oracle(cfg, mask):
+    """spec/quaternet.md §3.2: the vectorised backward (prefix and runs of teacher-forced steps) == every frame
+    back-propagated one step at a time; the masks put runs at the start, the end, before a fed-back step."""
     rng = np.random.default_rng(9)
     params = init_params(cfg, rng)
     prefix, future = _frames(rng, cfg, 2, 4), _frames(rng, cfg, 2, 5)
-    mask = np.array([False, True, False, False])
+    mask = np.array(mask)
     y, pre, cache = forward(params, prefix, future, mask, cfg)
+    assert_close(y, _forward_per_step(params, prefix, future, mask, cfg), **TOL_EXACT, name="y")
     dy, dpre = rng.standard_normal(y.shape), rng.standard_normal(pre.shape)
     for dp in (dpre, None):
         grads, dprefix, dfuture = backward(dy, dp, cache, input_grads=True)

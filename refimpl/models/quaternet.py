@@ -352,6 +352,34 @@ def _frame_forward(params, x, h, config: QuaterNetConfig):
     return y, pre, h_new, (ic, gc, hc)
 
 
+def _run_forward(params, frames, h, config: QuaterNetConfig):
+    """Consecutive teacher-forced steps, vectorised: ``frames (B, n, F)`` fed from state ``h (L, B, H)`` through
+    one sequence GRU pass (as the prefix) and the head on all ``n`` outputs at once (it works row by row).
+
+    Returns ``(y (B, n, G), pre (B, n, DJ), h_new, cache)``: the same numbers as ``n`` calls of
+    :func:`_frame_forward` (up to the summation order of the products)."""
+    B, n, F = frames.shape
+    g, ic = _input_forward(params, frames, config)  # (B, n, I)
+    tops, h_new, gc = gru_forward(g, h, params, "rnn", config.num_layers)  # (B, n, H)
+    y, pre, hc = _head_forward(params, tops.reshape(B * n, -1), frames.reshape(B * n, F), config)
+    return y.reshape(B, n, -1), pre.reshape(B, n, -1), h_new, (ic, gc, hc, n)
+
+
+def _run_backward(dy, dpre, dh_new, cache, config: QuaterNetConfig, grads: dict):
+    """Backward of :func:`_run_forward`: ``dy (B, n, G)``, ``dpre (B, n, DJ)`` or None, ``dh_new`` (L, B, H) or
+    None -> ``(dframes (B, n, F), dh (L, B, H))``; adds into ``grads``."""
+    ic, gc, hc, n = cache
+    B = dy.shape[0]
+    dtop, dqin = _head_backward(dy.reshape(B * n, -1), None if dpre is None else dpre.reshape(B * n, -1), hc,
+                                config, grads)
+    dg, dh, g = gru_backward(dtop.reshape(B, n, -1), dh_new, gc)
+    accumulate_grads(grads, g)
+    dx = _input_backward(dg, ic, config, grads)  # (B, n, F)
+    if dqin is not None:
+        dx[..., :config.rotation_size] += dqin.reshape(B, n, -1)
+    return dx, dh
+
+
 def _frame_backward(dy, dpre, dh_new, cache, config: QuaterNetConfig, grads: dict):
     """Backward of :func:`_frame_forward`: returns ``(dx (B, F), dh (L, B, H))``; adds into ``grads``."""
     ic, gc, hc = cache
@@ -498,15 +526,28 @@ def forward(params: Mapping[str, np.ndarray], prefix, future, mask, config: Quat
     g, ic = _input_forward(params, prefix, config)  # (B, P, I)
     tops, h, gc = gru_forward(g, h0, params, "rnn", L)
     y, pre, hc = _head_forward(params, tops[:, -1], prefix[:, -1], config)
-    ys, pres, steps = [y], [pre], []
-    for i in range(T - 1):
-        x = future[:, i] if mask[i] else np.concatenate([y, future[:, i, G:]], axis=1)
-        y, pre, h, c = _frame_forward(params, x, h, config)
-        ys.append(y)
-        pres.append(pre)
-        steps.append(c)
-    cache = dict(config=config, mask=mask, shape=(B, P, T), prefix=(ic, gc, hc), steps=steps, dtype=dtype)
-    return np.stack(ys, axis=1), np.stack(pres, axis=1), cache
+    ys, pres, segments = [y[:, None]], [pre[:, None]], []
+    i = 0
+    while i < T - 1:
+        if mask[i]:  # a run of teacher-forced steps: its frames are known, one vectorised GRU pass as the prefix
+            j = i + 1
+            while j < T - 1 and mask[j]:
+                j += 1
+            y, pre, h, c = _run_forward(params, future[:, i:j], h, config)
+            ys.append(y)
+            pres.append(pre)
+            segments.append(("run", i, j, c))
+            y = y[:, -1]
+            i = j
+        else:
+            x = np.concatenate([y, future[:, i, G:]], axis=1)  # the prediction fed back, with its controls
+            y, pre, h, c = _frame_forward(params, x, h, config)
+            ys.append(y[:, None])
+            pres.append(pre[:, None])
+            segments.append(("step", i, i + 1, c))
+            i += 1
+    cache = dict(config=config, mask=mask, shape=(B, P, T), prefix=(ic, gc, hc), segments=segments, dtype=dtype)
+    return np.concatenate(ys, axis=1), np.concatenate(pres, axis=1), cache
 
 
 def backward(dy, dpre, cache, input_grads: bool = False):
@@ -542,18 +583,21 @@ def backward(dy, dpre, cache, input_grads: bool = False):
     dy = check_float_array(dy, "dy", (B, T, G))
     if dpre is not None:
         dpre = check_float_array(dpre, "dpre", (B, T, R))
-    mask, dtype = cache["mask"], cache["dtype"]
+    dtype = cache["dtype"]
     grads: dict = {}
     dfuture = np.zeros((B, T, config.input_size), dtype=dtype)
     carry = None  # cotangent of the prediction fed back into the step after it
     dh = None
-    for i in range(T - 2, -1, -1):
-        d = dy[:, i + 1] if carry is None else dy[:, i + 1] + carry
-        dx, dh = _frame_backward(d, None if dpre is None else dpre[:, i + 1], dh, cache["steps"][i], config, grads)
-        if mask[i]:
-            dfuture[:, i] = dx
+    for kind, i, j, c in reversed(cache["segments"]):  # steps i … j − 1 predict frames i + 1 … j
+        d = dy[:, i + 1:j + 1].copy()  # (B, j − i, G)
+        if carry is not None:  # step j fed back the prediction of frame j
+            d[:, -1] += carry
+        dp = None if dpre is None else dpre[:, i + 1:j + 1]
+        if kind == "run":
+            dfuture[:, i:j], dh = _run_backward(d, dp, dh, c, config, grads)
             carry = None
         else:
+            dx, dh = _frame_backward(d[:, 0], None if dp is None else dp[:, 0], dh, c, config, grads)
             dfuture[:, i, G:] = dx[:, G:]
             carry = dx[:, :G]
     ic, gc, hc = cache["prefix"]
