@@ -2,7 +2,7 @@
 
 Runs the benchmarks of ``benchmarks/`` one after the other, each in its own process (``bench_qtg`` — with
 ``--train`` when it has it —, ``bench_quaternet``, ``bench_quaternet_cnn``, ``bench_gru_train``,
-``bench_lstm_train``, ``bench_acrnn``, ``bench_adam``, ``bench_onnx``, ``bench_locomotion``), with few rounds
+``bench_lstm_train``, ``bench_acrnn``, ``bench_long_term``, ``bench_adam``, ``bench_onnx``, ``bench_locomotion``), with few rounds
 (``--rounds``; each benchmark gets the options it has: ``--rounds``/``--iters``/``--train-rounds``, ``--threads``,
 ``--out``), collects the JSON each writes, measures the machine's peaks before and after them in the same run —
 float32 GEMM (NumPy ``sgemm`` 2048², best of several, with 1 and with 2 BLAS threads), DRAM bandwidth (a 2 × 256 MB
@@ -58,6 +58,7 @@ BENCHMARKS = {
     "quaternet": ("bench_quaternet.py", ("bench_quaternet.json",)),
     "quaternet_cnn": ("bench_quaternet_cnn.py", ("bench_quaternet_cnn.json",)),
     "gru_train": ("bench_gru_train.py", ("bench_gru_train.json",)),
+    "long_term": ("bench_long_term.py", ("bench_long_term.json",)),
     "lstm_train": ("bench_lstm_train.py", ("bench_lstm_train.json",)),
     "acrnn": ("bench_acrnn.py", ("bench_acrnn.json",)),
     "adam": ("bench_adam.py", ("bench_adam.json",)),
@@ -379,6 +380,34 @@ def rows_from(results: Path, peaks: dict) -> list[dict]:
                              "12 np.add passes alone / fused", _get(s, "twelve_adds_over_torch_fused/median"))) if x)))
     else:
         rows.append(_row("Adam", missing=["bench_adam.json: summary"]))
+    # --- long-term and pace networks against PyTorch (bench_long_term) ---------------------------------------
+    lg = _load(results, "bench_long_term.json")
+    if _get(lg, "cases"):
+        thr_l = str(_get(lg, "threads", "?"))
+        c = lg["cases"]
+        s = lambda case, key: _get(c, f"{case}/summary/{key}/median")  # noqa: E731
+        if "long_term_training" in c:
+            t = c["long_term_training"]
+            lim, basis = (_gemm_limit(t["matmul_gflop"], peaks, thr_l) if t.get("matmul_gflop") else (None, ""))
+            rows.append(_row(f"QuaterNet long-term training iteration, B={t['batch']}, {t['prefix']}+{t['target']} "
+                             f"frames", s("long_term_training", "numpy"), s("long_term_training", "torch"),
+                             ratio=s("long_term_training", "numpy_over_torch"), paired=True, limit=lim, basis=basis,
+                             threads=thr_l, note="PyTorch: same network, L1 loss instead of the FK loss"))
+        if "long_term_step_b1" in c:
+            rows.append(_row("QuaterNet long-term step, B=1", s("long_term_step_b1", "numpy"),
+                             s("long_term_step_b1", "torch"), s("long_term_step_b1", "onnxruntime"),
+                             ratio=s("long_term_step_b1", "numpy_over_torch"), paired=True, threads=thr_l))
+        if "pace_training" in c:
+            t = c["pace_training"]
+            rows.append(_row(f"pace network training iteration, B={t['batch']}, {t['chunk']} points",
+                             s("pace_training", "numpy"), s("pace_training", "torch"),
+                             ratio=s("pace_training", "numpy_over_torch"), paired=True, threads=thr_l))
+        if "pace_path_b1" in c:
+            rows.append(_row(f"pace network over a {c['pace_path_b1'].get('points')}-point path, B=1",
+                             s("pace_path_b1", "numpy"), s("pace_path_b1", "torch"), s("pace_path_b1", "onnxruntime"),
+                             ratio=s("pace_path_b1", "numpy_over_torch"), paired=True, threads=thr_l))
+    else:
+        rows.append(_row("QuaterNet long-term and pace networks", missing=["bench_long_term.json: cases"]))
     # --- locomotion (bench_locomotion) ----------------------------------------------------------------------
     lo = _load(results, "bench_locomotion.json")
     r = _get(lo, "results")

@@ -16,7 +16,7 @@ What is timed, float32, ``--threads`` BLAS / intra-op threads for every framewor
 * **long-term step at batch 1**: ``quaternet.step`` (NumPy) vs the exported step (``deploy.models.quaternet_long.
   export_pose_step``, onnxruntime) vs PyTorch (one GRU step + head, ``no_grad``);
 * **pace over one path at batch 1** (the offline network: every point of a 250-point path): ``pace.forward`` vs
-  PyTorch (``no_grad``). The pace network has no ONNX export (it runs once per path, spec/locomotion.md §10).
+  the exported pace model (``deploy.models.quaternet_long.export_pace``, onnxruntime) vs PyTorch (``no_grad``).
 
 Before timing, the PyTorch models are checked against NumPy with the same weights: the long-term network's
 teacher-forced predictions, the pace network's outputs (max error relative to the largest magnitude; float32
@@ -230,8 +230,10 @@ def main(argv=None) -> dict:
     step_t = _torch_train_step(torch, lambda v: t_fwd(v, P), t_params, xt, target, spec.optim.lr, spec.optim.betas)
     print(f"long-term network: B {B}, prefix {P} + target {Lx - P} frames, {quaternet.count_parameters(net):,} "
           f"parameters; PyTorch vs NumPy predictions {result['checks']['long_term_predictions']:.1e}", flush=True)
+    H, I, G = net.hidden_size, net.output_size + net.controls_hidden, net.output_size
+    macs = 3 * H * (I + H) + (net.num_layers - 1) * 3 * H * 2 * H + H * G  # per frame and sample: GRU + head
     result["cases"]["long_term_training"] = dict(
-        batch=B, prefix=P, target=Lx - P, **_rounds({"numpy": step_np, "torch": step_t}, [("numpy", "torch")],
+        batch=B, prefix=P, target=Lx - P, matmul_gflop=3 * 2 * macs * B * (Lx - 1) / 1e9, **_rounds({"numpy": step_np, "torch": step_t}, [("numpy", "torch")],
                                                     args.rounds, args.steps, 1, "long-term training"))
     x1 = x[:1, P]
     h1 = quaternet.init_state(params, 1, net)
@@ -282,9 +284,19 @@ def main(argv=None) -> dict:
             return t_fwd(path_t)
     with torch.no_grad():
         result["checks"]["pace_path"] = _rel(t_fwd(path_t).numpy(), pace.forward(params, config, path)[0])
-    result["cases"]["pace_path_b1"] = dict(points=250, **_rounds(
-        {"numpy": lambda: pace.forward(params, config, path), "torch": torch_path}, [("numpy", "torch")],
-        args.rounds, 5, 5, "pace 250-point path B=1"))
+    variants = {"numpy": lambda: pace.forward(params, config, path), "torch": torch_path}
+    try:
+        from deploy.models.quaternet_long import export_pace
+        from deploy.runtime import load_model
+        ort_pace = load_model(export_pace(params, config).SerializeToString(), intra_op_threads=args.threads)
+        result["checks"]["pace_path_onnxruntime"] = _rel(next(iter(ort_pace.run(x=path).values())),
+                                                         pace.forward(params, config, path)[0])
+        variants["onnxruntime"] = lambda: ort_pace.run(x=path)
+    except ImportError:
+        pass
+    pairs = [("numpy", "torch")] + ([("numpy", "onnxruntime")] if "onnxruntime" in variants else [])
+    result["cases"]["pace_path_b1"] = dict(points=250, **_rounds(variants, pairs, args.rounds, 5, 5,
+                                                                 "pace 250-point path B=1"))
 
     bad = {k: v for k, v in result["checks"].items() if not v < TOL}
     if bad:

@@ -43,7 +43,15 @@ def test_rows_ratios_limits_and_missing_fields(tmp_path):
         "summary": {"seconds.numpy_fast": {"median": 3.2}, "seconds.torch": {"median": 2.7},
                     "fast_over_torch": {"median": 1.18}, "seconds.acrnn_numpy": {"median": 4.1},
                     "seconds.acrnn_torch": {"median": 8.5}, "acrnn_numpy_over_torch": {"median": 0.48}}}))
+    (tmp_path / "bench_long_term.json").write_text(json.dumps({"threads": 2, "cases": {
+        "long_term_training": {"batch": 40, "prefix": 30, "target": 60, "matmul_gflop": 300.0, "summary": {
+            "numpy": {"median": 1500.0}, "torch": {"median": 1700.0}, "numpy_over_torch": {"median": 0.88}}},
+        "pace_training": {"batch": 40, "chunk": 377, "summary": {
+            "numpy": {"median": 88.0}, "torch": {"median": 146.0}, "numpy_over_torch": {"median": 0.6}}}}}))
     rows = {r["workload"].split(" (")[0].split(",")[0]: r for r in ba.rows_from(tmp_path, PEAKS)}
+    lt = rows["QuaterNet long-term training iteration"]
+    assert lt["numpy_ms"] == 1500.0 and lt["ratio"] == 0.88 and lt["limit_ms"] == pytest.approx(300.0 / 200.0 * 1e3)
+    assert rows["pace network training iteration"]["ratio"] == 0.6
     ac = rows["acRNN training iteration"]
     assert ac["numpy_ms"] == 4100.0 and ac["torch_ms"] == 8500.0 and ac["ratio"] == 0.48
     assert ac["limit_ms"] == pytest.approx(400.0 / 200.0 * 1e3)
