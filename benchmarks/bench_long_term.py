@@ -19,8 +19,10 @@ What is timed, float32, ``--threads`` BLAS / intra-op threads for every framewor
   the exported pace model (``deploy.models.quaternet_long.export_pace``, onnxruntime) vs PyTorch (``no_grad``).
 
 Before timing, the PyTorch models are checked against NumPy with the same weights: the long-term network's
-teacher-forced predictions, the pace network's outputs (max error relative to the largest magnitude; float32
-precision, < 1e-4 required). Variants are interleaved per round (order rotated, 0.15 s of settling between
+teacher-forced predictions and every parameter's gradient of the L1 loss on them (NumPy through
+``quaternet.backward``), the long-term step (PyTorch and onnxruntime), the pace network's outputs, and in float64 its L1
+loss and every gradient of it (the recipe's ``loss_and_grads``) (max error relative to the largest magnitude of each array;
+float32 precision, < 1e-4 required). Variants are interleaved per round (order rotated, 0.15 s of settling between
 variants); each round's time is the median of ``--steps`` calls (training) or of blocks of 20 calls (inference);
 ratios NumPy / PyTorch are paired per round. Nothing asserts on time.
 
@@ -134,8 +136,9 @@ def _torch_long_term(torch, params, net):
 def _torch_pace(torch, params, config):
     """The bidirectional pace network in PyTorch with ``params``: ``forward(x (B, N, 2)) -> (B, N, 4)``."""
     nn = torch.nn
-    gru = nn.GRU(config.input_size, config.hidden_size, 1, batch_first=True, bidirectional=True)
-    fc = nn.Linear(2 * config.hidden_size, config.output_size)
+    dt = torch.float64 if params["fc.weight"].dtype == np.float64 else torch.float32
+    gru = nn.GRU(config.input_size, config.hidden_size, 1, batch_first=True, bidirectional=True).to(dt)
+    fc = nn.Linear(2 * config.hidden_size, config.output_size).to(dt)
     mods = {"rnn": gru, "fc": fc}
     with torch.no_grad():
         for k, v in params.items():
@@ -150,6 +153,23 @@ def _torch_pace(torch, params, config):
         return fc(y)
 
     return forward, list(gru.parameters()) + list(fc.parameters()) + [h0]
+
+
+def _long_term_grad_check(torch, params, net, x, P, mask) -> dict:
+    """Both frameworks' gradients of the same L1 loss on the teacher-forced outputs (the benchmark's PyTorch loss):
+    NumPy through ``quaternet.forward`` / ``backward`` (the code the FK loss of the recipe also runs)."""
+    fwd, _, t_params = _torch_long_term(torch, params, net)
+    G = net.output_size
+    target = np.ascontiguousarray(x[:, P:, :G])
+    loss_t = (fwd(torch.from_numpy(x), P) - torch.from_numpy(target)).abs().mean()
+    loss_t.backward()
+    y, pre, cache = quaternet.forward(params, x[:, :P], x[:, P:], mask, net)
+    grads = quaternet.backward((np.sign(y - target) / y.size).astype(y.dtype), None, cache)
+    names = ["fc1.weight", "fc1.bias", "fc2.weight", "fc2.bias"] + [
+        f"rnn.{n}_l{k}" for k in range(net.num_layers) for n in ("weight_ih", "weight_hh", "bias_ih", "bias_hh")] + [
+        "fc.weight", "fc.bias", "h0"]
+    return {"long_term_loss": _rel(float(loss_t), float(np.abs(y - target).mean())),
+            "long_term_grads": max(_rel(p.grad.numpy(), grads[k]) for k, p in zip(names, t_params))}
 
 
 def _torch_train_step(torch, forward, parameters, x, target, lr, betas):
@@ -224,6 +244,7 @@ def main(argv=None) -> dict:
     with torch.no_grad():
         y_t = t_fwd(xt, P).numpy()
     result["checks"]["long_term_predictions"] = _rel(y_t, y_np)
+    result["checks"].update(_long_term_grad_check(torch, params, net, x, P, batch["mask"]))
     step_np, ref = _numpy_train_step(adapter, {k: v.copy() for k, v in params.items()}, spec)
     ref[0] = batch
     target = torch.from_numpy(np.ascontiguousarray(x[:, P:, :net.output_size]))
@@ -265,6 +286,18 @@ def main(argv=None) -> dict:
     t_fwd, t_params = _torch_pace(torch, params, config)
     with torch.no_grad():
         result["checks"]["pace_outputs"] = _rel(t_fwd(torch.from_numpy(xp)).numpy(), pace.forward(params, config, xp)[0])
+    # gradients in float64 (a float32 BPTT over 377 steps and 15,080 summed rows differs by ≈ 2e-4 between any
+    # two summation orders): the recipe's L1 loss and manual backward against autograd on the same weights
+    p64 = {k: v.astype(np.float64) for k, v in params.items()}
+    f64, t64 = _torch_pace(torch, p64, config)
+    x64, y64 = xp.astype(np.float64), yp.astype(np.float64)
+    loss_t = (f64(torch.from_numpy(x64)) - torch.from_numpy(y64)).abs().mean()
+    loss_t.backward()
+    loss_n, grads_n = adapter.loss_and_grads(p64, (x64, y64))
+    result["checks"]["pace_loss_float64"] = _rel(float(loss_t), loss_n)
+    names = [k for k in params if k != "h0"] + ["h0"]  # t64: the GRU's and fc's in state-dict order, then h0
+    result["checks"]["pace_grads_float64"] = max(_rel(p.grad.numpy(), grads_n[k]) for k, p in zip(names, t64))
+    t_fwd, t_params = _torch_pace(torch, params, config)  # fresh modules (no gradients) for the timed steps
     step_np, ref = _numpy_train_step(adapter, {k: v.copy() for k, v in params.items()}, spec)
     ref[0] = batch
     step_t = _torch_train_step(torch, t_fwd, t_params, torch.from_numpy(xp), torch.from_numpy(yp), spec.optim.lr,
