@@ -4,7 +4,8 @@ network, training iteration and batch-1 inference (issue #17: every recurrent mo
 What is timed, float32, ``--threads`` BLAS / intra-op threads for every framework (default 2, the command line's):
 
 * **long-term training iteration** (``quaternet-long``, paper size: 2 × 1000 GRU, controls block 6 → 30 → 30,
-  batch 40, the recipe's window): NumPy = what ``refimpl train`` runs per step (the recipe's adapter batch,
+  batch 40, the recipe's window): NumPy = what ``refimpl train`` runs per step (``bench_threads.adapter_case`` and
+  ``training_step``: the recipe's adapter batch,
   ``loss_and_grads`` — forward under scheduled sampling, which at epoch 0 is all teacher forcing, FK position
   loss + norm penalty, manual backward — and ``adam_step``); PyTorch = the same network (``nn.Linear`` controls
   block, ``nn.GRU`` over the whole teacher-forced sequence in one call, ``nn.Linear`` head, per-joint
@@ -37,7 +38,6 @@ import json
 import os
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -46,45 +46,15 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_threads import adapter_case, training_step  # noqa: E402
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
-from refimpl.cli import build_parser  # noqa: E402
 from refimpl.models import pace, quaternet  # noqa: E402
-from refimpl.optim import adam_init, adam_step  # noqa: E402
-from refimpl.registry import MODELS, task_of  # noqa: E402
-from refimpl.train import TrainContext  # noqa: E402
 
 SETTLE = 0.15
 TOL = 1e-4
-
-
-def _adapter_case(name: str):
-    """``(adapter, params, config, batch, spec)``: the recipe's adapter at its paper size and one batch of its
-    paper batch size, built as ``refimpl train --model name`` builds them (default data)."""
-    spec = MODELS[name]
-    task = task_of(spec)
-    with tempfile.TemporaryDirectory() as d:
-        args = build_parser().parse_args(["train", "--model", name, "--out", d])
-    train_ds, test_ds = task.train_datasets(args)
-    config = spec.make_config(train_ds, [])
-    extra = dict(task.checkpoint_extra(train_ds), representation=spec.representations[0])
-    adapter = spec.make_adapter(train_ds, test_ds, config, np.float32, extra)
-    rng = np.random.default_rng(0)
-    params = adapter.init_params(rng)
-    B = int(getattr(spec.recipe, "PAPER_BATCH", 32))
-    idx = rng.choice(adapter.num_examples, size=B, replace=adapter.num_examples < B)
-    batch = adapter.get_batch(idx, TrainContext(rng=np.random.default_rng(1), step=0, epoch=0))
-    return adapter, params, config, batch, spec
-
-
-def _numpy_train_step(adapter, params, spec):
-    state = adam_init(params)
-
-    def step():
-        _, grads = adapter.loss_and_grads(params, batch_ref[0])
-        adam_step(params, grads, state, spec.optim.lr, betas=spec.optim.betas)
-    batch_ref = [None]
-    return step, batch_ref
 
 
 def _rel(a, b) -> float:
@@ -93,6 +63,17 @@ def _rel(a, b) -> float:
 
 
 # ------------------------------------------------------------------------------------------- PyTorch models
+def _load(torch, mods: dict, params):
+    """Copy ``params`` (PyTorch state-dict names ``module.attribute``) into the modules ``mods``; returns ``h0`` as
+    a new learnable tensor (it is no module's attribute)."""
+    with torch.no_grad():
+        for k, v in params.items():
+            if k != "h0":
+                mod, attr = k.split(".", 1)
+                getattr(mods[mod], attr).copy_(torch.from_numpy(v))
+    return torch.nn.Parameter(torch.from_numpy(params["h0"].copy()))
+
+
 def _torch_long_term(torch, params, net):
     """The long-term pose network in PyTorch with ``params``: ``forward(x (B, L, F), P) -> y (B, L - P, G)``
     (all teacher forced), ``step(x (B, F), h) -> (y, h)``, and the modules' parameters."""
@@ -101,13 +82,7 @@ def _torch_long_term(torch, params, net):
     fc1, fc2 = nn.Linear(net.num_controls, net.controls_hidden), nn.Linear(net.controls_hidden, net.controls_hidden)
     gru, fc = nn.GRU(G + net.controls_hidden, H, L, batch_first=True), nn.Linear(H, G)
     mods = {"fc1": fc1, "fc2": fc2, "rnn": gru, "fc": fc}
-    with torch.no_grad():
-        for k, v in params.items():
-            if k == "h0":
-                continue
-            mod, attr = k.split(".", 1)
-            getattr(mods[mod], attr).copy_(torch.from_numpy(v))
-    h0 = nn.Parameter(torch.from_numpy(params["h0"].copy()))
+    h0 = _load(torch, mods, params)
     slope = net.negative_slope
     leaky = torch.nn.functional.leaky_relu
 
@@ -140,13 +115,7 @@ def _torch_pace(torch, params, config):
     gru = nn.GRU(config.input_size, config.hidden_size, 1, batch_first=True, bidirectional=True).to(dt)
     fc = nn.Linear(2 * config.hidden_size, config.output_size).to(dt)
     mods = {"rnn": gru, "fc": fc}
-    with torch.no_grad():
-        for k, v in params.items():
-            if k == "h0":
-                continue
-            mod, attr = k.split(".", 1)
-            getattr(mods[mod], attr).copy_(torch.from_numpy(v))
-    h0 = nn.Parameter(torch.from_numpy(params["h0"].copy()))
+    h0 = _load(torch, mods, params)
 
     def forward(x):
         y, _ = gru(x, h0.expand(2, x.shape[0], config.hidden_size).contiguous())
@@ -233,7 +202,7 @@ def main(argv=None) -> dict:
               "torch": torch.__version__, "load_average_start": os.getloadavg(), "checks": {}, "cases": {}}
 
     # --- long-term pose network ---------------------------------------------------------------------------
-    adapter, params, config, batch, spec = _adapter_case("quaternet-long")
+    adapter, params, config, batch, spec = adapter_case("quaternet-long")
     net = config.network()
     x, P = batch["inputs"], int(batch["prefix"])
     assert bool(np.all(batch["mask"])), "epoch 0 should be all teacher forcing"
@@ -245,8 +214,7 @@ def main(argv=None) -> dict:
         y_t = t_fwd(xt, P).numpy()
     result["checks"]["long_term_predictions"] = _rel(y_t, y_np)
     result["checks"].update(_long_term_grad_check(torch, params, net, x, P, batch["mask"]))
-    step_np, ref = _numpy_train_step(adapter, {k: v.copy() for k, v in params.items()}, spec)
-    ref[0] = batch
+    step_np = training_step(adapter, {k: v.copy() for k, v in params.items()}, batch, spec)
     target = torch.from_numpy(np.ascontiguousarray(x[:, P:, :net.output_size]))
     step_t = _torch_train_step(torch, lambda v: t_fwd(v, P), t_params, xt, target, spec.optim.lr, spec.optim.betas)
     print(f"long-term network: B {B}, prefix {P} + target {Lx - P} frames, {quaternet.count_parameters(net):,} "
@@ -281,7 +249,7 @@ def main(argv=None) -> dict:
     result["cases"]["long_term_step_b1"] = _rounds(variants, pairs, args.rounds, 5, 20, "long-term step B=1")
 
     # --- pace network -------------------------------------------------------------------------------------
-    adapter, params, config, batch, spec = _adapter_case("pace")
+    adapter, params, config, batch, spec = adapter_case("pace")
     xp, yp = batch
     t_fwd, t_params = _torch_pace(torch, params, config)
     with torch.no_grad():
@@ -298,8 +266,7 @@ def main(argv=None) -> dict:
     names = [k for k in params if k != "h0"] + ["h0"]  # t64: the GRU's and fc's in state-dict order, then h0
     result["checks"]["pace_grads_float64"] = max(_rel(p.grad.numpy(), grads_n[k]) for k, p in zip(names, t64))
     t_fwd, t_params = _torch_pace(torch, params, config)  # fresh modules (no gradients) for the timed steps
-    step_np, ref = _numpy_train_step(adapter, {k: v.copy() for k, v in params.items()}, spec)
-    ref[0] = batch
+    step_np = training_step(adapter, {k: v.copy() for k, v in params.items()}, batch, spec)
     step_t = _torch_train_step(torch, t_fwd, t_params, torch.from_numpy(xp), torch.from_numpy(yp), spec.optim.lr,
                                spec.optim.betas)
     print(f"pace network: B {xp.shape[0]} chunks of {xp.shape[1]} points, {pace.count_parameters(config):,} "

@@ -42,8 +42,10 @@ from refimpl.registry import MODELS, task_of  # noqa: E402
 from refimpl.train import TrainContext  # noqa: E402
 
 
-def _training_case(name: str, batch: int | None):
-    """``(step_fn, description)``: one training step of ``name`` the way ``refimpl train`` builds it."""
+def adapter_case(name: str, batch: int | None = None):
+    """``(adapter, params, config, data, spec)``: the recipe's adapter at its paper size, fresh parameters and one
+    batch of ``batch`` examples (default: the recipe's paper batch), built as ``refimpl train --model name`` builds
+    them (default data, float32, epoch 0)."""
     spec = MODELS[name]
     task = task_of(spec)
     with tempfile.TemporaryDirectory() as d:
@@ -54,18 +56,31 @@ def _training_case(name: str, batch: int | None):
     adapter = spec.make_adapter(train_ds, test_ds, config, np.float32, extra)
     rng = np.random.default_rng(0)
     params = adapter.init_params(rng)
-    state = adam_init(params)
     B = batch or int(getattr(spec.recipe, "PAPER_BATCH", 32))
     idx = rng.choice(adapter.num_examples, size=B, replace=adapter.num_examples < B)
     data = adapter.get_batch(idx, TrainContext(rng=np.random.default_rng(1), step=0, epoch=0))
-    lr = spec.optim.lr
+    return adapter, params, config, data, spec
+
+
+def training_step(adapter, params, data, spec):
+    """One step as ``refimpl train`` takes it: ``loss_and_grads`` and ``adam_step`` (the recipe's lr and betas),
+    in place on ``params``."""
+    state = adam_init(params)
 
     def train_step():
         _, grads = adapter.loss_and_grads(params, data)
-        adam_step(params, grads, state, lr, betas=spec.optim.betas)
+        adam_step(params, grads, state, spec.optim.lr, betas=spec.optim.betas)
+    return train_step
 
+
+def _training_case(name: str, batch: int | None):
+    """``(step_fn, params, config, description)``: one training step of ``name`` the way ``refimpl train`` builds
+    it."""
+    adapter, params, config, data, spec = adapter_case(name, batch)
+    B = batch or int(getattr(spec.recipe, "PAPER_BATCH", 32))
     n = sum(int(v.size) for v in params.values())
-    return train_step, params, config, {"batch": B, "parameters": n, "config": str(config)[:200]}
+    return (training_step(adapter, params, data, spec), params, config,
+            {"batch": B, "parameters": n, "config": str(config)[:200]})
 
 
 def _inference_case(name: str, params, config):
