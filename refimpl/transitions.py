@@ -360,12 +360,14 @@ def _stats(poses: np.ndarray):
 
 def build_transition_datasets(train_sources: Iterable[TransitionSource], test_sources: Iterable[TransitionSource],
                               T: int = 30, stride: int = 1, test_stride: int | None = None, fps: float = 30.0,
-                              relative_heading: bool = True):
+                              relative_heading: bool = True, loader=None):
     """Train and test :class:`TransitionDataset` from two disjoint lists of sources (split by file).
 
     Windows have ``2 + T + 2`` poses, cut every ``stride`` frames from each 30-fps clip (every phase of the
     subsampling, :func:`load_source`); the root statistics come from the training windows and are shared by
     both datasets. Each distinct 22-joint skeleton (compared by value) gets one entry in ``skeletons``.
+    ``loader(source, fps=fps) -> (skeleton, clips)`` reads a source (default :func:`load_source`; the Bandai
+    Namco locomotion set passes its own, :mod:`refimpl.locomotion_transitions`).
 
     Returns
     -------
@@ -377,12 +379,13 @@ def build_transition_datasets(train_sources: Iterable[TransitionSource], test_so
         if (s.path, s.frames) in paths_train:
             raise ValueError(f"test_sources: {s.path} {s.frames} is also a training source")
     length = T + 4
+    load = load_source if loader is None else loader
     skeletons: list[Skeleton] = []
 
     def build(sources, st):
         poses, sk_idx, src_idx = [], [], []
         for i, src in enumerate(sources):
-            skel, clips = load_source(src, fps=fps)
+            skel, clips = load(src, fps=fps)
             k = next((j for j, s in enumerate(skeletons) if s == skel), None)
             if k is None:
                 skeletons.append(skel)

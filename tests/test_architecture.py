@@ -23,7 +23,8 @@ LAYERS = {
     6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.train", "refimpl.rigs",
         "refimpl.transitions", "refimpl.baselines", "refimpl.metrics"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.tasks", "refimpl.tasks.*",
-        "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator"],
+        "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator",
+        "refimpl.locomotion_transitions"],
     8: ["refimpl.cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).

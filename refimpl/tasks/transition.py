@@ -30,6 +30,7 @@ from refimpl.baselines import method_registry
 from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
+from refimpl.locomotion_transitions import build_datasets as build_bandai_namco, is_bandai_namco_folder
 from refimpl.metrics import evaluate_methods, format_table
 from refimpl.motion import Motion
 from refimpl.options import positive_int
@@ -137,7 +138,13 @@ def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 
 
 def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.2, test_stride=None):
     """Train and test :class:`~refimpl.transitions.TransitionDataset` of ``2 + T + 2``-pose windows for ``--data``
-    (:func:`resolve_data`, :func:`refimpl.transitions.build_transition_datasets`)."""
+    (:func:`resolve_data`, :func:`refimpl.transitions.build_transition_datasets`); a folder of Bandai Namco
+    locomotion takes: :func:`refimpl.locomotion_transitions.build_datasets` (split by take, spec/qtg.md §8.4)."""
+    if data != "sample" and is_bandai_namco_folder(data):
+        try:
+            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride)
+        except (OSError, ValueError) as exc:
+            raise BadInputError(f"--data {data}: {exc}") from exc
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
     try:
         return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride)
@@ -253,7 +260,7 @@ def _protocol_line(ds, model=None) -> str:
     labels = sorted({ds.sources[i].label for i in np.unique(ds.source_index)})
     return (f"protocol: {ds.num_windows} held-out windows ({', '.join(labels)}) from {len(ds.sources)} sources, "
             f"{ds.past} past + T = {ds.transition_length} + {ds.future} target poses at {ds.fps:g} fps, "
-            "22 joints; error = mean over windows and joints of the Euclidean joint-position error (cm) per "
+            f"{(ds.poses.shape[-1] - 3) // 4} joints; error = mean over windows and joints of the Euclidean joint-position error (cm) per "
             "transition frame" + ("" if model is None else f"; network {model.spec.name} from {model.path}"))
 
 
