@@ -115,7 +115,7 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
 
 
 def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
-    from refimpl.transitions import build_transition_datasets, load_source, sample_sources
+    from refimpl.protocols.transition import build_transition_datasets, load_source, sample_sources
 
     t_start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)

@@ -2,7 +2,7 @@
 
 The QTG paper reports "the Mean Absolute Error per joint per frame" in centimetres (its Fig. 3) without a
 formula. We define it (spec/qtg.md §9) from forward-kinematics positions of the 22-joint skeleton, root
-included, in the window frame (root-relative, refimpl/transitions.py), in centimetres:
+included, in the window frame (root-relative, refimpl/protocols/transition.py), in centimetres:
 
     e[n, t, j] = ‖ FK(pred)[n, t, j] − FK(gt)[n, t, j] ‖₂          (Euclidean distance of joint j)
     curve[t]   = mean over n, j of e[n, t, j]                       (per-frame curve, t = 1 … T)
@@ -27,7 +27,7 @@ import numpy as np
 from refimpl.nn.params import check_float_array
 from refimpl.representations import REPRESENTATIONS, decode, positions_from_frames
 from refimpl.skeleton import Skeleton
-from refimpl.transitions import TransitionDataset, split_pose
+from refimpl.protocols.transition import TransitionDataset, split_pose
 
 __all__ = ["positions_from_poses", "joint_position_errors", "evaluate_methods", "format_table",
            "NPSS_VARIANTS", "root_zeroed_positions", "mean_joint_error", "npss", "mean_acceleration",

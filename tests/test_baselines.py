@@ -13,7 +13,7 @@ from refimpl.models.qtg_fast import rollout_forward
 from refimpl.quat import quat_angle, quat_from_axis_angle, quat_mul, quat_normalize
 from refimpl.recipes.qtg import qtg_method
 from refimpl.testing import TOL_EXACT, assert_close, assert_quat_close
-from refimpl.transitions import denormalize_poses, join_pose, normalize_poses, split_pose
+from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, split_pose
 
 
 def _random_poses(rng, B, J):

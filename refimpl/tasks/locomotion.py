@@ -825,7 +825,7 @@ def resolve_files(data: str) -> tuple[str, list, list]:
     """
     from refimpl.errors import BadInputError
     if data == "sample":
-        from refimpl.transitions import SAMPLE_DIR
+        from refimpl.protocols.transition import SAMPLE_DIR
         data = str(Path(SAMPLE_DIR) / "expmap")
     root = Path(data)
     if not root.is_dir():
