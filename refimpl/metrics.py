@@ -99,7 +99,7 @@ def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable]
     ----------
     dataset : TransitionDataset
     methods : mapping name -> f(past, target, T) -> poses
-        E.g. :func:`refimpl.baselines.method_registry`; un-normalised poses in and out.
+        E.g. :func:`refimpl.protocols.transition_baselines.method_registry`; un-normalised poses in and out.
     batch_size : int
         Windows per call.
     labels : bool

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from refimpl.baselines import (METHOD_NAMES, _inertialization_coefficients, _inertialize_naive, inertialize,
+from refimpl.protocols.transition_baselines import (METHOD_NAMES, _inertialization_coefficients, _inertialize_naive, inertialize,
                                interpolate, method_registry, quintic_inertialization)
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import rollout_forward
@@ -143,7 +143,7 @@ def test_interpolate_endpoints_and_spacing():
     # shortest path: total angle travelled <= π per joint
     assert np.all(ang.sum(axis=1) <= np.pi + 1e-9)
     # endpoints of the underlying interpolant
-    from refimpl.baselines import _interpolate_at
+    from refimpl.protocols.transition_baselines import _interpolate_at
     ends = _interpolate_at(past[:, 1], target[:, 0], np.array([0.0, 1.0]))
     assert_close(ends[:, 0, :3], past[:, 1, :3], **TOL_EXACT)
     assert_close(ends[:, 1, :3], target[:, 0, :3], **TOL_EXACT)

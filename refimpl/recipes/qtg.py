@@ -159,7 +159,7 @@ def qtg_method(params: Mapping[str, np.ndarray], config: QTGConfig, root_mean, r
     statistics), runs the network (:func:`refimpl.models.qtg_fast.rollout_inference` in the parameters' dtype),
     de-normalises the output's root translation and normalises its joint quaternions to unit length.
     """
-    from refimpl.baselines import check_context, check_length
+    from refimpl.protocols.transition_baselines import check_context, check_length
 
     model = prepare_inference(params, config)
     dtype = model.dtype

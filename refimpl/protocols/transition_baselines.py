@@ -20,8 +20,8 @@ from typing import Callable
 import numpy as np
 
 from refimpl.nn.params import check_float_array
-from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_slerp
 from refimpl.protocols.transition import join_pose, split_pose
+from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_slerp
 
 __all__ = [
     "quintic_inertialization", "inertialize", "interpolate", "method_registry", "METHOD_NAMES", "check_context",
