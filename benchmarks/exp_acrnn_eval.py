@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
-from refimpl.metrics import root_zeroed_positions
+from refimpl.protocols.synthesis import root_zeroed_positions
 from refimpl.registry import task_of
 from refimpl.services import evaluate_model, load_trained
 from refimpl.tasks import synthesis as S

@@ -10,7 +10,7 @@ train       train a network by name (today ``qtg``) on the sample, ``../shared/d
             exp-map files; resumable, progress with rate and ETA, CSV loss log
             (:func:`refimpl.train.train`)
 eval        the QTG paper's protocol: QTG vs inertialisation vs interpolation on held-out windows, mean
-            joint-position error per joint per frame in cm, per-frame curve (:mod:`refimpl.metrics`)
+            joint-position error per joint per frame in cm, per-frame curve (:mod:`refimpl.protocols.transition_metrics`)
 export      ONNX models ``qtg_init/step/rollout.onnx`` via ``deploy`` (imported lazily: the ``deploy`` extra)
 generate    a transition between two clips with QTG (NumPy or onnxruntime) or a baseline; BVH out
 render      a BVH / exp-map motion (optionally against a second one) to a PNG strip or a GIF

@@ -62,7 +62,7 @@ class DemoResult:
     files : dict name -> Path
         Every file written (checkpoint, logs, tables, ONNX models, BVH files, pictures).
     results : dict
-        :func:`refimpl.metrics.evaluate_methods` output on the held-out windows.
+        :func:`refimpl.protocols.transition_metrics.evaluate_methods` output on the held-out windows.
     verify : dict or None
         :func:`refimpl.services.verify_onnx` output (None when ONNX was skipped).
     skipped : list of str

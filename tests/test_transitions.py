@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from refimpl.bvh import read_bvh
-from refimpl.metrics import evaluate_methods, format_table, joint_position_errors, positions_from_poses
+from refimpl.protocols.transition_metrics import evaluate_methods, format_table, joint_position_errors, positions_from_poses
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_normalize, quat_rotate
 from refimpl.testing import TOL_EXACT, assert_close, assert_quat_close
 from refimpl.protocols.transition import (CMU_22_JOINTS, CMU_UNIT_CM, SALSA_22_JOINTS, TransitionDataset, TransitionSource,

@@ -28,7 +28,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from refimpl.bvh import read_bvh
-from refimpl.metrics import (acceleration_comparison, mean_joint_error, npss, root_zeroed_positions)
+from refimpl.protocols.synthesis import acceleration_comparison, mean_joint_error, npss, root_zeroed_positions
 from refimpl.models import acrnn, acrnn_fast
 from refimpl.motion import Motion
 from refimpl.optim import ACRNN_ADAM, adam_init, adam_step

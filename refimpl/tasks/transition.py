@@ -6,13 +6,13 @@ Everything the application layer needs about this task, and nothing about a part
   embedded sample, ``../shared/data``, a folder, a file), :func:`source_for_file`, :func:`build_datasets`,
   :func:`train_datasets`; the checkpoint facts the task needs (:func:`checkpoint_extra`, :func:`check_checkpoint`);
 * baselines and protocol: :func:`methods` (the networks' methods, then inertialisation and interpolation from
-  :mod:`refimpl.protocols.transition_baselines`), :func:`evaluate` (:func:`refimpl.metrics.evaluate_methods`, the paper's metric),
+  :mod:`refimpl.protocols.transition_baselines`), :func:`evaluate` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`, the paper's metric),
   :func:`print_results` / :func:`write_results` (table, per-frame curve, CSV, JSON);
 * generation: :func:`make_transition` between two clips in world coordinates, :func:`with_end_sites` for BVH
   readers, :func:`render_transition`, :func:`clip_for`, :func:`random_context` (context poses for numerical checks).
 
 The building blocks live below: windows, sources and datasets in :mod:`refimpl.protocols.transition`, the baselines in
-:mod:`refimpl.protocols.transition_baselines`, the metric in :mod:`refimpl.metrics`.
+:mod:`refimpl.protocols.transition_baselines`, the metric in :mod:`refimpl.protocols.transition_metrics`.
 
 Shape legend: N windows, T transition frames, F frames of a clip, J joints, P pose size (3 + 4 J), B batch.
 """
@@ -30,7 +30,7 @@ from refimpl.protocols.transition_baselines import method_registry
 from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
-from refimpl.metrics import evaluate_methods, format_table
+from refimpl.protocols.transition_metrics import evaluate_methods, format_table
 from refimpl.motion import Motion
 from refimpl.options import positive_int
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_rotate
@@ -212,7 +212,7 @@ def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds``: :func:`refimpl.metrics.evaluate_methods`."""
+    """The paper's protocol on ``test_ds``: :func:`refimpl.protocols.transition_metrics.evaluate_methods`."""
     return evaluate_methods(test_ds, methods_by_name)
 
 
