@@ -142,4 +142,5 @@ def _composed_backward(dtotal, cache):
     return draw
 
 
-# Kernel tier (spec/architecture.md): the checks, shared with refimpl.dq_output_fast. check_weights, check_inputs
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# check_weights, check_inputs.

@@ -93,7 +93,7 @@ def test_quat_norm_beyond_range_is_value_error():
 
 @pytest.mark.parametrize("dtype", [np.longdouble, np.float16, np.float32])
 def test_other_float_dtypes_do_not_overflow_the_rescaling(dtype):
-    """B14: _prescaled built 2.0 ** 4096 for long double (OverflowError)."""
+    """B14: prescaled built 2.0 ** 4096 for long double (OverflowError)."""
     q = np.array([3.0, 4.0, 0.0, 0.0], dtype=dtype)
     big = q * np.asarray(np.finfo(dtype).max / 8, dtype=dtype)
     for fn in (Q.quat_normalize, Q.matrix_from_quat, Q.quat_log, Q.axis_angle_from_quat, Q.quat_angle):
@@ -141,14 +141,14 @@ def test_quat_exp_overflowing_real_part_is_value_error():
                                  np.full((3, 3), "a"), None, np.eye(3) * 1e200, np.eye(3, dtype=np.float16),
                                  np.eye(3, dtype=np.longdouble)])
 def test_check_rotation_matrix_only_value_error(bad):
-    """`_check_rotation_matrix` on object/integer/complex/string/huge input: ValueError, never TypeError;
+    """`check_rotation_matrix` on object/integer/complex/string/huge input: ValueError, never TypeError;
     float16 and long double identities are accepted (no LAPACK)."""
     if isinstance(bad, np.ndarray) and bad.dtype.kind == "f" and np.max(bad) == 1:
-        Q._check_rotation_matrix(bad, "m")
+        Q.check_rotation_matrix(bad, "m")
         assert Q.quat_from_matrix(bad).dtype == bad.dtype
         return
     with pytest.raises(ValueError):
-        Q._check_rotation_matrix(bad, "m")
+        Q.check_rotation_matrix(bad, "m")
     with pytest.raises(ValueError):
         Q.quat_from_matrix(bad)
 
