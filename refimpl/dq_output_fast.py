@@ -59,11 +59,6 @@ def _soa(x: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x.reshape(-1, J, C).transpose(2, 1, 0))
 
 
-def _aos(x: np.ndarray, shape: tuple) -> np.ndarray:
-    """``(C, J, M)`` → ``shape = (..., J, C)`` (the inverse of :func:`_soa`)."""
-    return np.ascontiguousarray(x.transpose(2, 1, 0)).reshape(shape)
-
-
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``Σ_c a[c] b[c]`` over the leading (component) axis."""
     out = a[0] * b[0]

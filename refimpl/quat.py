@@ -295,10 +295,6 @@ def quat_inv(q) -> np.ndarray:
     return quat_conj_kernel(qs) / (np.sum(qs * qs, axis=-1, keepdims=True) * scale)
 
 
-def _quat_normalize(q: np.ndarray) -> np.ndarray:
-    return q / quat_norm_kernel(q)[..., None]
-
-
 @finite_output
 def quat_normalize(q, eps: float = 0.0) -> np.ndarray:
     """Unit quaternion ``q / |q|`` (spec/math.md §1.4).
