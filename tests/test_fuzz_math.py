@@ -1,4 +1,4 @@
-"""The test suite's share of the math API fuzz campaign (spec/robustness.md §8; benchmarks/fuzz_math.py).
+"""The test suite's share of the math API fuzz campaign (spec/robustness.md §8; tests/fuzz/math_api.py).
 
 Every public function of ``refimpl.quat``, ``refimpl.dualquat`` and ``refimpl.skeleton`` gets hostile
 arguments (huge, tiny, subnormal, NaN/inf, wrong dtypes and shapes, empty and zero arrays, broadcasting
@@ -7,10 +7,7 @@ result from finite input is finite. Targeted regressions for what the campaign f
 """
 from __future__ import annotations
 
-import importlib.util
 import random
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,22 +15,18 @@ import pytest
 from refimpl import dualquat as DQ
 from refimpl import quat as Q
 from refimpl import skeleton as S
-
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "fuzz_math.py"
-_spec = importlib.util.spec_from_file_location("fuzz_math", _PATH)
-fuzz_math = importlib.util.module_from_spec(_spec)
-sys.modules.setdefault("fuzz_math", fuzz_math)
-_spec.loader.exec_module(fuzz_math)
+from tests.fuzz import math_api
 
 
-@pytest.mark.parametrize("family", fuzz_math.FAMILIES)
+
+@pytest.mark.parametrize("family", math_api.FAMILIES)
 def test_campaign_share(family):
     """30 seeded cases per family (330 in all): no failure of the contract."""
     rng = random.Random(f"test-{family}")
     bad = []
     for _ in range(30):
-        target, fam, arg, kwargs, finite = fuzz_math.make_case(rng, family=family)
-        outcome, detail = fuzz_math.run_case(target, kwargs, finite)
+        target, fam, arg, kwargs, finite = math_api.make_case(rng, family=family)
+        outcome, detail = math_api.run_case(target, kwargs, finite)
         if outcome not in ("ok", "ValueError"):
             bad.append((target, arg, outcome, detail))
     assert not bad, bad
@@ -41,12 +34,12 @@ def test_campaign_share(family):
 
 def test_every_target_is_reached():
     """Each target of the campaign runs with its valid arguments (so the hostile cases test something)."""
-    for target in fuzz_math.TARGETS:
+    for target in math_api.TARGETS:
         rng = random.Random(target)
-        fn, spec = fuzz_math.TARGETS[target]
+        fn, spec = math_api.TARGETS[target]
         g = np.random.default_rng(0)
-        kwargs = {name: fuzz_math._valid(kind, g, (2,)) for name, kind in spec}
-        assert fuzz_math.run_case(target, kwargs, True)[0] == "ok", target
+        kwargs = {name: math_api._valid(kind, g, (2,)) for name, kind in spec}
+        assert math_api.run_case(target, kwargs, True)[0] == "ok", target
 
 
 def test_campaign_detects_failures():
@@ -54,16 +47,16 @@ def test_campaign_detects_failures():
     def raises_type_error(q):
         raise TypeError("x")
 
-    fuzz_math.TARGETS["_probe_type"] = (raises_type_error, [("q", "q")])
-    fuzz_math.TARGETS["_probe_nan"] = (lambda q: np.full(4, np.nan), [("q", "q")])
-    fuzz_math.TARGETS["_probe_id"] = (lambda q: np.asarray(q), [("q", "q")])
+    math_api.TARGETS["_probe_type"] = (raises_type_error, [("q", "q")])
+    math_api.TARGETS["_probe_nan"] = (lambda q: np.full(4, np.nan), [("q", "q")])
+    math_api.TARGETS["_probe_id"] = (lambda q: np.asarray(q), [("q", "q")])
     try:
-        assert fuzz_math.run_case("_probe_type", {"q": np.ones(4)}, True)[0] == "TypeError"
-        assert fuzz_math.run_case("_probe_nan", {"q": np.ones(4)}, True)[0] == "NonFiniteOutput"
-        assert fuzz_math.run_case("_probe_id", {"q": np.array([np.nan, 0, 0, 1])}, False)[0] == "AcceptedNonFinite"
+        assert math_api.run_case("_probe_type", {"q": np.ones(4)}, True)[0] == "TypeError"
+        assert math_api.run_case("_probe_nan", {"q": np.ones(4)}, True)[0] == "NonFiniteOutput"
+        assert math_api.run_case("_probe_id", {"q": np.array([np.nan, 0, 0, 1])}, False)[0] == "AcceptedNonFinite"
     finally:
         for k in ("_probe_type", "_probe_nan", "_probe_id"):
-            fuzz_math.TARGETS.pop(k)
+            math_api.TARGETS.pop(k)
 
 
 # ---------------------------------------------------------------------------------------------------------------
