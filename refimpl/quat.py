@@ -623,7 +623,8 @@ def axis_angle_from_quat(q) -> np.ndarray:
 # Euler angles
 # ----------------------------------------------------------------------------------------------------------------
 
-def _quat_elementary(axis: int, angle: np.ndarray) -> np.ndarray:
+def quat_elementary_kernel(axis: int, angle: np.ndarray) -> np.ndarray:
+    """The rotation by ``angle`` (...) about axis ``axis`` (0, 1, 2 = x, y, z): ``(cos a/2, sin a/2 e_axis)`` (...) 4."""
     q = np.zeros(angle.shape + (4,), dtype=angle.dtype)
     q[..., 0] = np.cos(0.5 * angle)
     q[..., 1 + axis] = np.sin(0.5 * angle)
@@ -649,9 +650,9 @@ def quat_from_euler(angles, order: str) -> np.ndarray:
     """
     o = _parse_order(order)
     a = as_float(angles, "angles", (3,))
-    q = _quat_elementary(_AXIS_INDEX[o[0]], a[..., 0])
-    q = quat_mul_kernel(q, _quat_elementary(_AXIS_INDEX[o[1]], a[..., 1]))
-    return quat_mul_kernel(q, _quat_elementary(_AXIS_INDEX[o[2]], a[..., 2]))
+    q = quat_elementary_kernel(_AXIS_INDEX[o[0]], a[..., 0])
+    q = quat_mul_kernel(q, quat_elementary_kernel(_AXIS_INDEX[o[1]], a[..., 1]))
+    return quat_mul_kernel(q, quat_elementary_kernel(_AXIS_INDEX[o[2]], a[..., 2]))
 
 
 def _wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -914,5 +915,5 @@ def quat_wxyz_from_xyzw(q) -> np.ndarray:
 
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
 # as_float, atan_ratio, check_rotation_matrix, hemisphere_sign, matrix_from_quat_kernel, prescaled, quat_conj_kernel,
-# quat_from_matrix_kernel, quat_mul_kernel, quat_norm_kernel, quat_rotate_kernel, sin_over_x, check_scalar,
-# finite_output, zeros_of.
+# quat_elementary_kernel, quat_from_matrix_kernel, quat_mul_kernel, quat_norm_kernel, quat_rotate_kernel,
+# sin_over_x, check_scalar, finite_output, zeros_of.

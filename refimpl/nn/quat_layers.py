@@ -9,6 +9,8 @@ Every layer is a pure function pair ``y, cache = name_forward(...)`` / ``dx = na
 * ``dq_normalize``        dual-quaternion normalisation, Andreou et al. Eq. 13
 * ``dq_velocity``         Eq.-13-normalize(ΔD ⊗ D_in): the velocity block of a dual-quaternion QuaterNet
 * ``euler_from_quat``     QuaterNet's quaternion → Euler conversion (``qeuler``) for the six orders
+* ``euler_to_quat``       q_{o0}(a0) ⊗ q_{o1}(a1) ⊗ q_{o2}(a2): the Euler outputs of the long-term ablation (QN §4.4.2)
+* ``axis_angle_to_quat``  (cos θ/2, sin(θ/2)/θ · v): the axis-angle outputs of the same ablation
 
 Conventions: quaternions ``(w, x, y, z)``, Hamilton product, dual quaternions ``(q_r | q_d)`` (8 numbers). All
 arrays broadcast over leading axes; the last axis holds the object. Layers work on ``(..., 4)`` / ``(..., 8)``
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import quat_mul_kernel  # the Hamilton-product kernel (broadcasting, keeps float32)
+from refimpl.quat import quat_elementary_kernel, quat_mul_kernel  # Hamilton product (broadcasting, keeps float32)
 
 __all__ = [
     "EULER_ORDERS",
@@ -33,6 +35,8 @@ __all__ = [
     "dq_normalize_forward", "dq_normalize_backward",
     "dq_velocity_forward", "dq_velocity_backward",
     "euler_from_quat_forward", "euler_from_quat_backward",
+    "euler_to_quat_forward", "euler_to_quat_backward",
+    "axis_angle_to_quat_forward", "axis_angle_to_quat_backward",
 ]
 
 #: The Euler orders understood by :func:`euler_from_quat_forward` (QuaterNet's ``qeuler``).
@@ -512,6 +516,65 @@ def euler_from_quat_backward(dangles, cache):
         dq[..., i2] += 2.0 * s2 * q[..., j2] * ga_num
         dq[..., j2] += 2.0 * s2 * q[..., i2] * ga_num
     return dq
+
+
+
+# --------------------------------------------------------------------------------------------------
+# Euler angles and axis-angle vectors to quaternions (the long-term QuaterNet's ablation outputs, QN §4.4.2)
+
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+
+def euler_to_quat_forward(angles, order: str):
+    """``q = q_{o0}(a0) ⊗ q_{o1}(a1) ⊗ q_{o2}(a2)`` (:func:`refimpl.quat.quat_from_euler`), with a cache.
+
+    angles : (..., 3) radians, ``angles[..., i]`` about axis ``order[i]``; order : one of :data:`EULER_ORDERS`.
+    Returns q (..., 4) and the cache for :func:`euler_to_quat_backward`."""
+    if order not in EULER_ORDERS:
+        raise ValueError(f"order: expected one of {EULER_ORDERS}, got {order!r}")
+    angles = as_float_array(angles, "angles", 3)
+    e = [quat_elementary_kernel(_AXIS[order[i]], angles[..., i]) for i in range(3)]
+    ab, c1 = quat_mul_forward(e[0], e[1])
+    q, c2 = quat_mul_forward(ab, e[2])
+    return q, (angles, order, c1, c2)
+
+
+def euler_to_quat_backward(dq, cache) -> np.ndarray:
+    """Gradient of :func:`euler_to_quat_forward` w.r.t. the angles (..., 3): ``dq/da_i`` of the elementary
+    quaternion is ``½ (−sin a/2, cos a/2 e_axis)``."""
+    angles, order, c1, c2 = cache
+    dab, de2 = quat_mul_backward(dq, c2)
+    de0, de1 = quat_mul_backward(dab, c1)
+    out = np.empty_like(angles)
+    for i, de in enumerate((de0, de1, de2)):
+        a = angles[..., i]
+        out[..., i] = 0.5 * (-np.sin(a / 2) * de[..., 0] + np.cos(a / 2) * de[..., 1 + _AXIS[order[i]]])
+    return out
+
+
+_SMALL_ANGLE = 1e-4
+
+
+def axis_angle_to_quat_forward(v):
+    """``q = (cos θ/2, sin(θ/2)/θ · v)``, θ = ‖v‖ (:func:`refimpl.quat.quat_from_axis_angle`); below θ = 1e-4
+    the series ``sin(θ/2)/θ ≈ ½ − θ²/48``. v : (..., 3); returns q (..., 4) and the cache."""
+    v = as_float_array(v, "v", 3)
+    th = np.linalg.norm(v, axis=-1)
+    small = th < _SMALL_ANGLE
+    ts = np.where(small, 1.0, th)
+    s = np.where(small, 0.5 - th * th / 48.0, np.sin(ts / 2) / ts)
+    q = np.concatenate([np.cos(th / 2)[..., None], s[..., None] * v], axis=-1)
+    return q, (v, th, ts, small, s)
+
+
+def axis_angle_to_quat_backward(dq, cache) -> np.ndarray:
+    """Gradient of :func:`axis_angle_to_quat_forward`: ``dw/dv = −½ sin(θ/2) v/θ`` (→ −v/4 at 0),
+    ``d(s v)/dv = s I + v (s'(θ)/θ) vᵀ`` with ``s'(θ)/θ = (½ θ cos θ/2 − sin θ/2)/θ³`` (→ −1/24 at 0)."""
+    v, th, ts, small, s = cache
+    hw = np.where(small, 0.25 - th * th / 96.0, np.sin(ts / 2) / (2 * ts))       # ½ sin(θ/2)/θ
+    ds = np.where(small, -1.0 / 24.0, (0.5 * ts * np.cos(ts / 2) - np.sin(ts / 2)) / ts ** 3)
+    dxyz = dq[..., 1:]
+    return (-hw * dq[..., 0])[..., None] * v + s[..., None] * dxyz + (ds * np.sum(dxyz * v, -1))[..., None] * v
 
 
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
