@@ -3,7 +3,8 @@
 Built with the onnx package's own graph API (no PyTorch, no tracing). One builder module per layer family
 (``linear``, ``activations``, ``gru``, ``lstm``, ``conv1d``, ``quat``, ``kinematics``, ``features``), block
 quantisation for onnxruntime's ``MatMulNBits`` (``quantize``), the per-model exporters and runtimes with the
-exporter table (``deploy.models``: ``qtg``, ``qtg_compact``, ``qtg_io``), validation (``validate``: checker,
+exporter table (``deploy.models``: one graph module and one entry module ``*_io`` per model; QTG's ``qtg``,
+``qtg_compact``, ``qtg_io`` are re-exported here), validation (``validate``: checker,
 strict shape inference, the ONNX reference evaluator, onnxruntime), sessions (``session``) and the generic
 runtime wrapper (``runtime``). See ``spec/deploy.md`` and
 ``deploy/README.md`` (input/output contract, C API example).

@@ -30,8 +30,8 @@ Not adopted, because slower here: fusing the decoder's output layer with the nex
 (``[W_dᵀ | W_dᵀ W_e0ᵀ]`` saves a product but reads 42 k more weights per step).
 
 The ONNX ``GRU`` operator is not used: it cannot take the per-sample term ``k`` nor quantised weights.
-``weights="int8"`` (or ``"int4"``) stores every weight matrix block-wise quantised (:func:`quantize_blocks`) and
-multiplies with onnxruntime's ``com.microsoft.MatMulNBits`` kernel (``accuracy_level = 4``: int8 activations,
+``weights="int8"`` (or ``"int4"``) stores every weight matrix block-wise quantised
+(:func:`deploy.quantize.quantize_blocks`) and multiplies with onnxruntime's ``com.microsoft.MatMulNBits`` kernel (``accuracy_level = 4``: int8 activations,
 integer dot products; constant biases are the kernel's own bias input, a per-sample one — ``k``, ``z`` — an
 ``Add``). A step then reads 0.61 MB of weights and scales (int4: 0.34 MB) instead of 2.16 MB of float32 for
 the default sizes, about the size of a per-core L2 cache (512 KiB on the development VM). This makes the variant
