@@ -216,7 +216,7 @@ def test_generate_command_writes_bvh_json_png(trained, tmp_path, capsys):
 
 
 def test_export_parity(trained, tmp_path):
-    """spec/deploy.md §9: the exported step (5 chained steps from h0) and pace network against NumPy."""
+    """spec/deploy.md §12: the exported step (5 chained steps from h0) and pace network against NumPy."""
     pytest.importorskip("onnxruntime")
     from refimpl.services import export_onnx, load_trained, verify_onnx
     pose, pm = load_trained(trained / "pose" / "checkpoint.npz"), load_trained(trained / "pace" / "checkpoint.npz")
