@@ -33,7 +33,7 @@ from typing import Sequence
 import numpy as np
 
 from refimpl.bvh import read_bvh
-from refimpl.models import acrnn, acrnn_fast
+from refimpl.models import acrnn
 from refimpl.motion import Motion
 from refimpl.nn.params import check_float_array
 from refimpl.optim import ACRNN_ADAM, adam_init, adam_step
@@ -285,7 +285,7 @@ def train_acrnn(params: dict, config: "acrnn.ACRNNConfig", data: SynthesisData, 
                 steps: int, rng: np.random.Generator, batch_size: int = 32, length: int = 100,
                 lr: float = ACRNN_ADAM["lr"], state: dict | None = None, log=None) -> list:
     """A plain acRNN training loop (Adam, constant lr 1e-4, batch 32, windows of 100 + 1 frames by default), on the
-    fast path (:func:`refimpl.models.acrnn_fast.loss_and_grads`; ``refimpl train --model acrnn`` is the
+    model's path (:func:`refimpl.models.acrnn.loss_and_grads`; ``refimpl train --model acrnn`` is the
     resumable, checkpointed version).
 
     Parameters
@@ -307,7 +307,7 @@ def train_acrnn(params: dict, config: "acrnn.ACRNNConfig", data: SynthesisData, 
     losses = []
     for k in range(int(steps)):
         frames = sample_windows(rng, train, batch_size, length)
-        total, parts, grads = acrnn_fast.loss_and_grads(params, config, frames, spec)
+        total, parts, grads = acrnn.loss_and_grads(params, config, frames, spec)
         adam_step(params, grads, state, lr, ACRNN_ADAM["betas"], ACRNN_ADAM["eps"])
         losses.append(total)
         if log is not None:
