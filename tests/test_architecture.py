@@ -17,14 +17,13 @@ LAYERS = {
     2: ["refimpl.skeleton"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.expmap", "refimpl.skeletons", "refimpl.preprocess",
         "refimpl.representations", "refimpl.strategies", "refimpl.splines"],
-    4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.dq_prediction",
+    4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.dq_output_fast", "refimpl.dq_prediction",
         "refimpl.schedules"],
     5: ["refimpl.models", "refimpl.models.*"],
     6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.train", "refimpl.rigs",
-        "refimpl.transitions", "refimpl.baselines", "refimpl.metrics"],
+        "refimpl.protocols", "refimpl.protocols.*"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.tasks", "refimpl.tasks.*",
-        "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator",
-        "refimpl.locomotion_transitions"],
+        "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator"],
     8: ["refimpl.cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).

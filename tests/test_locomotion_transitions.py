@@ -12,15 +12,16 @@ import numpy as np
 import pytest
 
 from refimpl.errors import BadInputError
-from refimpl.locomotion_transitions import (FOLDER, JOINTS, KIND, RUN_MIN_CM_S, STAND_MAX_CM_S, bandai_namco_sources,
-                                            build_datasets, is_bandai_namco_folder, load_bandai_namco_source,
-                                            take_facts, window_kinds, window_speeds, window_styles)
-from refimpl.metrics import positions_from_poses
+from refimpl.protocols.transition_locomotion import (FOLDER, JOINTS, KIND, RUN_MIN_CM_S, STAND_MAX_CM_S, bandai_namco_sources,
+                                            build_datasets, grouped_errors, heldout_dataset, is_bandai_namco_folder,
+                                            load_bandai_namco_source, take_facts, window_kinds, window_speeds,
+                                            window_styles)
+from refimpl.protocols.transition_metrics import positions_from_poses
 from refimpl.quat import quat_from_axis_angle, quat_rotate
 from refimpl.tasks import transition
-from refimpl.tasks.locomotion import load_bandai_namco
+from refimpl.protocols.locomotion_data import load_bandai_namco
 from refimpl.testing import assert_close
-from refimpl.transitions import TransitionSource, join_pose, normalize_poses, split_pose
+from refimpl.protocols.transition import TransitionSource, join_pose, normalize_poses, split_pose
 
 CONTENTS = ("walk", "walk-turn-left", "walk-turn-right", "run")
 STYLES = ("active", "elderly", "exhausted", "feminine", "masculine", "normal")
@@ -174,3 +175,38 @@ def test_window_kinds_from_root_motion():
     w2 = join_pose(quat_rotate(yaw, r), q2)
     assert list(window_kinds(w2)) == list(window_kinds(w))
     assert STAND_MAX_CM_S < 120 < RUN_MIN_CM_S < 400
+
+
+def test_heldout_dataset_is_the_test_half(few_takes):
+    train, test = build_datasets(few_takes, T=30, stride=8)
+    held = heldout_dataset(few_takes, train.root_mean, train.root_std, T=30, stride=8)
+    assert np.array_equal(held.poses, test.poses) and np.array_equal(held.root_std, train.root_std)
+    assert [s.path for s in held.sources] == [s.path for s in test.sources]
+
+
+def test_grouped_errors_metric_and_groups(few_takes):
+    """Ground truth scores 0; a root shifted by (3, 0, 4) cm scores exactly 5 cm on every joint, in every group;
+    the groups partition the windows."""
+    _, test = build_datasets(few_takes, T=30, stride=8)
+    past, gt, target = test.context()
+
+    def truth(p, t, T):
+        n = len(p)
+        start = next(i for i in range(len(past)) if np.array_equal(past[i:i + n], p))
+        return gt[start:start + n]
+
+    def shifted(p, t, T):
+        out = truth(p, t, T).copy()
+        out[..., :3] += np.array([3.0, 0.0, 4.0])
+        return out
+
+    groups = {"style": window_styles(test), "kind": window_kinds(test.poses)}
+    res = grouped_errors(test, {"truth": truth, "shifted": shifted}, groups, batch_size=7)
+    assert res["truth"]["mean_cm"] == 0.0 and len(res["truth"]["per_frame_cm"]) == 30
+    assert_close(np.array(res["shifted"]["per_frame_cm"]), np.full(30, 5.0), rtol=0, atol=1e-9)
+    for g in groups:
+        by = res["shifted"][f"by_{g}"]
+        assert sum(v["num_windows"] for v in by.values()) == test.num_windows
+        assert all(abs(v["mean_cm"] - 5.0) < 1e-9 for v in by.values())
+    with pytest.raises(ValueError, match="groups"):
+        grouped_errors(test, {"truth": truth}, {"style": np.array(["a"])})

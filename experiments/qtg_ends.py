@@ -1,7 +1,7 @@
 """Why does QTG miss the context at the first and last transition frames? (issue 26 item 4, spec/qtg.md §11.3)
 
 For a trained QTG checkpoint and the held-out windows of ``--data`` this measures, in the paper's metric (mean
-joint-position error per joint, cm, :func:`refimpl.metrics.joint_position_errors`):
+joint-position error per joint, cm, :func:`refimpl.protocols.transition_metrics.joint_position_errors`):
 
 * ``per_frame_cm``: the network's error per transition frame (frame 1 … T);
 * ``autoencoder_cm``: the decoder's precision floor, ``D(E(p))`` against ``p`` for the ground-truth poses of frame 1,
@@ -14,7 +14,7 @@ joint-position error per joint, cm, :func:`refimpl.metrics.joint_position_errors
 
 Usage::
 
-    python experiments/exp_qtg_ends.py --checkpoint runs/qtg_bn/checkpoint.npz \
+    python -m experiments.qtg_ends --checkpoint runs/qtg_bn/checkpoint.npz \
         --data ../shared/data/bandai_namco_locomotion --json experiments/results/qtg_locomotion/ends.json
 
 Shape legend: N windows, T transition frames, P pose size, J joints, Z latent size.
@@ -23,23 +23,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from refimpl.atomic import atomic_write_text  # noqa: E402
-from refimpl.metrics import joint_position_errors  # noqa: E402
-from refimpl.models.qtg import encode  # noqa: E402
-from refimpl.nn.mlp import mlp_forward  # noqa: E402
-from refimpl.services import load_trained, network_methods  # noqa: E402
-from refimpl.tasks.transition import build_datasets  # noqa: E402
-from refimpl.transitions import denormalize_poses, join_pose, normalize_poses, split_pose  # noqa: E402
+from refimpl.atomic import atomic_write_text
+from refimpl.protocols.transition_metrics import joint_position_errors
+from refimpl.models.qtg import encode
+from refimpl.nn.mlp import mlp_forward
+from refimpl.services import load_trained, network_methods
+from refimpl.protocols.transition_locomotion import heldout_dataset
+from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, split_pose
 
 
 def autoencode(model, poses):
@@ -87,7 +82,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     models = [load_trained(c) for c in args.checkpoint]
-    _, test_ds = build_datasets(args.data, models[0].transition_length, args.stride)
+    test_ds = heldout_dataset(args.data, models[0].root_mean, models[0].root_std, models[0].transition_length,
+                              args.stride)
     print(f"{test_ds.num_windows} held-out windows in {time.perf_counter() - t0:.1f} s", flush=True)
     results = {}
     for c, m in zip(args.checkpoint, models):

@@ -2,16 +2,16 @@
 
 ``../shared/data/bandai_namco_locomotion`` (830 BVH takes at 30 fps: walk, walk-turn-left, walk-turn-right, run,
 in six styles) is the nearest available stand-in for the Holden et al. locomotion set that QTG was trained on.
-This module turns it into :class:`~refimpl.transitions.TransitionDataset` windows built exactly as the CMU ones
-(:func:`refimpl.transitions.build_transition_datasets`: ``2 + T + 2`` poses, root relative to the first pose,
+This module turns it into :class:`~refimpl.protocols.transition.TransitionDataset` windows built exactly as the CMU ones
+(:func:`refimpl.protocols.transition.build_transition_datasets`: ``2 + T + 2`` poses, root relative to the first pose,
 root translation z-normalised with the training windows' statistics), with:
 
-* the reader :func:`load_bandai_namco_source` (the locomotion task's :func:`~refimpl.tasks.locomotion.load_bandai_namco`,
-  then the 21 joints of :data:`~refimpl.tasks.locomotion.BANDAI_NAMCO_RIG` in centimetres — this rig has 21
+* the reader :func:`load_bandai_namco_source` (the locomotion task's :func:`~refimpl.protocols.locomotion_data.load_bandai_namco`,
+  then the 21 joints of :data:`~refimpl.protocols.locomotion_data.BANDAI_NAMCO_RIG` in centimetres — this rig has 21
   joints, not the paper's 22: ``Hips``, 2 spine, neck, head, 2 × 4 arm and 2 × 4 leg joints; the static
   ``joint_Root`` carries no motion and is dropped, P = 3 + 4·21 = 87);
 * the split by whole takes :func:`bandai_namco_sources` (the locomotion task's
-  :func:`~refimpl.tasks.locomotion.bandai_namco_split`: take ids ending in 1 held out, every content × style in
+  :func:`~refimpl.protocols.locomotion_data.bandai_namco_split`: take ids ending in 1 held out, every content × style in
   both sides);
 * labels for the evaluation: :func:`take_facts` (content, style, id of a take) and :func:`window_kinds`
   (the transition a window asks for, from its own root motion: ``walk->run``, ``stand->walk``, ``walk turn``...).
@@ -26,16 +26,16 @@ from pathlib import Path
 
 import numpy as np
 
-from refimpl.metrics import joint_position_errors
 from refimpl.rigs import heading_from_root, subset_22
-from refimpl.tasks.locomotion import BANDAI_NAMCO_RIG, bandai_namco_split, load_bandai_namco
-from refimpl.transitions import TransitionSource, build_transition_datasets, split_pose
+from refimpl.protocols.locomotion_data import BANDAI_NAMCO_RIG, bandai_namco_split, load_bandai_namco
+from refimpl.protocols.transition import TransitionSource, build_transition_datasets, split_pose
+from refimpl.protocols.transition_metrics import joint_position_errors
 
 __all__ = ["KIND", "FOLDER", "JOINTS", "TakeFacts", "take_facts", "find_takes", "is_bandai_namco_folder",
-           "bandai_namco_sources", "load_bandai_namco_source", "build_datasets", "window_speeds", "window_kinds",
+           "bandai_namco_sources", "load_bandai_namco_source", "build_datasets", "heldout_dataset", "window_speeds", "window_kinds",
            "window_styles", "grouped_errors", "STAND_MAX_CM_S", "RUN_MIN_CM_S", "TURN_MIN_DEG"]
 
-#: :class:`~refimpl.transitions.TransitionSource` kind of a Bandai Namco take.
+#: :class:`~refimpl.protocols.transition.TransitionSource` kind of a Bandai Namco take.
 KIND = "bandai_namco_bvh"
 #: Name of the data set's folder in ``../shared/data``.
 FOLDER = "bandai_namco_locomotion"
@@ -81,7 +81,7 @@ def find_takes(root) -> list[Path]:
 
 def is_bandai_namco_folder(root) -> bool:
     """True for a folder of Bandai Namco takes, or one holding ``bandai_namco_locomotion`` without the CMU data
-    (``../shared/data`` itself stays the CMU set of :func:`refimpl.transitions.shared_sources`)."""
+    (``../shared/data`` itself stays the CMU set of :func:`refimpl.protocols.transition.shared_sources`)."""
     root = Path(root)
     if not root.is_dir() or (root / "dmgnn_cmu_expmap").is_dir():
         return False
@@ -89,7 +89,7 @@ def is_bandai_namco_folder(root) -> bool:
 
 
 def bandai_namco_sources(root):
-    """Train and test sources, split by whole takes (:func:`~refimpl.tasks.locomotion.bandai_namco_split`: ids
+    """Train and test sources, split by whole takes (:func:`~refimpl.protocols.locomotion_data.bandai_namco_split`: ids
     ending in 1 held out). Each source's label is its take's content (walk, walk-turn-left, walk-turn-right, run).
 
     Returns
@@ -108,9 +108,9 @@ def bandai_namco_sources(root):
 
 
 def load_bandai_namco_source(source: TransitionSource, fps: float = 30.0):
-    """Read one take for :func:`~refimpl.transitions.build_transition_datasets` (its ``loader``).
+    """Read one take for :func:`~refimpl.protocols.transition.build_transition_datasets` (its ``loader``).
 
-    :func:`~refimpl.tasks.locomotion.load_bandai_namco` (re-rooted at ``Hips``, centimetres, rotations continuous),
+    :func:`~refimpl.protocols.locomotion_data.load_bandai_namco` (re-rooted at ``Hips``, centimetres, rotations continuous),
     then the 21 joints of :data:`JOINTS` (the End Sites dropped: exact). No frame is dropped (the takes have no
     reference pose). ``source.frames`` selects a fraction of the take; ``fps`` must be 30 (the takes' rate).
 
@@ -132,7 +132,7 @@ def load_bandai_namco_source(source: TransitionSource, fps: float = 30.0):
 
 
 def build_datasets(root, T: int = 30, stride: int = 4, test_stride: int | None = None):
-    """Train and test :class:`~refimpl.transitions.TransitionDataset` of the takes in ``root`` (spec/qtg.md §8.4).
+    """Train and test :class:`~refimpl.protocols.transition.TransitionDataset` of the takes in ``root`` (spec/qtg.md §8.4).
 
     Windows of ``2 + T + 2`` poses every ``stride`` frames of every take (``test_stride`` for the held-out takes,
     default ``stride``); root statistics from the training windows.
@@ -140,6 +140,16 @@ def build_datasets(root, T: int = 30, stride: int = 4, test_stride: int | None =
     train_src, test_src = bandai_namco_sources(root)
     return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride,
                                      loader=load_bandai_namco_source)
+
+
+def heldout_dataset(root, root_mean, root_std, T: int = 30, stride: int = 4):
+    """Only the held-out windows of :func:`build_datasets` (reads the ~95 held-out takes, not all 830), with the
+    given root statistics (a trained model's): what an evaluation needs. Same windows as ``build_datasets(...)[1]``
+    with ``test_stride = stride``."""
+    _, test_src = bandai_namco_sources(root)
+    test, _ = build_transition_datasets(test_src, [], T=T, stride=stride, loader=load_bandai_namco_source)
+    return dataclasses.replace(test, root_mean=np.asarray(root_mean, dtype=np.float64),
+                               root_std=np.asarray(root_std, dtype=np.float64))
 
 
 def window_speeds(poses, fps: float = 30.0, past: int = 2, future: int = 2):

@@ -5,17 +5,17 @@ Two commands::
 
     # QTG, inertialisation and interpolation on the held-out takes: mean and per frame, overall, per style,
     # per transition kind (from each window's root motion) and per take content; JSON + a markdown table
-    python experiments/exp_qtg_locomotion.py eval --checkpoint runs/qtg_bn/checkpoint.npz \
+    python -m experiments.qtg_locomotion eval --checkpoint runs/qtg_bn/checkpoint.npz \
         --data ../shared/data/bandai_namco_locomotion --out experiments/results/qtg_locomotion/results.json \
         --md experiments/results/qtg_locomotion/results.md
 
     # every snapshot of a run (runs/qtg_bn/snapshots/*.npz): held-out error against steps and training time
-    python experiments/exp_qtg_locomotion.py curve --run runs/qtg_bn --data ../shared/data/bandai_namco_locomotion \
+    python -m experiments.qtg_locomotion curve --run runs/qtg_bn --data ../shared/data/bandai_namco_locomotion \
         --out experiments/results/qtg_locomotion/curve.json
 
 The metric is the paper's (spec/qtg.md §9): Euclidean joint-position error per joint per transition frame, cm,
 over the 21 joints of the Bandai Namco rig. Windows: ``2 + 30 + 2`` poses every ``--stride`` frames of the held-out
-takes (ids ending in 1), :mod:`refimpl.locomotion_transitions`.
+takes (ids ending in 1), :mod:`refimpl.protocols.transition_locomotion`.
 
 Shape legend: N windows, T transition frames.
 """
@@ -30,15 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from refimpl.atomic import atomic_write_text  # noqa: E402
-from refimpl.locomotion_transitions import (grouped_errors, take_facts, window_kinds,  # noqa: E402
-                                            window_styles)
-from refimpl.services import load_trained, network_methods  # noqa: E402
-from refimpl.tasks import transition  # noqa: E402
+from refimpl.atomic import atomic_write_text
+from refimpl.protocols.transition_locomotion import (grouped_errors, heldout_dataset, take_facts, window_kinds,
+                                                     window_styles)
+from refimpl.services import load_trained, network_methods
+from refimpl.tasks import transition
 
 FRAMES = (1, 2, 5, 10, 15, 20, 25, 29, 30)
 
@@ -99,7 +95,7 @@ def markdown(results: dict, meta: dict) -> str:
 def cmd_eval(args) -> int:
     t0 = time.perf_counter()
     model = load_trained(args.checkpoint)
-    _, test_ds = transition.build_datasets(args.data, model.transition_length, args.stride)
+    test_ds = heldout_dataset(args.data, model.root_mean, model.root_std, model.transition_length, args.stride)
     _say(f"{test_ds.num_windows} held-out windows of {len(test_ds.sources)} takes in {time.perf_counter() - t0:.1f} s")
     methods = transition.methods(network_methods(model), fps=test_ds.fps)
     results = grouped_errors(test_ds, methods, _groups(test_ds))
@@ -108,7 +104,7 @@ def cmd_eval(args) -> int:
             "training_s": _elapsed_at(Path(args.checkpoint).parent, step), "data": str(args.data),
             "stride": args.stride, "num_windows": test_ds.num_windows, "num_takes": len(test_ds.sources),
             "held_out_takes": [Path(s.path).name for s in test_ds.sources],
-            "command": "python experiments/exp_qtg_locomotion.py " + " ".join(sys.argv[1:])}
+            "command": "python -m experiments.qtg_locomotion " + " ".join(sys.argv[1:])}
     for n, r in results.items():
         _say(f"{n:16s} mean {r['mean_cm']:6.2f} cm  f1 {r['per_frame_cm'][0]:6.2f}  f30 {r['per_frame_cm'][-1]:6.2f}  "
              + "  ".join(f"{k} {v['mean_cm']:.2f}" for k, v in r["by_style"].items()))
@@ -127,7 +123,8 @@ def cmd_curve(args) -> int:
     if not snaps:
         raise SystemExit(f"{run}/snapshots: no checkpoint")
     models = [load_trained(s) for s in snaps]
-    _, test_ds = transition.build_datasets(args.data, models[0].transition_length, args.stride)
+    test_ds = heldout_dataset(args.data, models[0].root_mean, models[0].root_std, models[0].transition_length,
+                              args.stride)
     groups = _groups(test_ds)
     base = grouped_errors(test_ds, transition.methods({}, fps=test_ds.fps), groups)
     points = []
@@ -150,7 +147,7 @@ def cmd_curve(args) -> int:
            "baselines": {n: {"mean_cm": v["mean_cm"], "frame_1_cm": v["per_frame_cm"][0],
                              "frame_T_cm": v["per_frame_cm"][-1]} for n, v in base.items()},
            "points": points,
-           "command": "python experiments/exp_qtg_locomotion.py " + " ".join(sys.argv[1:])}
+           "command": "python -m experiments.qtg_locomotion " + " ".join(sys.argv[1:])}
     atomic_write_text(Path(args.out), json.dumps(out, indent=2) + "\n", make_parents=True)
     _say(f"wrote {args.out}")
     if args.plot:
