@@ -122,6 +122,11 @@ def cmd_curve(args) -> int:
     snaps = sorted((run / "snapshots").glob("*.npz")) + ([Path(c) for c in args.checkpoint] if args.checkpoint else [])
     if not snaps:
         raise SystemExit(f"{run}/snapshots: no checkpoint")
+    done = {}
+    if Path(args.out).is_file():  # points of an earlier call on the same data are kept, not measured again
+        prev = json.loads(Path(args.out).read_text())
+        if prev.get("data") == str(args.data) and prev.get("stride") == args.stride:
+            done = {p["checkpoint"]: p for p in prev["points"]}
     models = [load_trained(s) for s in snaps]
     test_ds = heldout_dataset(args.data, models[0].root_mean, models[0].root_std, models[0].transition_length,
                               args.stride)
@@ -134,6 +139,9 @@ def cmd_curve(args) -> int:
         if step in seen:
             continue
         seen.add(step)
+        if path.name in done and done[path.name]["step"] == step:
+            points.append(done[path.name])
+            continue
         r = grouped_errors(test_ds, network_methods(model), groups)[model.spec.name]
         points.append({"checkpoint": path.name, "step": step, "training_s": _elapsed_at(run, step),
                        "mean_cm": r["mean_cm"], "frame_1_cm": r["per_frame_cm"][0],

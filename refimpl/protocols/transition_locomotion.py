@@ -44,7 +44,7 @@ JOINTS = tuple(BANDAI_NAMCO_RIG.keep)
 
 #: Horizontal root speed (cm/s) below which a window's end is "stand", and from which it is "run"; between: "walk".
 STAND_MAX_CM_S = 40.0
-RUN_MIN_CM_S = 250.0
+RUN_MIN_CM_S = 200.0
 #: Heading change (degrees) between a window's first and last pose from which it is a turn.
 TURN_MIN_DEG = 45.0
 
