@@ -29,7 +29,7 @@ import numpy as np
 from refimpl.rigs import heading_from_root, subset_22
 from refimpl.protocols.locomotion_data import BANDAI_NAMCO_RIG, bandai_namco_split, load_bandai_namco
 from refimpl.protocols.transition import TransitionSource, build_transition_datasets, split_pose
-from refimpl.protocols.transition_metrics import joint_position_errors
+from refimpl.protocols.transition_metrics import joint_position_errors, run_method
 
 __all__ = ["KIND", "FOLDER", "JOINTS", "TakeFacts", "take_facts", "find_takes", "is_bandai_namco_folder",
            "bandai_namco_sources", "load_bandai_namco_source", "build_datasets", "heldout_dataset", "window_speeds", "window_kinds",
@@ -227,14 +227,10 @@ def grouped_errors(dataset, methods, groups, batch_size: int = 1024) -> dict:
     for g, v in labels.items():
         if v.shape != (dataset.num_windows,):
             raise ValueError(f"groups[{g!r}]: expected shape ({dataset.num_windows},), got {v.shape}")
-    past, gt, target = dataset.context()
-    T = dataset.transition_length
+    gt = dataset.context()[1]
     out = {}
     for name, f in methods.items():
-        pred = np.concatenate([np.asarray(f(past[i:i + batch_size], target[i:i + batch_size], T), dtype=np.float64)
-                               for i in range(0, dataset.num_windows, batch_size)])
-        if pred.shape != gt.shape:
-            raise ValueError(f"methods[{name!r}]: expected output shape {gt.shape}, got {pred.shape}")
+        pred = run_method(dataset, name, f, batch_size)
         per_window = joint_position_errors(pred, gt, dataset.skeletons, dataset.skeleton_index)[0].mean(axis=2)
         res = _summary(per_window)  # (N, T) -> summary
         for g, v in labels.items():

@@ -25,7 +25,7 @@ from refimpl.nn.params import check_float_array
 from refimpl.protocols.transition import TransitionDataset, split_pose
 from refimpl.skeleton import Skeleton
 
-__all__ = ["positions_from_poses", "joint_position_errors", "evaluate_methods", "format_table"]
+__all__ = ["positions_from_poses", "joint_position_errors", "run_method", "evaluate_methods", "format_table"]
 
 
 def positions_from_poses(poses, skeleton: Skeleton) -> np.ndarray:
@@ -85,6 +85,22 @@ def joint_position_errors(pred, gt, skeletons, skeleton_index) -> tuple[np.ndarr
     return dist, absc
 
 
+def run_method(dataset: TransitionDataset, name: str, method: Callable, batch_size: int = 1024) -> np.ndarray:
+    """``method(past, target, T)`` on every window of ``dataset``, ``batch_size`` windows per call.
+
+    Returns
+    -------
+    ndarray (N, T, P), float64; ValueError naming ``methods[name]`` when the output has another shape.
+    """
+    past, gt, target = dataset.context()
+    T = dataset.transition_length
+    pred = np.concatenate([np.asarray(method(past[i:i + batch_size], target[i:i + batch_size], T), dtype=np.float64)
+                           for i in range(0, dataset.num_windows, batch_size)])
+    if pred.shape != gt.shape:
+        raise ValueError(f"methods[{name!r}]: expected output shape {gt.shape}, got {pred.shape}")
+    return pred
+
+
 def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable], batch_size: int = 1024,
                      labels: bool = True) -> dict:
     """Run every method on every window of ``dataset`` and measure it (spec/qtg.md §9).
@@ -108,15 +124,11 @@ def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable]
         raise ValueError(f"dataset: expected a TransitionDataset, got {type(dataset).__name__}")
     if dataset.num_windows == 0:
         raise ValueError("dataset: no windows to evaluate")
-    past, gt, target = dataset.context()
-    T = dataset.transition_length
+    gt = dataset.context()[1]
     label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
     out = {}
     for name, f in methods.items():
-        pred = np.concatenate([np.asarray(f(past[i:i + batch_size], target[i:i + batch_size], T), dtype=np.float64)
-                               for i in range(0, dataset.num_windows, batch_size)])
-        if pred.shape != gt.shape:
-            raise ValueError(f"methods[{name!r}]: expected output shape {gt.shape}, got {pred.shape}")
+        pred = run_method(dataset, name, f, batch_size)
         dist, absc = joint_position_errors(pred, gt, dataset.skeletons, dataset.skeleton_index)
         res = {"mean_cm": float(dist.mean()), "per_frame_cm": dist.mean(axis=(0, 2)),
                "abs_coord_cm": float(absc.mean()), "num_windows": int(dataset.num_windows)}
