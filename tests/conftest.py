@@ -24,6 +24,13 @@ settings.register_profile(
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
+# The tests' data cache (refimpl/datacache.py) lives in a fresh temporary folder, never in ~/.cache/refimpl;
+# subprocesses of the tests inherit it.
+if "REFIMPL_CACHE" not in os.environ:
+    import tempfile
+
+    os.environ["REFIMPL_CACHE"] = tempfile.mkdtemp(prefix="refimpl-test-cache-")
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
 SHARED_DATA = SHARED / "data"

@@ -860,15 +860,22 @@ def _load_file(kind: str, path: str) -> tuple[Motion, LocomotionRig]:
 def build_dataset(kind: str, files: Sequence[str], *, prefix: int = 30, target: int = 60, mirror: bool = True,
                   pace_chunk_length: int = 0, progress: Callable[[str], None] | None = None) -> LocomotionDataset:
     """Load ``files`` of one ``kind`` (:func:`resolve_files`) into a :class:`LocomotionDataset`
-    (:func:`build_sequences`: mirrored, every downsampling phase)."""
-    seqs, rig = [], None
-    for i, f in enumerate(files):
-        motion, rig = _load_file(kind, f)
-        seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
-        if progress is not None and (i + 1) % 100 == 0:
-            progress(f"  loaded {i + 1}/{len(files)} files")
-    if not seqs:
-        raise ValueError("files: no sequence loaded")
+    (:func:`build_sequences`: mirrored, every downsampling phase), through the data cache
+    (:mod:`refimpl.tasks.locomotion_cache`; ``REFIMPL_CACHE=off`` reads the files every time)."""
+    from refimpl.tasks.locomotion_cache import load_sequences
+
+    def read():
+        seqs, rig = [], None
+        for i, f in enumerate(files):
+            motion, rig = _load_file(kind, f)
+            seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
+            if progress is not None and (i + 1) % 100 == 0:
+                progress(f"  loaded {i + 1}/{len(files)} files")
+        if not seqs:
+            raise ValueError("files: no sequence loaded")
+        return seqs, rig
+
+    seqs, rig = load_sequences(kind, files, read, mirror=mirror, progress=progress)
     ref = seqs[0].skeleton
     for s in seqs:
         if s.skeleton.num_joints != ref.num_joints or not np.allclose(s.skeleton.offsets, ref.offsets, atol=1e-6):
