@@ -48,7 +48,7 @@ import numpy as np
 
 from refimpl.allocator import retain_freed_memory
 from refimpl.errors import DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading
-from refimpl.options import add_data_options, nonneg_int, positive_float, positive_int
+from refimpl.options import add_data_options, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import MODELS, TASKS, task_of
 from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
                               onnx_metadata, read_motion, train_model, verify_onnx)
@@ -270,6 +270,7 @@ def cmd_train(args) -> int:
     rep = args.representation or spec.representations[0]
     if rep not in spec.representations:
         raise UsageError(f"--representation {rep!r}: model {spec.name!r} trains on {list(spec.representations)}")
+    check_overrides(spec.config_type, args.set)  # a --set typo is exit 2 before any data is read
     out = Path(args.out)
     ckpt = out / "checkpoint.npz"
     if args.resume and not ckpt.is_file():
@@ -736,12 +737,11 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
     parser.add_argument("--version", action="version", version=f"refimpl {__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=nonneg_int, default=2,
-                        help="BLAS threads for NumPy (default 2: measured fastest on an idle 2-core machine, "
-                             "0.58-0.74x the one-thread time per training step of every network and equal or "
-                             "faster at batch 1, benchmarks/bench_threads.py; pass 1 when other jobs share the "
-                             "cores, where two threads were 1.2-20x slower; 0 = library default; needs "
-                             "threadpoolctl)")
+    parser.add_argument("--blas-threads", type=nonneg_int, default=1,
+                        help="BLAS threads for NumPy (default 1: never far from the fastest; 2 threads are "
+                             "10-40%% faster per training step on an idle 2-core machine but many times slower "
+                             "when other jobs share the cores, benchmarks/bench_thread_default.py; pass 2 on a "
+                             "machine you have to yourself; 0 = library default; needs threadpoolctl)")
     parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
                         help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
                              "training step instead of faulting it in again (QTG step time 0.76-0.99x, pace 0.80-0.83x, "

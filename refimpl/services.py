@@ -28,8 +28,8 @@ __all__ = ["SAMPLE_DIR", "blas_threads", "read_motion", "load_trained", "train_m
 def blas_threads(n: int | None):
     """Limit the BLAS thread pool to ``n`` threads inside the block (threadpoolctl, when installed).
 
-    The command line passes 2 by default (fastest on an idle 2-core machine, spec/cli.md); one thread is much
-    faster than two when other jobs share the cores. ``None`` or 0 leaves the library default.
+    The command line passes 1 by default (spec/cli.md): two threads are somewhat faster on an idle 2-core
+    machine but many times slower when other jobs share the cores. ``None`` or 0 leaves the library default.
     """
     if not n:
         yield

@@ -168,7 +168,7 @@ def _assert_same(a, b):
 def test_encode_decode_sequences_is_exact(small_folder):
     seqs, rig = _fresh(small_folder)
     arrays, meta = encode_sequences((seqs, rig))
-    back, rig2 = decode_sequences(arrays, meta)
+    back, rig2 = decode_sequences(arrays, meta, loco.LocomotionSequence, (loco.CMU_RIG, loco.BANDAI_NAMCO_RIG))
     assert rig2 is rig and meta["skeletons"] == 1
     _assert_same(back, seqs)
 
@@ -181,32 +181,36 @@ def test_locomotion_cache_hit_miss_and_invalidation(small_folder, tmp_path):
         calls.append(1)
         return _fresh(small_folder, mirror)
 
-    first, _ = load_sequences("cmu_expmap", small_folder, read, folder=folder)
-    second, _ = load_sequences("cmu_expmap", small_folder, read, folder=folder)
+    def load(files, build, mirror=True):
+        return load_sequences(files, build, sequence_type=loco.LocomotionSequence, rigs=(loco.CMU_RIG,),
+                              options=dict(kind="cmu_expmap", mirror=mirror), folder=folder)
+
+    first, _ = load(small_folder, read)
+    second, _ = load(small_folder, read)
     assert len(calls) == 1
     _assert_same(second, first)
     # options are part of the key
-    load_sequences("cmu_expmap", small_folder, lambda: read(False), mirror=False, folder=folder)
+    load(small_folder, lambda: read(False), mirror=False)
     assert len(calls) == 2
     # a touched file invalidates the entry
     st = os.stat(small_folder[0])
     os.utime(small_folder[0], ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
-    load_sequences("cmu_expmap", small_folder, read, folder=folder)
+    load(small_folder, read)
     assert len(calls) == 3
     # a file fewer is another key
-    load_sequences("cmu_expmap", small_folder[:2], lambda: _fresh(small_folder[:2]), folder=folder)
-    third, _ = load_sequences("cmu_expmap", small_folder, read, folder=folder)
+    load(small_folder[:2], lambda: _fresh(small_folder[:2]))
+    third, _ = load(small_folder, read)
     assert len(calls) == 3
     _assert_same(third, first)
 
 
 def test_loader_version_hashes_the_loader_source(monkeypatch):
-    v = loader_version()
-    assert v == loader_version() and len(v) == 64
+    v = loader_version(loco.LocomotionSequence)
+    assert v == loader_version(loco.LocomotionSequence) and len(v) == 64
     import refimpl.tasks.locomotion_cache as lc
 
     monkeypatch.setattr(lc, "LOADER_VERSION", lc.LOADER_VERSION + 1)
-    assert loader_version() != v
+    assert loader_version(loco.LocomotionSequence) != v
 
 
 def test_build_dataset_through_the_cache_equals_a_fresh_read(small_folder, monkeypatch, tmp_path):

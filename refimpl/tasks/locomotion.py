@@ -875,7 +875,8 @@ def build_dataset(kind: str, files: Sequence[str], *, prefix: int = 30, target: 
             raise ValueError("files: no sequence loaded")
         return seqs, rig
 
-    seqs, rig = load_sequences(kind, files, read, mirror=mirror, progress=progress)
+    seqs, rig = load_sequences(files, read, sequence_type=LocomotionSequence, rigs=(BANDAI_NAMCO_RIG, CMU_RIG),
+                               options=dict(kind=kind, mirror=bool(mirror), fps=FPS), progress=progress)
     ref = seqs[0].skeleton
     for s in seqs:
         if s.skeleton.num_joints != ref.num_joints or not np.allclose(s.skeleton.offsets, ref.offsets, atol=1e-6):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -21,7 +22,6 @@ import numpy as np
 from refimpl import bvh, expmap, motion, quat, skeleton
 from refimpl.datacache import cached, fingerprint
 from refimpl.skeleton import Skeleton
-from refimpl.tasks import locomotion as _loco
 
 __all__ = ["LOADER_VERSION", "loader_version", "load_sequences", "encode_sequences", "decode_sequences"]
 
@@ -30,10 +30,11 @@ LOADER_VERSION = 1
 _FIELDS = ("rotations", "trajectory", "positions_world", "positions_local", "phase", "features")
 
 
-def loader_version() -> str:
-    """``LOADER_VERSION`` and the sha256 of the source of the modules a sequence is prepared by."""
+def loader_version(sequence_type: type) -> str:
+    """``LOADER_VERSION`` and the sha256 of the source of the modules a sequence is prepared by: the module
+    defining ``sequence_type`` (the locomotion task's data module) and the readers and kinematics below it."""
     h = hashlib.sha256(str(LOADER_VERSION).encode())
-    for mod in (_loco, bvh, expmap, motion, quat, skeleton):
+    for mod in (sys.modules[sequence_type.__module__], bvh, expmap, motion, quat, skeleton):
         h.update(Path(inspect.getsourcefile(mod)).read_bytes())
     return h.hexdigest()
 
@@ -81,10 +82,9 @@ def encode_sequences(value: tuple) -> tuple[dict, dict]:
     return arrays, dict(rig=rig.name, sequences=len(seqs), skeletons=len(skels))
 
 
-def decode_sequences(arrays: dict, meta: dict) -> tuple[list, object]:
-    """Inverse of :func:`encode_sequences`: ``(list of LocomotionSequence, LocomotionRig)``."""
-    rigs = {r.name: r for r in (_loco.BANDAI_NAMCO_RIG, _loco.CMU_RIG)}
-    rig = rigs[meta["rig"]]
+def decode_sequences(arrays: dict, meta: dict, sequence_type: type, rigs: Sequence) -> tuple[list, object]:
+    """Inverse of :func:`encode_sequences`: ``(list of sequence_type, the rig of rigs named in meta)``."""
+    rig = {r.name: r for r in rigs}[meta["rig"]]
     lengths = arrays["lengths"]
     if lengths.sum() != arrays["rotations"].shape[0] or len(lengths) != int(meta["sequences"]):
         raise ValueError("lengths do not add up to the stored frames")
@@ -92,24 +92,27 @@ def decode_sequences(arrays: dict, meta: dict) -> tuple[list, object]:
     ends = np.cumsum(lengths)
     out = []
     for i, (a, b) in enumerate(zip(ends - lengths, ends)):
-        out.append(_loco.LocomotionSequence(
+        out.append(sequence_type(
             name=str(arrays["names"][i]), source=str(arrays["sources"][i]),
             skeleton=skels[int(arrays["skeleton_index"][i])], **{f: arrays[f][a:b] for f in _FIELDS}))
     return out, rig
 
 
-def load_sequences(kind: str, files: Sequence[str], build: Callable[[], tuple[list, object]], *,
-                   mirror: bool = True, progress: Callable[[str], None] | None = None,
+def load_sequences(files: Sequence[str], build: Callable[[], tuple[list, object]], *, sequence_type: type,
+                   rigs: Sequence, options: dict, progress: Callable[[str], None] | None = None,
                    folder=None) -> tuple[list, object]:
-    """``(sequences, rig)`` of ``files`` of one ``kind`` (:func:`refimpl.tasks.locomotion.resolve_files`):
-    the cache's verified entry for these files and options, else ``build()`` (which reads them), stored.
+    """``(sequences, rig)`` of ``files``: the cache's verified entry for these files and ``options`` (the
+    loader's: source kind, mirroring, frame rate), else ``build()`` (which reads them), stored.
+
+    ``sequence_type`` is :class:`refimpl.tasks.locomotion.LocomotionSequence`, ``rigs`` the rigs a stored rig
+    name may refer to.
 
     Raises
     ------
     OSError, ValueError
         A file is missing or cannot be parsed (as without the cache).
     """
-    key = fingerprint(files, name="locomotion", version=loader_version(),
-                      options=dict(kind=kind, mirror=bool(mirror), fps=_loco.FPS))
-    return cached(f"locomotion-{kind}", key, build, encode_sequences, decode_sequences, folder=folder,
+    key = fingerprint(files, name="locomotion", version=loader_version(sequence_type), options=options)
+    return cached(f"locomotion-{options.get('kind', 'data')}", key, build, encode_sequences,
+                  lambda arrays, meta: decode_sequences(arrays, meta, sequence_type, rigs), folder=folder,
                   progress=progress)
