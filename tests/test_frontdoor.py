@@ -2,6 +2,7 @@
 read, the thread default, and the defects a newcomer hit (spec/cli.md)."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from refimpl.cli import build_parser, main
@@ -27,3 +28,35 @@ def test_a_set_value_of_the_wrong_type_is_exit_2_before_the_data_is_read(tmp_pat
     rc = main(["train", "--model", "quaternet-long", "--data", str(tmp_path / "nowhere"),
                "--out", str(tmp_path / "o"), "--set", "hidden_size=big", "--steps", "1"])
     assert rc == 2 and "'big' is not a valid int" in capsys.readouterr().err
+
+
+class _ClosedPipe:
+    """A stdout whose reader has gone away (``| head`` after ten lines)."""
+
+    def __init__(self, lines_before_close: int = 2):
+        self.left = lines_before_close
+
+    def write(self, text):
+        if "\n" in text:
+            self.left -= 1
+        if self.left < 0:
+            raise BrokenPipeError(32, "Broken pipe")
+        return len(text)
+
+    def flush(self):
+        if self.left < 0:
+            raise BrokenPipeError(32, "Broken pipe")
+
+
+def test_deploy_info_into_a_closed_pipe_stops_quietly(monkeypatch, capsys):
+    import deploy.cli
+    import deploy.runtime
+
+    class _Model:
+        inputs = [("x", (1, 3), np.float32)] * 20
+        outputs = [("y", (1, 3), np.float32)] * 20
+        metadata = {f"k{i}": i for i in range(50)}
+
+    monkeypatch.setattr(deploy.runtime, "load_model", lambda path: _Model())
+    monkeypatch.setattr("sys.stdout", _ClosedPipe())
+    assert deploy.cli.main(["info", "model.onnx"]) == 1  # old: BrokenPipeError traceback
