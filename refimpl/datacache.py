@@ -8,7 +8,7 @@ of its inputs, and the next command on unchanged files loads it in seconds.
   its resolved path, size and modification time (``st_mtime_ns``). A changed, added or removed file, a new
   loader version or different options give another key; the old entry is simply not found.
 * **Entry**: ``<cache dir>/<name>-<key[:24]>.npz`` holding the arrays, ``__meta__`` (a JSON string: key,
-  name, version, the caller's metadata) and ``__checksum__`` (sha256 of every array's name, dtype, shape and
+  name, version, the caller's metadata) and ``__checksum__`` (CRC-32 of every array's name, dtype, shape and
   bytes). Written atomically (:mod:`refimpl.atomic`), read with ``allow_pickle=False``.
 * **Trust**: an entry that cannot be read, whose checksum or key does not match, is ignored (the caller
   rebuilds and overwrites it); nothing in it is used unless it verifies.
@@ -24,6 +24,7 @@ import io
 import json
 import os
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Callable, Iterable, Mapping
 
@@ -65,12 +66,14 @@ def fingerprint(files: Iterable, *, name: str, version: int | str, options: Mapp
 
 
 def _checksum(arrays: Mapping[str, np.ndarray]) -> str:
-    h = hashlib.sha256()
+    """CRC-32 (zlib, chained) over every array's name, dtype, shape and bytes: detects a damaged entry at
+    ~3x the speed of sha256 (the inputs are identified by the sha256 key, not by this)."""
+    crc = 0
     for k in sorted(arrays):
         a = np.ascontiguousarray(arrays[k])
-        h.update(json.dumps([k, a.dtype.str, list(a.shape)]).encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
+        crc = zlib.crc32(json.dumps([k, a.dtype.str, list(a.shape)]).encode(), crc)
+        crc = zlib.crc32(memoryview(a).cast("B") if a.size else b"", crc)
+    return f"crc32:{crc:08x}"
 
 
 def entry_path(name: str, key: str, folder: Path | None = None) -> Path | None:
