@@ -11,9 +11,10 @@ import pytest
 
 from refimpl import datacache
 from refimpl.datacache import cache_dir, cached, entry_path, fingerprint, load_entry, save_entry
-from refimpl.tasks import locomotion as loco
-from refimpl.tasks.locomotion_cache import decode_sequences, encode_sequences, load_sequences, loader_version
-from refimpl.transitions import SAMPLE_DIR
+from refimpl.protocols import locomotion_data as loco
+from refimpl.protocols.locomotion import build_dataset
+from refimpl.protocols.locomotion_cache import decode_sequences, encode_sequences, load_sequences, loader_version
+from refimpl.protocols.transition import SAMPLE_DIR
 
 EXPMAP = Path(SAMPLE_DIR) / "expmap"
 
@@ -207,7 +208,7 @@ def test_locomotion_cache_hit_miss_and_invalidation(small_folder, tmp_path):
 def test_loader_version_hashes_the_loader_source(monkeypatch):
     v = loader_version(loco.LocomotionSequence)
     assert v == loader_version(loco.LocomotionSequence) and len(v) == 64
-    import refimpl.tasks.locomotion_cache as lc
+    import refimpl.protocols.locomotion_cache as lc
 
     monkeypatch.setattr(lc, "LOADER_VERSION", lc.LOADER_VERSION + 1)
     assert loader_version(loco.LocomotionSequence) != v
@@ -215,11 +216,11 @@ def test_loader_version_hashes_the_loader_source(monkeypatch):
 
 def test_build_dataset_through_the_cache_equals_a_fresh_read(small_folder, monkeypatch, tmp_path):
     monkeypatch.setenv("REFIMPL_CACHE", "off")
-    fresh = loco.build_dataset("cmu_expmap", small_folder, prefix=5, target=5)
+    fresh = build_dataset("cmu_expmap", small_folder, prefix=5, target=5)
     monkeypatch.setenv("REFIMPL_CACHE", str(tmp_path / "c"))
-    loco.build_dataset("cmu_expmap", small_folder, prefix=5, target=5)
+    build_dataset("cmu_expmap", small_folder, prefix=5, target=5)
     assert len(list((tmp_path / "c").glob("*.npz"))) == 1
-    cached_ds = loco.build_dataset("cmu_expmap", small_folder, prefix=5, target=5)
+    cached_ds = build_dataset("cmu_expmap", small_folder, prefix=5, target=5)
     _assert_same(cached_ds.sequences, fresh.sequences)
     assert cached_ds.rig is fresh.rig and cached_ds.files == fresh.files
     assert datacache.__all__  # public names exist

@@ -5,7 +5,7 @@ Loading the Bandai Namco set (830 BVH files → 1,660 mirrored sequences) takes 
 The key covers the files (path, size, mtime), the options (``kind``, ``mirror``, frame rate) and the loader
 itself: the sha256 of the source of every module the preparation runs through, so editing the loader
 invalidates the cache without a version number to remember. The decoded sequences are equal, array for array,
-to the ones :func:`refimpl.tasks.locomotion.build_sequences` returns.
+to the ones :func:`refimpl.protocols.locomotion_data.build_sequences` returns.
 
 Shapes: N sequences of T_i frames, J joints; concatenated along time in the entry (``lengths`` (N,)).
 """
@@ -30,11 +30,12 @@ LOADER_VERSION = 1
 _FIELDS = ("rotations", "trajectory", "positions_world", "positions_local", "phase", "features")
 
 
-def loader_version(sequence_type: type) -> str:
+def loader_version(sequence_type: type, *modules) -> str:
     """``LOADER_VERSION`` and the sha256 of the source of the modules a sequence is prepared by: the module
-    defining ``sequence_type`` (the locomotion task's data module) and the readers and kinematics below it."""
+    defining ``sequence_type`` (the locomotion protocol's data module), ``modules`` (the caller's: the module
+    of its ``build``) and the readers and kinematics below them."""
     h = hashlib.sha256(str(LOADER_VERSION).encode())
-    for mod in (sys.modules[sequence_type.__module__], bvh, expmap, motion, quat, skeleton):
+    for mod in (sys.modules[sequence_type.__module__], *modules, bvh, expmap, motion, quat, skeleton):
         h.update(Path(inspect.getsourcefile(mod)).read_bytes())
     return h.hexdigest()
 
@@ -104,7 +105,7 @@ def load_sequences(files: Sequence[str], build: Callable[[], tuple[list, object]
     """``(sequences, rig)`` of ``files``: the cache's verified entry for these files and ``options`` (the
     loader's: source kind, mirroring, frame rate), else ``build()`` (which reads them), stored.
 
-    ``sequence_type`` is :class:`refimpl.tasks.locomotion.LocomotionSequence`, ``rigs`` the rigs a stored rig
+    ``sequence_type`` is :class:`refimpl.protocols.locomotion_data.LocomotionSequence`, ``rigs`` the rigs a stored rig
     name may refer to.
 
     Raises
@@ -112,7 +113,8 @@ def load_sequences(files: Sequence[str], build: Callable[[], tuple[list, object]
     OSError, ValueError
         A file is missing or cannot be parsed (as without the cache).
     """
-    key = fingerprint(files, name="locomotion", version=loader_version(sequence_type), options=options)
+    version = loader_version(sequence_type, sys.modules[build.__module__])
+    key = fingerprint(files, name="locomotion", version=version, options=options)
     return cached(f"locomotion-{options.get('kind', 'data')}", key, build, encode_sequences,
                   lambda arrays, meta: decode_sequences(arrays, meta, sequence_type, rigs), folder=folder,
                   progress=progress)
