@@ -48,6 +48,7 @@ import numpy as np
 
 from refimpl.allocator import retain_freed_memory
 from refimpl.errors import DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading
+from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
 from refimpl.options import add_data_options, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import MODELS, TASKS, task_of
 from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
@@ -155,6 +156,26 @@ def _seconds(x) -> str:
     return f"{x!r:.40}"
 
 
+def _config_summary(cfg: Mapping, width: int = 60, line_width: int = 100) -> list[str]:
+    """The config as ``key=value`` pairs in lines of at most ``line_width`` characters; a value longer than
+    ``width`` characters (statistics, skeletons) is summarised by its type and size."""
+    parts = []
+    for k in sorted(cfg):
+        text = json.dumps(cfg[k])
+        if len(text) > width:
+            v = cfg[k]
+            size = f"{len(v)} values" if isinstance(v, list) else f"{len(v)} keys" if isinstance(v, dict) else \
+                f"{len(text)} characters"
+            text = f"<{type(v).__name__}, {size}>"
+        parts.append(f"{k}={text}")
+    lines = [""]
+    for part in parts:
+        if lines[-1] and len(lines[-1]) + len(part) + 2 > line_width:
+            lines.append("")
+        lines[-1] += (", " if lines[-1] else "") + part
+    return lines
+
+
 def _info_npz(p: Path, args) -> None:
     from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
 
@@ -187,7 +208,8 @@ def _info_npz(p: Path, args) -> None:
         _say(f"model       {meta['model']}")
         _say(f"progress    step {meta.get('step')} of {meta.get('steps_target')}, epoch {meta.get('epoch')}, "
              f"trained for {_seconds(meta.get('elapsed_s', 0.0))}")
-        _say(f"config      {json.dumps(cfg, sort_keys=True)}")
+        for i, line in enumerate(_config_summary(cfg)):
+            _say(("config      " if i == 0 else " " * 12) + line)
         if stats:
             _say(f"normalise   root mean {np.round(stats.get('root_mean', []), 3).tolist()} "
                  f"std {np.round(stats.get('root_std', []), 3).tolist()}")
@@ -263,15 +285,37 @@ def cmd_info(args) -> int:
     return EXIT_OK
 
 
+def _reuse_run_options(args, ckpt: Path) -> None:
+    """``--resume``: the options stored in the checkpoint fill those not given; a given option that differs is a
+    usage error listing only the differing fields, before any data is read (spec/cli.md §4)."""
+    from refimpl.checkpoint import load_checkpoint
+
+    with reading(ckpt):
+        _, meta = load_checkpoint(ckpt)
+    stored = (meta.get("train_config") or {}).get("run_options") if isinstance(meta, dict) else None
+    if not isinstance(stored, dict):  # a checkpoint written before the options were stored: the flags as given
+        return
+    if stored.get("model") not in MODELS:
+        raise BadInputError(f"{ckpt}: run option model {stored.get('model')!r} is not one of {sorted(MODELS)}")
+    conflicts = reconcile(args, stored, args.option_defaults)
+    if conflicts:
+        raise UsageError(f"--resume: {ckpt} was trained with other options:\n  " + "\n  ".join(conflicts)
+                         + "\n(leave them out to continue with the checkpoint's, or start again with --overwrite)")
+
+
 def cmd_train(args) -> int:
     """``refimpl train``."""
+    if args.steps == 0 or (args.steps is None and args.epochs == 0):
+        raise UsageError("--steps 0 / --epochs 0: nothing to train (a checkpoint would hold an untrained network)")
+    out = Path(args.out or f"runs/{args.model}")
+    if args.resume and (out / "checkpoint.npz").is_file():
+        _reuse_run_options(args, out / "checkpoint.npz")
     spec = MODELS[args.model]
     task = task_of(spec)
     rep = args.representation or spec.representations[0]
     if rep not in spec.representations:
         raise UsageError(f"--representation {rep!r}: model {spec.name!r} trains on {list(spec.representations)}")
     check_overrides(spec.config_type, args.set)  # a --set typo is exit 2 before any data is read
-    out = Path(args.out)
     ckpt = out / "checkpoint.npz"
     if args.resume and not ckpt.is_file():
         raise BadInputError(f"{ckpt}: no checkpoint to resume (train without --resume first)")
@@ -312,7 +356,8 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
                          lr=lr, betas=betas, clip_norm=args.clip_norm, seed=args.seed,
                          dtype=np.dtype(args.dtype).type, resume=args.resume,
                          checkpoint_every=args.checkpoint_every, validate_every=args.validate_every,
-                         progress_every=args.progress_every, progress=_progress_line)
+                         progress_every=args.progress_every, progress=_progress_line,
+                         run_options=run_options(args, args.resumable))
     last = float(np.mean(result.losses[-20:])) if result.losses else float("nan")
     _say(f"{'interrupted' if result.interrupted else 'done'}: step {result.step}, epoch {result.epoch}, "
          f"recent loss {last:.5g}, {result.elapsed_s:.1f} s")
@@ -361,9 +406,17 @@ def _eval_prediction(args, model) -> int:
     return EXIT_OK
 
 
+def _check_model_option(args, model) -> None:
+    """``--model`` and ``--checkpoint`` must name the same network (the checkpoint would silently win)."""
+    if model is not None and getattr(args, "model", None) and args.model != model.spec.name:
+        raise UsageError(f"--model {args.model}, but {args.checkpoint} holds a {model.spec.name} model "
+                         f"(leave --model out, or pass a {args.model} checkpoint)")
+
+
 def cmd_eval(args) -> int:
     """``refimpl eval``."""
     model = load_trained(args.checkpoint) if args.checkpoint else None
+    _check_model_option(args, model)
     task_name = model.spec.task if model is not None else (MODELS[args.model].task if args.model else "transition")
     if task_name == "prediction":
         return _eval_prediction(args, model)
@@ -462,7 +515,8 @@ def _generate_prediction(args, model) -> int:
     elif args.truth:
         raise UsageError(f"--truth: {args.source} ends before the {k} predicted frames")
     if args.png or args.gif:
-        for f in prediction.render_prediction(pr, png=args.png, gif=args.gif):
+        title = f"{name}: frames {pr.start}-{pr.stop - 1} predicted from {Path(args.source).name}"
+        for f in prediction.render_prediction(pr, png=args.png, gif=args.gif, title=title):
             _say(f"wrote {f}")
     return EXIT_OK
 
@@ -500,6 +554,7 @@ def cmd_generate(args) -> int:
 
         return generate_command(args, load_trained, _say)
     first = load_trained(args.checkpoint) if args.checkpoint else None
+    _check_model_option(args, first)
     task_name = _model_task(args, first)
     if task_name == "locomotion":
         raise UsageError("a quaternet-long / pace checkpoint: pass --model quaternet-long --checkpoint POSE.npz "
@@ -507,6 +562,11 @@ def cmd_generate(args) -> int:
     if args.source is None:
         raise UsageError("the following argument is required: --source (the prefix, seed or source clip)\n"
                          + _GENERATE_USAGE)
+    if task_name in ("prediction", "synthesis"):
+        given = [f"--{n.replace('_', '-')}" for n in ("target", "target_frame") if getattr(args, n) is not None]
+        if given:
+            raise UsageError(f"{' and '.join(given)}: a {task_name} model continues --source alone (a target clip "
+                             "is for transitions)")
     if task_name == "prediction":
         if args.backend == "numpy" and first is None:
             raise UsageError("--backend numpy needs --checkpoint")
@@ -642,7 +702,7 @@ def cmd_demo(args) -> int:
     from refimpl.demo import run_demo
 
     run_demo(args.out, seed=args.seed, quick=args.quick, steps=args.steps, onnx=not args.no_onnx,
-             render=not args.no_render)
+             render=not args.no_render, overwrite=args.overwrite)
     return EXIT_OK
 
 
@@ -653,6 +713,11 @@ def _eval_synthesis(args, model) -> int:
         raise UsageError("--model acrnn: evaluation needs --checkpoint (the statistics and the representation)")
     _say(f"reading {args.data} ...")
     data = task.load_eval_data(args.data, model.extra)
+    seen = sorted(set(data.test_names) & set(model.extra.get("train_takes") or ()))
+    if seen:
+        print(f"refimpl eval: warning: take(s) {', '.join(seen)} of --data {args.data} were training takes of "
+              f"{args.checkpoint} (trained on {', '.join(model.extra.get('train_takes'))}): these scores are not "
+              "held-out (pass --data with the model's own test takes)", file=sys.stderr, flush=True)
     results = evaluate_model(model, data, onnx_dir=args.onnx)
     task.print_results(results, data, model)
     if args.json:
@@ -703,9 +768,10 @@ def _generate_synthesis(args, model=None) -> int:
                                onnx_dir=args.onnx if args.backend == "onnx" else None)
     method = next(iter(networks.values()))
     n = args.length or 300
-    motion, seed_frames = task.continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
+    start = 1 if args.source_frame is None else args.source_frame  # frame 0 of a CMU file: its reference T-pose
+    motion, seed_frames = task.continue_seed(method, model.extra, args.source, start, n)
     write_bvh(args.out, transition.with_end_sites(motion))
-    _say(f"wrote {args.out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
+    _say(f"wrote {args.out}: {seed_frames} seed frames of {args.source} (from frame {start} at "
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
          "metres")
     if args.png or args.gif:
@@ -737,7 +803,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="refimpl",
         description="Reference NumPy implementation of QuaterNet, the dual-quaternion representation and QTG: "
-                    "inspect files, train, evaluate, export to ONNX, generate transitions, render. "
+                    "inspect files, train, evaluate, export to ONNX, generate motion, render. "
                     "Start with `refimpl demo`.",
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
     parser.add_argument("--version", action="version", version=f"refimpl {__version__}")
@@ -762,14 +828,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("train", help="train a network (qtg, quaternet, quaternet-cnn, acrnn) on motion files",
+    p = sub.add_parser("train", help=f"train a network ({', '.join(sorted(MODELS))}) on motion files",
                        description="Train a network with Adam; checkpoint.npz (resumable), loss.csv and "
                                    "loss_val.csv go to --out. Progress lines (rate, ETA) go to stderr. "
                                    "Models: " + "; ".join(f"{n}: {s.summary}" for n, s in sorted(MODELS.items())))
     p.add_argument("--model", default="qtg", choices=sorted(MODELS), help="network (default qtg)")
     p.add_argument("--representation", default=None, help="pose representation (qtg: quat)")
     add_data_options(p)
-    p.add_argument("--out", default="runs/qtg", help="output folder (default runs/qtg)")
+    p.add_argument("--out", default=None, help="output folder (default runs/<model>)")
     length = p.add_mutually_exclusive_group()
     length.add_argument("--steps", type=nonneg_int, default=None, help="optimiser steps")
     length.add_argument("--epochs", type=nonneg_int, default=10, help="epochs, when --steps is not given (default 10)")
@@ -781,23 +847,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--betas", type=float, nargs=2, default=None, metavar=("B1", "B2"),
                    help="Adam betas (default: the model's paper values; qtg 0.5 0.9)")
     p.add_argument("--clip-norm", type=positive_float, default=None, help="global gradient-norm clipping")
+    task_dests = []
     for task_name in sorted(TASKS):  # each task adds its own options, in its own group
-        task_of(task_name).add_train_options(p.add_argument_group(f"{task_name} task"))
+        group = p.add_argument_group(f"{task_name} task")
+        task_of(task_name).add_train_options(group)
+        task_dests += [a.dest for a in group._group_actions]
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a config field, e.g. --set gru_hidden=128 --set encoder_sizes=128,64")
     p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
     p.add_argument("--seed", type=int, default=0)
     resume = p.add_mutually_exclusive_group()
-    resume.add_argument("--resume", action="store_true", help="continue from --out/checkpoint.npz")
+    resume.add_argument("--resume", action="store_true",
+                        help="continue from --out/checkpoint.npz with the options stored in it (give only "
+                             "--steps/--epochs; a different option is refused, field by field)")
     resume.add_argument("--overwrite", action="store_true", help="start again, replacing --out's checkpoint and logs")
     p.add_argument("--checkpoint-every", type=positive_int, default=500)
     p.add_argument("--validate-every", type=positive_int, default=None,
                    help="log the held-out MAE every N steps (loss_val.csv)")
     p.add_argument("--progress-every", type=positive_int, default=50)
-    p.set_defaults(func=cmd_train)
+    p.set_defaults(func=cmd_train, resumable=RUN_OPTIONS + tuple(task_dests),
+                   option_defaults={a.dest: a.default for a in p._actions})
 
-    p = sub.add_parser("eval", help="a network against its task's baselines (QTG: transitions; QuaterNet: "
-                                    "short-term prediction)",
+    p = sub.add_parser("eval", help="a network against its task's baselines (transitions, short-term prediction, "
+                                    "Table 1 synthesis, locomotion)",
                        description="Transition task (qtg): the QTG paper's protocol, mean joint-position error per "
                                    "joint per frame (cm) on held-out transition windows, with the per-frame curve. "
                                    "Prediction task (quaternet, quaternet-cnn): the published short-term protocol, "
@@ -818,9 +890,12 @@ def build_parser() -> argparse.ArgumentParser:
             task_of(task_name).add_eval_options(p.add_argument_group(f"{task_name} task"))
     p.set_defaults(func=cmd_eval)
 
-    p = sub.add_parser("export", help="export a checkpoint to ONNX (needs the deploy extra)",
-                       description="Write <model>_init.onnx, <model>_step.onnx, <model>_rollout.onnx (validated); "
-                                   "the graphs standardise inside (raw poses in and out) and carry their metadata.")
+    p = sub.add_parser("export", help="export a checkpoint of any model to ONNX, verified (needs the deploy extra)",
+                       description="Write the model's ONNX graphs, validated (qtg: <model>_init/_step/_rollout.onnx; "
+                                   "quaternet: _init/_step/_predict; quaternet-cnn: _window; acrnn: _step/_generate; "
+                                   "quaternet-long: _step; pace: _pace); the graphs standardise inside (raw poses in "
+                                   "and out) and carry their metadata. A folder holding another model's graphs is "
+                                   "refused before anything is written.")
     p.add_argument("--checkpoint", required=True)
     p.add_argument("--out", default=None, help="output folder (default: onnx/ beside the checkpoint)")
     p.add_argument("--mode", default="unrolled", choices=("unrolled", "loop", "scan"), help="rollout graph form")
@@ -831,13 +906,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random poses")
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("generate", help="generate a transition between two clips, BVH out",
-                       description="Take frames s-1, s of --source and g, g+1 of --target (frame numbers at the "
-                                   "model's rate, 30 fps, after the files' first reference frame), generate the T "
-                                   "frames between them and write a BVH with --context frames on both sides.")
+    p = sub.add_parser("generate", help="generate motion with a trained model, BVH out (a transition, a "
+                                        "prediction, an acrnn continuation, a walk along a path)",
+                       description="The checkpoint's model decides what is generated. Transitions (qtg and the "
+                                   "baselines): take frames s-1, s of --source and g, g+1 of --target (frame "
+                                   "numbers at the model's rate, 30 fps, after the files' first reference frame), "
+                                   "generate the T frames between them and write a BVH with --context frames on "
+                                   "both sides. Prediction (quaternet, quaternet-cnn): continue a prefix of "
+                                   "--source ending at --source-frame. acrnn: continue 10 seed frames of --source. "
+                                   "quaternet-long: walk --path with --pace.")
     p.add_argument("--source", default=None, help=".bvh or exp-map .txt (every task but locomotion)")
     p.add_argument("--source-frame", type=nonneg_int, default=None,
-                   help="s, last frame of the source kept (transitions, required); acrnn: first seed frame (default 0)")
+                   help="s, last frame of the source kept (transitions, required); acrnn: first seed frame (default "
+                        "1: frame 0 of a converted CMU file is its reference T-pose)")
     p.add_argument("--target", default=None, help=".bvh or exp-map .txt (default: --source)")
     p.add_argument("--target-frame", type=nonneg_int, default=None,
                    help="g, first target frame (default: s + T + 1 in the same file, else 1)")
@@ -892,6 +973,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=positive_int, default=None, help="override the number of training steps")
     p.add_argument("--no-onnx", action="store_true", help="skip export and verification")
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the results of a longer demo in --out (a --quick run refuses otherwise)")
     p.set_defaults(func=cmd_demo)
     return parser
 

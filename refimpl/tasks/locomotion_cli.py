@@ -3,6 +3,7 @@ controls, and print the stability numbers (spec/cli.md, spec/locomotion.md §9).
 from __future__ import annotations
 
 import math
+import sys
 from typing import Callable
 
 import numpy as np
@@ -57,6 +58,11 @@ def generate_command(args, load_trained: Callable, say: Callable) -> int:
     face = facing_of(walk, rig)
     agree = np.sum(face * walk.controls[:, 4:6], axis=-1)
     dist = np.linalg.norm(np.diff(m.root_positions[:, [0, 2]], axis=0), axis=-1).sum() * QUATERNET_UNIT_CM / 100
+    asked = int(round(args.seconds * FPS))
+    if m.num_frames < asked:  # an open path ended before --seconds: say so (the motion is shorter)
+        print(f"refimpl generate: warning: the path ends after {m.num_frames / FPS:.1f} s at this speed; "
+              f"--seconds {args.seconds:g} asked for {asked} frames, the motion has {m.num_frames}",
+              file=sys.stderr, flush=True)
     say(f"wrote {out}: {m.num_frames} frames at {FPS:g} fps ({m.num_frames / FPS:.1f} s), {m.num_joints} joints, "
         f"centimetres; root travelled {dist:.1f} m along a {walk.path.length * QUATERNET_UNIT_CM / 100:.1f} m path")
     say(f"facing vs the pace network: median angle {math.degrees(np.median(np.arccos(np.clip(agree, -1, 1)))):.1f}°;"
