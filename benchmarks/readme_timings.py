@@ -5,7 +5,9 @@ Runs each paper's commands as a newcomer would (``python -m refimpl ...`` in a s
 run whose per-step time (median of the trainer's ``loss.csv`` ``elapsed_s`` differences) is projected to the
 README's budget, then its ``eval`` / ``generate`` / ``export`` on that checkpoint. For the locomotion set the
 pose network's training command runs twice on the same files, so the JSON holds the time to the first step of a
-cold (files read) and a warm (data cache, spec/data.md §7) start. The demo's ``eval.json`` is copied to
+cold (files read) and a warm (data cache, spec/data.md §7) start, and so does the pace network's (its
+first run also prepares and caches the pace data)
+(``first_step_done_s``: from the launch until the first step's row is in ``loss.csv``). The demo's ``eval.json`` is copied to
 ``benchmarks/results/demo_eval.json`` (the README's QTG numbers).
 
 The machine's load average is recorded before and after every command; on a shared machine the times are
@@ -38,19 +40,36 @@ SAMPLE = ROOT / "refimpl" / "data" / "sample"
 GROUPS = ("demo", "quaternet", "acrnn", "locomotion")
 
 
-def _run(argv: list, timeout: float, env: dict) -> dict:
+def _run(argv: list, timeout: float, env: dict, first_row: Path | None = None) -> dict:
+    """Run ``refimpl argv``; with ``first_row`` (a training run's ``loss.csv``) also the time from the launch
+    until the first step's row is written (polled every 0.05 s)."""
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-m", "refimpl", *argv], cwd=ROOT, env=env, capture_output=True,
-                       text=True, timeout=timeout)
+    first = None
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        p = subprocess.Popen([sys.executable, "-m", "refimpl", *argv], cwd=ROOT, env=env, stdout=out, stderr=err,
+                             text=True)
+        while p.poll() is None:
+            if first is None and first_row is not None and first_row.is_file() and \
+                    len(first_row.read_text().splitlines()) >= 2:
+                first = time.perf_counter() - t0
+            if time.perf_counter() - t0 > timeout:
+                p.kill()
+            time.sleep(0.05)
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read(), err.read()
     wall = time.perf_counter() - t0
     res = dict(command="refimpl " + " ".join(argv), rc=p.returncode, wall_s=round(wall, 2),
                load_before=round(load0, 2), load_after=round(os.getloadavg()[0], 2))
+    if first is not None:
+        res["first_step_done_s"] = round(first, 2)
     if p.returncode != 0:
-        res["stderr"] = p.stderr.strip()[-400:]
-    m = re.search(r"(\d+) steps per epoch", p.stdout)
+        res["stderr"] = stderr.strip()[-400:]
+    m = re.search(r"(\d+) steps per epoch", stdout)
     if m:
         res["steps_per_epoch"] = int(m.group(1))
+    res["time_utc"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     print(f"  {res['wall_s']:8.1f} s  rc {p.returncode}  load {load0:.1f}  {res['command'][:110]}", flush=True)
     return res
 
@@ -58,7 +77,7 @@ def _run(argv: list, timeout: float, env: dict) -> dict:
 def _train(argv: list, out: Path, budget_steps: int, timeout: float, env: dict, budget_epochs: int = 0) -> dict:
     """A short training run; its median step time projected to the README's ``budget_steps`` (or
     ``budget_epochs`` × the steps per epoch the trainer printed)."""
-    res = _run(argv + ["--out", str(out)], timeout, env)
+    res = _run(argv + ["--out", str(out)], timeout, env, first_row=out / "loss.csv")
     if budget_epochs and "steps_per_epoch" in res:
         budget_steps = budget_epochs * res["steps_per_epoch"]
     log = out / "loss.csv"
@@ -89,8 +108,10 @@ def main(argv=None) -> int:
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env["REFIMPL_CACHE"] = a.cache or str(tmp / "cache")
     S = str(a.steps)
-    out: dict = dict(time_utc=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), cpu_count=os.cpu_count(),
-                     short_run_steps=a.steps, results={})
+    out: dict = dict(cpu_count=os.cpu_count(), short_run_steps=a.steps, results={})
+    if Path(a.out).is_file():  # a run of some groups keeps the other groups' recorded results
+        with open(a.out) as f:
+            out["results"] = json.load(f).get("results", {})
     R = out["results"]
     try:
         if "demo" in only:
@@ -133,9 +154,9 @@ def main(argv=None) -> int:
                     "--set", "tf_decay=0.9", "--steps", S]
             R["locomotion_pose_train_cold"] = _train(pose, tmp / "pose_cold", 720, a.timeout, env)
             R["locomotion_pose_train_warm"] = _train(pose, tmp / "pose", 720, a.timeout, env)
-            R["locomotion_pace_train"] = _train(["train", "--model", "pace", "--data", str(bn),
-                                                 "--pace-chunk-length", "250", "--steps", S], tmp / "pace", 300,
-                                                a.timeout, env)
+            pace = ["train", "--model", "pace", "--data", str(bn), "--pace-chunk-length", "250", "--steps", S]
+            R["locomotion_pace_train"] = _train(pace, tmp / "pace_first", 300, a.timeout, env)  # builds pace data
+            R["locomotion_pace_train_warm"] = _train(pace, tmp / "pace", 300, a.timeout, env)
             R["locomotion_generate"] = _run(
                 ["generate", "--model", "quaternet-long", "--checkpoint", str(tmp / "pose" / "checkpoint.npz"),
                  "--pace", str(tmp / "pace" / "checkpoint.npz"), "--path", "circle:r=3", "--speed", "walk",

@@ -224,3 +224,19 @@ def test_build_dataset_through_the_cache_equals_a_fresh_read(small_folder, monke
     _assert_same(cached_ds.sequences, fresh.sequences)
     assert cached_ds.rig is fresh.rig and cached_ds.files == fresh.files
     assert datacache.__all__  # public names exist
+
+
+def test_pace_data_through_the_cache_equals_a_fresh_computation(small_folder, monkeypatch, tmp_path):
+    monkeypatch.setenv("REFIMPL_CACHE", str(tmp_path / "c"))
+    ds = build_dataset("cmu_expmap", small_folder, prefix=5, target=5)
+    assert ds.cache_key
+    first = ds.pace_data()
+    assert len(list((tmp_path / "c").glob("locomotion-pace-*.npz"))) == 1
+    import refimpl.protocols.locomotion as L
+
+    monkeypatch.setattr(L, "pace_training_data", lambda spline: (_ for _ in ()).throw(AssertionError("rebuilt")))
+    second = ds.pace_data()  # from the cache: the patched builder is not called
+    assert len(second) == len(first) > 0
+    for (a, b), (c, d) in zip(first, second):
+        np.testing.assert_array_equal(a, c)
+        np.testing.assert_array_equal(b, d)

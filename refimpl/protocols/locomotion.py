@@ -20,7 +20,7 @@ import numpy as np
 
 from refimpl.motion import Motion
 from refimpl.optim import QUATERNET_LR_DECAY, adam_init, adam_step, exponential_lr
-from refimpl.protocols.locomotion_cache import load_sequences
+from refimpl.protocols.locomotion_cache import load_pace_data, load_sequences, sequences_key
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                LocomotionSequence, build_sequences, load_bandai_namco, load_cmu_bvh,
                                                load_cmu_expmap)
@@ -249,6 +249,9 @@ class LocomotionDataset:
     pace_chunk_length : int
         Spline points per pace-network training chunk (0 = automatic: min(1000, median spline length)).
     fps : float
+    cache_key : str
+        The data-cache key of the sequences (:func:`refimpl.protocols.locomotion_cache.sequences_key`; "" = the
+        pace data are not cached).
     """
 
     sequences: tuple
@@ -258,6 +261,7 @@ class LocomotionDataset:
     target: int = 60
     pace_chunk_length: int = 0
     fps: float = FPS
+    cache_key: str = ""
 
     @property
     def skeleton(self) -> Skeleton:
@@ -274,14 +278,17 @@ class LocomotionDataset:
 
     def pace_data(self) -> list:
         """``(inputs (N, 2), targets (N, 4))`` of every sequence's spline (:func:`pace_training_data`); sequences
-        whose root does not move are skipped."""
-        out = []
-        for s in self.sequences:
-            try:
-                out.append(pace_training_data(sequence_spline(s)))
-            except ValueError:
-                continue
-        return out
+        whose root does not move are skipped. Through the data cache when the dataset has a ``cache_key``."""
+        def build():
+            out = []
+            for s in self.sequences:
+                try:
+                    out.append(pace_training_data(sequence_spline(s)))
+                except ValueError:
+                    continue
+            return out
+
+        return load_pace_data(self.cache_key, build) if self.cache_key else build()
 
 
 def _load_file(kind: str, path: str) -> tuple[Motion, LocomotionRig]:
@@ -308,14 +315,16 @@ def build_dataset(kind: str, files: Sequence[str], *, prefix: int = 30, target: 
             raise ValueError("files: no sequence loaded")
         return seqs, rig
 
+    options = dict(kind=kind, mirror=bool(mirror), fps=FPS)
     seqs, rig = load_sequences(files, read, sequence_type=LocomotionSequence, rigs=(BANDAI_NAMCO_RIG, CMU_RIG),
-                               options=dict(kind=kind, mirror=bool(mirror), fps=FPS), progress=progress)
+                               options=options, progress=progress)
     ref = seqs[0].skeleton
     for s in seqs:
         if s.skeleton.num_joints != ref.num_joints or not np.allclose(s.skeleton.offsets, ref.offsets, atol=1e-6):
             raise ValueError(f"{s.name}: its skeleton differs from {seqs[0].name}'s; the FK loss needs one skeleton")
     return LocomotionDataset(tuple(seqs), rig, tuple(str(f) for f in files), int(prefix), int(target),
-                             int(pace_chunk_length))
+                             int(pace_chunk_length),
+                             cache_key=sequences_key(files, read, LocomotionSequence, options))
 
 
 # ------------------------------------------------------------------------------------------------------------

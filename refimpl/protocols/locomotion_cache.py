@@ -23,7 +23,8 @@ from refimpl import bvh, expmap, motion, quat, skeleton
 from refimpl.datacache import cached, fingerprint
 from refimpl.skeleton import Skeleton
 
-__all__ = ["LOADER_VERSION", "loader_version", "load_sequences", "encode_sequences", "decode_sequences"]
+__all__ = ["LOADER_VERSION", "loader_version", "sequences_key", "load_sequences", "load_pace_data",
+           "encode_sequences", "decode_sequences"]
 
 #: Bumped by hand when the entry's layout changes (the loader's own code is hashed, see :func:`loader_version`).
 LOADER_VERSION = 1
@@ -99,22 +100,57 @@ def decode_sequences(arrays: dict, meta: dict, sequence_type: type, rigs: Sequen
     return out, rig
 
 
+def sequences_key(files: Sequence[str], build: Callable, sequence_type: type, options: dict) -> str:
+    """The cache key of the sequences ``build`` makes from ``files`` with ``options`` (see the module docstring)."""
+    version = loader_version(sequence_type, sys.modules[build.__module__])
+    return fingerprint(files, name="locomotion", version=version, options=options)
+
+
 def load_sequences(files: Sequence[str], build: Callable[[], tuple[list, object]], *, sequence_type: type,
                    rigs: Sequence, options: dict, progress: Callable[[str], None] | None = None,
                    folder=None) -> tuple[list, object]:
     """``(sequences, rig)`` of ``files``: the cache's verified entry for these files and ``options`` (the
     loader's: source kind, mirroring, frame rate), else ``build()`` (which reads them), stored.
 
-    ``sequence_type`` is :class:`refimpl.protocols.locomotion_data.LocomotionSequence`, ``rigs`` the rigs a stored rig
-    name may refer to.
+    ``sequence_type`` is :class:`refimpl.protocols.locomotion_data.LocomotionSequence`, ``rigs`` the rigs a stored
+    rig name may refer to.
 
     Raises
     ------
     OSError, ValueError
         A file is missing or cannot be parsed (as without the cache).
     """
-    version = loader_version(sequence_type, sys.modules[build.__module__])
-    key = fingerprint(files, name="locomotion", version=version, options=options)
+    key = sequences_key(files, build, sequence_type, options)
     return cached(f"locomotion-{options.get('kind', 'data')}", key, build, encode_sequences,
                   lambda arrays, meta: decode_sequences(arrays, meta, sequence_type, rigs), folder=folder,
+                  progress=progress)
+
+
+def _encode_pairs(pairs: list) -> tuple[dict, dict]:
+    lengths = np.array([a.shape[0] for a, _ in pairs], dtype=np.int64)
+    arrays = {"lengths": lengths,
+              "inputs": np.concatenate([a for a, _ in pairs]) if pairs else np.zeros((0, 2)),
+              "targets": np.concatenate([b for _, b in pairs]) if pairs else np.zeros((0, 4))}
+    return arrays, {"count": len(pairs)}
+
+
+def _decode_pairs(arrays: dict, meta: dict) -> list:
+    lengths = arrays["lengths"]
+    if len(lengths) != int(meta["count"]) or lengths.sum() != arrays["inputs"].shape[0]:
+        raise ValueError("lengths do not add up to the stored points")
+    ends = np.cumsum(lengths)
+    return [(arrays["inputs"][a:b], arrays["targets"][a:b]) for a, b in zip(ends - lengths, ends)]
+
+
+def load_pace_data(sequences_key_: str, build: Callable[[], list], *, folder=None,
+                   progress: Callable[[str], None] | None = None) -> list:
+    """The pace network's ``(inputs (N_i, 2), targets (N_i, 4))`` pairs of the sequences cached under
+    ``sequences_key_`` (:func:`sequences_key`): the cache's entry, else ``build()`` stored. The key adds the
+    source of the module defining ``build`` (the spline and pace-data code)."""
+    h = hashlib.sha256(sequences_key_.encode())
+    h.update(Path(inspect.getsourcefile(sys.modules[build.__module__])).read_bytes())
+    from refimpl import splines
+
+    h.update(Path(inspect.getsourcefile(splines)).read_bytes())
+    return cached("locomotion-pace", h.hexdigest(), build, _encode_pairs, _decode_pairs, folder=folder,
                   progress=progress)
