@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
-from refimpl.metrics import root_zeroed_positions
+from refimpl.protocols import synthesis as SP
+from refimpl.protocols.synthesis import root_zeroed_positions
 from refimpl.registry import task_of
 from refimpl.services import evaluate_model, load_trained
 from refimpl.tasks import synthesis as S
@@ -65,10 +66,10 @@ def _evaluate_row(d: Path):
     res = evaluate_model(model, data)
     # long run from one seed
     i, s = SEED
-    seed = data.test[i][s:s + S.SEED_LENGTH][None]
+    seed = data.test[i][s:s + SP.SEED_LENGTH][None]
     gen = model.spec.make_method(model)(seed, LONG_FRAMES)[0]                          # (N, F)
     pos = root_zeroed_positions(data.representation, data.skeleton, gen)                # (N, J, 3)
-    gt_pos = root_zeroed_positions(data.representation, data.skeleton, data.test[i][s + S.SEED_LENGTH:])
+    gt_pos = root_zeroed_positions(data.representation, data.skeleton, data.test[i][s + SP.SEED_LENGTH:])
     sp, gsp = _speed(pos), _speed(gt_pos)
     hip_y = gen[:, 1]
     longrun = {"windows": {f"{a}-{b}": float(sp[a:b - 1].mean()) for a, b in WINDOWS},

@@ -7,7 +7,7 @@ right-handed frames, dual quaternions ``(q_r | q_d)`` with ``q_d = ½ (0, t) ⊗
 The top level re-exports layers 1-3 and 6 (math, kinematics, data, optimisation and checkpoints) by name.
 Layers, losses and models keep their namespaces, because their names are only meaningful there:
 ``refimpl.nn`` (layers), ``refimpl.losses``, ``refimpl.models.qtg``, ``refimpl.representations``,
-``refimpl.baselines``, ``refimpl.transitions``, ``refimpl.metrics``, ``refimpl.train``.
+``refimpl.protocols`` (each paper's data, protocol, metrics and baselines), ``refimpl.train``.
 """
 import importlib
 

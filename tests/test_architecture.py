@@ -21,7 +21,7 @@ LAYERS = {
         "refimpl.schedules"],
     5: ["refimpl.models", "refimpl.models.*"],
     6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.train", "refimpl.rigs",
-        "refimpl.transitions", "refimpl.baselines", "refimpl.metrics"],
+        "refimpl.protocols", "refimpl.protocols.*"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.tasks", "refimpl.tasks.*",
         "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator"],
     8: ["refimpl.cli", "refimpl.demo", "refimpl.__main__"],

@@ -7,7 +7,7 @@
 * :func:`make_config` — :class:`~refimpl.models.acrnn.ACRNNConfig` with the data's frame size, ``--set`` overrides
   (``hidden_size``, ``num_layers``, ``skewed``, ``ground_truth_length``, ``condition_length``);
 * :func:`make_adapter` — the trainer's :class:`~refimpl.train.ModelAdapter`: windows of ``T + 1`` standardised
-  frames drawn by :func:`~refimpl.tasks.synthesis.sample_windows` with the trainer's Generator (so resuming is
+  frames drawn by :func:`~refimpl.protocols.synthesis.sample_windows` with the trainer's Generator (so resuming is
   exact), the row's loss over every step (:func:`refimpl.models.acrnn.loss_and_grads`);
 * :func:`make_method` — NumPy generation ``f(seed (B, S, F), n) -> (B, n, F)`` on raw frames;
 * :data:`EXPORTER` ``"acrnn"`` and :func:`export_inputs`, :func:`reference_outputs`, :func:`verify_onnx`.
@@ -27,7 +27,8 @@ from refimpl.models import acrnn
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
 from refimpl.options import config_with_overrides
-from refimpl.tasks.synthesis import TABLE1_ROWS, sample_windows, skeleton_of
+from refimpl.protocols.synthesis import sample_windows
+from refimpl.tasks.synthesis import TABLE1_ROWS, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",

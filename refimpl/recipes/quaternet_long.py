@@ -3,11 +3,11 @@
 
 * :class:`QuaterNetLongConfig` — the recipe's config (``--set hidden_size=256``): the network's sizes; J comes
   from the data; :meth:`QuaterNetLongConfig.network` is the :class:`~refimpl.models.quaternet.QuaterNetConfig`;
-* :func:`loss_and_grads` — the paper's loss on one :class:`~refimpl.tasks.locomotion.PoseBatch`: FK positions
+* :func:`loss_and_grads` — the paper's loss on one :class:`~refimpl.protocols.locomotion.PoseBatch`: FK positions
   with the longitudinal-offset term (:func:`refimpl.losses.fk_position_loss_forward`, through
   :mod:`refimpl.nn.kinematics_layers`) + 0.01 · the quaternion norm penalty (:func:`refimpl.losses.quat_norm_loss_forward`),
   backward through the scheduled-sampling unroll (:func:`refimpl.models.quaternet.backward`);
-* :func:`make_adapter` — windows drawn by :func:`refimpl.tasks.locomotion.pose_batch` (random rotation about +Y),
+* :func:`make_adapter` — windows drawn by :func:`refimpl.protocols.locomotion.pose_batch` (random rotation about +Y),
   teacher-forcing ratio ``0.995^epoch`` (:func:`refimpl.schedules.teacher_forcing_ratio`, from the trainer's
   epoch), one mask per batch, ground-truth controls in free-running steps;
 * :data:`PAPER_OPTIM` — Adam 1e-3, × 0.999 per epoch, gradient-norm clip 0.1; :data:`PAPER_BATCH` 40;
@@ -256,11 +256,11 @@ def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, in
 
 
 def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Mapping) -> ModelAdapter:
-    """The trainer's adapter: windows of :func:`refimpl.tasks.locomotion.pose_batch` (augmented), the
+    """The trainer's adapter: windows of :func:`refimpl.protocols.locomotion.pose_batch` (augmented), the
     scheduled-sampling mask of ratio ``0.995^epoch``, :func:`loss_and_grads`; validation = free-running mean
-    position error (units) on the held-out windows (:func:`refimpl.tasks.locomotion.evaluation_windows`, at most
+    position error (units) on the held-out windows (:func:`refimpl.protocols.locomotion.evaluation_windows`, at most
     256 of them)."""
-    from refimpl.tasks.locomotion import evaluation_windows, pose_batch, position_errors
+    from refimpl.protocols.locomotion import evaluation_windows, pose_batch, position_errors
 
     net = config.network()
     skel = train_ds.skeleton
