@@ -11,8 +11,9 @@ import numpy as np
 from refimpl.models import acrnn, pace
 from refimpl.recipes import acrnn as acrnn_recipe
 from refimpl.recipes import pace as pace_recipe
-from refimpl.tasks import locomotion as L
-from refimpl.tasks import synthesis as S
+from refimpl.protocols import locomotion as L
+from refimpl.protocols import locomotion_data as LD
+from refimpl.protocols import synthesis as S
 from refimpl.train import OptimConfig, TrainConfig, train
 
 SAMPLE_SALSA = Path(__file__).resolve().parents[1] / "refimpl" / "data" / "sample" / "salsa"
@@ -37,7 +38,7 @@ def _straight_walk_pace_data():
     from test_locomotion import _straight_walk
     out = []
     for spd, d in ((0.5, 0.0), (1.0, 0.5), (0.8, -0.3)):
-        seq = L.build_sequences(_straight_walk(speed=spd, direction=d, frames=80), L.CMU_RIG, mirror=False)[0]
+        seq = LD.build_sequences(_straight_walk(speed=spd, direction=d, frames=80), LD.CMU_RIG, mirror=False)[0]
         out.append(L.pace_training_data(L.sequence_spline(seq)))
     return out
 
