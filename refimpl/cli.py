@@ -54,6 +54,7 @@ from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_tr
                               onnx_metadata, read_motion, train_model, verify_onnx)
 from refimpl.tasks import transition
 from refimpl.train import check_resumable, output_lock
+from refimpl.transition_join import JOIN_MODES, with_join
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
 
@@ -373,7 +374,7 @@ def cmd_eval(args) -> int:
     _, test_ds = transition.build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
     if test_ds.num_windows == 0:
         raise BadInputError(f"--data {args.data}: no held-out window of {T + 4} frames")
-    results = evaluate_model(model, test_ds, onnx_dir=args.onnx)
+    results = evaluate_model(model, test_ds, onnx_dir=args.onnx, join=args.join)
     transition.print_results(results, test_ds, model)
     frame_time = 1.0 / test_ds.fps
     transition.write_results(results, frame_time, json_path=args.json, csv_path=args.csv)
@@ -393,7 +394,11 @@ def cmd_export(args) -> int:
     """``refimpl export``."""
     model = load_trained(args.checkpoint)
     out = Path(args.out) if args.out else Path(model.path).parent / "onnx"
-    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length)
+    join = {} if args.join == "none" else {"join": args.join}
+    if join and model.spec.task != "transition":
+        raise UsageError(f"--join applies to transition models, not {model.spec.name}")
+    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length,
+                          **join)
     for role, path in written.items():
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
@@ -540,12 +545,14 @@ def cmd_generate(args) -> int:
         method = next(iter(networks.values()))
     else:
         method = transition.methods(fps=fps)[args.method]
+    method = with_join(method, args.join, dt=1.0 / fps)
     same = Path(args.source).resolve() == Path(target_path).resolve()
     target_frame = args.target_frame if args.target_frame is not None else (
         args.source_frame + T + 1 if same else 1)
     tr = transition.make_transition(method, skel, src_clip, args.source_frame, tgt_clip, target_frame, T,
                          frame_time=1.0 / fps, context=args.context, align=args.align, same_clip=same,
-                         method_name=args.method, name=Path(args.out).stem)
+                         method_name=args.method + ("" if args.join == "none" else "+join"),
+                         name=Path(args.out).stem)
     write_bvh(args.out, transition.with_end_sites(tr.motion))
     _say(f"wrote {args.out}: {tr.motion.num_frames} frames at {fps:g} fps, 22 joints (centimetres); "
          f"generated frames {tr.start}..{tr.stop - 1} ({args.method}, {args.backend})")
@@ -824,6 +831,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="skip the onnxruntime-vs-NumPy check on random context poses")
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random poses")
+    p.add_argument("--join", default="none", choices=JOIN_MODES,
+                   help="transition models: inertialize = bake the join option into the rollout graph (spec/qtg.md "
+                        "7.4; the C example gets it too); default none")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("generate", help="generate a transition between two clips, BVH out",
@@ -842,6 +852,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--onnx", default=None, help="folder of exported models (ONNX backend)")
     p.add_argument("--length", type=positive_int, default=None, help="T (default: the model's)")
     p.add_argument("--context", type=positive_int, default=10, help="frames kept on each side (default 10)")
+    p.add_argument("--join", default="none", choices=JOIN_MODES,
+                   help="inertialize: carry the jump at each end of the transition away (spec/qtg.md 7.4)")
     p.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
                    help="place the target clip: none = as in its file, continue = after the source (default: "
                         "none for one file, continue for two)")

@@ -134,11 +134,13 @@ def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict
     return methods
 
 
-def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition") -> dict:
+def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition",
+                   **options) -> dict:
     """The task's protocol on ``test_ds`` for the network (NumPy, and onnxruntime from ``onnx_dir``) and the
-    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`)."""
+    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`); ``options`` go to the task's
+    ``methods`` (transition: ``join``)."""
     mod = task_of(model.spec if model is not None else task)
-    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps))
+    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps, **options))
 
 
 def _deploy_models(what: str):

@@ -35,6 +35,8 @@ from refimpl.motion import Motion
 from refimpl.options import positive_int
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_rotate
 from refimpl.skeleton import Skeleton
+from refimpl.transition_join import JOIN_MODES, check_join, with_join
+from refimpl.transition_quality import evaluate_quality, format_quality
 from refimpl.transitions import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                  build_transition_datasets, declared_rate, heading_from_root, join_pose, load_source,
                                  make_windows, sample_sources, shared_sources, split_pose, window_to_world)
@@ -42,7 +44,7 @@ from refimpl.transitions import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, Tra
 __all__ = [
     "NAME", "add_train_options", "resolve_data", "source_for_file", "build_datasets", "train_datasets",
     "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
-    "methods", "evaluate",
+    "add_eval_options", "methods", "evaluate",
     "print_results", "write_results", "Transition", "make_transition", "with_end_sites", "render_transition",
     "clip_for", "random_context",
 ]
@@ -205,15 +207,33 @@ def onnx_method(runtime) -> Callable:
 # baselines and protocol
 # ----------------------------------------------------------------------------------------------------------------
 
-def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0) -> dict:
-    """``name -> f(past, target, T)``: the given networks' methods (in order), then both baselines
+def add_eval_options(group) -> None:
+    """The task's options of ``refimpl eval``: ``--join``."""
+    group.add_argument("--join", default="none", choices=JOIN_MODES,
+                       help="inertialize: also evaluate each network with its joins inertialised (spec/qtg.md "
+                            "7.4), as <name>+join beside the paper-faithful row (default none)")
+
+
+def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0, join: str = "none") -> dict:
+    """``name -> f(past, target, T)``: the given networks' methods (in order; with ``join="inertialize"`` each
+    followed by ``<name>+join``, :func:`refimpl.transition_join.with_join`), then both baselines
     (:func:`refimpl.baselines.method_registry` with ``dt = 1 / fps``)."""
-    return {**dict(networks or {}), **method_registry(dt=1.0 / fps)}
+    out = {}
+    for name, f in dict(networks or {}).items():
+        out[name] = f
+        if check_join(join) != "none":
+            out[f"{name}+join"] = with_join(f, join, dt=1.0 / fps)
+    return {**out, **method_registry(dt=1.0 / fps)}
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds``: :func:`refimpl.metrics.evaluate_methods`."""
-    return evaluate_methods(test_ds, methods_by_name)
+    """The paper's protocol on ``test_ds`` (:func:`refimpl.metrics.evaluate_methods`) and, under each method's
+    ``"quality"``, the animator's measures (:func:`refimpl.transition_quality.evaluate_quality`: joins, foot
+    skating, first and last frame, with the ground truth's numbers)."""
+    results = evaluate_methods(test_ds, methods_by_name)
+    for name, q in evaluate_quality(test_ds, methods_by_name).items():
+        results[name]["quality"] = q
+    return results
 
 
 def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
@@ -265,6 +285,11 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
     _say("")
     _say("Mean joint-position error per joint per frame (cm), by motion category and at transition frames fK:")
     _say(format_table(results))
+    if all("quality" in r for r in results.values()):
+        _say("")
+        _say("Joins (mean joint displacement into frame 1 and out of frame T), foot skating (horizontal speed of "
+             "the foot joints in contact) and the error at the first and last frames:")
+        _say(format_quality({k: r["quality"] for k, r in results.items()}))
     if curve:
         _say("")
         _say("Per-frame curve (cm):")
