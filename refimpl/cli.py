@@ -609,7 +609,8 @@ def _parse_slice(text: str | None, n: int) -> slice:
 
 def cmd_render(args) -> int:
     """``refimpl render``."""
-    from refimpl.render import render_gif, render_strip
+    from refimpl.render import render_gif
+    from refimpl.render_strip import render_strip
 
     motion = read_motion(args.file, fps=args.fps, layout=args.layout)
     other = read_motion(args.compare, fps=args.fps, layout=args.layout) if args.compare else None
@@ -710,7 +711,8 @@ def _generate_synthesis(args, model=None) -> int:
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
          "metres")
     if args.png or args.gif:
-        from refimpl.render import render_gif, render_strip
+        from refimpl.render import render_gif
+        from refimpl.render_strip import render_strip
 
         pos = motion.positions()
         parents = np.asarray(motion.skeleton.parents)

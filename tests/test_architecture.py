@@ -23,7 +23,7 @@ LAYERS = {
     6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.train", "refimpl.rigs",
         "refimpl.transitions", "refimpl.baselines", "refimpl.metrics", "refimpl.transition_quality",
         "refimpl.transition_join"],
-    7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.tasks", "refimpl.tasks.*",
+    7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks", "refimpl.tasks.*",
         "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator"],
     8: ["refimpl.cli", "refimpl.demo", "refimpl.__main__"],
 }
