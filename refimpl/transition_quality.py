@@ -29,7 +29,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from refimpl.metrics import positions_from_poses
+from refimpl.metrics import positions_from_poses, predict_transitions
 from refimpl.nn.params import check_float_array
 from refimpl.transitions import TransitionDataset
 
@@ -240,18 +240,11 @@ def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable]
     -------
     dict name -> :func:`window_quality`'s dict (``contact_rule`` added: threshold and foot joints).
     """
-    if not isinstance(dataset, TransitionDataset):
-        raise ValueError(f"dataset: expected a TransitionDataset, got {type(dataset).__name__}")
-    if dataset.num_windows == 0:
-        raise ValueError("dataset: no windows to evaluate")
-    past, gt, target = dataset.context()
-    T, dt = dataset.transition_length, 1.0 / dataset.fps
     out = {}
     for name, f in methods.items():
-        pred = np.concatenate([np.asarray(f(past[i:i + batch_size], target[i:i + batch_size], T), dtype=np.float64)
-                               for i in range(0, dataset.num_windows, batch_size)])
-        if pred.shape != gt.shape:
-            raise ValueError(f"methods[{name!r}]: expected output shape {gt.shape}, got {pred.shape}")
+        pred = predict_transitions(dataset, f, name, batch_size)  # validates dataset and output
+        past, _, target = dataset.context()
+        dt = 1.0 / dataset.fps
         whole = np.concatenate([past, pred, target], axis=1)  # (N, W, P)
         parts = []
         for k in np.unique(dataset.skeleton_index):

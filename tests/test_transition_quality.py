@@ -140,3 +140,17 @@ def test_evaluate_quality_of_the_truth_and_of_a_pop(sample_test):
     assert q["truth"]["contact_rule"]["height_cm"] == CONTACT_HEIGHT_CM
     text = format_quality(q)
     assert "ground truth" in text and "shifted" in text and "LeftToeBase" in text
+
+
+def test_predict_transitions_batches_and_checks(sample_test):
+    """refimpl.metrics.predict_transitions: batches concatenate to one call's output; a wrong shape is refused."""
+    from refimpl.baselines import interpolate
+    from refimpl.metrics import predict_transitions
+
+    past, _, target = sample_test.context()
+    whole = interpolate(past, target, sample_test.transition_length)
+    assert np.array_equal(predict_transitions(sample_test, interpolate, batch_size=7), whole)
+    with pytest.raises(ValueError, match=r"methods\['bad'\]"):
+        predict_transitions(sample_test, lambda p, t, T: np.zeros((len(p), T + 1, p.shape[-1])), "bad")
+    with pytest.raises(ValueError, match="dataset"):
+        predict_transitions(sample_test.select(np.zeros(sample_test.num_windows, bool)), interpolate)
