@@ -555,7 +555,7 @@ def cmd_generate(args) -> int:
                          name=Path(args.out).stem)
     write_bvh(args.out, transition.with_end_sites(tr.motion))
     _say(f"wrote {args.out}: {tr.motion.num_frames} frames at {fps:g} fps, 22 joints (centimetres); "
-         f"generated frames {tr.start}..{tr.stop - 1} ({args.method}, {args.backend})")
+         f"generated frames {tr.start}..{tr.stop - 1} ({tr.method}, {args.backend})")
     err = tr.error_cm()
     if err is not None:
         _say(f"ground truth available (same clip, target = source + T + 1): mean joint error {err:.2f} cm")
