@@ -1,9 +1,9 @@
-"""ONNX builder of the join option ``join="inertialize"`` (``refimpl/transition_join.py``, spec/qtg.md §7.4).
+"""ONNX builder of the join option ``join="inertialize"`` (``refimpl/protocols/transition_join.py``, spec/qtg.md §7.4).
 
-:func:`inertialize_joins` appends to a graph the computation of :func:`refimpl.transition_join.inertialize_joins`
+:func:`inertialize_joins` appends to a graph the computation of :func:`refimpl.protocols.transition_join.inertialize_joins`
 on a generated transition ``poses (B, T, P)`` (raw poses) and its context ``past``, ``target (B, 2, P)``: the
 offset between the past's continuation and the first frame, and between the last frame and the target's backward
-continuation, each decayed by Bollo's clamped quintic (:func:`refimpl.baselines.quintic_inertialization`) over
+continuation, each decayed by Bollo's clamped quintic (:func:`refimpl.protocols.transition_baselines.quintic_inertialization`) over
 ``blend_frames`` frames. ``T``, the frame time and the blend are constants of the graph (the rollout's ``T`` is
 fixed at export), so the sample times and the reversal of time are constant tensors.
 
@@ -30,7 +30,7 @@ def join_metadata(mode: str, T: int, frame_rate: float, blend_frames: int, in_gr
     """The ``join`` metadata entry: mode, blend, and where it is applied (in this graph or as a post-process)."""
     where = ("in this graph: the output poses are already joined" if in_graph else
              "not in this graph (a per-frame model cannot know the last frame): after the T frames, apply "
-             "refimpl.transition_join.inertialize_joins(past, poses, target, dt=1/frame_rate, blend_frames) "
+             "refimpl.protocols.transition_join.inertialize_joins(past, poses, target, dt=1/frame_rate, blend_frames) "
              "(deploy.models.qtg_io.QTGRuntime.transition does)")
     return {"mode": mode, "blend_frames": int(blend_frames), "frame_time": 1.0 / float(frame_rate),
             "transition_length": int(T), "applied": where,
@@ -65,7 +65,7 @@ def _atan2(g: GraphBuilder, y: str, x: str, *, name: str) -> str:
 
 
 def _quintic(g: GraphBuilder, x0: str, v0: str, t1: float, times: np.ndarray, *, name: str) -> str:
-    """Clamped quintic ``x(t)`` of :func:`refimpl.baselines.quintic_inertialization` for ``x0, v0 (B, C)`` at the
+    """Clamped quintic ``x(t)`` of :func:`refimpl.protocols.transition_baselines.quintic_inertialization` for ``x0, v0 (B, C)`` at the
     constant ``times (K,)`` → ``(B, C, K)``."""
     s = g.scalar
     v0 = g.node("Min", [v0, s(0.0)], f"{name}.v0")                                      # never away from 0
@@ -117,7 +117,7 @@ def _pick(g, x, index: int, *, name):
 
 def _carry_offset(g: GraphBuilder, prev: str, frames: str, K: int, J: int, dt: float, t1: float, *,
                   name: str) -> str:
-    """:func:`refimpl.transition_join.carry_offset`: ``prev (B, 2, P)``, ``frames (B, K, P)`` → ``(B, K, P)``."""
+    """:func:`refimpl.protocols.transition_join.carry_offset`: ``prev (B, 2, P)``, ``frames (B, K, P)`` → ``(B, K, P)``."""
     P = 3 + 4 * J
     s = g.scalar
 
@@ -206,7 +206,7 @@ def inertialize_joins(g: GraphBuilder, past: str, poses: str, target: str, T: in
     frame_rate : float
         Frames per second (``dt = 1 / frame_rate``).
     blend_frames : int
-        Frames of each blend (:func:`refimpl.transition_join.join_blend_frames`).
+        Frames of each blend (:func:`refimpl.protocols.transition_join.join_blend_frames`).
     """
     if (P - 3) % 4 or P < 7:
         raise ValueError(f"P: expected a pose size 3 + 4 J, got {P}")

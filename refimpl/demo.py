@@ -39,7 +39,7 @@ from refimpl.registry import MODELS
 from refimpl.services import (SAMPLE_DIR, blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
                               train_model, verify_onnx)
 from refimpl.tasks.transition import make_transition, print_results, render_transition, with_end_sites, write_results
-from refimpl.transition_join import with_join
+from refimpl.protocols.transition_join import with_join
 
 __all__ = ["run_demo", "DemoResult", "DEMO_CONFIG", "DEMO_STEPS", "DEMO_BATCH", "DEMO_LR", "QUICK_CONFIG",
            "QUICK_STEPS"]
@@ -67,7 +67,7 @@ class DemoResult:
     files : dict name -> Path
         Every file written (checkpoint, logs, tables, ONNX models, BVH files, pictures).
     results : dict
-        :func:`refimpl.metrics.evaluate_methods` output on the held-out windows.
+        :func:`refimpl.protocols.transition_metrics.evaluate_methods` output on the held-out windows.
     verify : dict or None
         :func:`refimpl.services.verify_onnx` output (None when ONNX was skipped).
     skipped : list of str
@@ -120,7 +120,7 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
 
 
 def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
-    from refimpl.transitions import build_transition_datasets, load_source, sample_sources
+    from refimpl.protocols.transition import build_transition_datasets, load_source, sample_sources
 
     t_start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)

@@ -115,7 +115,7 @@ def render_strip(path: str | os.PathLike, positions, parents, *, prediction=None
     feet : sequence of int, optional
         Foot joints whose floor track over the last :data:`FOOT_TRACK` frames is drawn in each panel while they
         are in contact (within ``contact_height`` of their lowest ground-truth height, the rule of
-        :mod:`refimpl.transition_quality`): a planted foot leaves a dot, a skating foot a streak.
+        :mod:`refimpl.protocols.transition_quality`): a planted foot leaves a dot, a skating foot a streak.
     contact_height : float
         In the positions' unit (2.0: centimetres).
 

@@ -14,7 +14,7 @@ from deploy.validate import run_onnxruntime, validate_model
 from deploy.metadata import read_metadata
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.recipes.qtg import qtg_method
-from refimpl.transition_join import inertialize_joins, join_blend_frames, with_join
+from refimpl.protocols.transition_join import inertialize_joins, join_blend_frames, with_join
 
 SMALL = QTGConfig(pose_size=91, encoder_sizes=(32, 16), gru_hidden=32, decoder_sizes=(32,), transition_length=30)
 

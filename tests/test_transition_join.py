@@ -1,18 +1,18 @@
-"""Tests of the join option (refimpl/transition_join.py, spec/qtg.md §7.4): the inertialised joins."""
+"""Tests of the join option (refimpl/protocols/transition_join.py, spec/qtg.md §7.4): the inertialised joins."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from refimpl.baselines import inertialize
+from refimpl.protocols.transition_baselines import inertialize
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_normalize
 from refimpl.recipes.qtg import qtg_method
 from refimpl.testing import assert_close, assert_quat_close
-from refimpl.transition_join import (JOIN_BLEND_FRAMES, carry_offset, check_join, inertialize_joins,
+from refimpl.protocols.transition_join import (JOIN_BLEND_FRAMES, carry_offset, check_join, inertialize_joins,
                                      join_blend_frames, with_join)
-from refimpl.transition_quality import evaluate_quality
-from refimpl.transitions import join_pose, split_pose
+from refimpl.protocols.transition_quality import evaluate_quality
+from refimpl.protocols.transition import join_pose, split_pose
 
 DT = 1.0 / 30.0
 
@@ -26,7 +26,7 @@ def _poses(rng, B, F, J, spread=0.3):
 def test_carry_offset_reproduces_the_inertialization_baseline():
     """Onto a static pose, carry_offset is the baseline's inertialisation: with the past moved one frame back
     (``a = 2 p_{-1} − p_0``, rotations ``q_{-1} ⊗ q_0⁻¹ ⊗ q_{-1}``) its frame 0 is ``p_0`` and frames 1 … T
-    equal :func:`refimpl.baselines.inertialize`."""
+    equal :func:`refimpl.protocols.transition_baselines.inertialize`."""
     rng = np.random.default_rng(0)
     B, J, T = 5, 4, 8
     past, target = _poses(rng, B, 2, J), _poses(rng, B, 2, J)

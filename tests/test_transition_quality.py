@@ -1,4 +1,4 @@
-"""Tests of the animator's measures (refimpl/transition_quality.py, spec/qtg.md §9.1) on constructed motions whose
+"""Tests of the animator's measures (refimpl/protocols/transition_quality.py, spec/qtg.md §9.1) on constructed motions whose
 answers are known, and on the embedded sample."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 from refimpl.rigs import CMU_22_JOINTS
 from refimpl.skeleton import Skeleton
-from refimpl.transition_quality import (CONTACT_HEIGHT_CM, contact_floor, evaluate_quality, foot_contacts,
+from refimpl.protocols.transition_quality import (CONTACT_HEIGHT_CM, contact_floor, evaluate_quality, foot_contacts,
                                         foot_joints, format_quality, join_displacement, skate_speed,
                                         step_displacement, window_quality)
 
@@ -143,9 +143,9 @@ def test_evaluate_quality_of_the_truth_and_of_a_pop(sample_test):
 
 
 def test_predict_transitions_batches_and_checks(sample_test):
-    """refimpl.metrics.predict_transitions: batches concatenate to one call's output; a wrong shape is refused."""
-    from refimpl.baselines import interpolate
-    from refimpl.metrics import predict_transitions
+    """refimpl.protocols.transition_metrics.predict_transitions: batches concatenate to one call's output; a wrong shape is refused."""
+    from refimpl.protocols.transition_baselines import interpolate
+    from refimpl.protocols.transition_metrics import predict_transitions
 
     past, _, target = sample_test.context()
     whole = interpolate(past, target, sample_test.transition_length)

@@ -42,7 +42,7 @@ import onnx
 from typing import Mapping
 
 from refimpl.models.qtg import QTGConfig, param_shapes
-from refimpl.transition_join import check_join, join_blend_frames
+from refimpl.protocols.transition_join import check_join, join_blend_frames
 
 from deploy.activations import leaky_relu
 from deploy.features import destandardize, standardize
@@ -128,7 +128,7 @@ def default_skeleton(pose_size: int):
         return None
     from refimpl.bvh import read_bvh_header
     from refimpl.rigs import CMU_22_JOINTS, CMU_UNIT_CM, scale_skeleton, subset_22
-    from refimpl.transitions import SAMPLE_DIR
+    from refimpl.protocols.transition import SAMPLE_DIR
 
     skel = read_bvh_header(SAMPLE_DIR / "bvh" / "02_01.bvh").skeleton
     ident = np.zeros((1, skel.num_joints, 4))
@@ -154,7 +154,7 @@ def check_params(params: Mapping[str, np.ndarray], config: QTGConfig) -> None:
 def check_normalization(normalization, config: QTGConfig):
     """``(mean (P,), std (P,))`` float64 from ``(mean, std)`` of shape ``(P,)`` or root-only ``(3,)``.
 
-    Root-only statistics (``refimpl.transitions``: ``root_mean``, ``root_std``) are padded with mean 0 and std 1
+    Root-only statistics (``refimpl.protocols.transition``: ``root_mean``, ``root_std``) are padded with mean 0 and std 1
     for the quaternion entries, for which the in-graph ``(x − 0) / 1`` and ``x · 1 + 0`` are exact.
     """
     if normalization is None:
@@ -318,7 +318,7 @@ def export_qtg_init(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
         Force primitive operators (see ``GraphBuilder``).
     normalization : (mean, std), optional
         Standardise inside the graph, so inputs and outputs are raw poses: shapes ``(P,)``, or ``(3,)`` for the
-        root translation only (``refimpl.transitions.normalize_poses``' ``root_mean``, ``root_std``).
+        root translation only (``refimpl.protocols.transition.normalize_poses``' ``root_mean``, ``root_std``).
     normalize_in_graph : bool
         With ``False`` the statistics only go to the metadata (``"in_graph": false``) and the graph works on
         normalised poses like the NumPy model.
@@ -417,11 +417,11 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
         ``scan`` (default): an ONNX ``Scan`` over a constant ``(T, 1)`` tick tensor, the state carried;
         ``loop``: an ONNX ``Loop`` with the state carried; ``unrolled``: T copies of the step (shared weights).
     join : {"none", "inertialize"}
-        ``"inertialize"`` bakes :func:`refimpl.transition_join.inertialize_joins` into the graph after the network
+        ``"inertialize"`` bakes :func:`refimpl.protocols.transition_join.inertialize_joins` into the graph after the network
         (``deploy/join.py``; raw poses, so it needs the statistics in the graph when there are any); the
         metadata's ``join`` entry says so. ``"none"`` (default): the network's frames.
     join_blend_frames : int, optional
-        Frames of each blend (default :func:`refimpl.transition_join.join_blend_frames` of ``T``).
+        Frames of each blend (default :func:`refimpl.protocols.transition_join.join_blend_frames` of ``T``).
     Others as :func:`export_qtg_init`.
 
     Returns

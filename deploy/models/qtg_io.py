@@ -17,7 +17,7 @@ from typing import Mapping
 import numpy as np
 
 from refimpl.models.qtg import QTGConfig
-from refimpl.transition_join import inertialize_joins, join_blend_frames as default_blend
+from refimpl.protocols.transition_join import inertialize_joins, join_blend_frames as default_blend
 
 from deploy.graph import OPSET
 from deploy.models.entry_io import checkpoint_params, read_checkpoint, write_models

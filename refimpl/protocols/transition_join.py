@@ -4,7 +4,7 @@ A network's transition need not start where the past motion was heading nor arri
 leaves a jump at either end (spec/qtg.md §7.4). Games remove such jumps by *inertialisation* (Bollo, GDC 2018):
 at the switch, the offset between where the old motion would be and where the new one is decays to zero over a
 short blend. ``join="inertialize"`` does that at both ends with the project's own decay curve,
-:func:`refimpl.baselines.quintic_inertialization`; ``join="none"`` (the default everywhere) leaves the network's
+:func:`refimpl.protocols.transition_baselines.quintic_inertialization`; ``join="none"`` (the default everywhere) leaves the network's
 frames as they are (the paper's numbers).
 
 With past ``p_{-1}, p_0``, generated ``G_1 … G_T`` and targets ``g1, g2``, frame time ``dt`` and blend time ``t1``
@@ -19,7 +19,7 @@ With past ``p_{-1}, p_0``, generated ``G_1 … G_T`` and targets ``g1, g2``, fra
 * **end**: the same, time reversed, on the start-corrected frames: the target's backward continuation
   ``g1 + (g1 − g2)`` is where frame ``T`` should be, and the offset decays towards frame ``T − t1/dt``.
 
-Both offsets use the clamps of :func:`~refimpl.baselines.quintic_inertialization` (never away from zero, no
+Both offsets use the clamps of :func:`~refimpl.protocols.transition_baselines.quintic_inertialization` (never away from zero, no
 overshoot). The ONNX rollout graph bakes the same computation in when exported with ``join="inertialize"``
 (``deploy/join.py``).
 
@@ -31,10 +31,10 @@ from typing import Callable
 
 import numpy as np
 
-from refimpl.baselines import check_context, check_length, quintic_inertialization
+from refimpl.protocols.transition_baselines import check_context, check_length, quintic_inertialization
 from refimpl.nn.params import check_float_array
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul
-from refimpl.transitions import join_pose, split_pose
+from refimpl.protocols.transition import join_pose, split_pose
 
 __all__ = ["JOIN_MODES", "JOIN_BLEND_FRAMES", "check_join", "join_blend_frames", "carry_offset",
            "inertialize_joins", "with_join"]
@@ -75,7 +75,7 @@ def carry_offset(prev, frames, dt: float, blend_time: float) -> np.ndarray:
     dt : float
         Frame time (s).
     blend_time : float
-        ``t1`` of :func:`~refimpl.baselines.quintic_inertialization` (s), > 0.
+        ``t1`` of :func:`~refimpl.protocols.transition_baselines.quintic_inertialization` (s), > 0.
 
     Returns
     -------

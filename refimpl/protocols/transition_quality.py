@@ -1,8 +1,8 @@
 """What an animator checks in a transition: the joins, foot skating, and the error at its first and last frames.
 
-The paper's metric (:mod:`refimpl.metrics`) averages the error over all frames; it does not show a pop at either
+The paper's metric (:mod:`refimpl.protocols.transition_metrics`) averages the error over all frames; it does not show a pop at either
 end of the transition or feet that slide. These measures do (spec/qtg.md §9.1). All of them work on
-forward-kinematics joint positions in a window's frame (centimetres, y up, :mod:`refimpl.transitions`), of the
+forward-kinematics joint positions in a window's frame (centimetres, y up, :mod:`refimpl.protocols.transition`), of the
 whole sequence ``p_{-1}, p_0 | p_1 … p_T | g1, g2`` (``W = T + 4`` frames; the transition is frames
 ``[start, stop) = [2, T + 2)``):
 
@@ -29,9 +29,9 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from refimpl.metrics import positions_from_poses, predict_transitions
+from refimpl.protocols.transition_metrics import positions_from_poses, predict_transitions
 from refimpl.nn.params import check_float_array
-from refimpl.transitions import TransitionDataset
+from refimpl.protocols.transition import TransitionDataset
 
 __all__ = ["CONTACT_HEIGHT_CM", "FOOT_WORDS", "foot_joints", "step_displacement", "join_displacement",
            "contact_floor", "foot_contacts", "skate_speed", "window_quality", "evaluate_quality",
@@ -231,7 +231,7 @@ def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable]
     ----------
     dataset : TransitionDataset
     methods : mapping name -> f(past, target, T) -> poses
-        Un-normalised poses in and out, as :func:`refimpl.metrics.evaluate_methods`.
+        Un-normalised poses in and out, as :func:`refimpl.protocols.transition_metrics.evaluate_methods`.
     batch_size : int
     height : float
         Contact threshold (cm).
