@@ -1,11 +1,12 @@
 """ONNX builder of the join option ``join="inertialize"`` (``refimpl/protocols/transition_join.py``, spec/qtg.md §7.4).
 
-:func:`inertialize_joins` appends to a graph the computation of :func:`refimpl.protocols.transition_join.inertialize_joins`
-on a generated transition ``poses (B, T, P)`` (raw poses) and its context ``past``, ``target (B, 2, P)``: the
-offset between the past's continuation and the first frame, and between the last frame and the target's backward
-continuation, each decayed by Bollo's clamped quintic (:func:`refimpl.protocols.transition_baselines.quintic_inertialization`) over
-``blend_frames`` frames. ``T``, the frame time and the blend are constants of the graph (the rollout's ``T`` is
-fixed at export), so the sample times and the reversal of time are constant tensors.
+:func:`inertialize_joins` appends to a graph the computation of
+:func:`refimpl.protocols.transition_join.inertialize_joins` on a generated transition ``poses (B, T, P)`` (raw
+poses) and its context ``past``, ``target (B, 2, P)``: the offset between the past's continuation and the first
+frame, and between the last frame and the target's backward continuation, each decayed by Bollo's clamped quintic
+(:func:`refimpl.protocols.transition_baselines.quintic_inertialization`) over ``blend_frames`` frames. ``T``, the
+frame time and the blend are constants of the graph (the rollout's ``T`` is fixed at export), so the sample times
+and the reversal of time are constant tensors.
 
 ``atan2`` has no ONNX operator: :func:`_atan2` builds it from ``Atan`` and ``Where`` (numpy's values except for
 signed zeros). A graph cannot raise: normalisations divide by ``max(|q|, 1e-8)`` as the NumPy function does.
@@ -65,8 +66,8 @@ def _atan2(g: GraphBuilder, y: str, x: str, *, name: str) -> str:
 
 
 def _quintic(g: GraphBuilder, x0: str, v0: str, t1: float, times: np.ndarray, *, name: str) -> str:
-    """Clamped quintic ``x(t)`` of :func:`refimpl.protocols.transition_baselines.quintic_inertialization` for ``x0, v0 (B, C)`` at the
-    constant ``times (K,)`` → ``(B, C, K)``."""
+    """Clamped quintic ``x(t)`` of :func:`refimpl.protocols.transition_baselines.quintic_inertialization` for
+    ``x0, v0 (B, C)`` at the constant ``times (K,)`` → ``(B, C, K)``."""
     s = g.scalar
     v0 = g.node("Min", [v0, s(0.0)], f"{name}.v0")                                      # never away from 0
     neg = g.node("Less", [v0, s(0.0)], f"{name}.v0_neg")
@@ -117,7 +118,8 @@ def _pick(g, x, index: int, *, name):
 
 def _carry_offset(g: GraphBuilder, prev: str, frames: str, K: int, J: int, dt: float, t1: float, *,
                   name: str) -> str:
-    """:func:`refimpl.protocols.transition_join.carry_offset`: ``prev (B, 2, P)``, ``frames (B, K, P)`` → ``(B, K, P)``."""
+    """:func:`refimpl.protocols.transition_join.carry_offset`: ``prev (B, 2, P)``, ``frames (B, K, P)`` →
+    ``(B, K, P)``."""
     P = 3 + 4 * J
     s = g.scalar
 

@@ -1,5 +1,5 @@
-"""Tests of the animator's measures (refimpl/protocols/transition_quality.py, spec/qtg.md §9.1) on constructed motions whose
-answers are known, and on the embedded sample."""
+"""Tests of the animator's measures (refimpl/protocols/transition_quality.py, spec/qtg.md §9.1) on constructed
+motions whose answers are known, and on the embedded sample."""
 from __future__ import annotations
 
 import numpy as np
@@ -138,12 +138,19 @@ def test_evaluate_quality_of_the_truth_and_of_a_pop(sample_test):
     assert s["join_in_cm"] > 5.0 and s["join_in_ratio"] > 2.0
     assert s["first_frame_cm"] == pytest.approx(10.0) and s["last_frame_cm"] == pytest.approx(10.0)
     assert q["truth"]["contact_rule"]["height_cm"] == CONTACT_HEIGHT_CM
+    labels = np.array([sample_test.sources[i].label for i in sample_test.source_index])
+    by = s["by_label"]
+    assert sorted(by) == sorted(set(labels)) == ["jump", "run", "salsa", "walk"]
+    n = {lab: int((labels == lab).sum()) for lab in by}  # pooled = window-weighted mean of the labels' means
+    assert s["join_in_cm"] == pytest.approx(sum(by[lab]["join_in_cm"] * n[lab] for lab in by) / sum(n.values()))
+    assert all(by[lab]["first_frame_cm"] == pytest.approx(10.0) for lab in by)
     text = format_quality(q)
     assert "ground truth" in text and "shifted" in text and "LeftToeBase" in text
 
 
 def test_predict_transitions_batches_and_checks(sample_test):
-    """refimpl.protocols.transition_metrics.predict_transitions: batches concatenate to one call's output; a wrong shape is refused."""
+    """refimpl.protocols.transition_metrics.predict_transitions: batches concatenate to one call's output; a wrong
+    shape is refused."""
     from refimpl.protocols.transition_baselines import interpolate
     from refimpl.protocols.transition_metrics import predict_transitions
 

@@ -417,8 +417,8 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
         ``scan`` (default): an ONNX ``Scan`` over a constant ``(T, 1)`` tick tensor, the state carried;
         ``loop``: an ONNX ``Loop`` with the state carried; ``unrolled``: T copies of the step (shared weights).
     join : {"none", "inertialize"}
-        ``"inertialize"`` bakes :func:`refimpl.protocols.transition_join.inertialize_joins` into the graph after the network
-        (``deploy/join.py``; raw poses, so it needs the statistics in the graph when there are any); the
+        ``"inertialize"`` bakes :func:`refimpl.protocols.transition_join.inertialize_joins` into the graph after the
+        network (``deploy/join.py``; raw poses, so it needs the statistics in the graph when there are any); the
         metadata's ``join`` entry says so. ``"none"`` (default): the network's frames.
     join_blend_frames : int, optional
         Frames of each blend (default :func:`refimpl.protocols.transition_join.join_blend_frames` of ``T``).

@@ -4,8 +4,8 @@ A network's transition need not start where the past motion was heading nor arri
 leaves a jump at either end (spec/qtg.md §7.4). Games remove such jumps by *inertialisation* (Bollo, GDC 2018):
 at the switch, the offset between where the old motion would be and where the new one is decays to zero over a
 short blend. ``join="inertialize"`` does that at both ends with the project's own decay curve,
-:func:`refimpl.protocols.transition_baselines.quintic_inertialization`; ``join="none"`` (the default everywhere) leaves the network's
-frames as they are (the paper's numbers).
+:func:`refimpl.protocols.transition_baselines.quintic_inertialization`; ``join="none"`` (the default
+everywhere) leaves the network's frames as they are (the paper's numbers).
 
 With past ``p_{-1}, p_0``, generated ``G_1 … G_T`` and targets ``g1, g2``, frame time ``dt`` and blend time ``t1``
 (:func:`join_blend_frames` frames):
@@ -19,9 +19,9 @@ With past ``p_{-1}, p_0``, generated ``G_1 … G_T`` and targets ``g1, g2``, fra
 * **end**: the same, time reversed, on the start-corrected frames: the target's backward continuation
   ``g1 + (g1 − g2)`` is where frame ``T`` should be, and the offset decays towards frame ``T − t1/dt``.
 
-Both offsets use the clamps of :func:`~refimpl.protocols.transition_baselines.quintic_inertialization` (never away from zero, no
-overshoot). The ONNX rollout graph bakes the same computation in when exported with ``join="inertialize"``
-(``deploy/join.py``).
+Both offsets use the clamps of :func:`~refimpl.protocols.transition_baselines.quintic_inertialization` (never
+away from zero, no overshoot). The ONNX rollout graph bakes the same computation in when exported with
+``join="inertialize"`` (``deploy/join.py``).
 
 Shape legend: B batch, T (or K) frames, P pose size (3 + 4 J), J joints, C channels (1 + J).
 """

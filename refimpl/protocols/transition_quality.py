@@ -1,7 +1,7 @@
 """What an animator checks in a transition: the joins, foot skating, and the error at its first and last frames.
 
-The paper's metric (:mod:`refimpl.protocols.transition_metrics`) averages the error over all frames; it does not show a pop at either
-end of the transition or feet that slide. These measures do (spec/qtg.md §9.1). All of them work on
+The paper's metric (:mod:`refimpl.protocols.transition_metrics`) averages the error over all frames; it does not
+show a pop at either end of the transition or feet that slide. These measures do (spec/qtg.md §9.1). All of them work on
 forward-kinematics joint positions in a window's frame (centimetres, y up, :mod:`refimpl.protocols.transition`), of the
 whole sequence ``p_{-1}, p_0 | p_1 … p_T | g1, g2`` (``W = T + 4`` frames; the transition is frames
 ``[start, stop) = [2, T + 2)``):
@@ -171,11 +171,18 @@ def skate_speed(positions, feet, floor, dt: float, *, height: float = CONTACT_HE
     x = _positions(positions)
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt: expected a positive frame time, got {dt!r}")
+    total, count, steps = _contact_speeds(x, feet, floor, dt, height, up)
+    n = count.sum()
+    return (float(total.sum() / n) if n else float("nan")), float(n / (steps * len(total)))
+
+
+def _contact_speeds(x, feet, floor, dt, height, up):
+    """Per window: the sum of horizontal foot speeds over contact steps ``(N,)``, their number ``(N,)``, and the
+    number of foot steps of one window ``(F − 1) K``."""
     contact = foot_contacts(x, feet, floor, height=height, up=up)  # (N, F − 1, K)
     flat = [a for a in range(3) if a != up]
     v = np.linalg.norm(np.diff(x[:, :, list(feet)][..., flat], axis=1), axis=-1) / dt  # (N, F − 1, K)
-    speed = float(v[contact].mean()) if contact.any() else float("nan")
-    return speed, float(contact.mean())
+    return np.where(contact, v, 0.0).sum(axis=(1, 2)), contact.sum(axis=(1, 2)), contact[0].size
 
 
 def window_quality(pred_pos, gt_pos, feet, dt: float, *, past: int = 2, future: int = 2,
@@ -201,31 +208,50 @@ def window_quality(pred_pos, gt_pos, feet, dt: float, *, past: int = 2, future: 
         ``last_frame_cm``, and ``ground_truth``: the same join, skating and contact numbers of ``gt_pos`` plus
         its ``median_step_cm`` (all steps of all windows).
     """
+    return _summarise(_window_arrays(pred_pos, gt_pos, feet, dt, past, future, height, up))
+
+
+def _window_arrays(pred_pos, gt_pos, feet, dt, past, future, height, up) -> dict:
+    """Per-window numbers of :func:`window_quality`, so that any subset of windows can be summarised exactly."""
     pred, gt = _positions(pred_pos, "pred_pos"), _positions(gt_pos, "gt_pos")
     if pred.shape != gt.shape:
         raise ValueError(f"pred_pos: expected the shape of gt_pos {gt.shape}, got {pred.shape}")
     W = gt.shape[1]
     start, stop = past, W - future
     floor = contact_floor(gt, feet, up=up)  # (N, K)
-    median = float(np.median(step_displacement(gt)))
+    out = {"gt_steps": step_displacement(gt),  # (N, W − 1)
+           "err": np.linalg.norm(pred[:, start:stop] - gt[:, start:stop], axis=-1).mean(axis=-1)}  # (N, T)
+    for tag, x in (("", pred), ("gt_", gt)):
+        out[tag + "into"], out[tag + "out"] = join_displacement(x, start, stop)  # (N,), (N,)
+        total, count, steps = _contact_speeds(x[:, start - 1:stop + 1], feet, floor, dt, height, up)
+        out[tag + "skate_sum"], out[tag + "contacts"] = total, count
+        out[tag + "foot_steps"] = np.full(len(total), steps)
+    return out
 
-    def measures(x):
-        into, out = join_displacement(x, start, stop)
-        speed, share = skate_speed(x[:, start - 1:stop + 1], feet, floor, dt, height=height, up=up)
-        return {"join_in_cm": float(into.mean()), "join_out_cm": float(out.mean()), "skate_cm_s": speed,
-                "contact_share": share}
 
-    res = measures(pred)
-    truth = dict(measures(gt), median_step_cm=median)
-    err = np.linalg.norm(pred[:, start:stop] - gt[:, start:stop], axis=-1).mean(axis=(0, 2))  # (T,)
+def _summarise(a: dict, sel=None) -> dict:
+    """:func:`window_quality`'s dict of the windows ``sel`` (default all) of :func:`_window_arrays`' arrays."""
+    a = a if sel is None else {k: v[sel] for k, v in a.items()}
+    median = float(np.median(a["gt_steps"]))
+
+    def measures(tag):
+        n = a[tag + "contacts"].sum()
+        return {"join_in_cm": float(a[tag + "into"].mean()), "join_out_cm": float(a[tag + "out"].mean()),
+                "skate_cm_s": float(a[tag + "skate_sum"].sum() / n) if n else float("nan"),
+                "contact_share": float(n / a[tag + "foot_steps"].sum())}
+
+    res = measures("")
+    err = a["err"].mean(axis=0)  # (T,)
     res.update(join_in_ratio=_ratio(res["join_in_cm"], median), join_out_ratio=_ratio(res["join_out_cm"], median),
-               first_frame_cm=float(err[0]), last_frame_cm=float(err[-1]), ground_truth=truth)
+               first_frame_cm=float(err[0]), last_frame_cm=float(err[-1]),
+               ground_truth=dict(measures("gt_"), median_step_cm=median))
     return res
 
 
 def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable], batch_size: int = 1024,
-                     height: float = CONTACT_HEIGHT_CM) -> dict:
-    """:func:`window_quality` of every method on every window of ``dataset`` (per skeleton, window-weighted).
+                     height: float = CONTACT_HEIGHT_CM, labels: bool = True) -> dict:
+    """:func:`window_quality` of every method on all windows of ``dataset`` (windows of every skeleton pooled:
+    means over windows, the median step and the skating over all of them) and, with ``labels``, per source label.
 
     Parameters
     ----------
@@ -235,46 +261,38 @@ def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable]
     batch_size : int
     height : float
         Contact threshold (cm).
+    labels : bool
+        Also ``by_label``: ``{label: window_quality's dict}`` (walk, run, ... or a locomotion set's styles).
 
     Returns
     -------
-    dict name -> :func:`window_quality`'s dict (``contact_rule`` added: threshold and foot joints).
+    dict name -> :func:`window_quality`'s dict, plus ``contact_rule`` (threshold, floor, foot joints) and
+    ``by_label``.
     """
+    past, _, target = dataset.context() if isinstance(dataset, TransitionDataset) else (None, None, None)
     out = {}
     for name, f in methods.items():
         pred = predict_transitions(dataset, f, name, batch_size)  # validates dataset and output
-        past, _, target = dataset.context()
-        dt = 1.0 / dataset.fps
         whole = np.concatenate([past, pred, target], axis=1)  # (N, W, P)
-        parts = []
+        arrays: dict = {}
         for k in np.unique(dataset.skeleton_index):
-            sel = dataset.skeleton_index == k
+            sel = np.flatnonzero(dataset.skeleton_index == k)
             skel = dataset.skeletons[int(k)]
-            q = window_quality(positions_from_poses(whole[sel], skel), positions_from_poses(dataset.poses[sel], skel),
-                               foot_joints(skel), dt, past=dataset.past, future=dataset.future, height=height)
-            parts.append((int(sel.sum()), q))
-        out[name] = dict(_weighted(parts), contact_rule={
+            part = _window_arrays(positions_from_poses(whole[sel], skel),
+                                  positions_from_poses(dataset.poses[sel], skel), foot_joints(skel),
+                                  1.0 / dataset.fps, dataset.past, dataset.future, height, 1)
+            for key, v in part.items():
+                arrays.setdefault(key, np.zeros((dataset.num_windows,) + v.shape[1:], v.dtype))[sel] = v
+        res = _summarise(arrays)
+        res["contact_rule"] = {
             "height_cm": float(height), "floor": "each foot joint's lowest height over the ground-truth window",
             "foot_joints": sorted({dataset.skeletons[int(k)].names[j] for k in np.unique(dataset.skeleton_index)
-                                   for j in foot_joints(dataset.skeletons[int(k)])})})
+                                   for j in foot_joints(dataset.skeletons[int(k)])})}
+        if labels:
+            label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
+            res["by_label"] = {lab: _summarise(arrays, label_of == lab) for lab in sorted(set(label_of))}
+        out[name] = res
     return out
-
-
-def _weighted(parts):
-    """Window-weighted mean of :func:`window_quality` dicts (NaN skating ignored); ratios recomputed."""
-    n = np.array([w for w, _ in parts], dtype=np.float64)
-
-    def mean(key, sub=None):
-        vals = np.array([(q[sub] if sub else q)[key] for _, q in parts], dtype=np.float64)
-        ok = np.isfinite(vals)
-        return float(np.sum(vals[ok] * n[ok]) / np.sum(n[ok])) if ok.any() else float("nan")
-
-    keys = ("join_in_cm", "join_out_cm", "skate_cm_s", "contact_share")
-    res = {k: mean(k) for k in keys + ("first_frame_cm", "last_frame_cm")}
-    truth = {k: mean(k, "ground_truth") for k in keys + ("median_step_cm",)}
-    res.update(join_in_ratio=_ratio(res["join_in_cm"], truth["median_step_cm"]),
-               join_out_ratio=_ratio(res["join_out_cm"], truth["median_step_cm"]), ground_truth=truth)
-    return res
 
 
 def _ratio(a: float, m: float) -> float:

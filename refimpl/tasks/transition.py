@@ -227,9 +227,10 @@ def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`) and, under each method's
-    ``"quality"``, the animator's measures (:func:`refimpl.protocols.transition_quality.evaluate_quality`: joins, foot
-    skating, first and last frame, with the ground truth's numbers)."""
+    """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`) and,
+    under each method's ``"quality"``, the animator's measures
+    (:func:`refimpl.protocols.transition_quality.evaluate_quality`: joins, foot skating, first and last frame, with
+    the ground truth's numbers)."""
     results = evaluate_methods(test_ds, methods_by_name)
     for name, q in evaluate_quality(test_ds, methods_by_name).items():
         results[name]["quality"] = q
@@ -452,8 +453,8 @@ def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
 
     The strip shows the frames on both sides of each join (:func:`refimpl.render_strip.join_frames`: last past,
     first generated, a middle one, last generated, first target), left and right limbs in two shades
-    (:func:`refimpl.render_strip.limb_sides`), the feet's floor tracks (:func:`refimpl.protocols.transition_quality.foot_joints`)
-    and a floor grid fixed in the world (spec/cli.md).
+    (:func:`refimpl.render_strip.limb_sides`), the feet's floor tracks
+    (:func:`refimpl.protocols.transition_quality.foot_joints`) and a floor grid fixed in the world (spec/cli.md).
     """
     from refimpl.render import render_gif
     from refimpl.render_strip import join_frames, limb_sides, render_strip
