@@ -38,9 +38,8 @@ __all__ = ["CONTACT_HEIGHT_CM", "FOOT_WORDS", "foot_joints", "step_displacement"
            "format_quality"]
 
 #: A foot joint is in contact when it is within this height (cm) of its floor (its lowest height over the
-#: ground-truth window). 2 cm: on the embedded sample's held-out windows it marks 47 % (walk, run), 71 % (jump)
-#: and 61 % (salsa) of the ground truth's foot steps as contacts, with mean horizontal speeds of 31, 6.5 and
-#: 14 cm/s there (the toe rolling off, heels lifting); 1 cm misses heel strikes, 5 cm counts swing feet.
+#: ground-truth window). Why 2 cm: spec/qtg.md §9.1 (on the sample's held-out windows it marks 51 % of the walks'
+#: ground-truth foot steps as contacts, at 31 cm/s: the toe rolling off, heels lifting).
 CONTACT_HEIGHT_CM = 2.0
 #: Words (case-insensitive) that mark a foot joint's name: CMU ``LeftFoot``/``LeftToeBase``, salsa ``lFoot``.
 FOOT_WORDS = ("foot", "toe", "ankle")
