@@ -72,3 +72,13 @@ def test_export_and_generate_with_join(capsys, ckpt, tmp_path):
     np.testing.assert_allclose(root[5], 2 * root[4] - root[3], atol=1e-4)  # frame 1 continues the past
     np.testing.assert_allclose(root[34], 2 * root[35] - root[36], atol=1e-4)  # frame T leads into the target
     assert np.abs(ma.positions() - mb.positions()).max() < 1e-2  # NumPy join = the graph's join (cm)
+
+
+def test_results_json_is_strict():
+    """Skating without a single contact is NaN in Python and null in the JSON file (strict JSON, spec/cli.md §5)."""
+    from refimpl.tasks.transition import _results_json
+
+    text = _results_json({"m": {"quality": {"skate_cm_s": float("nan"), "by_label": {"walk": {"skate_cm_s": 3.0}}},
+                                "per_frame_cm": np.array([1.0, np.nan])}})
+    assert json.loads(text)["m"] == {"quality": {"skate_cm_s": None, "by_label": {"walk": {"skate_cm_s": 3.0}}},
+                                     "per_frame_cm": [1.0, None]}

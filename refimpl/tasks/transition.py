@@ -250,14 +250,16 @@ def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
 def _results_json(results: Mapping[str, dict]) -> str:
     def conv(v):
         if isinstance(v, np.ndarray):
-            return [float(x) for x in v]
+            return [conv(float(x)) for x in v]
         if isinstance(v, dict):
             return {k: conv(x) for k, x in v.items()}
         if isinstance(v, (np.floating, np.integer)):
-            return v.item()
+            v = v.item()
+        if isinstance(v, float) and not np.isfinite(v):
+            return None  # e.g. skating without a contact: null, so that the file is strict JSON
         return v
 
-    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True) + "\n"
+    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def _curve_table(results: Mapping[str, dict], frame_time: float) -> str:
