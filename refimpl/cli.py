@@ -613,7 +613,7 @@ def _parse_slice(text: str | None, n: int) -> slice:
 def cmd_render(args) -> int:
     """``refimpl render``."""
     from refimpl.render import render_gif
-    from refimpl.render_strip import render_strip
+    from refimpl.render_strip import limb_sides, render_strip
 
     motion = read_motion(args.file, fps=args.fps, layout=args.layout)
     other = read_motion(args.compare, fps=args.fps, layout=args.layout) if args.compare else None
@@ -628,16 +628,17 @@ def cmd_render(args) -> int:
     pred = None if other is None else other.positions()[idx]
     parents = np.asarray(motion.skeleton.parents)
     outs = args.out or [Path(args.file).stem + ".png"]
+    sides = limb_sides(motion.skeleton)  # left limbs dark, right limbs light (the skeleton's mirror map)
     labels = (Path(args.file).stem, Path(args.compare).stem if args.compare else "")
     step = sel.step or 1
     for out in outs:
         suffix = Path(out).suffix.lower()
         if suffix == ".png":
             render_strip(out, pos, parents, prediction=pred, num_frames=args.num_frames, labels=labels,
-                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title)
+                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title, sides=sides)
         elif suffix == ".gif":
             render_gif(out, pos, parents, prediction=pred, fps=motion.fps / step, stride=args.stride, labels=labels,
-                       up=args.up, frame_numbers=idx, title=args.title)
+                       up=args.up, frame_numbers=idx, title=args.title, sides=sides)
         else:
             raise UsageError(f"--out {out}: expected a .png or .gif file name")
         _say(f"wrote {out} ({len(idx)} frames of {args.file})")
