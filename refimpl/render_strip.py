@@ -54,10 +54,16 @@ def join_frames(start: int, stop: int, num_total: int, *, middle: int = 1) -> li
 
 def limb_sides(skeleton) -> np.ndarray:
     """``(J,)`` −1 for the skeleton's left joints, +1 for its right joints (``joints_left`` / ``joints_right``,
-    the mirror map), 0 for the others."""
+    the mirror map), 0 for the others. A skeleton without a mirror map is read from its names' side suffixes
+    (``Foot_L`` / ``Foot_R``, ``hand.l``: the Bandai-Namco and Blender conventions)."""
     sides = np.zeros(skeleton.num_joints, dtype=np.int64)
-    sides[list(skeleton.joints_left)] = -1
-    sides[list(skeleton.joints_right)] = 1
+    if len(skeleton.joints_left) or len(skeleton.joints_right):
+        sides[list(skeleton.joints_left)] = -1
+        sides[list(skeleton.joints_right)] = 1
+        return sides
+    for j, name in enumerate(skeleton.names):
+        tail = name.lower()[-2:]
+        sides[j] = -1 if tail in ("_l", ".l") else 1 if tail in ("_r", ".r") else 0
     return sides
 
 

@@ -37,6 +37,8 @@ def test_limb_sides_from_the_mirror_map():
     names = dict(zip(CMU_22_JOINTS, sides))
     assert names["LeftFoot"] == -1 and names["RightHand"] == 1 and names["Spine"] == 0 and names["Hips"] == 0
     assert (sides == -1).sum() == (sides == 1).sum() == 8
+    bandai = ["Hips", "Spine", "UpperLeg_L", "Foot_L", "UpperLeg_R", "Foot_R"]  # no prefixes: suffixes
+    assert limb_sides(Skeleton(_PARENTS, np.ones((6, 3)), names=bandai)).tolist() == [0, 0, -1, -1, 1, 1]
 
 
 def test_bone_colors_shade_left_darker_and_right_lighter():
