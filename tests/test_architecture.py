@@ -22,8 +22,9 @@ LAYERS = {
     5: ["refimpl.models", "refimpl.models.*"],
     6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.train", "refimpl.rigs",
         "refimpl.protocols", "refimpl.protocols.*"],
-    7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.tasks", "refimpl.tasks.*",
-        "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator"],
+    7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
+        "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
+        "refimpl.allocator"],
     8: ["refimpl.cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).

@@ -279,7 +279,8 @@ def make_prediction(method: Callable, rotations, frame: int, prefix_length: int,
 def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: int = 10) -> list:
     """Draw a :class:`Prediction` (against its ground truth when it has one): the last ``context`` prefix frames
     and the predicted ones, as a PNG strip and / or a GIF."""
-    from refimpl.render import render_gif, render_strip
+    from refimpl.render import render_gif
+    from refimpl.render_strip import render_strip
 
     a = max(0, pr.start - context)
     parents = np.asarray(pr.motion.skeleton.parents)
