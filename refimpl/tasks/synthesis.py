@@ -571,6 +571,14 @@ def random_inputs(model, rng: np.random.Generator, batch: int = 2, seed_length: 
     return (mean + std * rng.standard_normal((batch, seed_length, mean.size)),)
 
 
+def in_source_units(motion: Motion, scale: float = LENGTH_SCALE) -> Motion:
+    """``motion`` (the network's metres) back in the units of the takes it was read from: offsets and root
+    positions divided by ``scale`` (0.01: metres -> centimetres, the salsa BVH's units)."""
+    s = motion.skeleton
+    skel = Skeleton(s.parents, np.asarray(s.offsets) / scale, s.names, s.end_sites, s.joints_left, s.joints_right)
+    return Motion(skel, motion.rotations, np.asarray(motion.root_positions) / scale, motion.frame_time, motion.name)
+
+
 def continue_seed(method, model_config: Mapping, path, start: int, num_frames: int) -> tuple:
     """Seed frames ``[start, start + 10)`` of a salsa BVH at 30 fps continued by ``method`` for ``num_frames``.
 
