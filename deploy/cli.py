@@ -43,6 +43,10 @@ def _exporter_of_checkpoint(path, override: str | None) -> str:
     from refimpl.checkpoint import load_checkpoint
     from refimpl.registry import MODELS
 
+    from pathlib import Path
+
+    if not Path(path).is_file():
+        raise _BadInput(f"{path}: no such checkpoint file")
     name = override
     if name is None:
         try:
