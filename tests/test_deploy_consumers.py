@@ -112,3 +112,50 @@ def test_pace_consumer(exported):
     assert np.abs(got["amplitude"] - ref.track("amplitude")[:, 0]).max() <= 1e-5
     assert np.abs(got["frequency"] - ref.track("frequency")[:, 0]).max() <= 1e-5
     assert np.abs(got["facing"] - ref.track("direction")).max() <= 1e-5
+
+
+def test_walked_path_consumer(exported):
+    """The long-term step fed by the controls of a walk along a circle (pace tracks of the NumPy pace network,
+    the checkpoint's real seed clip): the same rotations and root heights as ``generate_walk``."""
+    from refimpl.models import pace
+    from refimpl.services import load_trained
+    from refimpl.splines import circle_path
+    from refimpl.tasks import locomotion_generate as G
+    from refimpl.tasks.locomotion import skeleton_of
+    from tests.consumers import quaternet_long
+
+    pose, pm = load_trained(exported["quaternet-long"][0]), load_trained(exported["pace"][0])
+    seed = pose.extra["seed_clip"]
+    rot, feats = np.asarray(seed["rotations"]), np.asarray(seed["features"])
+    path = circle_path(6.0)
+    net = pose.config.network()
+    w = G.generate_walk(pose.params, net, pm.params, pm.config, skeleton_of(pose.extra), rot, feats, path, 0.5, 20)
+    tracks = pace.predict(pm.params, pm.config, path, 0.5)
+    rot_a, feats_a = G.align_seed(rot, feats, tracks.interpolate(0.0, "direction"))
+    frames = np.concatenate([rot_a.reshape(len(rot_a), -1), feats_a], axis=1)          # (P, 4J + 8)
+    got = quaternet_long.walk(exported["quaternet-long"][1], frames, w.controls)
+    R = 4 * net.num_joints
+    assert got.shape[0] == w.motion.num_frames == 20
+    assert np.abs(got[:, :R].reshape(20, -1, 4) - w.motion.rotations).max() <= 1e-4
+    assert np.abs(got[:, R + 1] - w.motion.root_positions[:, 1]).max() <= 1e-4
+
+
+def test_dual_quaternion_consumer(exported):
+    """The dual-quaternion QuaterNet from its metadata: sign rule, current DQs from the skeleton, decoding."""
+    from tests.consumers import quaternet_dq
+
+    from refimpl.dq_prediction import dq_frames_from_rotations
+    from refimpl.tasks.prediction import canonical_prefix, skeleton_of
+    from tests.consumers.common import metadata, session
+
+    ck, folder = exported["quaternet-dq"]
+    _, method = _numpy(ck)
+    x = _prefix()
+    sk = metadata(session(folder / "quaternet_predict.onnx"))["skeleton"]
+    mine = quaternet_dq.current_dqs(quaternet_dq.canonical(x), sk["parents"], np.asarray(sk["offsets"]))
+    assert np.abs(mine - dq_frames_from_rotations(canonical_prefix(x), skeleton_of("cmu"))).max() <= 1e-12
+    got = quaternet_dq.predict(folder, x)
+    ref = method(x, got.shape[1])
+    # the DQ network is sensitive to float32 rounding (its dual parts carry translations of ~8 CMU units): NumPy
+    # float32 and float64 differ by ~1e-3 in the decoded rotations too
+    assert np.abs(got - ref).max() <= 5e-3

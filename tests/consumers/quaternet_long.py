@@ -39,3 +39,19 @@ def pace(folder, turning_angle: np.ndarray, speed: float, tangent: np.ndarray) -
     facing = np.stack([tangent[:, 0] * cs[:, 0] - tangent[:, 1] * cs[:, 1],
                        tangent[:, 1] * cs[:, 0] + tangent[:, 0] * cs[:, 1]], axis=-1)
     return {"amplitude": np.maximum(y[:, 0], 0.1), "frequency": np.maximum(y[:, 1], 0.0), "facing": facing}
+
+
+def walk(folder, seed: np.ndarray, controls: np.ndarray) -> np.ndarray:
+    """A walked path: ``seed (P, F)`` frames (rotations with the root facing the path's start, offset, height,
+    controls) fed with the carried state, then one step per ``controls (N, 6)`` row with ``[y | controls]``;
+    returns the ``N`` generated frames ``(N, G)`` (unit rotations, offset, height)."""
+    s = session(Path(folder) / "quaternet-long_step.onnx")
+    meta = metadata(s)
+    h = np.load(Path(folder) / meta["initial_state"]["file"], allow_pickle=False)        # (L, 1, H)
+    for t in range(seed.shape[0]):
+        y, h = s.run(None, {"x": seed[t:t + 1].astype(np.float32), "state": h})
+    out = []
+    for c in controls:
+        y, h = s.run(None, {"x": np.concatenate([y, c[None].astype(np.float32)], axis=1), "state": h})
+        out.append(y[0])
+    return np.stack(out)
