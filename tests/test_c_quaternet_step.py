@@ -95,7 +95,7 @@ def _prefix(P=9):
 def test_c_loop_matches_python(binary, model, tmp_path):
     from deploy.models.quaternet_io import QuaterNetRuntime
     from refimpl.models import quaternet as rnn
-    from refimpl.tasks.prediction import canonical_prefix
+    from refimpl.protocols.prediction import canonical_prefix
 
     folder, params, config = model
     x = _prefix()

@@ -68,7 +68,7 @@ def test_prediction_consumers(exported, name):
 
 
 def test_acrnn_consumer(exported):
-    from refimpl.tasks import synthesis
+    from refimpl.protocols import synthesis
     from tests.consumers import acrnn
 
     ck, folder = exported["acrnn"]
@@ -85,13 +85,14 @@ def test_acrnn_consumer(exported):
 
 
 def test_long_term_consumer(exported):
+    from refimpl.protocols.locomotion import evaluation_windows
     from refimpl.tasks import locomotion
     from tests.consumers import quaternet_long
 
     ck, folder = exported["quaternet-long"]
     model, method = _numpy(ck)
     ds = locomotion.load_eval_data("sample", model.extra)
-    inputs, _, _ = locomotion.evaluation_windows(ds)
+    inputs, _, _ = evaluation_windows(ds)
     x = np.asarray(inputs[:3])                                                       # real frames and controls
     rot, tr = method(x, ds.prefix)
     ref = np.concatenate([np.asarray(rot).reshape(rot.shape[0], rot.shape[1], -1), tr], axis=-1)
@@ -145,7 +146,8 @@ def test_dual_quaternion_consumer(exported):
     from tests.consumers import quaternet_dq
 
     from refimpl.dq_prediction import dq_frames_from_rotations
-    from refimpl.tasks.prediction import canonical_prefix, skeleton_of
+    from refimpl.protocols.prediction import canonical_prefix
+    from refimpl.protocols.prediction_data import skeleton_of
     from tests.consumers.common import metadata, session
 
     ck, folder = exported["quaternet-dq"]

@@ -226,7 +226,7 @@ def test_sign_rule_numpy_and_graph_match_the_euler_round_trip():
 
     from deploy.graph import GraphBuilder
     from deploy.models.quaternet_sign import canonical_signs, canonical_signs_graph
-    from refimpl.tasks.prediction import canonical_prefix
+    from refimpl.protocols.prediction import canonical_prefix
 
     rng = np.random.default_rng(1)
     q = rng.standard_normal((40, 6, 5, 4)) * rng.choice([-1.0, 1.0], size=(40, 6, 5, 1))

@@ -171,8 +171,8 @@ def export_acrnn_step(params: Mapping[str, np.ndarray], config: ACRNNConfig, *, 
                                ("c", [L, "B", H], "LSTM c (zeros at the start)")),
           "outputs": io_entries(("next_frame", ["B", F], "prediction of frame t + 1, raw"),
                                 ("h_next", [L, "B", H], "new h"), ("c_next", [L, "B", H], "new c"),
-                                *[(k, _decoded_shape(k, representation, ["B"], J), _DECODED_MEANING[k][representation] + " (of "
-                                  "next_frame)") for k in dec])}
+                                *[(k, _decoded_shape(k, representation, ["B"], J),
+                                   _DECODED_MEANING[k][representation] + " (of next_frame)") for k in dec])}
     meta = _metadata(g, config, "step", io, mean, std, representation, J, D, frame_rate, metadata, skeleton)
     return g.model(metadata=meta, doc_string="acRNN step: one frame, state in -> state out",
                    producer_version=EXPORTER_VERSION)
@@ -230,7 +230,7 @@ def export_acrnn_generate(params: Mapping[str, np.ndarray], config: ACRNNConfig,
     io = {"inputs": io_entries(("seed", ["B", "S", F], "raw seed frames (10 in the paper's protocol)"),
                                ("num_frames", [], "N, frames to generate (int64, >= 1)")),
           "outputs": io_entries(("frames", ["B", "N", F], "generated raw frames after the seed"),
-                                *[(k, _decoded_shape(k, representation, ["B", "N"], J), _DECODED_MEANING[k][representation] +
-                                  " (of every frame)") for k in dec])}
+                                *[(k, _decoded_shape(k, representation, ["B", "N"], J),
+                                   _DECODED_MEANING[k][representation] + " (of every frame)") for k in dec])}
     meta = _metadata(g, config, "generate", io, mean, std, representation, J, D, frame_rate, metadata, skeleton)
     return g.model(metadata=meta, doc_string="acRNN generator: seed -> N frames", producer_version=EXPORTER_VERSION)

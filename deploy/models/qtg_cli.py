@@ -90,8 +90,9 @@ def run_command(runtime, args) -> int:
     transition generated from frames ``S−2, S−1`` and ``S+T, S+T+1``; prints the mean joint-position error."""
     from refimpl.bvh import read_bvh_header, write_bvh
     from refimpl.motion import Motion
-    from refimpl.transitions import (TransitionSource, declared_rate, denormalize_poses, heading_from_root,
-                                     load_source, make_windows, normalize_poses, window_to_world)
+    from refimpl.protocols.transition import (TransitionSource, declared_rate, denormalize_poses,
+                                              heading_from_root, load_source, make_windows, normalize_poses,
+                                              window_to_world)
 
     if args.start is None:
         raise ValueError("--start: required for qtg (the first generated frame)")

@@ -103,8 +103,8 @@ def quaternet_transforms(config, role: str) -> tuple[dict, dict]:
     from deploy.models.quaternet_sign import RULE
 
     in_graph = role == "predict" and not _dual(config)
-    steps = [f"sign rule ({'applied inside this graph to the prefix' if in_graph else 'apply it to the prefix before feeding it'}): "
-             + r for r in RULE]
+    where = "applied inside this graph to the prefix" if in_graph else "apply it to the prefix before feeding it"
+    steps = [f"sign rule ({where}): " + r for r in RULE]
     if _dual(config):
         steps = steps + [
             "then current dual quaternions per joint from the canonical local rotations q_j and skeleton.offsets o_j: "

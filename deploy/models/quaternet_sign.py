@@ -2,16 +2,18 @@
 nodes (spec/deploy.md §11.1).
 
 A quaternion and its negation are the same rotation, but the recurrent and convolutional QuaterNet read the
-numbers: ``refimpl``'s predictor (``refimpl.tasks.prediction.canonical_prefix``) therefore first maps every
-prefix to one representative — quaternions → zyx Euler → quaternions (``refimpl.quat``), then ``quat_fix`` over
-time. This module states that rule without Euler angles, so that a graph (or any consumer) can apply it:
+numbers: ``refimpl``'s predictor (``refimpl.protocols.prediction.canonical_prefix``) therefore first
+maps every prefix to one representative — quaternions → zyx Euler → quaternions (``refimpl.quat``), then
+``quat_fix`` over time. This module states that rule without Euler angles, so that a graph (or any consumer)
+can apply it:
 
 1. **Unit length**: ``q ← q / |q|`` (the round trip returns unit quaternions).
-2. **Frame 0 (Euler branch)**: with ``(w, x, y, z) = q``, ``σ = atan2(z + x, w − y)``, ``δ = atan2(z − x, w + y)``
-   (both in ``(−π, π]``), ``α = σ + δ``, ``γ = σ − δ``; in gimbal lock (``hypot(z − x, w + y) ≤ 1.49e-8``:
-   ``α = 2σ, γ = 0``; else ``hypot(z + x, w − y) ≤ 1.49e-8``: ``α = 2δ, γ = 0``). The zyx Euler angles are α and
-   γ wrapped to ``[−π, π)``; each wrap negates the round trip's quaternion, so frame 0 becomes
-   ``s₀ q₀`` with ``s₀ = (−1)^(n(α) + n(γ))``, ``n(v) = 1`` when ``v ≥ π`` or ``v < −π``, else 0.
+2. **Frame 0 (Euler branch)**: with ``(w, x, y, z) = q``, ``σ = atan2(z + x, w − y)``,
+   ``δ = atan2(z − x, w + y)`` (both in ``(−π, π]``), ``α = σ + δ``, ``γ = σ − δ``; in gimbal lock
+   (``hypot(z − x, w + y) ≤ 1.49e-8``: ``α = 2σ, γ = 0``; else ``hypot(z + x, w − y) ≤ 1.49e-8``: ``α = 2δ,
+   γ = 0``). The zyx Euler angles are α and γ wrapped to ``[−π, π)``; each wrap negates the round trip's
+   quaternion, so frame 0 becomes ``s₀ q₀`` with ``s₀ = (−1)^(n(α) + n(γ))``, ``n(v) = 1`` when ``v ≥ π`` or
+   ``v < −π``, else 0.
 3. **Continuity** (``quat_fix``): frame ``t ≥ 1`` becomes ``s₀ (−1)^(c_t) q_t``, ``c_t`` = the number of
    ``u ∈ [1, t]`` with ``⟨q_u, q_{u−1}⟩ < 0`` (dot products of the unit inputs): consecutive frames then lie in
    one hemisphere.
@@ -139,8 +141,8 @@ def canonical_signs_graph(g: GraphBuilder, prefix: str, J: int, *, name: str = "
                    f"{name}.alpha")
     locked = g.node("Or", [lock_dif, lock_sum], f"{name}.locked")
     gamma = g.node("Where", [locked, g.scalar(0.0), g.node("Sub", [sigma, delta], f"{name}.dif")], f"{name}.gamma")
-    wraps = g.node("Add", [_wrap_count(g, alpha, name=f"{name}.n_alpha"), _wrap_count(g, gamma, name=f"{name}.n_gamma")],
-                   f"{name}.wraps")                                                              # (B, J, 1)
+    wraps = g.node("Add", [_wrap_count(g, alpha, name=f"{name}.n_alpha"),
+                           _wrap_count(g, gamma, name=f"{name}.n_gamma")], f"{name}.wraps")   # (B, J, 1)
     s0 = g.node("Sub", [g.scalar(1.0), g.node("Mul", [g.node("Mod", [wraps, two], f"{name}.wraps2", fmod=1), two],
                                               f"{name}.s0x2")], f"{name}.s0")                    # (B, J, 1)
     # continuity: parity of the negative dot products up to t (a cumulative sum, mod 2)

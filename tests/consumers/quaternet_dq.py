@@ -29,8 +29,8 @@ def current_dqs(rotations, parents, offsets) -> np.ndarray:
     out = np.zeros((B, P, J, 8))
     for j in range(J):
         q = rotations[..., j, :]
-        local_d = 0.5 * qmul(np.concatenate([np.zeros(q.shape[:-1] + (1,)), np.broadcast_to(offsets[j], q.shape[:-1] + (3,))],
-                                            axis=-1), q)
+        o = np.broadcast_to(offsets[j], q.shape[:-1] + (3,))
+        local_d = 0.5 * qmul(np.concatenate([np.zeros(q.shape[:-1] + (1,)), o], axis=-1), q)
         if parents[j] < 0:
             out[..., j, :4] = q
         else:
