@@ -8,7 +8,6 @@ the C program's sign rule (read from the metadata's ``input_transform``) is exer
 """
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 from pathlib import Path
@@ -16,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.test_c_example import _compiler, _wheel_library
+from tests.test_c_example import build_example
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT / "deploy" / "examples" / "quaternet_step.c"
@@ -32,41 +31,7 @@ def test_source_reads_everything_from_the_model():
 
 @pytest.fixture(scope="module")
 def binary(tmp_path_factory):
-    cc = _compiler()
-    if cc is None:
-        pytest.skip("no C compiler (set CC, or install cc/gcc/clang)")
-    ort = os.environ.get("ORT_C_DIR")
-    if not ort:
-        pytest.skip("ORT_C_DIR not set: point it at an unpacked onnxruntime-linux-x64-<version>.tgz "
-                    "(include/onnxruntime_c_api.h; see deploy/README.md)")
-    header = Path(ort) / "include" / "onnxruntime_c_api.h"
-    if not header.is_file():
-        pytest.skip(f"{header} not found")
-    api = re.search(r"#define\s+ORT_API_VERSION\s+(\d+)", header.read_text(errors="replace"))
-    work = tmp_path_factory.mktemp("c_qn_build")
-    libs = sorted((Path(ort) / "lib").glob("libonnxruntime.so*"))
-    if libs:
-        lib_dir = Path(ort) / "lib"
-        found = re.search(r"libonnxruntime\.so\.(\d+\.\d+\.\d+)", " ".join(p.name for p in libs))
-        version = found.group(1) if found else None
-    else:
-        wheel = _wheel_library()
-        if wheel is None:
-            pytest.skip(f"no library in {ort}/lib and no onnxruntime wheel")
-        lib_dir = work / "lib"
-        lib_dir.mkdir()
-        for name in ("libonnxruntime.so", "libonnxruntime.so.1"):
-            (lib_dir / name).symlink_to(wheel[0])
-        version = wheel[1]
-    if api is None or (version is not None and int(api.group(1)) > int(version.split(".")[1])):
-        pytest.skip(f"header ORT_API_VERSION {api and api.group(1)} does not fit the library {version}")
-    exe = work / "quaternet_step"
-    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", "-Werror", str(SOURCE), f"-I{header.parent}",
-                            f"-L{lib_dir}", "-lonnxruntime", "-lm", f"-Wl,-rpath,{lib_dir}", "-o", str(exe)],
-                           capture_output=True, text=True, timeout=120)
-    assert build.returncode == 0, build.stderr
-    assert "warning" not in build.stderr, build.stderr
-    return exe
+    return build_example(tmp_path_factory, SOURCE, "quaternet_step", extra=("-Werror",))
 
 
 @pytest.fixture(scope="module")

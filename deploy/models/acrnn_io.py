@@ -136,4 +136,4 @@ export_dir = export_acrnn_dir
 Runtime = ACRNNRuntime
 
 # ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.run_commands import run_synthesis as run_command  # noqa: E402
+from deploy.models.run_commands import run_synthesis as run_command  # noqa: E402,F401

@@ -185,4 +185,4 @@ export_dir = export_qtg_dir
 Runtime = QTGRuntime
 
 # ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.qtg_cli import add_export_options, add_run_options, export_checkpoint, run_command  # noqa: E402
+from deploy.models.qtg_cli import add_export_options, add_run_options, export_checkpoint, run_command  # noqa: E402,F401

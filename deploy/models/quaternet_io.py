@@ -232,5 +232,5 @@ export_dir = export_quaternet_dir
 Runtime = QuaterNetRuntime
 
 # ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.run_commands import add_prediction_run_options as add_run_options  # noqa: E402
-from deploy.models.run_commands import run_prediction as run_command  # noqa: E402
+from deploy.models.run_commands import add_prediction_run_options as add_run_options  # noqa: E402,F401
+from deploy.models.run_commands import run_prediction as run_command  # noqa: E402,F401

@@ -142,4 +142,4 @@ class Runtime:
         return y[..., :4 * J].reshape(B, -1, J, 4), y[..., 4 * J:]
 
 # ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.run_commands import run_locomotion as run_command  # noqa: E402
+from deploy.models.run_commands import run_locomotion as run_command  # noqa: E402,F401
