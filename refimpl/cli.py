@@ -712,10 +712,10 @@ def _generate_synthesis(args, model=None) -> int:
     method = next(iter(networks.values()))
     n = args.length or 300
     motion, seed_frames = task.continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
-    write_bvh(args.out, transition.with_end_sites(motion))
+    write_bvh(args.out, transition.with_end_sites(task.in_source_units(motion)))   # the take's centimetres
     _say(f"wrote {args.out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
-         "metres")
+         "centimetres (the take's units)")
     if args.png or args.gif:
         from refimpl.render import render_gif
         from refimpl.render_strip import render_strip

@@ -42,7 +42,7 @@ from refimpl.skeleton import Skeleton, remove_joints
 __all__ = [
     "SALSA_FRAME_TIME", "SALSA_TRAIN", "SALSA_TEST", "SAMPLE_TRAIN", "SAMPLE_TEST", "LENGTH_SCALE", "FPS",
     "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN",
-    "horizon_frames", "load_salsa_motion", "motion_to_frames", "frames_to_motion", "SynthesisData",
+    "horizon_frames", "in_source_units", "load_salsa_motion", "motion_to_frames", "frames_to_motion", "SynthesisData",
     "load_synthesis_data", "sample_windows", "seed_windows", "evaluate_generator", "NPSS_VARIANTS",
     "root_zeroed_positions", "mean_joint_error", "npss", "mean_acceleration", "acceleration_comparison",
 ]
@@ -69,6 +69,14 @@ WINDOW_MARGIN = 10
 def horizon_frames(ms: float, fps: int = FPS) -> int:
     """Frames in ``ms`` milliseconds at ``fps`` (rounded): 100, 400, 1000 ms → 3, 12, 30 at 30 fps."""
     return int(round(ms * fps / 1000.0))
+
+
+def in_source_units(motion: Motion, scale: float = LENGTH_SCALE) -> Motion:
+    """``motion`` (the network's metres) back in the units of the takes it was read from: offsets and root
+    positions divided by ``scale`` (0.01: metres -> centimetres, the salsa BVH's units)."""
+    s = motion.skeleton
+    skel = Skeleton(s.parents, np.asarray(s.offsets) / scale, s.names, s.end_sites, s.joints_left, s.joints_right)
+    return Motion(skel, motion.rotations, np.asarray(motion.root_positions) / scale, motion.frame_time, motion.name)
 
 
 def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE) -> Motion:
