@@ -52,6 +52,7 @@ from refimpl.options import add_data_options, nonneg_int, positive_float, positi
 from refimpl.registry import MODELS, TASKS, task_of
 from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
                               onnx_metadata, read_motion, train_model, verify_onnx)
+from refimpl import weights_cli
 from refimpl.tasks import transition
 from refimpl.train import check_resumable, output_lock
 
@@ -888,6 +889,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-onnx", action="store_true", help="skip export and verification")
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
     p.set_defaults(func=cmd_demo)
+
+    weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
     return parser
 
 

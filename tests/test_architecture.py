@@ -20,11 +20,11 @@ LAYERS = {
     4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.dq_prediction",
         "refimpl.schedules"],
     5: ["refimpl.models", "refimpl.models.*"],
-    6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.train", "refimpl.rigs",
+    6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.safetensors", "refimpl.train", "refimpl.rigs",
         "refimpl.transitions", "refimpl.baselines", "refimpl.metrics"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.tasks", "refimpl.tasks.*",
-        "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator"],
-    8: ["refimpl.cli", "refimpl.demo", "refimpl.__main__"],
+        "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services", "refimpl.allocator", "refimpl.weights"],
+    8: ["refimpl.cli", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).
 DEPLOY_IMPORTERS = {"refimpl.cli", "refimpl.demo", "refimpl.services"}

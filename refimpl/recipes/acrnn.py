@@ -30,7 +30,7 @@ from refimpl.options import config_with_overrides
 from refimpl.tasks.synthesis import TABLE1_ROWS, sample_windows, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
+__all__ = ["PUBLISHED_SETTINGS", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "PAPER_WINDOW", "PAPER_GROUND_TRUTH", "PAPER_CONDITION", "PAPER_SEED_FRAMES", "make_config",
            "loss_spec", "make_adapter", "acrnn_method", "make_method", "export_inputs", "reference_outputs",
            "verify_onnx"]
@@ -51,6 +51,16 @@ PAPER_WINDOW = 100
 PAPER_GROUND_TRUTH = 5
 PAPER_CONDITION = 5
 PAPER_SEED_FRAMES = 10
+
+
+#: ``--set`` values that make the network the published code's (``refimpl import --layout published``): its
+#: skewed stack (spec/acrnn.md §1).
+PUBLISHED_SETTINGS = ("skewed=true",)
+
+
+def published_names(config: ACRNNConfig) -> dict:
+    """Our parameter name -> (published name, shape) (:func:`refimpl.models.acrnn.published_names`)."""
+    return acrnn.published_names(config)
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> ACRNNConfig:
