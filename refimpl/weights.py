@@ -39,7 +39,7 @@ import numpy as np
 from refimpl.atomic import atomic_path
 from refimpl.checkpoint import load_state_dict_npz
 from refimpl.checkpoint_schema import expected_param_shapes, validate_trained
-from refimpl.errors import UsageError
+from refimpl.errors import MissingDependency, UsageError
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
 from refimpl.safetensors import is_safetensors, read_safetensors, write_safetensors
 
@@ -69,7 +69,7 @@ def _read_torch(path: Path, where: str) -> dict:
     try:
         import torch
     except ImportError:
-        raise UsageError(f"{where}: a PyTorch file needs torch (read only with torch.load(weights_only=True)); "
+        raise MissingDependency(f"{where}: a PyTorch file needs torch (read only with torch.load(weights_only=True)); "
                          f"without torch save the state dict as .npz or .safetensors (spec/import.md)") from None
     try:
         obj = torch.load(str(path), map_location="cpu", weights_only=True)
@@ -95,8 +95,8 @@ def read_state_dict(path) -> dict[str, np.ndarray]:
     ------
     ValueError
         Unreadable, malformed or not a state dict (a refimpl checkpoint, non-numeric entries, no entries).
-    UsageError
-        A PyTorch file without torch installed.
+    MissingDependency
+        A PyTorch file without torch installed (exit 1; the message says to save .npz or .safetensors).
     OSError
         No file, a directory.
     """
@@ -146,8 +146,10 @@ def _listing(names) -> str:
     return str(names[:_SHOWN])[:-1] + (f", ... {len(names) - _SHOWN} more]" if len(names) > _SHOWN else "]")
 
 
-def to_refimpl(state: Mapping[str, np.ndarray], names: Mapping[str, tuple], where: str = "state dict") -> dict:
-    """``state`` (names of the layout) → our parameters (our names and shapes), by ``names`` (:func:`layout_names`).
+def to_refimpl(state: Mapping[str, np.ndarray], names: Mapping[str, tuple], shapes: Mapping[str, tuple],
+               where: str = "state dict") -> dict:
+    """``state`` (names of the layout) → our parameters, by ``names`` (:func:`layout_names`), reshaped to our
+    ``shapes`` (our name -> shape, ``param_shapes``; the same sizes).
 
     Raises
     ------
@@ -170,7 +172,7 @@ def to_refimpl(state: Mapping[str, np.ndarray], names: Mapping[str, tuple], wher
         a = np.asarray(state[n])
         if a.dtype.kind != "f":
             raise ValueError(f"{where}: entry {n!r} has dtype {a.dtype}; expected floating-point weights")
-        out[ours] = a
+        out[ours] = a.reshape(shapes[ours])
     return out
 
 
@@ -229,8 +231,14 @@ def import_checkpoint(spec: ModelSpec, state: Mapping[str, np.ndarray], layout: 
     config = spec.make_config(train_ds, (*settings, *overrides))
     names = layout_names(spec, config, layout)
     try:
-        params = to_refimpl(state, names, where)
+        params = to_refimpl(state, names, expected_param_shapes(spec.recipe, spec.config_type, config), where)
     except ValueError as exc:
+        other = next((o for o in LAYOUTS if o != layout), None)
+        try:
+            if set(state) == {n for n, _ in layout_names(spec, config, other).values()}:
+                raise ValueError(f"{exc} (these are the names of --layout {other})") from None
+        except UsageError:
+            pass
         fields = ", ".join(f.name for f in getattr(config, "__dataclass_fields__", {}).values())
         raise ValueError(f"{exc} (model {spec.name!r}, layout {layout!r}; other sizes: --set one of {fields})"
                          ) from None
