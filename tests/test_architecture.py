@@ -16,7 +16,7 @@ LAYERS = {
     1: ["refimpl.quat", "refimpl.dualquat"],
     2: ["refimpl.skeleton"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.expmap", "refimpl.skeletons", "refimpl.preprocess",
-        "refimpl.representations", "refimpl.strategies", "refimpl.splines"],
+        "refimpl.representations", "refimpl.strategies", "refimpl.splines", "refimpl.augment"],
     4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.dq_prediction",
         "refimpl.schedules"],
     5: ["refimpl.models", "refimpl.models.*"],

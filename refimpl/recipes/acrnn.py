@@ -22,12 +22,13 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.augment import random_heading_windows
 from refimpl.errors import UsageError
 from refimpl.models import acrnn, acrnn_fast
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
 from refimpl.options import config_with_overrides
-from refimpl.tasks.synthesis import TABLE1_ROWS, sample_windows, skeleton_of
+from refimpl.tasks.synthesis import TABLE1_ROWS, WINDOW_MARGIN, motion_to_frames, sample_windows, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 
 __all__ = ["PUBLISHED_SETTINGS", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
@@ -95,6 +96,10 @@ def make_adapter(train_ds, val_ds, config: ACRNNConfig, dtype, extra: Mapping) -
     length = int(train_ds.window_length)
 
     def get_batch(idx, ctx):
+        if train_ds.augment:  # the published trainer: each window turned to a random heading, then encoded
+            windows, _ = random_heading_windows(ctx.rng, train_ds.motions, len(idx), length + 2, WINDOW_MARGIN)
+            return np.stack([data.standardise(motion_to_frames(data.representation, w)) for w in windows]
+                            ).astype(dtype)                                                 # (B, T + 1, F)
         return sample_windows(ctx.rng, train, len(idx), length)                             # (B, T + 1, F)
 
     def loss_and_grads(params, batch):

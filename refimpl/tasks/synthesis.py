@@ -72,7 +72,7 @@ def horizon_frames(ms: float, fps: int = FPS) -> int:
     return int(round(ms * fps / 1000.0))
 
 
-def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE) -> Motion:
+def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE, phase: int = 0) -> Motion:
     """One salsa file at 30 fps without End Sites, lengths × ``scale``.
 
     Parameters
@@ -82,12 +82,14 @@ def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE) -> Mot
         Decimation (2: 60 → 30 fps).
     scale : float
         Length factor for offsets and root positions.
+    phase : int
+        First frame kept (0 or 1 at stride 2: the two parities of the 60 fps frames).
 
     Returns
     -------
     Motion with 43 joints, frame time 1/30 s.
     """
-    m = downsample(read_bvh(path, frame_time=SALSA_FRAME_TIME), stride)
+    m = downsample(read_bvh(path, frame_time=SALSA_FRAME_TIME), stride, phase)
     skel, rot = remove_joints(m.skeleton, m.rotations, m.skeleton.end_sites)
     s = skel
     skel = Skeleton(s.parents, s.offsets * scale, s.names, (), s.joints_left, s.joints_right)
@@ -152,7 +154,11 @@ class SynthesisData:
         De-standardised frames per take.
     train_names, test_names : tuple of str
     mean, std : ndarray (F,)
-        Training-set statistics (``feature_statistics``; std < 1e-4 → 1).
+        Training-set statistics (``feature_statistics``; std < 1e-4 → 1); 0 and 1 when not ``standardised``.
+    standardised : bool
+        False: raw frames (the published trainer's), mean 0 and std 1.
+    parities : int
+        1, or 2 when the training takes' odd 60 fps frames are extra training sequences (``<name>/odd``).
     """
 
     representation: str
@@ -163,6 +169,8 @@ class SynthesisData:
     test_names: tuple
     mean: np.ndarray
     std: np.ndarray
+    standardised: bool = True
+    parities: int = 1
 
     @property
     def frame_size(self) -> int:
@@ -181,12 +189,18 @@ class SynthesisData:
 
 
 def load_synthesis_data(representation: str, folder, train: Sequence[str] = SALSA_TRAIN,
-                        test: Sequence[str] = SALSA_TEST, scale: float = LENGTH_SCALE) -> SynthesisData:
+                        test: Sequence[str] = SALSA_TEST, scale: float = LENGTH_SCALE, parities: int = 1,
+                        standardise: bool = True) -> SynthesisData:
     """Read the salsa takes of ``folder`` (``<name>.bvh``) into frames of ``representation``.
 
     Example: ``load_synthesis_data("dual_quaternions", "../shared/data/acrnn_cmu_salsa")``; the embedded sample
-    ``refimpl/data/sample/salsa`` with ``train=SAMPLE_TRAIN, test=SAMPLE_TEST``.
+    ``refimpl/data/sample/salsa`` with ``train=SAMPLE_TRAIN, test=SAMPLE_TEST``. ``parities=2`` adds each
+    training take's odd 60 fps frames as a second training sequence (the published trainer samples both; the test
+    takes keep frames 0, 2, 4, ...); ``standardise=False`` stores mean 0 and std 1 (the published trainer's raw
+    frames) instead of the training statistics (spec/acrnn.md §1.1).
     """
+    if parities not in (1, 2):
+        raise ValueError(f"parities: expected 1 or 2, got {parities!r}")
     if representation not in REPRESENTATIONS:
         raise ValueError(f"representation: expected one of {list(REPRESENTATIONS)}, got {representation!r}")
     folder = Path(folder)
@@ -195,9 +209,16 @@ def load_synthesis_data(representation: str, folder, train: Sequence[str] = SALS
     motions = {n: load_salsa_motion(folder / f"{n}.bvh", scale=scale) for n in (*train, *test)}
     skel = motions[train[0]].skeleton
     frames = {n: motion_to_frames(representation, m) for n, m in motions.items()}
-    mean, std = feature_statistics([frames[n] for n in train])
-    return SynthesisData(representation, skel, tuple(frames[n] for n in train), tuple(frames[n] for n in test),
-                         tuple(train), tuple(test), mean, std)
+    train_frames = [frames[n] for n in train]
+    if parities == 2:
+        train_frames += [motion_to_frames(representation, load_salsa_motion(folder / f"{n}.bvh", scale=scale,
+                                                                            phase=1)) for n in train]
+    mean, std = feature_statistics(train_frames)
+    if not standardise:
+        mean, std = np.zeros_like(mean), np.ones_like(std)
+    return SynthesisData(representation, skel, tuple(train_frames), tuple(frames[n] for n in test),
+                         tuple(train) + tuple(f"{n}/odd" for n in train if parities == 2), tuple(test), mean, std,
+                         standardise, parities)
 
 
 def sample_windows(rng: np.random.Generator, sequences: Sequence[np.ndarray], batch_size: int = 32,
@@ -359,12 +380,19 @@ class TrainingSet:
         ``--losses`` override of the row's loss weights (the ablation), None = the row's.
     window_length : int
         T, predicted frames per training window (100).
+    motions : tuple of Motion
+        With ``augment``: the training takes at 30 fps (each parity), from which the windows are cut, turned to a
+        random heading (:func:`refimpl.augment.random_heading_windows`) and encoded per batch. Else empty.
+    augment : bool
+        ``--augment-heading``: the published trainer's random heading per window (spec/acrnn.md §1.1).
     """
 
     data: SynthesisData
     row: str
     weights: dict | None = None
     window_length: int = 100
+    motions: tuple = ()
+    augment: bool = False
 
     @property
     def variant(self) -> str:
@@ -395,6 +423,15 @@ def add_train_options(parser) -> None:
     parser.add_argument("--losses", default=None, metavar="NAME=W,...",
                         help="synthesis: override the row's loss weights, e.g. mse=1,reg=0.01,pos=0.333 "
                              "(dual quaternions: mse reg pos offset quat quat_current; quaternions: mse quat fk reg)")
+    parser.add_argument("--augment-heading", action="store_true",
+                        help="synthesis: turn every training window to a random heading about the vertical (the "
+                             "published acRNN trainer; spec/acrnn.md §1.1)")
+    parser.add_argument("--parities", type=int, default=1, choices=(1, 2),
+                        help="synthesis: 2 = train on both parities of the 60 fps frames (the published trainer); "
+                             "default 1 (frames 0, 2, 4, ...)")
+    parser.add_argument("--raw-frames", action="store_true",
+                        help="synthesis: no per-feature standardisation (mean 0, std 1; the published trainer's raw "
+                             "metres) instead of the dual-quaternion paper's training mean/std")
 
 
 def resolve_data(data: str) -> tuple[Path, tuple, tuple]:
@@ -422,15 +459,20 @@ def train_datasets(args):
     if row not in TABLE1_ROWS:
         raise UsageError(f"--representation {row!r}: expected one of {list(TABLE1_ROWS)}")
     folder, train, test = resolve_data(args.data)
+    parities, augment = int(getattr(args, "parities", 1)), bool(getattr(args, "augment_heading", False))
+    representation = acrnn.VARIANTS[TABLE1_ROWS[row]].representation
     try:
-        data = load_synthesis_data(acrnn.VARIANTS[TABLE1_ROWS[row]].representation, folder, train, test)
+        data = load_synthesis_data(representation, folder, train, test, parities=parities,
+                                   standardise=not getattr(args, "raw_frames", False))
+        motions = tuple(load_salsa_motion(folder / f"{n}.bvh", phase=p) for p in range(parities) for n in train) \
+            if augment else ()
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
     length = int(getattr(args, "window_length", 100))
     if min(len(s) for s in data.train) < length + 1:
         raise UsageError(f"--window-length {length}: the shortest training take has "
                          f"{min(len(s) for s in data.train)} frames")
-    return TrainingSet(data, row, _parse_losses(getattr(args, "losses", None)), length), data
+    return TrainingSet(data, row, _parse_losses(getattr(args, "losses", None)), length, motions, augment), data
 
 
 def num_examples(dataset) -> int:
@@ -456,6 +498,7 @@ def checkpoint_extra(train_ds) -> dict:
     return {"mean": [float(v) for v in d.mean], "std": [float(v) for v in d.std], "fps": float(FPS),
             "data_representation": d.representation, "variant": train_ds.variant, "row": train_ds.row,
             "loss_weights": weights, "window_length": int(train_ds.window_length),
+            "augment_heading": bool(train_ds.augment), "standardised": bool(d.standardised), "parities": d.parities,
             "train_takes": list(d.train_names), "test_takes": list(d.test_names),
             "skeleton": {"parents": [int(p) for p in sk.parents], "names": list(sk.names),
                          "offsets": [[float(v) for v in o] for o in sk.offsets]}}
