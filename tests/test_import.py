@@ -184,6 +184,9 @@ def test_acrnn_published_import_generates_as_the_published_network(tmp_path, fmt
     model = load_trained(tmp_path / "ckpt.npz")
     assert model.config.skewed is True and model.config.hidden_size == 8
     assert model.meta["imported"]["layout"] == "published"
+    capsys.readouterr()
+    assert main(["info", str(tmp_path / "ckpt.npz")]) == 0
+    assert f"imported    from acrnn.{fmt} (published names" in capsys.readouterr().out
     mean, std = np.asarray(model.extra["mean"]), np.asarray(model.extra["std"])
     rng = np.random.default_rng(2)
     seed = mean + std * rng.standard_normal((2, 10, mean.size))
