@@ -70,3 +70,46 @@ def test_train_with_the_published_options_then_eval(tmp_path):
     assert model.extra["parities"] == 2 and model.extra["standardised"] is False
     assert np.all(np.asarray(model.extra["std"]) == 1)
     assert main(["--blas-threads", "1", "eval", "--checkpoint", str(out / "checkpoint.npz")]) == 0
+
+
+def test_the_published_171_value_frame():
+    """``positions_acrnn`` on the salsa skeleton with its End Sites: hip (x/z as forward differences), then every
+    other BVH node (depth-first, End Sites included) minus the hip, × 0.01 — computed here from the BVH reader's
+    own forward kinematics at 60 fps, decimated."""
+    from refimpl.bvh import read_bvh
+    from refimpl.representations import frame_size, positions_from_frames
+
+    d = load_synthesis_data("positions_acrnn", SAMPLE_SALSA, SAMPLE_TRAIN, SAMPLE_TEST, standardise=False)
+    assert d.frame_size == 171 == frame_size("positions_acrnn", 57) and d.skeleton.num_joints == 57
+    world = read_bvh(SAMPLE_SALSA / "01.bvh").positions()[::2] * 0.01                  # (T, 57, 3)
+    frames = d.train[0]                                                                  # (T - 1, 171)
+    np.testing.assert_allclose(frames[:, 3:].reshape(-1, 56, 3), (world[:, 1:] - world[:, :1])[:-1], atol=1e-12)
+    np.testing.assert_allclose(frames[:, 1], world[:-1, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(frames[:, [0, 2]], np.diff(world[:, 0, [0, 2]], axis=0), atol=1e-12)
+    rel = positions_from_frames("positions_acrnn", d.skeleton, frames) - frames[:, None, :3]
+    np.testing.assert_allclose(rel, (world[:, :] - world[:, :1])[:-1], atol=1e-12)      # hip block: zero
+
+
+def test_published_positions_acrnn_imports_and_generates(tmp_path):
+    """A published acRNN state dict of the 171-value frame (raw metres, no standardisation) imports with
+    ``--representation positions-published --raw-frames`` and generates as the published network."""
+    from tests.test_import import _published_acrnn
+
+    from refimpl.models.acrnn import ACRNNConfig, published_names
+    from refimpl.safetensors import write_safetensors
+
+    rng = np.random.default_rng(0)
+    sd = {n: rng.uniform(-0.3, 0.3, s).astype(np.float32)
+          for n, s in published_names(ACRNNConfig(frame_size=171, hidden_size=8)).values()}
+    write_safetensors(tmp_path / "w.safetensors", sd)
+    assert main(["--blas-threads", "1", "import", str(tmp_path / "w.safetensors"), "--model", "acrnn",
+                 "--representation", "positions-published", "--raw-frames", "--set", "hidden_size=8",
+                 "--out", str(tmp_path / "ckpt.npz")]) == 0
+    model = load_trained(tmp_path / "ckpt.npz")
+    assert model.extra["standardised"] is False and model.config.frame_size == 171
+    seed = rng.standard_normal((2, 10, 171)) * 0.1
+    np.testing.assert_allclose(model.spec.make_method(model)(seed, 8), _published_acrnn(sd, seed, 8),
+                               rtol=1e-4, atol=1e-5)
+    assert main(["--blas-threads", "1", "eval", "--checkpoint", str(tmp_path / "ckpt.npz")]) == 0
+    pytest.importorskip("onnxruntime")
+    assert main(["export", "--checkpoint", str(tmp_path / "ckpt.npz"), "--out", str(tmp_path / "onnx")]) == 0

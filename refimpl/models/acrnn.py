@@ -328,6 +328,7 @@ class Variant:
 #: local L_quat + 0.01 L_reg; quaternions-FK: MSE + L_quat + 1/4 FK position loss).
 VARIANTS = {v.name: v for v in (
     Variant("positions", "positions"),
+    Variant("positions_acrnn", "positions_acrnn"),      # the published code's 171-value frame (End Sites kept)
     Variant("euler", "euler"),
     Variant("quaternions", "quaternions"),
     Variant("quaternions_fk", "quaternions", {"mse": 1.0, "quat": 1.0, "fk": WEIGHT_ACRNN_QUAT_FK}),
@@ -405,6 +406,7 @@ class LossSpec:
 
     @property
     def num_joints(self) -> int:
+        """Joint blocks in a frame (J, or J − 1 for a representation without the root's block)."""
         return (self.mean.size - 3) // REPRESENTATIONS[self.representation].dim
 
 

@@ -72,8 +72,13 @@ def horizon_frames(ms: float, fps: int = FPS) -> int:
     return int(round(ms * fps / 1000.0))
 
 
-def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE, phase: int = 0) -> Motion:
-    """One salsa file at 30 fps without End Sites, lengths × ``scale``.
+#: Representations whose frames keep the End Sites (the published acRNN's 57 nodes, spec/acrnn.md §1.1).
+END_SITE_REPRESENTATIONS = ("positions_acrnn",)
+
+
+def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE, phase: int = 0,
+                      end_sites: bool = False) -> Motion:
+    """One salsa file at 30 fps without End Sites (``end_sites=True``: with them), lengths × ``scale``.
 
     Parameters
     ----------
@@ -85,12 +90,16 @@ def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE, phase:
     phase : int
         First frame kept (0 or 1 at stride 2: the two parities of the 60 fps frames).
 
+    end_sites : bool
+        Keep the End Sites as joints (identity rotations), in the file's depth-first order.
+
     Returns
     -------
-    Motion with 43 joints, frame time 1/30 s.
+    Motion with 43 joints (57 with the End Sites), frame time 1/30 s.
     """
     m = downsample(read_bvh(path, frame_time=SALSA_FRAME_TIME), stride, phase)
-    skel, rot = remove_joints(m.skeleton, m.rotations, m.skeleton.end_sites)
+    skel, rot = (m.skeleton, m.rotations) if end_sites else remove_joints(m.skeleton, m.rotations,
+                                                                          m.skeleton.end_sites)
     s = skel
     skel = Skeleton(s.parents, s.offsets * scale, s.names, (), s.joints_left, s.joints_right)
     return Motion(skel, rot, m.root_positions * scale, m.frame_time, m.name)
@@ -206,13 +215,15 @@ def load_synthesis_data(representation: str, folder, train: Sequence[str] = SALS
     folder = Path(folder)
     if set(train) & set(test):
         raise ValueError(f"train and test share takes: {sorted(set(train) & set(test))}")
-    motions = {n: load_salsa_motion(folder / f"{n}.bvh", scale=scale) for n in (*train, *test)}
+    keep = representation in END_SITE_REPRESENTATIONS
+    motions = {n: load_salsa_motion(folder / f"{n}.bvh", scale=scale, end_sites=keep) for n in (*train, *test)}
     skel = motions[train[0]].skeleton
     frames = {n: motion_to_frames(representation, m) for n, m in motions.items()}
     train_frames = [frames[n] for n in train]
     if parities == 2:
         train_frames += [motion_to_frames(representation, load_salsa_motion(folder / f"{n}.bvh", scale=scale,
-                                                                            phase=1)) for n in train]
+                                                                            phase=1, end_sites=keep))
+                         for n in train]
     mean, std = feature_statistics(train_frames)
     if not standardise:
         mean, std = np.zeros_like(mean), np.ones_like(std)
@@ -350,7 +361,8 @@ TABLE1_ROWS = {
     "quaternions+positions": "quaternions+positions",
     "ortho6d": "ortho6d",
     "ortho6d+positions": "ortho6d+positions",
-    "positions": "positions",                    # the original acRNN
+    "positions": "positions",                    # the original acRNN's positions in the paper's 3 + 3J frame
+    "positions-published": "positions_acrnn",    # the published acRNN code's frame: 171 values, End Sites kept
     "euler": "euler",                            # Table 4 only
 }
 DEFAULT_ROW = "dq-all"
@@ -464,8 +476,9 @@ def train_datasets(args):
     try:
         data = load_synthesis_data(representation, folder, train, test, parities=parities,
                                    standardise=not getattr(args, "raw_frames", False))
-        motions = tuple(load_salsa_motion(folder / f"{n}.bvh", phase=p) for p in range(parities) for n in train) \
-            if augment else ()
+        keep = representation in END_SITE_REPRESENTATIONS
+        motions = tuple(load_salsa_motion(folder / f"{n}.bvh", phase=p, end_sites=keep) for p in range(parities)
+                        for n in train) if augment else ()
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
     length = int(getattr(args, "window_length", 100))
