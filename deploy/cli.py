@@ -9,7 +9,7 @@
 ``run MODEL_DIR IN.bvh OUT.bvh --start S``
     Open the folder's models with the runtime of the model named in their metadata
     (``deploy.models.runtime_for_dir``); read a BVH, keep the 22-joint subset in centimetres at 30 fps
-    (``refimpl.transitions.load_source``, the same clip loading as ``refimpl``), replace frames ``S … S+T−1`` by a
+    (``refimpl.protocols.transition.load_source``, the same clip loading as ``refimpl``), replace frames ``S … S+T−1`` by a
     transition generated from frames ``S−2, S−1`` and ``S+T, S+T+1`` with the exported models, and write the
     result as BVH; prints the mean joint-position error against the original frames.
 ``info MODEL.onnx``
@@ -101,7 +101,7 @@ def _cmd_run(args) -> int:
     from deploy.models import runtime_for_dir
     from refimpl.bvh import read_bvh_header, write_bvh
     from refimpl.motion import Motion
-    from refimpl.transitions import (TransitionSource, declared_rate, denormalize_poses, heading_from_root,
+    from refimpl.protocols.transition import (TransitionSource, declared_rate, denormalize_poses, heading_from_root,
                                      load_source, make_windows, normalize_poses, window_to_world)
 
     rt = runtime_for_dir(args.model_dir, intra_op_threads=args.threads)

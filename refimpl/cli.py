@@ -10,7 +10,7 @@ train       train a network by name (today ``qtg``) on the sample, ``../shared/d
             exp-map files; resumable, progress with rate and ETA, CSV loss log
             (:func:`refimpl.train.train`)
 eval        the QTG paper's protocol: QTG vs inertialisation vs interpolation on held-out windows, mean
-            joint-position error per joint per frame in cm, per-frame curve (:mod:`refimpl.metrics`)
+            joint-position error per joint per frame in cm, per-frame curve (:mod:`refimpl.protocols.transition_metrics`)
 export      ONNX models ``qtg_init/step/rollout.onnx`` via ``deploy`` (imported lazily: the ``deploy`` extra)
 generate    a transition between two clips with QTG (NumPy or onnxruntime) or a baseline; BVH out
 render      a BVH / exp-map motion (optionally against a second one) to a PNG strip or a GIF
@@ -329,10 +329,12 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
 
 def _eval_prediction(args, model) -> int:
     """``refimpl eval`` on the prediction task: the network(s) and the baselines, the paper's table, JSON."""
+    from refimpl.protocols import prediction as PP
+    from refimpl.protocols import prediction_data as PD
     from refimpl.tasks import prediction
 
     _say(f"reading {args.data} ...")
-    stride = prediction.stride_of(model.extra["dataset"], model.extra["frame_time"]) if model else 2
+    stride = PD.stride_of(model.extra["dataset"], model.extra["frame_time"]) if model else 2
     data = prediction.resolve_data(args.data, downsample=stride)
     if model is not None and model.extra.get("dataset") != data.dataset:
         raise UsageError(f"--data {args.data} is {data.dataset}, the model was trained on {model.extra.get('dataset')}")
@@ -344,21 +346,21 @@ def _eval_prediction(args, model) -> int:
         raise UsageError(str(exc)) from None
     networks = network_methods(model, onnx_dir=args.onnx) if (model is not None or args.onnx) else {}
     try:
-        results = prediction.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line,
-                                          actions=actions)
+        results = PP.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line,
+                                  actions=actions)
     except ValueError as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
     if model is not None:
         _say(f"network {model.spec.name} from {model.path} (step {model.meta.get('step')})")
     _say("Mean Euler-angle error (radians, zyx, joint 0 excluded) per action and horizon:")
-    _say(prediction.format_table(results))
+    _say(PP.format_table(results))
     if args.json:
-        prediction.write_results_json(args.json, results[0] if len(results) == 1 else results)
+        PP.write_results_json(args.json, results[0] if len(results) == 1 else results)
         _say(f"results          {args.json}")
     if args.plot:
         from refimpl.render import render_error_curves
 
-        render_error_curves(args.plot, prediction.average_curves(results), frame_time=protocol.frame_ms / 1000.0)
+        render_error_curves(args.plot, PP.average_curves(results), frame_time=protocol.frame_ms / 1000.0)
         _say(f"plot             {args.plot}")
     return EXIT_OK
 
@@ -425,6 +427,7 @@ def cmd_export(args) -> int:
 def _generate_prediction(args, model) -> int:
     """``refimpl generate`` on the prediction task: a prefix of ``--source`` -> ``--length`` frames, BVH out."""
     from refimpl.bvh import write_bvh
+    from refimpl.protocols import prediction_data as PD
     from refimpl.tasks import prediction
 
     if args.backend == "onnx":
@@ -447,7 +450,7 @@ def _generate_prediction(args, model) -> int:
     rotations = prediction.load_clip(args.source, dataset, frame_time)
     k = args.length or 25
     pr = prediction.make_prediction(next(iter(networks.values())), rotations, args.source_frame, P, k,
-                                    skeleton=prediction.skeleton_of(dataset), frame_time=frame_time,
+                                    skeleton=PD.skeleton_of(dataset), frame_time=frame_time,
                                     method_name=name, name=Path(args.out).stem)
     write_bvh(args.out, pr.motion)
     _say(f"wrote {args.out}: {pr.motion.num_frames} frames at {1.0 / frame_time:g} fps ({dataset} skeleton, root "
@@ -676,7 +679,9 @@ def _eval_locomotion(args, model) -> int:
     results = task.evaluate(data, task.methods(nets))
     _say(f"held-out windows: {next(iter(results.values()))['windows']} of {data.prefix} + {data.target} frames "
          f"({len(data.files)} files); error in QuaterNet units (1 unit = 5.6444 cm)")
-    _say(task.format_results(results))
+    from refimpl.protocols.locomotion import format_results
+
+    _say(format_results(results))
     if args.json:
         from refimpl.atomic import atomic_write_text
 

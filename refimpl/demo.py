@@ -62,7 +62,7 @@ class DemoResult:
     files : dict name -> Path
         Every file written (checkpoint, logs, tables, ONNX models, BVH files, pictures).
     results : dict
-        :func:`refimpl.metrics.evaluate_methods` output on the held-out windows.
+        :func:`refimpl.protocols.transition_metrics.evaluate_methods` output on the held-out windows.
     verify : dict or None
         :func:`refimpl.services.verify_onnx` output (None when ONNX was skipped).
     skipped : list of str
@@ -115,7 +115,7 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
 
 
 def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
-    from refimpl.transitions import build_transition_datasets, load_source, sample_sources
+    from refimpl.protocols.transition import build_transition_datasets, load_source, sample_sources
 
     t_start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)

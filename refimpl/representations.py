@@ -43,7 +43,7 @@ from refimpl.dualquat import dq_fix, dq_normalize, translation_from_dq
 from refimpl.quat import (axis_angle_from_quat, euler_from_quat, matrix_from_ortho6d, matrix_from_quat,
                           ortho6d_from_matrix, quat_fix, quat_from_axis_angle, quat_from_euler, quat_from_matrix,
                           quat_normalize)
-from refimpl.skeleton import Skeleton, as_float_array as _as_float_array, current_dq_from_local, local_from_current_dq
+from refimpl.skeleton import Skeleton, as_float_array, current_dq_from_local, local_from_current_dq
 
 __all__ = ["Representation", "REPRESENTATIONS", "encode", "decode", "frame_size", "positions_from_frames",
            "fix_antipodal_frames"]
@@ -157,7 +157,7 @@ def _encode_joints(name: str, skel: Skeleton, rot: np.ndarray, order: str) -> np
 
 
 def _split_frames(rep: Representation, skel: Skeleton, frames) -> tuple[np.ndarray, np.ndarray]:
-    x = _as_float_array(frames, "frames")
+    x = as_float_array(frames, "frames")
     stored = rep.joints_stored(skel.num_joints)
     size = 3 + rep.dim * stored
     if x.ndim < 1 or x.shape[-1] != size:
@@ -252,7 +252,7 @@ def fix_antipodal_frames(name: str, frames) -> np.ndarray:
     ndarray, same shape and dtype.
     """
     rep = _lookup(name)
-    x = _as_float_array(frames, "frames")
+    x = as_float_array(frames, "frames")
     if x.ndim < 2 or x.shape[-1] < 3 + rep.dim or (x.shape[-1] - 3) % rep.dim:
         raise ValueError(f"frames: expected shape (T, ..., 3 + {rep.dim}·J) for {name!r}, got {x.shape}")
     num_joints = (x.shape[-1] - 3) // rep.dim

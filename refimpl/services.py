@@ -18,7 +18,7 @@ import numpy as np
 
 from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
-from refimpl.transitions import SAMPLE_DIR
+from refimpl.protocols.transition import SAMPLE_DIR
 
 __all__ = ["SAMPLE_DIR", "blas_threads", "read_motion", "load_trained", "train_model", "network_methods",
            "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata"]

@@ -7,7 +7,8 @@ from refimpl.cli import build_parser, main
 from refimpl.registry import MODELS
 from refimpl.services import load_trained
 from refimpl.tasks import synthesis
-from refimpl.tasks.synthesis import SAMPLE_SALSA, SAMPLE_TEST, SAMPLE_TRAIN, load_salsa_motion, load_synthesis_data
+from refimpl.protocols.synthesis import SAMPLE_TEST, SAMPLE_TRAIN, load_salsa_motion, load_synthesis_data
+from refimpl.tasks.synthesis import SAMPLE_SALSA
 from refimpl.train import TrainContext
 
 

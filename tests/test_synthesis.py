@@ -1,4 +1,4 @@
-"""The salsa synthesis task (refimpl/tasks/synthesis.py): data, split, frames, windows, seeds, evaluation, training."""
+"""The salsa synthesis protocol (refimpl/protocols/synthesis.py): data, split, frames, windows, seeds, evaluation, training."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,7 +9,7 @@ import pytest
 from refimpl.bvh import read_bvh, write_bvh
 from refimpl.models import acrnn
 from refimpl.representations import REPRESENTATIONS, positions_from_frames
-from refimpl.tasks import synthesis as S
+from refimpl.protocols import synthesis as S
 
 SAMPLE = Path(__file__).resolve().parents[1] / "refimpl" / "data" / "sample" / "salsa"
 

@@ -86,11 +86,6 @@ def _decode(g: GraphBuilder, frames: str, representation: str, J: int, D: int, l
     return {}
 
 
-def _decoded_io(outs: dict, shape_prefix: list, J: int) -> list:
-    sizes = {"joints": None, "positions": 3}
-    return [(k, shape_prefix + [J, sizes[k] or "Dj"]) for k in outs]
-
-
 def _metadata(g, config, role, io, mean, std, representation, J, D, frame_rate, extra, skeleton):
     rep = {"name": representation, "size": config.frame_size,
            "fields": [{"name": "root", "start": 0, "size": 3,

@@ -126,7 +126,7 @@ def default_skeleton(pose_size: int):
         return None
     from refimpl.bvh import read_bvh_header
     from refimpl.rigs import CMU_22_JOINTS, CMU_UNIT_CM, scale_skeleton, subset_22
-    from refimpl.transitions import SAMPLE_DIR
+    from refimpl.protocols.transition import SAMPLE_DIR
 
     skel = read_bvh_header(SAMPLE_DIR / "bvh" / "02_01.bvh").skeleton
     ident = np.zeros((1, skel.num_joints, 4))
@@ -152,7 +152,7 @@ def check_params(params: Mapping[str, np.ndarray], config: QTGConfig) -> None:
 def check_normalization(normalization, config: QTGConfig):
     """``(mean (P,), std (P,))`` float64 from ``(mean, std)`` of shape ``(P,)`` or root-only ``(3,)``.
 
-    Root-only statistics (``refimpl.transitions``: ``root_mean``, ``root_std``) are padded with mean 0 and std 1
+    Root-only statistics (``refimpl.protocols.transition``: ``root_mean``, ``root_std``) are padded with mean 0 and std 1
     for the quaternion entries, for which the in-graph ``(x − 0) / 1`` and ``x · 1 + 0`` are exact.
     """
     if normalization is None:
@@ -296,7 +296,7 @@ def export_qtg_init(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
         Force primitive operators (see ``GraphBuilder``).
     normalization : (mean, std), optional
         Standardise inside the graph, so inputs and outputs are raw poses: shapes ``(P,)``, or ``(3,)`` for the
-        root translation only (``refimpl.transitions.normalize_poses``' ``root_mean``, ``root_std``).
+        root translation only (``refimpl.protocols.transition.normalize_poses``' ``root_mean``, ``root_std``).
     normalize_in_graph : bool
         With ``False`` the statistics only go to the metadata (``"in_graph": false``) and the graph works on
         normalised poses like the NumPy model.

@@ -30,8 +30,8 @@ Not adopted, because slower here: fusing the decoder's output layer with the nex
 (``[W_dᵀ | W_dᵀ W_e0ᵀ]`` saves a product but reads 42 k more weights per step).
 
 The ONNX ``GRU`` operator is not used: it cannot take the per-sample term ``k`` nor quantised weights.
-``weights="int8"`` (or ``"int4"``) stores every weight matrix block-wise quantised (:func:`quantize_blocks`) and
-multiplies with onnxruntime's ``com.microsoft.MatMulNBits`` kernel (``accuracy_level = 4``: int8 activations,
+``weights="int8"`` (or ``"int4"``) stores every weight matrix block-wise quantised
+(:func:`deploy.quantize.quantize_blocks`) and multiplies with onnxruntime's ``com.microsoft.MatMulNBits`` kernel (``accuracy_level = 4``: int8 activations,
 integer dot products; constant biases are the kernel's own bias input, a per-sample one — ``k``, ``z`` — an
 ``Add``). A step then reads 0.61 MB of weights and scales (int4: 0.34 MB) instead of 2.16 MB of float32 for
 the default sizes, about the size of a per-core L2 cache (512 KiB on the development VM). This makes the variant
@@ -53,7 +53,7 @@ import onnx
 from refimpl.models.qtg import QTGConfig
 
 from deploy.graph import OPSET, GraphBuilder
-from deploy.gru import gru_gates as _gru_gates
+from deploy.gru import gru_gates
 from deploy.metadata import EXPORTER_VERSION, io_entries
 from deploy.models.qtg import check_normalization, check_params, pose_in, pose_out, qtg_metadata
 from deploy.quantize import WEIGHT_FORMATS, WeightMatmul
@@ -173,7 +173,7 @@ def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConf
         for layer in range(L):
             c, top = f"{s}.l{layer}", layer == L - 1
             h_rz, h_n = recurrent[layer] or (None, g.weight(f"gru.l{layer}.b_hn", prep["hn_b"][layer]))
-            states[layer] = _gru_gates(g, i_rz, i_n, h_rz, h_n, states[layer], H, f"{c}.cell")  # (B, H)
+            states[layer] = gru_gates(g, i_rz, i_n, h_rz, h_n, states[layer], H, f"{c}.cell")  # (B, H)
             # one product of the new state: the next step's recurrent term (none after the last step) and the
             # term the state feeds now, v_t (top layer) or the input term of layer + 1
             if last:

@@ -1,4 +1,4 @@
-"""ONNX graphs of QuaterNet's long-term locomotion networks (spec/deploy.md §9, spec/locomotion.md §10).
+"""ONNX graphs of QuaterNet's long-term locomotion networks (spec/deploy.md §12, spec/locomotion.md §10).
 
 * :func:`export_pose_step` — one step of the long-term pose network (``refimpl.models.quaternet.step`` with
   controls and translations, absolute rotations): ``x (B, 4J + 2 + 6)``, ``state (L, B, H)`` →

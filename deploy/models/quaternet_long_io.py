@@ -1,5 +1,5 @@
 """QuaterNet long-term's entry of the exporter table (``deploy.models.EXPORTERS["quaternet-long"]``): the pose
-network's step and the pace network (spec/deploy.md §9).
+network's step and the pace network (spec/deploy.md §12).
 
 * :func:`load_checkpoint` — ``(params, config, meta)`` of a ``refimpl train`` checkpoint of ``quaternet-long``
   (config: :class:`~refimpl.models.quaternet.QuaterNetConfig`) or ``pace`` (:class:`~refimpl.models.pace.PaceConfig`);

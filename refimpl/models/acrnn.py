@@ -33,7 +33,8 @@ from typing import Mapping
 import numpy as np
 
 from refimpl.models._shared import check_param_dict
-from refimpl.dq_output import DQ_TERM_NAMES, DQ_TERMS, dq_output_loss_backward, dq_output_loss_forward
+from refimpl.dq_output import DQ_TERM_NAMES, DQ_TERMS
+from refimpl.dq_output_fast import dq_output_loss_backward, dq_output_loss_forward
 from refimpl.losses import (WEIGHT_ACRNN_QUAT_FK, euclidean_loss_backward, euclidean_loss_forward,
                             mse_loss_backward, mse_loss_forward, quat_loss_backward, quat_loss_forward,
                             quat_norm_loss_backward, quat_norm_loss_forward)
@@ -414,7 +415,7 @@ def loss_forward(pred, target, spec: LossSpec):
     """Training loss of acRNN over every step.
 
     ``total = w_mse · MSE(pred, target) + Σ geometric terms`` on the de-standardised output
-    ``raw = pred · std + mean`` (dual quaternions: :func:`refimpl.dq_output.dq_output_loss_forward`; quaternions:
+    ``raw = pred · std + mean`` (dual quaternions: :func:`refimpl.dq_output_fast.dq_output_loss_forward`; quaternions:
     normalise per joint, then L_quat and the FK position loss).
 
     Parameters
@@ -514,26 +515,15 @@ def loss_and_grads(params: Mapping[str, np.ndarray], config: ACRNNConfig, frames
     parts : dict
     grads : dict
     """
-    return loss_and_grads_with(sequence_forward, sequence_backward, params, config, frames, spec, mask)
-
-
-def loss_and_grads_with(forward, backward, params: Mapping[str, np.ndarray], config: ACRNNConfig, frames,
-                        spec: LossSpec, mask=None):
-    """:func:`loss_and_grads` with the rollout's ``forward(params, config, frames, mask) -> (pred, cache)`` and
-    ``backward(dpred, cache) -> grads`` given (this module's, or :mod:`refimpl.models.acrnn_fast`'s)."""
     if config.frame_size != spec.mean.size:
         raise ValueError(f"spec: expected frames of size {config.frame_size} (config.frame_size), got "
                          f"{spec.mean.size}")
-    pred, cache = forward(params, config, frames, mask)
+    pred, cache = sequence_forward(params, config, frames, mask)
     total, parts, lcache = loss_forward(pred, np.asarray(frames)[:, 1:], spec)
-    grads = backward(loss_backward(1.0, lcache), cache)
+    grads = sequence_backward(loss_backward(1.0, lcache), cache)
     return total, parts, grads
 
 
 def config_for(representation: str, num_joints: int, **kwargs) -> ACRNNConfig:
     """The config whose frame size is ``3 + D·J`` for ``representation``."""
     return ACRNNConfig(frame_size=frame_size(representation, num_joints), **kwargs)
-
-
-# Kernel tier (spec/architecture.md §kernel tier): public names of helpers other modules use.
-check_sequence_inputs = _check_sequence

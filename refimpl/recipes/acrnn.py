@@ -7,8 +7,8 @@
 * :func:`make_config` — :class:`~refimpl.models.acrnn.ACRNNConfig` with the data's frame size, ``--set`` overrides
   (``hidden_size``, ``num_layers``, ``skewed``, ``ground_truth_length``, ``condition_length``);
 * :func:`make_adapter` — the trainer's :class:`~refimpl.train.ModelAdapter`: windows of ``T + 1`` standardised
-  frames drawn by :func:`~refimpl.tasks.synthesis.sample_windows` with the trainer's Generator (so resuming is
-  exact), the row's loss over every step on the fast path (:func:`refimpl.models.acrnn_fast.loss_and_grads`);
+  frames drawn by :func:`~refimpl.protocols.synthesis.sample_windows` with the trainer's Generator (so resuming is
+  exact), the row's loss over every step (:func:`refimpl.models.acrnn.loss_and_grads`);
 * :func:`make_method` — NumPy generation ``f(seed (B, S, F), n) -> (B, n, F)`` on raw frames;
 * :data:`EXPORTER` ``"acrnn"`` and :func:`export_inputs`, :func:`reference_outputs`, :func:`verify_onnx`.
 
@@ -24,15 +24,17 @@ import numpy as np
 
 from refimpl.augment import random_heading_windows
 from refimpl.errors import UsageError
-from refimpl.models import acrnn, acrnn_fast
+from refimpl.models import acrnn
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
 from refimpl.options import config_with_overrides
-from refimpl.tasks.synthesis import TABLE1_ROWS, WINDOW_MARGIN, motion_to_frames, sample_windows, skeleton_of
+from refimpl.protocols.synthesis import WINDOW_MARGIN, motion_to_frames, sample_windows
+from refimpl.tasks.synthesis import TABLE1_ROWS, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["PUBLISHED_SETTINGS", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
-           "PAPER_WINDOW", "PAPER_GROUND_TRUTH", "PAPER_CONDITION", "PAPER_SEED_FRAMES", "PAPER_SKEWED", "make_config",
+__all__ = ["PUBLISHED_SETTINGS", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE",
+           "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH", "PAPER_WINDOW", "PAPER_GROUND_TRUTH", "PAPER_CONDITION",
+           "PAPER_SEED_FRAMES", "PAPER_SKEWED", "make_config",
            "loss_spec", "make_adapter", "acrnn_method", "make_method", "export_inputs", "reference_outputs",
            "verify_onnx"]
 
@@ -103,7 +105,7 @@ def make_adapter(train_ds, val_ds, config: ACRNNConfig, dtype, extra: Mapping) -
         return sample_windows(ctx.rng, train, len(idx), length)                             # (B, T + 1, F)
 
     def loss_and_grads(params, batch):
-        total, _, grads = acrnn_fast.loss_and_grads(params, config, batch, spec)
+        total, _, grads = acrnn.loss_and_grads(params, config, batch, spec)
         return total, grads
 
     from refimpl.tasks.synthesis import num_examples

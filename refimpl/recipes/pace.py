@@ -3,7 +3,7 @@
 
 Per spline point ``[turning_angle, average_speed]`` → ``[A, ω, cos Δ, sin Δ]``; L1 loss, Adam 1e-3 with
 × 0.999 per epoch, batch 40, no clipping; chunks of spline points drawn by
-:func:`refimpl.tasks.locomotion.pace_batch` (the reference's 1000 points when the data's splines are that long,
+:func:`refimpl.protocols.locomotion.pace_batch` (the reference's 1000 points when the data's splines are that long,
 else their median length). ``--set bidirectional=false`` trains the delayed online variant.
 
 Shape legend: B batch, N spline points.
@@ -56,9 +56,9 @@ def chunk_length(data, requested: int = 0) -> int:
 
 
 def make_adapter(train_ds, val_ds, config: pace.PaceConfig, dtype, extra: Mapping) -> ModelAdapter:
-    """Chunks of the training splines (:func:`refimpl.tasks.locomotion.pace_batch`), L1 loss; validation = L1
+    """Chunks of the training splines (:func:`refimpl.protocols.locomotion.pace_batch`), L1 loss; validation = L1
     over the whole held-out splines (not the last training batch, ref quirk 8)."""
-    from refimpl.tasks.locomotion import pace_batch
+    from refimpl.protocols.locomotion import pace_batch
 
     data = train_ds.pace_data()
     chunk = chunk_length(data, train_ds.pace_chunk_length)

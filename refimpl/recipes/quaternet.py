@@ -242,13 +242,13 @@ def _dq_tracks(data, skeleton) -> list:
 
 def make_adapter(train_ds, val_ds, config: ShortTermConfig, dtype, extra: Mapping, *, name: str = NAME,
                  model_module=net) -> ModelAdapter:
-    """The trainer's adapter on ``train_ds`` (a :class:`~refimpl.tasks.prediction.PredictionData`).
+    """The trainer's adapter on ``train_ds`` (a :class:`~refimpl.protocols.prediction_data.PredictionData`).
 
     Examples are the training sequences (long enough for a window); ``get_batch`` draws one window start per
     sequence and the feeding mask from the trainer's Generator, and reads the epoch for the teacher-forcing ratio.
     The loss the trainer logs is the total (main loss + penalty).
     """
-    from refimpl.tasks.prediction import training_windows, usable_training
+    from refimpl.protocols.prediction_data import training_windows, usable_training
 
     P, T = config.prefix_length, config.target_length
     data = usable_training(train_ds, P + T)
@@ -295,7 +295,7 @@ def _param_dtype(params) -> np.dtype:
 def network_method(predict_fn: Callable, params: Mapping[str, np.ndarray], network_config, name: str) -> Callable:
     """``f(prefix (B, P, J, 4), k) -> (B, k, J, 4)``: the published predict (canonical prefix, then
     ``predict_fn(params, frames (B, P, 4J), k, network_config)``) in the parameters' dtype."""
-    from refimpl.tasks.prediction import canonical_prefix
+    from refimpl.protocols.prediction import canonical_prefix
 
     dtype = _param_dtype(params)
 
@@ -323,7 +323,7 @@ def dq_network_method(params: Mapping[str, np.ndarray], network_config, skeleton
     canonicalisation of the prefix, its current dual quaternions (:func:`refimpl.dq_prediction.
     dq_frames_from_rotations` with ``skeleton``), :func:`refimpl.models.quaternet.predict` in the parameters'
     dtype, and the predicted DQs decoded to unit local quaternions (Eq. 12)."""
-    from refimpl.tasks.prediction import canonical_prefix
+    from refimpl.protocols.prediction import canonical_prefix
 
     dtype = _param_dtype(params)
     parents = skeleton.parents
@@ -351,7 +351,7 @@ def predictor(params: Mapping[str, np.ndarray], config: ShortTermConfig, skeleto
 
 def make_method(model) -> Callable:
     """:func:`predictor` of a :class:`~refimpl.registry.TrainedModel` (the skeleton of its dataset)."""
-    from refimpl.tasks.prediction import skeleton_of
+    from refimpl.protocols.prediction_data import skeleton_of
 
     skeleton = skeleton_of(model.extra["dataset"]) if getattr(model.config, "dual", False) else None
     return predictor(model.params, model.config, skeleton)
@@ -360,7 +360,7 @@ def make_method(model) -> Callable:
 def export_inputs(model) -> dict:
     """Keyword arguments of the exporter (``deploy.models.quaternet.export_dir``): metadata (dataset, frame rate,
     skeleton, checkpoint step) and the predictor's default k."""
-    from refimpl.tasks.prediction import skeleton_of
+    from refimpl.protocols.prediction_data import skeleton_of
 
     skel = skeleton_of(model.extra["dataset"])
     meta = {"frame_rate": float(model.fps), "dataset": model.extra["dataset"],
@@ -375,7 +375,7 @@ def network_frames(model, prefix) -> np.ndarray:
     take)."""
     if not getattr(model.config, "dual", False):
         return np.asarray(prefix)
-    from refimpl.tasks.prediction import skeleton_of
+    from refimpl.protocols.prediction_data import skeleton_of
 
     return dq_frames_from_rotations(prefix, skeleton_of(model.extra["dataset"]))
 

@@ -6,13 +6,13 @@ Everything the application layer needs about this task, and nothing about a part
   embedded sample, ``../shared/data``, a folder, a file), :func:`source_for_file`, :func:`build_datasets`,
   :func:`train_datasets`; the checkpoint facts the task needs (:func:`checkpoint_extra`, :func:`check_checkpoint`);
 * baselines and protocol: :func:`methods` (the networks' methods, then inertialisation and interpolation from
-  :mod:`refimpl.baselines`), :func:`evaluate` (:func:`refimpl.metrics.evaluate_methods`, the paper's metric),
+  :mod:`refimpl.protocols.transition_baselines`), :func:`evaluate` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`, the paper's metric),
   :func:`print_results` / :func:`write_results` (table, per-frame curve, CSV, JSON);
 * generation: :func:`make_transition` between two clips in world coordinates, :func:`with_end_sites` for BVH
   readers, :func:`render_transition`, :func:`clip_for`, :func:`random_context` (context poses for numerical checks).
 
-The building blocks live below: windows, sources and datasets in :mod:`refimpl.transitions`, the baselines in
-:mod:`refimpl.baselines`, the metric in :mod:`refimpl.metrics`.
+The building blocks live below: windows, sources and datasets in :mod:`refimpl.protocols.transition`, the baselines in
+:mod:`refimpl.protocols.transition_baselines`, the metric in :mod:`refimpl.protocols.transition_metrics`.
 
 Shape legend: N windows, T transition frames, F frames of a clip, J joints, P pose size (3 + 4 J), B batch.
 """
@@ -26,16 +26,16 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
-from refimpl.baselines import method_registry
+from refimpl.protocols.transition_baselines import method_registry
 from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
-from refimpl.metrics import evaluate_methods, format_table
+from refimpl.protocols.transition_metrics import evaluate_methods, format_table
 from refimpl.motion import Motion
 from refimpl.options import positive_int
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_rotate
 from refimpl.skeleton import Skeleton
-from refimpl.transitions import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
+from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                  build_transition_datasets, declared_rate, heading_from_root, join_pose, load_source,
                                  make_windows, sample_sources, shared_sources, split_pose, window_to_world)
 
@@ -64,11 +64,11 @@ def add_train_options(parser) -> None:
 
 
 def source_for_file(path, *, fps: float | None = None, label: str | None = None, frames=(0.0, 1.0)):
-    """A :class:`~refimpl.transitions.TransitionSource` for one BVH / exp-map file, its kind found from its joints.
+    """A :class:`~refimpl.protocols.transition.TransitionSource` for one BVH / exp-map file, its kind found from its joints.
 
     ``.txt`` files are CMU exp-map files (117 values per row, 120 fps unless ``fps``). ``.bvh`` files must have
-    the CMU cgspeed joints (:data:`~refimpl.transitions.CMU_22_JOINTS`) or the DAZ salsa joints
-    (:data:`~refimpl.transitions.SALSA_22_JOINTS`); their rate is the declared ``Frame Time`` unless ``fps``
+    the CMU cgspeed joints (:data:`~refimpl.protocols.transition.CMU_22_JOINTS`) or the DAZ salsa joints
+    (:data:`~refimpl.protocols.transition.SALSA_22_JOINTS`); their rate is the declared ``Frame Time`` unless ``fps``
     (the CMU salsa files declare 120 fps but are 60 fps).
     """
     p = existing_file(path)
@@ -91,8 +91,8 @@ def source_for_file(path, *, fps: float | None = None, label: str | None = None,
 def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 0.2):
     """Train and test sources for ``--data``.
 
-    * ``"sample"``: the embedded sample's fixed split (:func:`refimpl.transitions.sample_sources`);
-    * a folder laid out like ``../shared/data`` (``dmgnn_cmu_expmap`` ...): :func:`refimpl.transitions.shared_sources`;
+    * ``"sample"``: the embedded sample's fixed split (:func:`refimpl.protocols.transition.sample_sources`);
+    * a folder laid out like ``../shared/data`` (``dmgnn_cmu_expmap`` ...): :func:`refimpl.protocols.transition.shared_sources`;
     * a folder with ``train/`` and ``test/`` sub-folders: their ``*.bvh`` / ``*.txt`` files (recursively);
     * any other folder: its files sorted by path, the last ``test_fraction`` of them held out (split by file);
     * a single file: its first ``1 − test_fraction`` of frames for training, the rest for testing (split by time).
@@ -136,8 +136,8 @@ def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 
 
 
 def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.2, test_stride=None):
-    """Train and test :class:`~refimpl.transitions.TransitionDataset` of ``2 + T + 2``-pose windows for ``--data``
-    (:func:`resolve_data`, :func:`refimpl.transitions.build_transition_datasets`)."""
+    """Train and test :class:`~refimpl.protocols.transition.TransitionDataset` of ``2 + T + 2``-pose windows for ``--data``
+    (:func:`resolve_data`, :func:`refimpl.protocols.transition.build_transition_datasets`)."""
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
     try:
         return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride)
@@ -207,12 +207,12 @@ def onnx_method(runtime) -> Callable:
 
 def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0) -> dict:
     """``name -> f(past, target, T)``: the given networks' methods (in order), then both baselines
-    (:func:`refimpl.baselines.method_registry` with ``dt = 1 / fps``)."""
+    (:func:`refimpl.protocols.transition_baselines.method_registry` with ``dt = 1 / fps``)."""
     return {**dict(networks or {}), **method_registry(dt=1.0 / fps)}
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds``: :func:`refimpl.metrics.evaluate_methods`."""
+    """The paper's protocol on ``test_ds``: :func:`refimpl.protocols.transition_metrics.evaluate_methods`."""
     return evaluate_methods(test_ds, methods_by_name)
 
 
@@ -369,8 +369,8 @@ def make_transition(method: Callable, skeleton, source_clip, source_frame: int, 
     """Generate the ``T`` frames between two clips and return them in world coordinates.
 
     The four context poses (source frames ``s − 1, s``, target frames ``g, g + 1``) are expressed relative to
-    the first one (:func:`refimpl.transitions.make_windows` on the 4 frames), ``method`` generates the
-    transition in that frame, and the result is moved back to the world (:func:`refimpl.transitions.window_to_world`).
+    the first one (:func:`refimpl.protocols.transition.make_windows` on the 4 frames), ``method`` generates the
+    transition in that frame, and the result is moved back to the world (:func:`refimpl.protocols.transition.window_to_world`).
 
     Parameters
     ----------
