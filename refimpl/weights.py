@@ -240,8 +240,9 @@ def import_checkpoint(spec: ModelSpec, state: Mapping[str, np.ndarray], layout: 
         except UsageError:
             pass
         fields = ", ".join(f.name for f in getattr(config, "__dataclass_fields__", {}).values())
-        raise ValueError(f"{exc} (model {spec.name!r}, layout {layout!r}; other sizes: --set one of {fields})"
-                         ) from None
+        hint = getattr(spec.recipe, "IMPORT_HINT", "")
+        raise ValueError(f"{exc} (model {spec.name!r}, layout {layout!r}; other sizes: --set one of {fields}"
+                         + (f"; {hint}" if hint else "") + ")") from None
     kinds = sorted({a.dtype.name for a in params.values()})
     if dtype is None:
         if len(kinds) != 1:

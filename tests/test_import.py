@@ -320,7 +320,7 @@ def test_mismatched_files_exit_3_with_one_line(tmp_path, capsys):
     assert "missing" in err and "unexpected" in err and "lstm1" in err
     # wrong sizes: the config fields to --set are named
     err = _one_line_error(capsys, _import(tmp_path, tmp_path / "a.npz", "acrnn"), 3)
-    assert "wrong shapes" in err and "hidden_size" in err
+    assert "wrong shapes" in err and "hidden_size" in err and "positions-published" in err
     # a missing and an extra entry
     np.savez(tmp_path / "b.npz", **{k: v for k, v in sd.items() if k != "lstm3.bias_hh"}, extra=np.ones(2))
     err = _one_line_error(capsys, _import(tmp_path, tmp_path / "b.npz", "acrnn", "--set", "hidden_size=8"), 3)

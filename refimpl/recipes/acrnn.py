@@ -3,12 +3,17 @@
 
 * ``--representation`` picks a row of Table 1 (:data:`refimpl.tasks.synthesis.TABLE1_ROWS`: ``dq-all`` (default),
   ``dq-mse``, ``quaternions``, ``quaternions-fk``, ``quaternions+positions``, ``ortho6d``, ``ortho6d+positions``,
-  ``positions``, ``euler``); ``--losses mse=1,pos=0.333,...`` overrides its loss weights (the ablation);
-* :func:`make_config` — :class:`~refimpl.models.acrnn.ACRNNConfig` with the data's frame size, ``--set`` overrides
-  (``hidden_size``, ``num_layers``, ``skewed``, ``ground_truth_length``, ``condition_length``);
+  ``positions``, ``positions-published``, ``euler``); ``--losses mse=1,pos=0.333,...`` overrides its loss weights
+  (the ablation);
+* :func:`make_config` — :class:`~refimpl.models.acrnn.ACRNNConfig` with the data's frame size and the published
+  skewed stack (:data:`PAPER_SKEWED`, spec/acrnn.md §1.1), ``--set`` overrides (``hidden_size``, ``num_layers``,
+  ``skewed``, ``ground_truth_length``, ``condition_length``);
 * :func:`make_adapter` — the trainer's :class:`~refimpl.train.ModelAdapter`: windows of ``T + 1`` standardised
   frames drawn by :func:`~refimpl.protocols.synthesis.sample_windows` with the trainer's Generator (so resuming is
-  exact), the row's loss over every step (:func:`refimpl.models.acrnn.loss_and_grads`);
+  exact), or with ``--augment-heading`` cut from the takes, turned to a random heading and encoded per batch
+  (:func:`refimpl.augment.random_heading_windows`); the row's loss over every step
+  (:func:`refimpl.models.acrnn.loss_and_grads`);
+* :func:`published_names`, :data:`PUBLISHED_SETTINGS` — ``refimpl import --layout published`` (spec/import.md);
 * :func:`make_method` — NumPy generation ``f(seed (B, S, F), n) -> (B, n, F)`` on raw frames;
 * :data:`EXPORTER` ``"acrnn"`` and :func:`export_inputs`, :func:`reference_outputs`, :func:`verify_onnx`.
 
@@ -32,7 +37,7 @@ from refimpl.protocols.synthesis import WINDOW_MARGIN, motion_to_frames, sample_
 from refimpl.tasks.synthesis import TABLE1_ROWS, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["PUBLISHED_SETTINGS", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE",
+__all__ = ["PUBLISHED_SETTINGS", "IMPORT_HINT", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE",
            "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH", "PAPER_WINDOW", "PAPER_GROUND_TRUTH", "PAPER_CONDITION",
            "PAPER_SEED_FRAMES", "PAPER_SKEWED", "make_config",
            "loss_spec", "make_adapter", "acrnn_method", "make_method", "export_inputs", "reference_outputs",
@@ -62,6 +67,9 @@ PAPER_SKEWED = True
 #: ``--set`` values that make the network the published code's (``refimpl import --layout published``): its
 #: skewed stack (spec/acrnn.md §1).
 PUBLISHED_SETTINGS = ("skewed=true",)
+#: Added to ``refimpl import``'s message for a state dict of other shapes.
+IMPORT_HINT = ("the frame size comes from --representation and --data; the published code's positions frame "
+               "(171 values) is --representation positions-published --raw-frames")
 
 
 def published_names(config: ACRNNConfig) -> dict:
