@@ -16,16 +16,16 @@ LAYERS = {
     1: ["refimpl.quat", "refimpl.dualquat"],
     2: ["refimpl.skeleton"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.expmap", "refimpl.skeletons", "refimpl.preprocess",
-        "refimpl.representations", "refimpl.strategies", "refimpl.splines"],
+        "refimpl.representations", "refimpl.strategies", "refimpl.splines", "refimpl.augment"],
     4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.dq_output_fast", "refimpl.dq_prediction",
         "refimpl.schedules"],
     5: ["refimpl.models", "refimpl.models.*"],
-    6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.train", "refimpl.rigs",
-        "refimpl.protocols", "refimpl.protocols.*"],
+    6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.safetensors", "refimpl.train",
+        "refimpl.rigs", "refimpl.protocols", "refimpl.protocols.*"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
-        "refimpl.allocator"],
-    8: ["refimpl.cli", "refimpl.demo", "refimpl.__main__"],
+        "refimpl.allocator", "refimpl.weights"],
+    8: ["refimpl.cli", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).
 DEPLOY_IMPORTERS = {"refimpl.cli", "refimpl.demo", "refimpl.services"}

@@ -40,7 +40,7 @@ from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
+__all__ = ["published_names", "param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
            "PAPER_BATCH",
            "OUTPUTS", "QuaterNetLongConfig", "make_config", "rotations_from_quat", "quat_from_rotations",
            "quat_from_rotations_backward", "ablation_inputs", "loss_and_grads", "make_adapter", "rollout",
@@ -112,6 +112,12 @@ def param_shapes(config: QuaterNetLongConfig) -> dict:
     """Name -> shape of every parameter of the network ``config`` describes (the checkpoint schema's reference,
     spec/robustness.md §9): the recurrent network's ``param_shapes`` of ``config.network`` (ablations included)."""
     return quaternet.param_shapes(config.network())
+
+
+def published_names(config: QuaterNetLongConfig) -> dict:
+    """Our parameter name -> (published name, shape): the published long-term state dict's names
+    (:func:`refimpl.models.quaternet.published_names` of ``config.network()``; the identity)."""
+    return quaternet.published_names(config.network())
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> QuaterNetLongConfig:
