@@ -24,7 +24,7 @@ LAYERS = {
         "refimpl.rigs", "refimpl.protocols", "refimpl.protocols.*"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
-        "refimpl.allocator", "refimpl.weights"],
+        "refimpl.allocator", "refimpl.weights", "refimpl.run_options"],
     8: ["refimpl.cli", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).
