@@ -824,10 +824,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"refimpl {__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
     parser.add_argument("--blas-threads", type=nonneg_int, default=1,
-                        help="BLAS threads for NumPy (default 1: never far from the fastest; 2 threads are "
-                             "10-40%% faster per training step on an idle 2-core machine but many times slower "
-                             "when other jobs share the cores, benchmarks/bench_thread_default.py; pass 2 on a "
-                             "machine you have to yourself; 0 = library default; needs threadpoolctl)")
+                        help="BLAS threads for NumPy (default 1: it cannot collapse; 2 threads took 0.58-0.99x "
+                             "the one-thread time per training step on an idle 2-core machine, but 8-31x when other "
+                             "jobs shared the cores, benchmarks/bench_thread_default.py; pass 2 on a machine you "
+                             "have to yourself; 0 = library default; needs threadpoolctl)")
     parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
                         help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
                              "training step instead of faulting it in again (QTG step time 0.76-0.99x, pace 0.80-0.83x, "
