@@ -52,6 +52,7 @@ from refimpl.options import add_data_options, nonneg_int, positive_float, positi
 from refimpl.registry import MODELS, TASKS, task_of
 from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
                               onnx_metadata, read_motion, train_model, verify_onnx)
+from refimpl import weights_cli
 from refimpl.tasks import transition
 from refimpl.train import check_resumable, output_lock
 from refimpl.protocols.transition_join import JOIN_MODES, with_join
@@ -186,6 +187,10 @@ def _info_npz(p: Path, args) -> None:
         cfg = dict(meta["model_config"])
         stats = {k: cfg.pop(k) for k in ("root_mean", "root_std") if k in cfg}
         _say(f"model       {meta['model']}")
+        if isinstance(meta.get("imported"), dict):  # `refimpl import` (spec/import.md)
+            imp = meta["imported"]
+            _say(f"imported    from {imp.get('source')} ({imp.get('layout')} names, sha256 "
+                 f"{str(imp.get('sha256'))[:16]}...), not trained here")
         _say(f"progress    step {meta.get('step')} of {meta.get('steps_target')}, epoch {meta.get('epoch')}, "
              f"trained for {_seconds(meta.get('elapsed_s', 0.0))}")
         _say(f"config      {json.dumps(cfg, sort_keys=True)}")
@@ -712,10 +717,10 @@ def _generate_synthesis(args, model=None) -> int:
     method = next(iter(networks.values()))
     n = args.length or 300
     motion, seed_frames = task.continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
-    write_bvh(args.out, transition.with_end_sites(motion))
+    write_bvh(args.out, transition.with_end_sites(task.in_source_units(motion)))   # the take's centimetres
     _say(f"wrote {args.out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
-         "metres")
+         "centimetres (the take's units)")
     if args.png or args.gif:
         from refimpl.render import render_gif
         from refimpl.render_strip import render_strip
@@ -908,6 +913,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-onnx", action="store_true", help="skip export and verification")
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
     p.set_defaults(func=cmd_demo)
+
+    weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
     return parser
 
 

@@ -74,8 +74,9 @@ def _wheel_library():
     return (libs[0], onnxruntime.__version__) if libs else None
 
 
-@pytest.fixture(scope="module")
-def binary(tmp_path_factory):
+def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
+    """Build ``source`` with ``-Wall -Wextra`` (+ ``extra``) against ``$ORT_C_DIR``'s headers and its ``lib/`` (or
+    the wheel's library); ``pytest.skip`` when the compiler, headers or a fitting library are missing."""
     cc = _compiler()
     if cc is None:
         pytest.skip("no C compiler (set CC, or install cc/gcc/clang)")
@@ -89,7 +90,7 @@ def binary(tmp_path_factory):
     api = re.search(r"#define\s+ORT_API_VERSION\s+(\d+)", header.read_text(errors="replace"))
     if api is None:
         pytest.skip(f"{header}: no ORT_API_VERSION")
-    work = tmp_path_factory.mktemp("c_build")
+    work = tmp_path_factory.mktemp(f"c_build_{name}")
     libs = sorted((Path(ort) / "lib").glob("libonnxruntime.so*"))
     if libs:
         lib_dir = Path(ort) / "lib"
@@ -101,19 +102,24 @@ def binary(tmp_path_factory):
             pytest.skip(f"no library in {ort}/lib and no onnxruntime wheel")
         lib_dir = work / "lib"
         lib_dir.mkdir()
-        for name in ("libonnxruntime.so", "libonnxruntime.so.1"):
-            (lib_dir / name).symlink_to(wheel[0])
+        for lib in ("libonnxruntime.so", "libonnxruntime.so.1"):
+            (lib_dir / lib).symlink_to(wheel[0])
         version = wheel[1]
     if version is not None and int(api.group(1)) > int(version.split(".")[1]):
         pytest.skip(f"header ORT_API_VERSION {api.group(1)} is newer than the library {version}: "
                     "use headers of the library's release")
-    exe = work / "qtg_rollout"
-    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", str(SOURCE), f"-I{header.parent}", f"-L{lib_dir}",
-                            "-lonnxruntime", f"-Wl,-rpath,{lib_dir}", "-o", str(exe)],
+    exe = work / name
+    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", *extra, str(source), f"-I{header.parent}", f"-L{lib_dir}",
+                            "-lonnxruntime", "-lm", f"-Wl,-rpath,{lib_dir}", "-o", str(exe)],
                            capture_output=True, text=True, timeout=120)
     assert build.returncode == 0, build.stderr
     assert "warning" not in build.stderr, build.stderr
     return exe
+
+
+@pytest.fixture(scope="module")
+def binary(tmp_path_factory):
+    return build_example(tmp_path_factory, SOURCE, "qtg_rollout")
 
 
 def _python_rollout(model: Path, past: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -204,3 +204,6 @@ class QTGRuntime:
 load_checkpoint = load_qtg_checkpoint
 export_dir = export_qtg_dir
 Runtime = QTGRuntime
+
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.qtg_cli import add_export_options, add_run_options, export_checkpoint, run_command  # noqa: E402,F401
