@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -43,10 +43,11 @@ from refimpl.skeleton import Skeleton, remove_joints
 
 __all__ = [
     "SALSA_FRAME_TIME", "SALSA_TRAIN", "SALSA_TEST", "SAMPLE_TRAIN", "SAMPLE_TEST", "LENGTH_SCALE", "FPS",
-    "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN",
-    "horizon_frames", "load_salsa_motion", "motion_to_frames", "frames_to_motion", "SynthesisData",
-    "load_synthesis_data", "sample_windows", "seed_windows", "evaluate_generator", "train_acrnn", "NPSS_VARIANTS",
-    "root_zeroed_positions", "mean_joint_error", "npss", "mean_acceleration", "acceleration_comparison",
+    "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN", "TABLE1_ROWS",
+    "DEFAULT_ROW", "horizon_frames", "load_salsa_motion", "motion_to_frames", "frames_to_motion", "SynthesisData",
+    "skeleton_of", "load_synthesis_data", "sample_windows", "seed_windows", "evaluate_generator", "train_acrnn",
+    "NPSS_VARIANTS", "root_zeroed_positions", "mean_joint_error", "npss", "mean_acceleration",
+    "acceleration_comparison",
 ]
 
 #: Seconds per frame of the salsa files (60 fps, although the headers say 120).
@@ -66,6 +67,21 @@ MAX_SEEDS = 400
 HORIZONS_MS = (100, 400, 1000)
 ACCELERATION_FRAMES = 300
 WINDOW_MARGIN = 10
+
+
+#: ``--representation`` value -> row of Table 1 (a key of :data:`refimpl.models.acrnn.VARIANTS`).
+TABLE1_ROWS = {
+    "dq-all": "dual_quaternions_all",            # dual quaternions (all losses), the paper's proposal
+    "dq-mse": "dual_quaternions",                # dual quaternions (MSE)
+    "quaternions": "quaternions",                # quaternions (MSE)
+    "quaternions-fk": "quaternions_fk",          # quaternions (MSE + L_quat + FK positions)
+    "quaternions+positions": "quaternions+positions",
+    "ortho6d": "ortho6d",
+    "ortho6d+positions": "ortho6d+positions",
+    "positions": "positions",                    # the original acRNN
+    "euler": "euler",                            # Table 4 only
+}
+DEFAULT_ROW = "dq-all"
 
 
 def horizon_frames(ms: float, fps: int = FPS) -> int:
@@ -179,6 +195,12 @@ class SynthesisData:
 
     def destandardise(self, frames) -> np.ndarray:
         return np.asarray(frames) * self.std + self.mean
+
+
+def skeleton_of(model_config: Mapping) -> Skeleton:
+    """The skeleton stored in a checkpoint's model config."""
+    s = model_config["skeleton"]
+    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), s["names"])
 
 
 def load_synthesis_data(representation: str, folder, train: Sequence[str] = SALSA_TRAIN,
