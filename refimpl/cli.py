@@ -47,6 +47,7 @@ from typing import Sequence
 
 import numpy as np
 
+from refimpl import weights_cli
 from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
@@ -148,7 +149,9 @@ def cmd_export(args) -> int:
     model = load_trained(args.checkpoint)
     out = Path(args.out) if args.out else Path(model.path).parent / "onnx"
     task = task_of(model.spec)
-    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, **task.export_options(args))
+    _refuse_other_tasks_options(args, model)
+    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length,
+                          **task.export_options(args))
     for role, path in written.items():
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
@@ -161,6 +164,26 @@ def cmd_export(args) -> int:
             raise RuntimeError("onnxruntime and NumPy disagree beyond the recipe's verification tolerance "
                                f"(refimpl.recipes.{model.spec.name.replace('-', '_')}; spec/cli.md)")
     return EXIT_OK
+
+
+def _refuse_other_tasks_options(args, model) -> None:
+    """UsageError for an option of another task's group given a value (``export --join`` of a model whose task
+    has no such option)."""
+    for task_name, options in args.task_options.items():
+        for dest, default, flag in options:
+            if task_name != model.spec.task and getattr(args, dest) != default:
+                raise UsageError(f"{flag} applies to {task_name} models, not {model.spec.name}")
+
+
+def _add_task_options(p, add) -> None:
+    """Every task's options of a command, each in its own group (``add(task, group)``: the task's hook);
+    ``args.task_options`` records them: task -> [(dest, default, flag)]."""
+    owned = {}
+    for task_name in TASKS:
+        group = p.add_argument_group(f"{task_name} task")
+        add(task_of(task_name), group)
+        owned[task_name] = [(a.dest, a.default, a.option_strings[0]) for a in group._group_actions]
+    p.set_defaults(task_options=owned)
 
 
 def _generate_task(args):
@@ -206,7 +229,8 @@ def _parse_slice(text: str | None, n: int) -> slice:
 
 def cmd_render(args) -> int:
     """``refimpl render``."""
-    from refimpl.render import render_gif, render_strip
+    from refimpl.render import render_gif
+    from refimpl.render_strip import limb_sides, render_strip
 
     motion = read_motion(args.file, fps=args.fps, layout=args.layout)
     other = read_motion(args.compare, fps=args.fps, layout=args.layout) if args.compare else None
@@ -221,16 +245,17 @@ def cmd_render(args) -> int:
     pred = None if other is None else other.positions()[idx]
     parents = np.asarray(motion.skeleton.parents)
     outs = args.out or [Path(args.file).stem + ".png"]
+    sides = limb_sides(motion.skeleton)  # left limbs dark, right limbs light (the skeleton's mirror map)
     labels = (Path(args.file).stem, Path(args.compare).stem if args.compare else "")
     step = sel.step or 1
     for out in outs:
         suffix = Path(out).suffix.lower()
         if suffix == ".png":
             render_strip(out, pos, parents, prediction=pred, num_frames=args.num_frames, labels=labels,
-                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title)
+                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title, sides=sides)
         elif suffix == ".gif":
             render_gif(out, pos, parents, prediction=pred, fps=motion.fps / step, stride=args.stride, labels=labels,
-                       up=args.up, frame_numbers=idx, title=args.title)
+                       up=args.up, frame_numbers=idx, title=args.title, sides=sides)
         else:
             raise UsageError(f"--out {out}: expected a .png or .gif file name")
         _say(f"wrote {out} ({len(idx)} frames of {args.file})")
@@ -306,8 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--betas", type=float, nargs=2, default=None, metavar=("B1", "B2"),
                    help="Adam betas (default: the model's paper values)")
     p.add_argument("--clip-norm", type=positive_float, default=None, help="global gradient-norm clipping")
-    for task_name in sorted(TASKS):  # each task adds its own options, in its own group
-        task_of(task_name).add_train_options(p.add_argument_group(f"{task_name} task"))
+    _add_task_options(p, lambda task, group: task.add_train_options(group))
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a config field, e.g. --set gru_hidden=128 --set encoder_sizes=128,64")
     p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
@@ -334,8 +358,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", default=None, choices=sorted(MODELS),
                    help=f"without --checkpoint: evaluate the baselines of this model's task (default "
                         f"{DEFAULT_MODEL}'s); the checkpoint's model decides otherwise")
-    for task_name in TASKS:  # each task adds its own options, in its own group
-        task_of(task_name).add_eval_options(p.add_argument_group(f"{task_name} task"))
+    _add_task_options(p, lambda task, group: task.add_eval_options(group))
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("export", help="export a checkpoint to ONNX (needs the deploy extra)",
@@ -349,8 +372,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="skip the onnxruntime-vs-NumPy check on the task's check inputs")
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random inputs")
-    for task_name in TASKS:
-        task_of(task_name).add_export_options(p.add_argument_group(f"{task_name} task"))
+    p.add_argument("--transition-length", type=positive_int, default=None,
+                   help="frames of the rollout / predict model (default: the model's)")
+    _add_task_options(p, lambda task, group: task.add_export_options(group))
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("generate", help="generate motion with a network or a baseline, BVH out",
@@ -371,8 +395,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", default=None, choices=sorted(MODELS),
                    help="the network, and so the task, when the checkpoint does not say it (default: the "
                         "checkpoint's model)")
-    for task_name in TASKS:
-        task_of(task_name).add_generate_options(p.add_argument_group(f"{task_name} task"))
+    _add_task_options(p, lambda task, group: task.add_generate_options(group))
     p.set_defaults(func=cmd_generate)
 
     p = sub.add_parser("render", help="draw a motion as a PNG strip or GIF (matplotlib)",
@@ -400,6 +423,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-onnx", action="store_true", help="skip export and verification")
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
     p.set_defaults(func=cmd_demo)
+
+    weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
     return parser
 
 

@@ -132,6 +132,10 @@ def _info_npz(p: Path, args) -> None:
         cfg = dict(meta["model_config"])
         stats = {k: cfg.pop(k) for k in ("root_mean", "root_std") if k in cfg}
         _say(f"model       {meta['model']}")
+        if isinstance(meta.get("imported"), dict):  # `refimpl import` (spec/import.md)
+            imp = meta["imported"]
+            _say(f"imported    from {imp.get('source')} ({imp.get('layout')} names, sha256 "
+                 f"{str(imp.get('sha256'))[:16]}...), not trained here")
         _say(f"progress    step {meta.get('step')} of {meta.get('steps_target')}, epoch {meta.get('epoch')}, "
              f"trained for {_seconds(meta.get('elapsed_s', 0.0))}")
         _say(f"config      {json.dumps(cfg, sort_keys=True)}")

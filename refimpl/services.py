@@ -139,7 +139,8 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
 
 
 def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict:
-    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``)."""
+    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``,
+    in the task's method interface: its ``onnx_method``)."""
     methods = {}
     if model is not None:
         methods[model.spec.name] = model.spec.make_method(model)
@@ -149,13 +150,14 @@ def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict
     return methods
 
 
-def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str | None = None):
+def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str | None = None, **options):
     """The task's protocol on ``test_ds`` (its ``evaluate``) for the network (NumPy, and onnxruntime from
-    ``onnx_dir``) and the task's baselines; ``task`` names the task when there is no ``model``."""
+    ``onnx_dir``) and the task's baselines; ``task`` names the task when there is no ``model``; ``options`` go to
+    the task's ``methods``."""
     if model is None and task is None:
         raise ValueError("evaluate_model: pass a model or a task name")
     mod = task_of(model.spec if model is not None else task)
-    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps))
+    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps, **options))
 
 
 def _deploy_models(what: str):

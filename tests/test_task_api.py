@@ -114,7 +114,7 @@ def _toy_recipe_module() -> types.ModuleType:
 
     def verify_onnx(model, runtime, x):
         diff = float(np.abs(runtime.run(x) - x @ model.params["weight"]).max())
-        return {"linear": diff, "ok": diff < 1e-5}
+        return {"step": diff, "ok": diff < 1e-5}
 
     r.verify_onnx = verify_onnx
     return r
@@ -135,9 +135,9 @@ def _toy_exporter_module() -> types.ModuleType:
         model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
         helper.set_model_props(model, {"model": json.dumps({"name": "toy-linear"})})
         out_dir.mkdir(parents=True, exist_ok=True)
-        path = out_dir / "toy-linear_linear.onnx"
+        path = out_dir / "toy-linear_step.onnx"
         onnx.save(model, str(path))
-        return {"linear": path}
+        return {"step": path}
 
     class Runtime:
         def __init__(self, path):
@@ -147,7 +147,7 @@ def _toy_exporter_module() -> types.ModuleType:
 
         @classmethod
         def from_dir(cls, directory, intra_op_threads: int = 1):
-            return cls(Path(directory) / "toy-linear_linear.onnx")
+            return cls(Path(directory) / "toy-linear_step.onnx")
 
         def run(self, x):
             return self.session.run(None, {"x": np.asarray(x, np.float32)})[0].astype(np.float64)
@@ -196,7 +196,7 @@ def test_a_toy_model_and_task_go_through_the_command_line(toy, tmp_path, capsys)
         pytest.skip("deploy (onnx) is not installed: export not exercised")
     assert main(["export", "--checkpoint", str(ckpt), "--out", str(tmp_path / "onnx")]) == 0
     text = capsys.readouterr().out
-    assert "toy-linear_linear.onnx" in text and "onnxruntime vs NumPy (linear)" in text
+    assert "toy-linear_step.onnx" in text and "onnxruntime vs NumPy (step)" in text
     assert main(["eval", "--checkpoint", str(ckpt), "--onnx", str(tmp_path / "onnx"), "--json", str(js)]) == 0
     got = json.loads(js.read_text())
     assert got["toy-linear_onnx"] == pytest.approx(got["toy-linear"], abs=1e-5)

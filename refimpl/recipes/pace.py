@@ -21,7 +21,7 @@ from refimpl.optim import QUATERNET_ADAM, QUATERNET_LR_DECAY
 from refimpl.options import config_with_overrides
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
+__all__ = ["published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "MAX_CHUNK", "make_config", "chunk_length", "make_adapter", "make_method", "export_inputs", "verify_onnx"]
 
 NAME = "pace"
@@ -35,6 +35,11 @@ PAPER_OPTIM = OptimConfig(**QUATERNET_ADAM, lr_decay=QUATERNET_LR_DECAY)
 PAPER_BATCH = 40
 #: The reference's chunk length (spline points).
 MAX_CHUNK = 1000
+
+
+def published_names(config: pace.PaceConfig) -> dict:
+    """Our parameter name -> (published name, shape) (:func:`refimpl.models.pace.published_names`)."""
+    return pace.published_names(config)
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> pace.PaceConfig:

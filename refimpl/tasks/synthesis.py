@@ -15,10 +15,11 @@ import numpy as np
 
 from refimpl.errors import UsageError
 from refimpl.models import acrnn
-from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, FPS, MAX_SEEDS, SALSA_TEST, SALSA_TRAIN,
-                                         SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE, TABLE1_ROWS,
-                                         SynthesisData, evaluate_generator, frames_to_motion, load_salsa_motion,
-                                         load_synthesis_data, motion_to_frames, skeleton_of)
+from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS,
+                                         SALSA_TEST, SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE,
+                                         TABLE1_ROWS, SynthesisData, evaluate_generator, frames_to_motion,
+                                         in_source_units, load_salsa_motion, load_synthesis_data, motion_to_frames,
+                                         skeleton_of)
 from refimpl.registry import require_source
 from refimpl.representations import REPRESENTATIONS
 from refimpl.services import checkpoint_for, evaluate_model, network_methods
@@ -67,12 +68,19 @@ class TrainingSet:
         ``--losses`` override of the row's loss weights (the ablation), None = the row's.
     window_length : int
         T, predicted frames per training window (100).
+    motions : tuple of Motion
+        With ``augment``: the training takes at 30 fps (each parity), from which the windows are cut, turned to a
+        random heading (:func:`refimpl.augment.random_heading_windows`) and encoded per batch. Else empty.
+    augment : bool
+        ``--augment-heading``: the published trainer's random heading per window (spec/acrnn.md §1.1).
     """
 
     data: SynthesisData
     row: str
     weights: dict | None = None
     window_length: int = 100
+    motions: tuple = ()
+    augment: bool = False
 
     @property
     def variant(self) -> str:
@@ -103,6 +111,15 @@ def add_train_options(parser) -> None:
     parser.add_argument("--losses", default=None, metavar="NAME=W,...",
                         help="synthesis: override the row's loss weights, e.g. mse=1,reg=0.01,pos=0.333 "
                              "(dual quaternions: mse reg pos offset quat quat_current; quaternions: mse quat fk reg)")
+    parser.add_argument("--augment-heading", action="store_true",
+                        help="synthesis: turn every training window to a random heading about the vertical (the "
+                             "published acRNN trainer; spec/acrnn.md §1.1)")
+    parser.add_argument("--parities", type=int, default=1, choices=(1, 2),
+                        help="synthesis: 2 = train on both parities of the 60 fps frames (the published trainer); "
+                             "default 1 (frames 0, 2, 4, ...)")
+    parser.add_argument("--raw-frames", action="store_true",
+                        help="synthesis: no per-feature standardisation (mean 0, std 1; the published trainer's raw "
+                             "metres) instead of the dual-quaternion paper's training mean/std")
 
 
 def add_eval_options(parser) -> None:
@@ -143,15 +160,21 @@ def train_datasets(args):
     if row not in TABLE1_ROWS:
         raise UsageError(f"--representation {row!r}: expected one of {list(TABLE1_ROWS)}")
     folder, train, test = resolve_data(args.data)
+    parities, augment = int(getattr(args, "parities", 1)), bool(getattr(args, "augment_heading", False))
+    representation = acrnn.VARIANTS[TABLE1_ROWS[row]].representation
     try:
-        data = load_synthesis_data(acrnn.VARIANTS[TABLE1_ROWS[row]].representation, folder, train, test)
+        data = load_synthesis_data(representation, folder, train, test, parities=parities,
+                                   standardise=not getattr(args, "raw_frames", False))
+        keep = representation in END_SITE_REPRESENTATIONS
+        motions = tuple(load_salsa_motion(folder / f"{n}.bvh", phase=p, end_sites=keep) for p in range(parities)
+                        for n in train) if augment else ()
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
     length = int(getattr(args, "window_length", 100))
     if min(len(s) for s in data.train) < length + 1:
         raise UsageError(f"--window-length {length}: the shortest training take has "
                          f"{min(len(s) for s in data.train)} frames")
-    return TrainingSet(data, row, _parse_losses(getattr(args, "losses", None)), length), data
+    return TrainingSet(data, row, _parse_losses(getattr(args, "losses", None)), length, motions, augment), data
 
 
 def num_examples(dataset) -> int:
@@ -177,6 +200,7 @@ def checkpoint_extra(train_ds) -> dict:
     return {"mean": [float(v) for v in d.mean], "std": [float(v) for v in d.std], "fps": float(FPS),
             "data_representation": d.representation, "variant": train_ds.variant, "row": train_ds.row,
             "loss_weights": weights, "window_length": int(train_ds.window_length),
+            "augment_heading": bool(train_ds.augment), "standardised": bool(d.standardised), "parities": d.parities,
             "train_takes": list(d.train_names), "test_takes": list(d.test_names),
             "skeleton": {"parents": [int(p) for p in sk.parents], "names": list(sk.names),
                          "offsets": [[float(v) for v in o] for o in sk.offsets]}}
@@ -353,12 +377,13 @@ def generate_command(args, model) -> int:
     n = args.length or 300
     out = args.out or "synthesis.bvh"
     motion, seed_frames = continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
-    write_bvh(out, with_end_sites(motion))
+    write_bvh(out, with_end_sites(in_source_units(motion)))   # the take's centimetres
     _say(f"wrote {out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
-         "metres")
+         "centimetres (the take's units)")
     if args.png or args.gif:
-        from refimpl.render import render_gif, render_strip
+        from refimpl.render import render_gif
+        from refimpl.render_strip import render_strip
 
         pos = motion.positions()
         parents = np.asarray(motion.skeleton.parents)

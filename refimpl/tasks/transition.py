@@ -38,7 +38,9 @@ from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE
                                           build_transition_datasets, declared_rate, join_pose, load_source,
                                           sample_sources, shared_sources, split_pose)
 from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
+from refimpl.protocols.transition_join import JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table
+from refimpl.protocols.transition_quality import evaluate_quality, format_quality
 from refimpl.quat import quat_from_axis_angle
 from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
@@ -47,9 +49,9 @@ from refimpl.tasks.transition_generate import make_transition, render_transition
 __all__ = [
     "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "add_train_options", "add_eval_options", "add_export_options",
     "add_generate_options", "source_for_file", "resolve_data", "build_datasets", "train_datasets", "num_examples",
-    "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method", "methods", "evaluate",
-    "print_results", "write_results", "clip_for", "random_context", "eval_command", "generate_command",
-    "export_options", "verify_inputs",
+    "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "JoinedOnnxMethod", "onnx_method",
+    "methods", "evaluate", "print_results", "write_results", "clip_for", "random_context", "eval_command",
+    "generate_command", "export_options", "verify_inputs",
 ]
 
 NAME = "transition"
@@ -72,14 +74,19 @@ def add_train_options(parser) -> None:
 
 
 def add_eval_options(parser) -> None:
-    """The task's options of ``refimpl eval``: ``--transition-length``, ``--csv``."""
+    """The task's options of ``refimpl eval``: ``--transition-length``, ``--csv``, ``--join``."""
     parser.add_argument("--transition-length", type=positive_int, default=None, help="T (default: the model's)")
     parser.add_argument("--csv", default=None, help="write the per-frame curve as CSV")
+    parser.add_argument("--join", default="none", choices=JOIN_MODES,
+                        help="inertialize: also evaluate each network with its joins inertialised (spec/qtg.md "
+                             "7.4), as <name>+join beside the paper-faithful row (default none)")
 
 
 def add_export_options(parser) -> None:
-    """The task's options of ``refimpl export``: ``--transition-length`` (T of the rollout model)."""
-    parser.add_argument("--transition-length", type=positive_int, default=None, help="T of the rollout model")
+    """The task's options of ``refimpl export``: ``--join``."""
+    parser.add_argument("--join", default="none", choices=JOIN_MODES,
+                        help="transition models: inertialize = bake the join option into the rollout graph "
+                             "(spec/qtg.md 7.4; the C example gets it too); default none")
 
 
 def add_generate_options(parser) -> None:
@@ -89,6 +96,8 @@ def add_generate_options(parser) -> None:
                         help="g, first target frame (default: s + T + 1 in the same file, else 1)")
     parser.add_argument("--method", default=METHOD_NAMES[0], choices=METHOD_NAMES)
     parser.add_argument("--context", type=positive_int, default=10, help="frames kept on each side (default 10)")
+    parser.add_argument("--join", default="none", choices=JOIN_MODES,
+                        help="inertialize: carry the jump at each end of the transition away (spec/qtg.md 7.4)")
     parser.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
                         help="place the target clip: none = as in its file, continue = after the source (default: "
                              "none for one file, continue for two)")
@@ -217,8 +226,20 @@ def trained_fields(model_config: Mapping, config) -> dict:
                        "transition_length": int(model_config.get("transition_length", config.transition_length))}}
 
 
+class JoinedOnnxMethod:
+    """An exported transition model's method whose graphs carry the join option (metadata ``join``, spec/qtg.md
+    §7.4): :func:`methods` lists it as ``<name>+join`` (e.g. ``qtg_onnx+join``)."""
+
+    def __init__(self, method: Callable):
+        self.method = method
+
+    def __call__(self, past, target, T):
+        return self.method(past, target, T)
+
+
 def onnx_method(runtime) -> Callable:
-    """``f(past, target, T) -> poses`` running an exported transition model's runtime (``runtime.transition``).
+    """``f(past, target, T) -> poses`` running an exported transition model's runtime (``runtime.transition``);
+    a :class:`JoinedOnnxMethod` when the files were exported with the join option.
 
     The models standardise inside the graph, so ``f`` takes and returns raw poses like the NumPy methods; output
     quaternions are normalised to unit length.
@@ -230,22 +251,37 @@ def onnx_method(runtime) -> Callable:
         quats = quats / np.maximum(np.linalg.norm(quats, axis=-1, keepdims=True), 1e-12)
         return join_pose(root, quats)
 
-    return network_onnx
+    join = (runtime.rollout_model or runtime.step_model).metadata.get("join") or {}
+    return JoinedOnnxMethod(network_onnx) if join.get("mode", "none") != "none" else network_onnx
 
 
 # ----------------------------------------------------------------------------------------------------------------
 # baselines and protocol
 # ----------------------------------------------------------------------------------------------------------------
 
-def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0) -> dict:
-    """``name -> f(past, target, T)``: the given networks' methods (in order), then both baselines
+def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0, join: str = "none") -> dict:
+    """``name -> f(past, target, T)``: the given networks' methods (in order; an exported model with the join option
+    as ``<name>+join``; with ``join="inertialize"`` each followed by ``<name>+join``,
+    :func:`refimpl.protocols.transition_join.with_join`), then both baselines
     (:func:`refimpl.protocols.transition_baselines.method_registry` with ``dt = 1 / fps``)."""
-    return {**dict(networks or {}), **method_registry(dt=1.0 / fps)}
+    out = {}
+    for name, f in dict(networks or {}).items():
+        key = f"{name}+join" if isinstance(f, JoinedOnnxMethod) else name
+        out[key] = f
+        if check_join(join) != "none":
+            out[f"{key}+join"] = with_join(f, join, dt=1.0 / fps)
+    return {**out, **method_registry(dt=1.0 / fps)}
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds``: :func:`refimpl.protocols.transition_metrics.evaluate_methods`."""
-    return evaluate_methods(test_ds, methods_by_name)
+    """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`) and,
+    under each method's ``"quality"``, the animator's measures
+    (:func:`refimpl.protocols.transition_quality.evaluate_quality`: joins, foot skating, first and last frame, with
+    the ground truth's numbers)."""
+    results = evaluate_methods(test_ds, methods_by_name)
+    for name, q in evaluate_quality(test_ds, methods_by_name).items():
+        results[name]["quality"] = q
+    return results
 
 
 def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
@@ -261,14 +297,16 @@ def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
 def _results_json(results: Mapping[str, dict]) -> str:
     def conv(v):
         if isinstance(v, np.ndarray):
-            return [float(x) for x in v]
+            return [conv(float(x)) for x in v]
         if isinstance(v, dict):
             return {k: conv(x) for k, x in v.items()}
         if isinstance(v, (np.floating, np.integer)):
-            return v.item()
+            v = v.item()
+        if isinstance(v, float) and not np.isfinite(v):
+            return None  # e.g. skating without a contact: null, so that the file is strict JSON
         return v
 
-    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True) + "\n"
+    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def _curve_table(results: Mapping[str, dict], frame_time: float) -> str:
@@ -297,6 +335,11 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
     _say("")
     _say("Mean joint-position error per joint per frame (cm), by motion category and at transition frames fK:")
     _say(format_table(results))
+    if all("quality" in r for r in results.values()):
+        _say("")
+        _say("Joins (mean joint displacement into frame 1 and out of frame T), foot skating (horizontal speed of "
+             "the foot joints in contact) and the error at the first and last frames:")
+        _say(format_quality({k: r["quality"] for k, r in results.items()}))
     if curve:
         _say("")
         _say("Per-frame curve (cm):")
@@ -343,7 +386,7 @@ def eval_command(args, model) -> int:
     _, test_ds = build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
     if test_ds.num_windows == 0:
         raise BadInputError(f"--data {args.data}: no held-out window of {T + 4} frames")
-    results = evaluate_model(model, test_ds, onnx_dir=args.onnx, task=NAME)
+    results = evaluate_model(model, test_ds, onnx_dir=args.onnx, task=NAME, join=args.join)
     print_results(results, test_ds, model)
     frame_time = 1.0 / test_ds.fps
     write_results(results, frame_time, json_path=args.json, csv_path=args.csv)
@@ -405,16 +448,17 @@ def generate_command(args, model) -> int:
         method = next(iter(networks.values()))
     else:
         method = methods(fps=fps)[args.method]
+    method = with_join(method, args.join, dt=1.0 / fps)
     same = Path(args.source).resolve() == Path(target_path).resolve()
     target_frame = args.target_frame if args.target_frame is not None else (
         args.source_frame + T + 1 if same else 1)
     out = args.out or "transition.bvh"
     tr = make_transition(method, skel, src_clip, args.source_frame, tgt_clip, target_frame, T,
                          frame_time=1.0 / fps, context=args.context, align=args.align, same_clip=same,
-                         method_name=args.method, name=Path(out).stem)
+                         method_name=args.method + ("" if args.join == "none" else "+join"), name=Path(out).stem)
     write_bvh(out, with_end_sites(tr.motion))
     _say(f"wrote {out}: {tr.motion.num_frames} frames at {fps:g} fps, 22 joints (centimetres); "
-         f"generated frames {tr.start}..{tr.stop - 1} ({args.method}, {args.backend})")
+         f"generated frames {tr.start}..{tr.stop - 1} ({tr.method}, {args.backend})")
     err = tr.error_cm()
     if err is not None:
         _say(f"ground truth available (same clip, target = source + T + 1): mean joint error {err:.2f} cm")
@@ -429,8 +473,8 @@ def generate_command(args, model) -> int:
 
 
 def export_options(args) -> dict:
-    """The exporter's options of ``refimpl export``: ``T`` (``--transition-length``, default the model's)."""
-    return {"T": args.transition_length}
+    """The exporter's options of ``refimpl export``: ``join`` (``--join``, when not ``none``)."""
+    return {} if args.join == "none" else {"join": args.join}
 
 
 def verify_inputs(args, model) -> tuple:

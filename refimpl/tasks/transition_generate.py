@@ -14,6 +14,7 @@ import numpy as np
 from refimpl.errors import UsageError
 from refimpl.motion import Motion
 from refimpl.protocols.transition import heading_from_root, make_windows, window_to_world
+from refimpl.protocols.transition_quality import foot_joints
 from refimpl.quat import quat_conj, quat_mul, quat_rotate
 from refimpl.skeleton import Skeleton
 
@@ -165,23 +166,38 @@ def make_transition(method: Callable, skeleton, source_clip, source_frame: int, 
 
 
 def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
-    """Draw a :class:`Transition` (against its ground truth when it has one) as a PNG strip and / or a GIF."""
-    from refimpl.render import render_gif, render_strip
+    """Draw a :class:`Transition` (against its ground truth when it has one) as a PNG strip and / or a GIF.
 
-    parents = np.asarray(tr.motion.skeleton.parents)
+    The strip shows the frames on both sides of each join (:func:`refimpl.render_strip.join_frames`: last past,
+    first generated, a middle one, last generated, first target), left and right limbs in two shades
+    (:func:`refimpl.render_strip.limb_sides`), the feet's floor tracks
+    (:func:`refimpl.protocols.transition_quality.foot_joints`) and a floor grid fixed in the world (spec/cli.md).
+    """
+    from refimpl.render import render_gif
+    from refimpl.render_strip import join_frames, limb_sides, render_strip
+
+    skel = tr.motion.skeleton
+    parents = np.asarray(skel.parents)
     gt = (tr.truth if tr.truth is not None else tr.motion).positions()
     pred = tr.motion.positions() if tr.truth is not None else None
     labels = ("ground truth", tr.method) if pred is not None else (tr.method, "")
+    sides = limb_sides(skel)
     written = []
     if png:
-        n = tr.motion.num_frames
-        frames = sorted(set([0, tr.start - 1] + list(range(tr.start, tr.stop, max(1, (tr.stop - tr.start) // 6)))
-                            + [tr.stop - 1, n - 1]))
+        frames = join_frames(tr.start, tr.stop, tr.motion.num_frames)
         written.append(render_strip(png, gt, parents, prediction=pred, frames=frames, highlight=(tr.start, tr.stop),
-                                    labels=labels, title=title, frame_time=tr.motion.frame_time))
+                                    labels=labels, title=title, frame_time=tr.motion.frame_time, sides=sides,
+                                    feet=_feet(skel)))
         _say(f"wrote {png}")
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred, fps=tr.motion.fps,
-                                  highlight=(tr.start, tr.stop), labels=labels, title=title))
+                                  highlight=(tr.start, tr.stop), labels=labels, title=title, sides=sides))
         _say(f"wrote {gif}")
     return written
+
+
+def _feet(skel):
+    try:
+        return foot_joints(skel)
+    except ValueError:  # a skeleton without foot joints: no tracks
+        return None

@@ -17,7 +17,7 @@ writes (``--json``):
 
 Usage::
 
-    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python benchmarks/exp_quaternet_long_dq.py \\
+    OPENBLAS_NUM_THREADS=1 python -m experiments.quaternet_long_dq \\
         --quat Q/checkpoint.npz --dq D/checkpoint.npz --pace P/checkpoint.npz --json R.json --png W.png
 """
 from __future__ import annotations

@@ -8,7 +8,7 @@ Train both first with identical settings (same seed, steps, batch, schedules; ``
     OPENBLAS_NUM_THREADS=1 refimpl train --model quaternet --data ../shared/data --set hidden_size=512 \\
         --set representation=dual_quaternion --steps N --seed 0 --out runs/dq
 
-then ``python benchmarks/exp_quaternet_dq.py --quat runs/q/checkpoint.npz --dq runs/dq/checkpoint.npz``.
+then ``python -m experiments.quaternet_dq --quat runs/q/checkpoint.npz --dq runs/dq/checkpoint.npz``.
 
 Evaluates the Table 2 horizons at the data's real frame rate (refimpl.protocols.prediction.table2_protocol) under
 the standard (4 windows) and dense (128) samplers, once over both test actions (out to 400 ms: the running test
@@ -31,7 +31,7 @@ from refimpl.tasks import prediction as pr
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / ".." / "shared" / "data"
-OUT = ROOT / "benchmarks" / "results" / "quaternet_dq"
+OUT = ROOT / "experiments" / "results" / "quaternet_dq"
 #: The paper's Table 2 (H3.6M subject 5, average over actions, Euler-angle error, radians).
 PAPER_TABLE2 = {"horizons_ms": [80, 160, 320, 400, 600, 800, 1000, 2000, 3000, 4000],
                 "quaternions": [0.3871, 0.6766, 1.0117, 1.1452, 1.4327, 1.7983, 2.3004, 6.0033, 10.7987, 13.1485],

@@ -1,4 +1,4 @@
-"""Evaluation half of the acRNN representation experiment (benchmarks/exp_acrnn_table1.py ``eval``).
+"""Evaluation half of the acRNN representation experiment (experiments/acrnn_table1.py ``eval``).
 
 For every trained row in ``<out>/<row>/checkpoint.npz``: the synthesis protocol (refimpl.tasks.synthesis.evaluate,
 152 seeds on the salsa test takes 05 and 20), the long-run behaviour (:data:`LONG_FRAMES` frames from one seed:
@@ -59,7 +59,7 @@ def _load_row(d: Path):
 
 def _evaluate_row(d: Path):
     """Protocol of §5 and the long run of one trained row; written to ``eval_row.json`` / ``eval_clip.npz``
-    (so rows can be evaluated as they finish: ``python benchmarks/exp_acrnn_eval.py OUT ROW``)."""
+    (so rows can be evaluated as they finish: ``python -m experiments.acrnn_eval OUT ROW``)."""
     model = load_trained(d / "checkpoint.npz")
     task = task_of(model.spec)
     data = task.load_eval_data(DATA, model.extra)
