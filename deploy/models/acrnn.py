@@ -108,6 +108,8 @@ _DECODED_MEANING = {
 #: What the D values of one joint of a frame are, per representation (``refimpl.representations``).
 _JOINT_LAYOUT = {
     "positions": "(x, y, z) position in metres relative to the root joint, current coordinates",
+    "positions_acrnn": "(x, y, z) position in metres relative to the root joint, current coordinates (the published "
+                       "acRNN frame: End Sites kept, the root's own zero block omitted, so slot j = skeleton joint j + 1)",
     "euler": "local Euler angles in radians, zyx order (angle about z, then y, then x)",
     "expmap": "local rotation vector (axis × angle, radians)",
     "quaternions": "local quaternion (w, x, y, z), Hamilton, relative to the parent joint",
@@ -125,14 +127,16 @@ def _metadata(g, config, role, io, mean, std, representation, J, D, frame_rate, 
                        "meaning": "hip dx = x_{t+1} - x_t, hip height y_t, hip dz = z_{t+1} - z_t (metres, y up; "
                                   "the hip's ground position is the running sum of dx, dz)"},
                       {"name": "joints", "start": 3, "size": J * D, "per_joint": D, "joints": J,
-                       "joint_names": "skeleton.names (slot j = joint j)",
+                       "joint_names": ("skeleton.names[1:] (slot j = joint j + 1)" if representation == "positions_acrnn"
+                                       else "skeleton.names (slot j = joint j)"),
                        "layout": _JOINT_LAYOUT.get(representation, representation)}]}
     sk = None
     if skeleton is not None:
         sk = skeleton_metadata(skeleton)
         sk.setdefault("units", "m")
-        if len(sk["names"]) != J:
-            raise ValueError(f"skeleton: expected {J} joints (the frames'), got {len(sk['names'])}")
+        expected = J + 1 if representation == "positions_acrnn" else J   # the root's own block is not in the frame
+        if len(sk["names"]) != expected:
+            raise ValueError(f"skeleton: expected {expected} joints (the frames'), got {len(sk['names'])}")
     return build_metadata(g, name="acrnn", role=role, config=config.to_dict(), io=io, representation=rep,
                           normalization=(mean, std), in_graph=True, skeleton=sk, frame_rate=frame_rate,
                           source_paper=SOURCE, variant="float", extra=extra)
