@@ -206,7 +206,7 @@ def cmd_export(args) -> int:
 
 def _refuse_other_tasks_options(args, task: str, who: str) -> None:
     """UsageError for an option of another task's group given a value (``export --join`` of a model whose task
-    has no such option; ``generate --target`` of a prediction model)."""
+    has no such option; ``generate --target`` of a model whose task has no target clip)."""
     for task_name, options in args.task_options.items():
         for dest, default, flag in options:
             if task_name != task and getattr(args, dest) != default:
@@ -420,8 +420,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_options(p, lambda task, group: task.add_export_options(group))
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("generate", help="generate motion with a network or a baseline, BVH out (a transition, a "
-                                        "prediction, an acrnn continuation, a walk along a path)",
+    p = sub.add_parser("generate", help="generate motion with a network or a baseline, BVH out (every model: "
+                                        "`refimpl generate --help` lists each task's form)",
                        description="Generate motion with the task of --model (else of --checkpoint's model, else "
                                    f"of the exported models in --onnx, else {DEFAULT_MODEL}'s) and write a BVH.",
                        usage=generate_usage().replace("usage: ", "", 1))
