@@ -251,7 +251,7 @@ def test_acrnn_bvh_keeps_the_take_units(exported, tmp_path):
     ck, folder = exported["acrnn"]
     a, b = tmp_path / "numpy.bvh", tmp_path / "onnx.bvh"
     assert refimpl_main(["generate", "--model", "acrnn", "--checkpoint", str(ck), "--source", str(SALSA),
-                         "--length", "12", "--out", str(a)]) == EXIT_OK
+                         "--source-frame", "0", "--length", "12", "--out", str(a)]) == EXIT_OK  # as run's --start
     assert deploy_main(["run", str(folder), str(SALSA), str(b), "--frames", "12"]) == 0
     src = read_bvh(SALSA)
     for path in (a, b):
