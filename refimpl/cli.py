@@ -15,6 +15,8 @@ export      ONNX models ``qtg_init/step/rollout.onnx`` via ``deploy`` (imported 
 generate    a transition between two clips with QTG (NumPy or onnxruntime) or a baseline; BVH out
 render      a BVH / exp-map motion (optionally against a second one) to a PNG strip or a GIF
 demo        the whole tour on the embedded sample (:mod:`refimpl.demo`)
+import      a PyTorch state dict (.npz, .safetensors, .pt) as a checkpoint; ``export-weights`` the reverse
+            (:mod:`refimpl.weights_cli`, spec/import.md)
 ==========  ==============================================================================================
 
 Exit codes (scripts may rely on them): 0 success; 1 runtime failure (including a missing optional dependency
