@@ -124,21 +124,25 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
 
 
 def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict:
-    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``)."""
+    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``;
+    ``<name>_onnx+join`` when the files were exported with the join option, spec/qtg.md §7.4)."""
     methods = {}
     if model is not None:
         methods[model.spec.name] = model.spec.make_method(model)
     if onnx_dir is not None:
         name = model.spec.name if model is not None else _onnx_model_name(onnx_dir)
-        methods[f"{name}_onnx"] = onnx_method(onnx_dir)
+        joined = (onnx_metadata(onnx_dir).get("join") or {}).get("mode", "none") != "none"
+        methods[f"{name}_onnx" + ("+join" if joined else "")] = onnx_method(onnx_dir)
     return methods
 
 
-def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition") -> dict:
+def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition",
+                   **options) -> dict:
     """The task's protocol on ``test_ds`` for the network (NumPy, and onnxruntime from ``onnx_dir``) and the
-    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`)."""
+    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`); ``options`` go to the task's
+    ``methods`` (transition: ``join``)."""
     mod = task_of(model.spec if model is not None else task)
-    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps))
+    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps, **options))
 
 
 def _deploy_models(what: str):

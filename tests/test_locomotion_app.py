@@ -139,7 +139,7 @@ def test_generation_on_a_circle_stays_on_it():
     root = walk.motion.root_positions
     radius = np.hypot(root[:, 0], root[:, 2])
     assert np.max(np.abs(radius - r)) < 0.2 ** 2 / (8 * r) + 1e-3
-    assert np.allclose(root[:, 1], walk.motion.root_positions[:, 1])  # height from the network, finite
+    assert np.all(np.isfinite(root)) and np.ptp(root[:, 1]) > 0  # height from the network: finite, not constant
     assert G.bone_length_drift(walk.motion) < 1e-9
 
 

@@ -19,7 +19,6 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from refimpl.motion import Motion
-from refimpl.optim import QUATERNET_LR_DECAY, adam_init, adam_step, exponential_lr
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                LocomotionSequence, build_sequences, load_bandai_namco, load_cmu_bvh,
                                                load_cmu_expmap)
@@ -29,7 +28,7 @@ from refimpl.splines import Spline
 
 __all__ = [
     "PoseBatch", "rotate_controls", "pose_batch", "sequence_spline", "pace_training_data", "pace_batch",
-    "train_pace_network", "LocomotionDataset", "build_dataset", "evaluation_windows", "zero_velocity",
+    "LocomotionDataset", "build_dataset", "evaluation_windows", "zero_velocity",
     "position_errors", "evaluate", "format_results",
 ]
 
@@ -185,52 +184,6 @@ def pace_batch(data: Sequence[tuple[np.ndarray, np.ndarray]], rng: np.random.Gen
         st = int(rng.integers(0, inp.shape[0] - chunk_length + 1))
         x[b], y[b] = inp[st:st + chunk_length], tgt[st:st + chunk_length]
     return x, y
-
-
-def train_pace_network(train_data, config=None, epochs: int = 10, batch_size: int = 40, chunk_length: int = 1000,
-                       lr: float = 1e-3, lr_decay: float = QUATERNET_LR_DECAY, seed: int = 1234, params=None,
-                       valid_data=None, log: Callable[[str], None] | None = print):
-    """Train the pace network (reference ``train_pace_network.py``): L1 loss, Adam(lr) × ``lr_decay`` per epoch,
-    no gradient clipping, ⌈(number of splines) / batch⌉ batches per epoch.
-
-    Parameters
-    ----------
-    train_data, valid_data : sequence of (inputs (N, 2), targets (N, 4)) from :func:`pace_training_data`
-    config : refimpl.models.pace.PaceConfig, default bidirectional
-
-    Returns
-    -------
-    params : dict
-    history : list of dict ``{"epoch", "train_l1", "valid_l1"}`` (valid: L1 over every valid chunk, or None)
-    """
-    from refimpl.models import pace
-    config = pace.PaceConfig() if config is None else config
-    rng = np.random.default_rng(seed)
-    params = pace.init_params(config, rng) if params is None else params
-    state = adam_init(params)
-    usable = [d for d in train_data if d[0].shape[0] >= chunk_length]
-    batches = max(1, math.ceil(len(usable) / batch_size))
-    history = []
-    for epoch in range(epochs):
-        step_lr = exponential_lr(lr, lr_decay, epoch)
-        total = 0.0
-        for _ in range(batches):
-            x, y = pace_batch(usable, rng, batch_size, chunk_length)
-            pred, cache = pace.forward(params, config, x)
-            loss, lcache = pace.loss_forward(pred, y)
-            _, grads = pace.backward(pace.loss_backward(1.0, lcache), cache)
-            adam_step(params, grads, state, step_lr)
-            total += loss
-        valid = None
-        if valid_data:
-            vals = [pace.loss_forward(pace.forward(params, config, inp[None])[0], tgt[None])[0]
-                    for inp, tgt in valid_data]
-            valid = float(np.mean(vals))
-        history.append({"epoch": epoch + 1, "train_l1": total / batches, "valid_l1": valid})
-        if log is not None:
-            log(f"pace epoch {epoch + 1}/{epochs}: train L1 {total / batches:.5f}"
-                + ("" if valid is None else f", valid L1 {valid:.5f}"))
-    return params, history
 
 
 @dataclasses.dataclass(frozen=True)

@@ -33,10 +33,8 @@ from typing import Sequence
 import numpy as np
 
 from refimpl.bvh import read_bvh
-from refimpl.models import acrnn
 from refimpl.motion import Motion
 from refimpl.nn.params import check_float_array
-from refimpl.optim import ACRNN_ADAM, adam_init, adam_step
 from refimpl.preprocess import downsample, feature_statistics
 from refimpl.representations import REPRESENTATIONS, decode, encode, fix_antipodal_frames, positions_from_frames
 from refimpl.skeleton import Skeleton, remove_joints
@@ -45,8 +43,8 @@ __all__ = [
     "SALSA_FRAME_TIME", "SALSA_TRAIN", "SALSA_TEST", "SAMPLE_TRAIN", "SAMPLE_TEST", "LENGTH_SCALE", "FPS",
     "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN",
     "END_SITE_REPRESENTATIONS",
-    "horizon_frames", "load_salsa_motion", "motion_to_frames", "frames_to_motion", "SynthesisData",
-    "load_synthesis_data", "sample_windows", "seed_windows", "evaluate_generator", "train_acrnn", "NPSS_VARIANTS",
+    "horizon_frames", "in_source_units", "load_salsa_motion", "motion_to_frames", "frames_to_motion", "SynthesisData",
+    "load_synthesis_data", "sample_windows", "seed_windows", "evaluate_generator", "NPSS_VARIANTS",
     "root_zeroed_positions", "mean_joint_error", "npss", "mean_acceleration", "acceleration_comparison",
 ]
 
@@ -72,6 +70,14 @@ WINDOW_MARGIN = 10
 def horizon_frames(ms: float, fps: int = FPS) -> int:
     """Frames in ``ms`` milliseconds at ``fps`` (rounded): 100, 400, 1000 ms → 3, 12, 30 at 30 fps."""
     return int(round(ms * fps / 1000.0))
+
+
+def in_source_units(motion: Motion, scale: float = LENGTH_SCALE) -> Motion:
+    """``motion`` (the network's metres) back in the units of the takes it was read from: offsets and root
+    positions divided by ``scale`` (0.01: metres -> centimetres, the salsa BVH's units)."""
+    s = motion.skeleton
+    skel = Skeleton(s.parents, np.asarray(s.offsets) / scale, s.names, s.end_sites, s.joints_left, s.joints_right)
+    return Motion(skel, motion.rotations, np.asarray(motion.root_positions) / scale, motion.frame_time, motion.name)
 
 
 #: Representations whose frames keep the End Sites (the published acRNN's 57 nodes, spec/acrnn.md §1.1).
@@ -312,40 +318,6 @@ def evaluate_generator(generate_fn, data: SynthesisData, horizons_ms: Sequence[f
                                "npss_real": npss(gt[:, :n], pred[:, :n], "real")}
     out["acceleration"] = acceleration_comparison(pred[:, :acceleration_frames], gt[:, :acceleration_frames])
     return out
-
-
-def train_acrnn(params: dict, config: "acrnn.ACRNNConfig", data: SynthesisData, spec: "acrnn.LossSpec",
-                steps: int, rng: np.random.Generator, batch_size: int = 32, length: int = 100,
-                lr: float = ACRNN_ADAM["lr"], state: dict | None = None, log=None) -> list:
-    """A plain acRNN training loop (Adam, constant lr 1e-4, batch 32, windows of 100 + 1 frames by default), on the
-    model's path (:func:`refimpl.models.acrnn.loss_and_grads`; ``refimpl train --model acrnn`` is the
-    resumable, checkpointed version).
-
-    Parameters
-    ----------
-    params : dict
-        Updated in place.
-    state : dict, optional
-        Adam state (``adam_init(params)`` when None; pass the same dict to continue a run).
-    log : callable, optional
-        ``log(step, total, parts)`` after every step (progress).
-
-    Returns
-    -------
-    list of float
-        The training loss of every step.
-    """
-    train = [data.standardise(s).astype(next(iter(params.values())).dtype) for s in data.train]
-    state = adam_init(params) if state is None else state
-    losses = []
-    for k in range(int(steps)):
-        frames = sample_windows(rng, train, batch_size, length)
-        total, parts, grads = acrnn.loss_and_grads(params, config, frames, spec)
-        adam_step(params, grads, state, lr, ACRNN_ADAM["betas"], ACRNN_ADAM["eps"])
-        losses.append(total)
-        if log is not None:
-            log(k, total, parts)
-    return losses
 
 
 # --------------------------------------------------------------------------------------------------

@@ -150,7 +150,10 @@ def export_inputs(model) -> dict:
             "training": {"checkpoint_step": model.meta.get("step"), "row": ex.get("row"),
                          "variant": ex.get("variant")}}
     return {"mean": np.asarray(ex["mean"]), "std": np.asarray(ex["std"]), "representation": ex["data_representation"],
-            "parents": tuple(int(p) for p in sk.parents), "metadata": meta}
+            "parents": tuple(int(p) for p in sk.parents), "metadata": meta,
+            "skeleton": {"names": list(sk.names), "parents": [int(p) for p in sk.parents],
+                         "offsets": np.asarray(sk.offsets, dtype=np.float64).tolist(), "units": "m",
+                         "source": "the training takes' skeleton without End Sites, lengths x 0.01 (cm -> m)"}}
 
 
 def reference_outputs(model, seed, num_frames: int) -> np.ndarray:

@@ -28,6 +28,7 @@ from refimpl.models.qtg_fast import prepare_inference, rollout_backward, rollout
 from refimpl.optim import QTG_ADAM
 from refimpl.train import ModelAdapter, OptimConfig, StepInfo, TrainConfig, TrainResult, default_progress, train
 from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, split_pose
+from refimpl.protocols.transition_join import inertialize_joins
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "parse_overrides", "make_config", "qtg_adapter", "make_adapter", "train_qtg", "qtg_method",
@@ -216,6 +217,9 @@ def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
     """Compare an exported QTG's onnxruntime outputs with :func:`reference_outputs` on raw context poses
     ``past, target (B, 2, P)``: the ``rollout`` model and the ``init`` + ``step`` loop.
 
+    Models exported with the join option (metadata ``join``) are compared with
+    :func:`refimpl.protocols.transition_join.inertialize_joins` of the reference outputs.
+
     Returns
     -------
     dict ``{"rollout": max |Δ|, "step_loop": max |Δ|, "ok": bool}``; ``ok`` against
@@ -225,6 +229,10 @@ def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
     T = int(T or model.transition_length)
     std = np.asarray(model.pose_normalization[1], dtype=np.float64)  # (P,)
     ref = reference_outputs(model, past, target, T)  # (B, T, P)
+    join = (runtime.rollout_model or runtime.step_model).metadata.get("join") or {}
+    if join.get("mode", "none") != "none":  # exported with the join option: NumPy's join after the network
+        n = int(join["blend_frames"]) if join.get("transition_length") == T else None
+        ref = inertialize_joins(past, ref, target, dt=float(join["frame_time"]), blend_frames=n)
     out = {}
     ok = True
     for key, use_rollout in (("rollout", True), ("step_loop", False)):

@@ -395,6 +395,9 @@ def verify_onnx(model, runtime, prefix, k: int = 10) -> dict:
     units: ``|Δ| <= (atol + rtol) · max(1, max |ref|)`` over each predicted frame)."""
     from refimpl.testing import TOL_ORT_ROLLOUT
 
+    from refimpl.protocols.prediction import canonical_prefix
+
+    prefix = canonical_prefix(prefix)   # the published sign rule, as the predictor (the predict graph repeats it)
     ref = reference_outputs(model, prefix, k)
     frames = network_frames(model, prefix)
     # float32 rounding scales with the largest number of a frame: for dual quaternions the dual parts carry the

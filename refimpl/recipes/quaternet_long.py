@@ -350,8 +350,11 @@ def export_inputs(model) -> dict:
     if model.config.output not in ("quaternion", "dual_quaternion"):
         raise UsageError(f"export: only quaternion- and dual-quaternion-output models are exported (this one: "
                          f"{model.config.output})")
+    from refimpl.tasks.locomotion import skeleton_of
+
     return {"metadata": {"frame_rate": float(model.fps or 30.0),
-                         "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}}}
+                         "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}},
+            "skeleton": skeleton_of(model.extra)}
 
 
 def reference_outputs(model, x, state=None):

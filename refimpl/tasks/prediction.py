@@ -15,8 +15,8 @@ import numpy as np
 
 from refimpl.expmap import read_expmap
 from refimpl.preprocess import downsample, fix_antipodal
-from refimpl.protocols.prediction import (Protocol, baseline_methods, euler_errors, evaluate_all, make_protocol,
-                                          table2_protocol)
+from refimpl.protocols.prediction import (Protocol, baseline_methods, canonical_prefix, euler_errors, evaluate_all,
+                                          make_protocol, table2_protocol)
 from refimpl.protocols.prediction_data import (SUBJECT_DIR, PredictionData, load_cmu, load_h36m, skeleton_of,
                                                stride_of)
 from refimpl.skeleton import Skeleton
@@ -149,6 +149,7 @@ def onnx_method(runtime) -> Callable:
         if skeleton is not None:  # QuaterNet with dual quaternions: current DQs in, decoded local rotations out
             from refimpl.dq_prediction import dq_frames_from_rotations, rotations_from_dq_frames
 
+            x = canonical_prefix(x)   # the sign rule first, as the NumPy method (metadata input_transform)
             y = np.asarray(runtime.predict(dq_frames_from_rotations(x, skeleton), int(n_future)), np.float64)
             return rotations_from_dq_frames(y, skeleton.parents)
         return np.asarray(runtime.predict(x, int(n_future)), dtype=np.float64)
@@ -279,7 +280,8 @@ def make_prediction(method: Callable, rotations, frame: int, prefix_length: int,
 def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: int = 10) -> list:
     """Draw a :class:`Prediction` (against its ground truth when it has one): the last ``context`` prefix frames
     and the predicted ones, as a PNG strip and / or a GIF."""
-    from refimpl.render import render_gif, render_strip
+    from refimpl.render import render_gif
+    from refimpl.render_strip import render_strip
 
     a = max(0, pr.start - context)
     parents = np.asarray(pr.motion.skeleton.parents)

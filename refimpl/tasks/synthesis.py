@@ -15,8 +15,9 @@ import numpy as np
 
 from refimpl.models import acrnn
 from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS, SALSA_TEST,
-                                         SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE, SynthesisData, evaluate_generator,
-                                         frames_to_motion, load_salsa_motion, load_synthesis_data, motion_to_frames)
+                                         SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE, SynthesisData,
+                                         evaluate_generator, frames_to_motion, in_source_units, load_salsa_motion,
+                                         load_synthesis_data, motion_to_frames)
 from refimpl.representations import REPRESENTATIONS
 from refimpl.skeleton import Skeleton
 
@@ -24,7 +25,7 @@ __all__ = [
     "NAME", "TABLE1_ROWS", "DEFAULT_ROW", "NPSS_REPORTED", "TrainingSet", "add_train_options", "resolve_data",
     "train_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields",
     "skeleton_of", "onnx_method", "methods", "evaluate", "print_results", "write_results", "random_inputs",
-    "continue_seed",
+    "continue_seed", "in_source_units",
 ]
 
 # ----------------------------------------------------------------------------------------------------------------

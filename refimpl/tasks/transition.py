@@ -38,11 +38,13 @@ from refimpl.skeleton import Skeleton
 from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                  build_transition_datasets, declared_rate, heading_from_root, join_pose, load_source,
                                  make_windows, sample_sources, shared_sources, split_pose, window_to_world)
+from refimpl.protocols.transition_join import JOIN_MODES, check_join, with_join
+from refimpl.protocols.transition_quality import evaluate_quality, foot_joints, format_quality
 
 __all__ = [
     "NAME", "add_train_options", "resolve_data", "source_for_file", "build_datasets", "train_datasets",
     "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
-    "methods", "evaluate",
+    "add_eval_options", "methods", "evaluate",
     "print_results", "write_results", "Transition", "make_transition", "with_end_sites", "render_transition",
     "clip_for", "random_context",
 ]
@@ -205,15 +207,34 @@ def onnx_method(runtime) -> Callable:
 # baselines and protocol
 # ----------------------------------------------------------------------------------------------------------------
 
-def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0) -> dict:
-    """``name -> f(past, target, T)``: the given networks' methods (in order), then both baselines
+def add_eval_options(group) -> None:
+    """The task's options of ``refimpl eval``: ``--join``."""
+    group.add_argument("--join", default="none", choices=JOIN_MODES,
+                       help="inertialize: also evaluate each network with its joins inertialised (spec/qtg.md "
+                            "7.4), as <name>+join beside the paper-faithful row (default none)")
+
+
+def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0, join: str = "none") -> dict:
+    """``name -> f(past, target, T)``: the given networks' methods (in order; with ``join="inertialize"`` each
+    followed by ``<name>+join``, :func:`refimpl.protocols.transition_join.with_join`), then both baselines
     (:func:`refimpl.protocols.transition_baselines.method_registry` with ``dt = 1 / fps``)."""
-    return {**dict(networks or {}), **method_registry(dt=1.0 / fps)}
+    out = {}
+    for name, f in dict(networks or {}).items():
+        out[name] = f
+        if check_join(join) != "none":
+            out[f"{name}+join"] = with_join(f, join, dt=1.0 / fps)
+    return {**out, **method_registry(dt=1.0 / fps)}
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds``: :func:`refimpl.protocols.transition_metrics.evaluate_methods`."""
-    return evaluate_methods(test_ds, methods_by_name)
+    """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`) and,
+    under each method's ``"quality"``, the animator's measures
+    (:func:`refimpl.protocols.transition_quality.evaluate_quality`: joins, foot skating, first and last frame, with
+    the ground truth's numbers)."""
+    results = evaluate_methods(test_ds, methods_by_name)
+    for name, q in evaluate_quality(test_ds, methods_by_name).items():
+        results[name]["quality"] = q
+    return results
 
 
 def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
@@ -229,14 +250,16 @@ def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
 def _results_json(results: Mapping[str, dict]) -> str:
     def conv(v):
         if isinstance(v, np.ndarray):
-            return [float(x) for x in v]
+            return [conv(float(x)) for x in v]
         if isinstance(v, dict):
             return {k: conv(x) for k, x in v.items()}
         if isinstance(v, (np.floating, np.integer)):
-            return v.item()
+            v = v.item()
+        if isinstance(v, float) and not np.isfinite(v):
+            return None  # e.g. skating without a contact: null, so that the file is strict JSON
         return v
 
-    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True) + "\n"
+    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def _curve_table(results: Mapping[str, dict], frame_time: float) -> str:
@@ -265,6 +288,11 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
     _say("")
     _say("Mean joint-position error per joint per frame (cm), by motion category and at transition frames fK:")
     _say(format_table(results))
+    if all("quality" in r for r in results.values()):
+        _say("")
+        _say("Joins (mean joint displacement into frame 1 and out of frame T), foot skating (horizontal speed of "
+             "the foot joints in contact) and the error at the first and last frames:")
+        _say(format_quality({k: r["quality"] for k, r in results.items()}))
     if curve:
         _say("")
         _say("Per-frame curve (cm):")
@@ -423,26 +451,41 @@ def make_transition(method: Callable, skeleton, source_clip, source_frame: int, 
 
 
 def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
-    """Draw a :class:`Transition` (against its ground truth when it has one) as a PNG strip and / or a GIF."""
-    from refimpl.render import render_gif, render_strip
+    """Draw a :class:`Transition` (against its ground truth when it has one) as a PNG strip and / or a GIF.
 
-    parents = np.asarray(tr.motion.skeleton.parents)
+    The strip shows the frames on both sides of each join (:func:`refimpl.render_strip.join_frames`: last past,
+    first generated, a middle one, last generated, first target), left and right limbs in two shades
+    (:func:`refimpl.render_strip.limb_sides`), the feet's floor tracks
+    (:func:`refimpl.protocols.transition_quality.foot_joints`) and a floor grid fixed in the world (spec/cli.md).
+    """
+    from refimpl.render import render_gif
+    from refimpl.render_strip import join_frames, limb_sides, render_strip
+
+    skel = tr.motion.skeleton
+    parents = np.asarray(skel.parents)
     gt = (tr.truth if tr.truth is not None else tr.motion).positions()
     pred = tr.motion.positions() if tr.truth is not None else None
     labels = ("ground truth", tr.method) if pred is not None else (tr.method, "")
+    sides = limb_sides(skel)
     written = []
     if png:
-        n = tr.motion.num_frames
-        frames = sorted(set([0, tr.start - 1] + list(range(tr.start, tr.stop, max(1, (tr.stop - tr.start) // 6)))
-                            + [tr.stop - 1, n - 1]))
+        frames = join_frames(tr.start, tr.stop, tr.motion.num_frames)
         written.append(render_strip(png, gt, parents, prediction=pred, frames=frames, highlight=(tr.start, tr.stop),
-                                    labels=labels, title=title, frame_time=tr.motion.frame_time))
+                                    labels=labels, title=title, frame_time=tr.motion.frame_time, sides=sides,
+                                    feet=_feet(skel)))
         _say(f"wrote {png}")
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred, fps=tr.motion.fps,
-                                  highlight=(tr.start, tr.stop), labels=labels, title=title))
+                                  highlight=(tr.start, tr.stop), labels=labels, title=title, sides=sides))
         _say(f"wrote {gif}")
     return written
+
+
+def _feet(skel):
+    try:
+        return foot_joints(skel)
+    except ValueError:  # a skeleton without foot joints: no tracks
+        return None
 
 
 def clip_for(path, model_fps: float, fps_override):
