@@ -12,7 +12,8 @@ rule                what is flagged
 ``allow-pickle``    a keyword ``allow_pickle=`` whose value is not the constant ``False``
 ``np-load``         ``np.load(...)`` / ``numpy.load(...)`` / ``load(...)`` imported from numpy
                     without the keyword ``allow_pickle=False`` (``**kwargs`` does not count)
-``torch-load``      ``torch.load(...)``
+``torch-load``      ``torch.load(...)`` without the keyword ``weights_only=True`` (torch's loader that
+                    rebuilds tensors and plain containers only, never arbitrary objects)
 ``eval`` ``exec``   calls of the builtins ``eval`` / ``exec`` (also ``builtins.eval``)
 ``shell-true``      a keyword ``shell=True`` (any call)
 ``os-system``       ``os.system`` / ``os.popen``
@@ -107,7 +108,8 @@ def scan_source(source: str, filename: str = "<string>") -> list[tuple[int, str,
             name = _dotted(node.func)
             if name in ("eval", "exec", "builtins.eval", "builtins.exec"):
                 hit(node, name.split(".")[-1])
-            if name == "torch.load":
+            if name == "torch.load" and not any(k.arg == "weights_only" and isinstance(k.value, ast.Constant)
+                                                and k.value.value is True for k in node.keywords):
                 hit(node, "torch-load")
             is_np_load = (name is not None and "." in name and name.rsplit(".", 1)[1] == "load"
                           and name.rsplit(".", 1)[0] in numpy_aliases) or (name in numpy_load_aliases)
@@ -170,6 +172,9 @@ _BAD = [
     ("import numpy as np\nnp.load('x.npz', allow_pickle=True)\n", "allow-pickle"),
     ("import numpy as np\nnp.load('x.npz', allow_pickle=flag)\n", "allow-pickle"),
     ("import torch\ntorch.load('m.pt')\n", "torch-load"),
+    ("import torch\ntorch.load('m.pt', weights_only=False)\n", "torch-load"),
+    ("import torch\ntorch.load('m.pt', weights_only=flag)\n", "torch-load"),
+    ("import torch\ntorch.load('m.pt', **kw)\n", "torch-load"),
     ("eval('1+1')\n", "eval"),
     ("exec('x=1')\n", "exec"),
     ("import builtins\nbuiltins.eval('1')\n", "eval"),
@@ -183,6 +188,7 @@ _GOOD = [
     '"""Nothing is loaded with pickle. np.load(path) is never called with eval( or exec(."""\n',
     "# import pickle; os.system('x'); eval('1')\n",
     "import numpy as np\nnp.load('x.npz', allow_pickle=False)\n",
+    "import torch\ntorch.load('m.pt', map_location='cpu', weights_only=True)\n",
     "import numpy as np\nwith np.load(p,\n        allow_pickle=False) as z:\n    pass\n",
     "import subprocess\nsubprocess.run(['ls'], shell=False)\n",
     "import json\njson.loads('{}')\n",

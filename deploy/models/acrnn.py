@@ -116,23 +116,28 @@ _JOINT_LAYOUT = {
                         "translation t = 2 (q_d ⊗ conj(q_r)) in metres",
     "quaternions+positions": "local quaternion (w, x, y, z) then current position (x, y, z) in metres",
     "ortho6d+positions": "ortho6D (6) then current position (x, y, z) in metres",
+    "positions_acrnn": "(x, y, z) position in metres relative to the root joint, current coordinates; the root's "
+                       "own (zero) block is not stored, so slot j is joint j + 1 (the published acRNN's frame)",
 }
 
 
 def _metadata(g, config, role, io, mean, std, representation, J, D, frame_rate, extra, skeleton):
+    root_block = REPRESENTATIONS[representation].root_block  # False: the published acRNN's frame (J + 1 joints)
     rep = {"name": representation, "size": config.frame_size, "units": "m",
            "fields": [{"name": "root", "start": 0, "size": 3, "units": "m",
                        "meaning": "hip dx = x_{t+1} - x_t, hip height y_t, hip dz = z_{t+1} - z_t (metres, y up; "
                                   "the hip's ground position is the running sum of dx, dz)"},
                       {"name": "joints", "start": 3, "size": J * D, "per_joint": D, "joints": J,
-                       "joint_names": "skeleton.names (slot j = joint j)",
+                       "joint_names": "skeleton.names (slot j = joint j)" if root_block else
+                       "skeleton.names[1:] (slot j = joint j + 1; no root block)",
                        "layout": _JOINT_LAYOUT.get(representation, representation)}]}
     sk = None
     if skeleton is not None:
         sk = skeleton_metadata(skeleton)
         sk.setdefault("units", "m")
-        if len(sk["names"]) != J:
-            raise ValueError(f"skeleton: expected {J} joints (the frames'), got {len(sk['names'])}")
+        if len(sk["names"]) != J + (0 if root_block else 1):
+            raise ValueError(f"skeleton: expected {J + (0 if root_block else 1)} joints (the frames'), got "
+                             f"{len(sk['names'])}")
     return build_metadata(g, name="acrnn", role=role, config=config.to_dict(), io=io, representation=rep,
                           normalization=(mean, std), in_graph=True, skeleton=sk, frame_rate=frame_rate,
                           source_paper=SOURCE, variant="float", extra=extra)
