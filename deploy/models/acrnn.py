@@ -116,28 +116,30 @@ _JOINT_LAYOUT = {
                         "translation t = 2 (q_d ⊗ conj(q_r)) in metres",
     "quaternions+positions": "local quaternion (w, x, y, z) then current position (x, y, z) in metres",
     "ortho6d+positions": "ortho6D (6) then current position (x, y, z) in metres",
-    "positions_acrnn": "(x, y, z) position in metres relative to the root joint, current coordinates; the root's "
-                       "own (zero) block is not stored, so slot j is joint j + 1 (the published acRNN's frame)",
+    "positions_acrnn": "(x, y, z) position in metres relative to the root joint (the published acRNN's frame)",
 }
 
 
 def _metadata(g, config, role, io, mean, std, representation, J, D, frame_rate, extra, skeleton):
-    root_block = REPRESENTATIONS[representation].root_block  # False: the published acRNN's frame (J + 1 joints)
     rep = {"name": representation, "size": config.frame_size, "units": "m",
            "fields": [{"name": "root", "start": 0, "size": 3, "units": "m",
                        "meaning": "hip dx = x_{t+1} - x_t, hip height y_t, hip dz = z_{t+1} - z_t (metres, y up; "
                                   "the hip's ground position is the running sum of dx, dz)"},
                       {"name": "joints", "start": 3, "size": J * D, "per_joint": D, "joints": J,
-                       "joint_names": "skeleton.names (slot j = joint j)" if root_block else
-                       "skeleton.names[1:] (slot j = joint j + 1; no root block)",
+                       "joint_names": "skeleton.names (slot j = joint j)",
                        "layout": _JOINT_LAYOUT.get(representation, representation)}]}
+    root_block = getattr(REPRESENTATIONS.get(representation), "root_block", True)
+    if not root_block:  # the frames leave the root joint out (its position is the root block)
+        rep["fields"][1]["joint_names"] = "skeleton.names[1:] (slot j = joint j + 1; the root joint has no slot)"
+        rep["fields"][0]["meaning"] = "the root joint's position (x, y, z), metres, y up"
     sk = None
     if skeleton is not None:
         sk = skeleton_metadata(skeleton)
         sk.setdefault("units", "m")
-        if len(sk["names"]) != J + (0 if root_block else 1):
-            raise ValueError(f"skeleton: expected {J + (0 if root_block else 1)} joints (the frames'), got "
-                             f"{len(sk['names'])}")
+        expected = J if root_block else J + 1
+        if len(sk["names"]) != expected:
+            raise ValueError(f"skeleton: expected {expected} joints (the frames' {J}"
+                             f"{'' if root_block else ' and the root'}), got {len(sk['names'])}")
     return build_metadata(g, name="acrnn", role=role, config=config.to_dict(), io=io, representation=rep,
                           normalization=(mean, std), in_graph=True, skeleton=sk, frame_rate=frame_rate,
                           source_paper=SOURCE, variant="float", extra=extra)
