@@ -15,6 +15,8 @@ export      ONNX models via ``deploy`` (imported lazily: the ``deploy`` extra), 
 generate    motion from a network or a baseline, BVH out (the task's ``generate_command``)
 render      a BVH / exp-map motion (optionally against a second one) to a PNG strip or a GIF
 demo        the whole tour on the embedded sample (:mod:`refimpl.demo`)
+import      a PyTorch state dict (.npz, .safetensors, .pt) as a checkpoint; ``export-weights`` the reverse
+            (:mod:`refimpl.weights_cli`, spec/import.md)
 ==========  ==============================================================================================
 
 Exit codes (scripts may rely on them): 0 success; 1 runtime failure (including a missing optional dependency
