@@ -11,7 +11,8 @@ the *content* of a ``refimpl train`` checkpoint, generically for every registere
   :data:`MAX_CONFIG_LIST` entries, then the dataclass itself checks the ranges;
 * the task's stored fields (:data:`TASK_FIELDS`, extended by a task module's ``CHECKPOINT_FIELDS``):
   ``fps`` > 0 and finite, ``root_mean`` 3 finite numbers, ``root_std`` 3 finite numbers > 0, ``transition_length``
-  a positive int, ``dtype`` ``"float32"``/``"float64"``, ``representation`` a string;
+  a positive int, ``dtype`` ``"float32"``/``"float64"``, ``representation`` a string; then each task's own schema
+  (:mod:`refimpl.task_schemas`: types, ranges, shapes, and that the labels agree with the frame size);
 * the parameters: exactly the names and shapes the config implies (the recipe's ``param_shapes(config)``, else
   the config module's ``param_shapes``, else its ``init_params`` on a tiny generator), one floating dtype
   (float32 or float64, the stored ``dtype`` when there is one), all finite and of magnitude at most
@@ -293,6 +294,9 @@ def validate_trained(arrays: Mapping[str, np.ndarray], meta, models: Mapping, wh
     task = task_of(spec) if task_of is not None else None
     validate_task_fields(cfg, task, where)
     config = validate_model_config(spec.config_type, cfg, where)
+    from refimpl.task_schemas import validate_task_checkpoint
+
+    validate_task_checkpoint(getattr(spec, "task", None), cfg, config, where)
     try:
         shapes = expected_param_shapes(spec.recipe, spec.config_type, config)
     except ValueError as exc:

@@ -10,6 +10,7 @@ import dataclasses
 import math
 from typing import Mapping, Sequence
 
+from refimpl.bounds import check_config_sizes
 from refimpl.errors import UsageError
 
 __all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "add_data_options", "parse_overrides",
@@ -58,7 +59,7 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
     """``["gru_hidden=128", "encoder_sizes=128,64"]`` -> typed values, by the type of the default.
 
     Tuples are comma-separated integers; booleans one of ``1/0, true/false, yes/no, on/off`` (any case); ints,
-    floats and strings as written. Raises ``UsageError`` naming the item for an unknown field, a missing ``=`` or
+    finite floats and strings as written. Raises ``UsageError`` naming the item for an unknown field, a missing ``=`` or
     a value of the wrong type."""
     fields = {f.name for f in dataclasses.fields(config_type)}
     out = {}
@@ -80,6 +81,8 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
                 out[key] = int(value)
             elif isinstance(default, float):
                 out[key] = float(value)
+                if not math.isfinite(out[key]):
+                    raise ValueError(value)
             else:
                 out[key] = value
         except ValueError:
@@ -87,13 +90,20 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
     return out
 
 
-def config_with_overrides(base, overrides: Sequence[str], fixed: str | None = None, fixed_note: str = ""):
+def config_with_overrides(base, overrides: Sequence[str], fixed: str | Sequence[str] | None = None,
+                          fixed_note: str = ""):
     """``base`` (a config dataclass) with the ``--set`` ``overrides`` (:func:`parse_overrides`). ``fixed`` names a
-    field the data determines: overriding it with another value than ``base``'s raises
-    ``UsageError("--set <fixed>=<value>: <fixed_note>")``; a value the config refuses raises ``UsageError``."""
+    field (or a sequence of fields) the data or the model determines: overriding it with another value than ``base``'s raises
+    ``UsageError("--set <fixed>=<value>: <fixed_note>")``; a value the config refuses, or a size beyond
+    :mod:`refimpl.bounds` (:func:`~refimpl.bounds.check_config_sizes`), raises ``UsageError``."""
     values = parse_overrides(type(base), dataclasses.asdict(base), overrides)
-    if fixed is not None and fixed in values and values[fixed] != getattr(base, fixed):
-        raise UsageError(f"--set {fixed}={values[fixed]}: {fixed_note}")
+    try:
+        check_config_sizes(values)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    for name in ((fixed,) if isinstance(fixed, str) else tuple(fixed or ())):
+        if name in values and values[name] != getattr(base, name):
+            raise UsageError(f"--set {name}={values[name]}: {fixed_note}")
     try:
         return dataclasses.replace(base, **values)
     except ValueError as exc:

@@ -21,6 +21,7 @@ from refimpl.models import pace
 from refimpl.models.quaternet import QuaterNetConfig
 
 from deploy.graph import save_model
+from deploy.models.arguments import count, frames_array
 from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint
 from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
 from deploy.runtime import DeployedModel, load_model
@@ -77,6 +78,20 @@ def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, **_i
     return {"step": out / STEP_FILE, "h0": out / H0_FILE}
 
 
+def _read_h0(path) -> np.ndarray:
+    """The learned initial state ``(L, 1, H)`` beside a step model: a finite float array of rank 3 (a damaged or
+    pickled file is refused with ``ValueError``)."""
+    try:
+        h0 = np.load(path, allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001 - np.load raises ValueError, OSError, EOFError, ... on junk
+        raise ValueError(f"{path}: not a readable .npy array ({type(exc).__name__})") from None
+    if not isinstance(h0, np.ndarray) or h0.dtype.kind != "f" or h0.ndim != 3 or h0.shape[1] != 1 or \
+            not np.all(np.isfinite(h0)):
+        raise ValueError(f"{path}: expected a finite float array (L, 1, H), got {getattr(h0, 'dtype', '?')} "
+                         f"{getattr(h0, 'shape', '?')}")
+    return h0
+
+
 class Runtime:
     """The exported long-term models in onnxruntime (any of ``step`` and ``pace``)."""
 
@@ -96,19 +111,20 @@ class Runtime:
         if not step.is_file() and not pm.is_file():
             raise ValueError(f"directory: no {STEP_FILE} or {PACE_FILE} in {str(d)!r}")
         return cls(step if step.is_file() else None, pm if pm.is_file() else None,
-                   np.load(h0, allow_pickle=False) if h0.is_file() else None, intra_op_threads=intra_op_threads)
+                   _read_h0(h0) if h0.is_file() else None, intra_op_threads=intra_op_threads)
 
     def initial_state(self, batch: int) -> np.ndarray:
         """``h0`` repeated: ``(L, B, H)``."""
+        batch = count(batch, "batch", "batch")
         if self.h0 is None:
             raise ValueError("initial_state: no h0 file beside the step model")
-        return np.repeat(self.h0, int(batch), axis=1)
+        return np.repeat(self.h0, batch, axis=1)
 
     def step(self, x, state=None):
         """One frame: ``(y (B, G), state_next (L, B, H))``; ``state`` None = the learned initial state."""
         if self.step_model is None:
             raise ValueError("step: no step model loaded")
-        x = np.asarray(x, np.float32)
+        x = frames_array(x, "x", ranks=(2,))
         state = self.initial_state(x.shape[0]) if state is None else state
         out = self.step_model.run(x=x, state=state)
         return out["y"], out["state_next"]
@@ -117,23 +133,30 @@ class Runtime:
         """Raw pace outputs ``(B, N, 4)`` for ``x (B, N, 2)``."""
         if self.pace_model is None:
             raise ValueError("pace: no pace model loaded")
-        return self.pace_model.run(x=np.asarray(x, np.float32))["y"]
+        return self.pace_model.run(x=frames_array(x, "x", ranks=(3,)))["y"]
 
     def rollout(self, inputs, prefix: int):
         """Free-running prediction with the ground-truth controls (the task's method interface):
         ``inputs (B, P + T, F)`` → ``rotations (B, T, J, 4)``, ``translations (B, T, 2)``."""
+        x = frames_array(inputs, "inputs", ranks=(3,))
+        prefix = count(prefix, "prefix")
+        if self.step_model is None:
+            raise ValueError("rollout: no step model loaded")
+        B, Ltot, F = x.shape
+        if not prefix < Ltot:
+            raise ValueError(f"prefix: expected fewer than the {Ltot} frames of inputs, got {prefix}")
+        if F < 12 or (F - 8) % 4:
+            raise ValueError(f"inputs: expected F = 4 J + 8 features per frame, got {F}")
         if (self.step_model.metadata.get("representation") or {}).get("kind") == "quaternet_long_dq":
             raise ValueError("rollout: a dual-quaternion step model takes current-DQ frames; evaluate it in NumPy "
                              "(refimpl eval --checkpoint)")
-        x = np.asarray(inputs, np.float32)
-        B, Ltot, F = x.shape
         G = F - 6
         J = (G - 2) // 4
         h = None
-        for t in range(int(prefix)):
+        for t in range(prefix):
             y, h = self.step(x[:, t], h)
         ys = [y]
-        for t in range(int(prefix), Ltot - 1):
+        for t in range(prefix, Ltot - 1):
             y, h = self.step(np.concatenate([y, x[:, t, G:]], axis=1), h)
             ys.append(y)
         y = np.stack(ys, axis=1)

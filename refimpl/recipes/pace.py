@@ -40,7 +40,8 @@ MAX_CHUNK = 1000
 def make_config(train_ds, overrides: Sequence[str] = ()) -> pace.PaceConfig:
     """The paper's sizes with ``--set`` overrides (``bidirectional``, ``hidden_size``, ``delay``)."""
     base = pace.PaceConfig()
-    return config_with_overrides(base, overrides)
+    return config_with_overrides(base, overrides, ("input_size", "output_size"),
+                                 "the pace network maps 2-D path points to 4 values (amplitude, frequency, facing)")
 
 
 def chunk_length(data, requested: int = 0) -> int:
