@@ -33,8 +33,11 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["TASK_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "MAX_PARAM_ABS", "validate_model_config", "expected_param_shapes", "validate_params",
-           "validate_task_fields", "validate_trained", "validate_training_state"]
+from refimpl.task_schemas import validate_task_checkpoint
+
+__all__ = ["TASK_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "MAX_PARAM_ABS", "validate_model_config",
+           "expected_param_shapes", "validate_params", "validate_task_fields", "validate_checkpoint_config",
+           "validate_trained", "validate_training_state"]
 
 #: Largest integer any config field (or entry of a size list) may hold, and the longest size list: bounds the
 #: work of computing the parameter shapes (``gru_layers = 10**30`` would loop for ever) before the parameters
@@ -264,6 +267,30 @@ def validate_task_fields(model_config: Mapping, task_module=None, where: str = "
             check(model_config[key], f"{where}: model_config.{key}")
 
 
+def validate_checkpoint_config(spec, model_config, where: str = "checkpoint", task_of: Callable | None = None):
+    """Everything of a checkpoint but its arrays: ``model_config``'s task fields (:data:`TASK_FIELDS`, the task's
+    schema in :mod:`refimpl.task_schemas`) and network config, and the parameter shapes it implies.
+
+    Used by :func:`validate_trained` on a file and by ``refimpl train`` on the checkpoint it is about to write
+    (so that training never writes a file its loader refuses).
+
+    Returns
+    -------
+    config, shapes (name -> shape)
+    """
+    if not isinstance(model_config, Mapping):
+        raise ValueError(f"{where}: model_config: expected a JSON object, got {_kind(model_config)}")
+    task = task_of(spec) if task_of is not None else None
+    validate_task_fields(model_config, task, where)
+    config = validate_model_config(spec.config_type, model_config, where)
+    validate_task_checkpoint(getattr(spec, "task", None), model_config, config, where, task)
+    try:
+        shapes = expected_param_shapes(spec.recipe, spec.config_type, config)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    return config, shapes
+
+
 def validate_trained(arrays: Mapping[str, np.ndarray], meta, models: Mapping, where: str = "checkpoint",
                      task_of: Callable | None = None, expected_format: str = "refimpl.train/1"):
     """The whole schema of a training checkpoint (see the module docstring), for inference.
@@ -289,18 +316,7 @@ def validate_trained(arrays: Mapping[str, np.ndarray], meta, models: Mapping, wh
     if spec is None:
         raise ValueError(f"{where}: unknown model {name!r}; known: {sorted(models)}")
     cfg = meta.get("model_config")
-    if not isinstance(cfg, Mapping):
-        raise ValueError(f"{where}: model_config: expected a JSON object, got {_kind(cfg)}")
-    task = task_of(spec) if task_of is not None else None
-    validate_task_fields(cfg, task, where)
-    config = validate_model_config(spec.config_type, cfg, where)
-    from refimpl.task_schemas import validate_task_checkpoint
-
-    validate_task_checkpoint(getattr(spec, "task", None), cfg, config, where)
-    try:
-        shapes = expected_param_shapes(spec.recipe, spec.config_type, config)
-    except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from None
+    config, shapes = validate_checkpoint_config(spec, cfg, where, task_of)
     params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
     validate_params(params, shapes, where, dtype=cfg.get("dtype"))
     return spec, config, params, dict(cfg)

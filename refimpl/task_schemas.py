@@ -38,13 +38,15 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-__all__ = ["MAX_TASK_ABS", "MAX_TASK_JOINTS", "validate_task_checkpoint", "TASK_CHECKS"]
+__all__ = ["MAX_TASK_ABS", "MAX_TASK_JOINTS", "LOCOMOTION_RIGS", "validate_task_checkpoint", "TASK_CHECKS"]
 
 #: Largest magnitude of a stored statistic, offset or seed value (the data of this project stay below ~10^4).
 MAX_TASK_ABS = 1e6
 #: Largest skeleton (joints) a task field may describe.
 MAX_TASK_JOINTS = 1000
 _MIN_STD = 1e-6
+#: Rigs of the locomotion task (``refimpl.tasks.locomotion.CMU_RIG`` / ``BANDAI_NAMCO_RIG``; tested equal).
+LOCOMOTION_RIGS = ("cmu", "bandai_namco")
 
 
 def _kind(v) -> str:
@@ -118,10 +120,11 @@ def _skeleton(value, where: str, want_sides: bool = False):
         raise ValueError(f"{name}: {exc}") from None
 
 
-def _synthesis(cfg: Mapping, config, where: str) -> None:
+def _synthesis(cfg: Mapping, config, where: str, task_module=None) -> None:
     from refimpl.models import acrnn
     from refimpl.representations import REPRESENTATIONS, frame_size
-    from refimpl.tasks.synthesis import TABLE1_ROWS
+
+    rows = getattr(task_module, "TABLE1_ROWS", None)  # --representation value -> variant (the task's table)
 
     _require(cfg, ("mean", "std", "data_representation", "skeleton", "variant"), where, "synthesis")
     rep = cfg["data_representation"]
@@ -138,11 +141,15 @@ def _synthesis(cfg: Mapping, config, where: str) -> None:
     for key in ("row", "representation"):
         if key in cfg:
             row = cfg[key]
-            if not isinstance(row, str) or row not in TABLE1_ROWS:
-                raise ValueError(f"{where}: model_config.{key}: expected one of {list(TABLE1_ROWS)}, got {_kind(row)}")
-            if TABLE1_ROWS[row] != variant:
-                raise ValueError(f"{where}: model_config.{key} {row!r} is the variant {TABLE1_ROWS[row]!r}, but "
+            if not isinstance(row, str) or (rows is not None and row not in rows):
+                raise ValueError(f"{where}: model_config.{key}: expected one of {list(rows or ())}, got {_kind(row)}")
+            if rows is not None and rows[row] != variant:
+                raise ValueError(f"{where}: model_config.{key} {row!r} is the variant {rows[row]!r}, but "
                                  f"model_config.variant is {variant!r}")
+    if isinstance(cfg.get("row"), str) and isinstance(cfg.get("representation"), str) and \
+            cfg["row"] != cfg["representation"]:
+        raise ValueError(f"{where}: model_config.row {cfg['row']!r} differs from model_config.representation "
+                         f"{cfg['representation']!r}")
     sk = _skeleton(cfg["skeleton"], where)
     F = frame_size(rep, sk.num_joints)
     got = getattr(config, "frame_size", cfg.get("frame_size"))
@@ -166,7 +173,7 @@ def _synthesis(cfg: Mapping, config, where: str) -> None:
             raise ValueError(f"{where}: model_config.{key}: expected a list of take names, got {_kind(cfg[key])}")
 
 
-def _prediction(cfg: Mapping, config, where: str) -> None:
+def _prediction(cfg: Mapping, config, where: str, task_module=None) -> None:
     from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
 
     _require(cfg, ("dataset",), where, "prediction")
@@ -186,11 +193,9 @@ def _prediction(cfg: Mapping, config, where: str) -> None:
             raise ValueError(f"{where}: model_config.fps {fps!r} does not match frame_time {ft!r} (1 / frame_time)")
 
 
-def _locomotion(cfg: Mapping, config, where: str) -> None:
-    from refimpl.tasks.locomotion import BANDAI_NAMCO_RIG, CMU_RIG
-
+def _locomotion(cfg: Mapping, config, where: str, task_module=None) -> None:
     _require(cfg, ("skeleton", "rig"), where, "locomotion")
-    rigs = (CMU_RIG.name, BANDAI_NAMCO_RIG.name)
+    rigs = LOCOMOTION_RIGS
     if cfg["rig"] not in rigs:
         raise ValueError(f"{where}: model_config.rig: expected one of {list(rigs)}, got {_kind(cfg['rig'])}")
     sk = _skeleton(cfg["skeleton"], where, want_sides=True)
@@ -219,7 +224,7 @@ def _locomotion(cfg: Mapping, config, where: str) -> None:
     del feat
 
 
-def _transition(cfg: Mapping, config, where: str) -> None:
+def _transition(cfg: Mapping, config, where: str, task_module=None) -> None:
     if "root_mean" not in cfg or "root_std" not in cfg:
         raise ValueError(f"{where}: the checkpoint has no normalisation statistics (root_mean/root_std); train it "
                          "with `refimpl train`")
@@ -230,9 +235,13 @@ TASK_CHECKS: dict[str, Callable] = {"synthesis": _synthesis, "prediction": _pred
                                     "transition": _transition}
 
 
-def validate_task_checkpoint(task: str, model_config: Mapping, config, where: str = "checkpoint") -> None:
+def validate_task_checkpoint(task: str, model_config: Mapping, config, where: str = "checkpoint",
+                             task_module=None) -> None:
     """Check the task fields of a checkpoint's ``model_config`` against ``config`` (the validated network
-    config); ``ValueError`` naming ``where`` and the field. Unknown tasks are not checked."""
+    config); ``ValueError`` naming ``where`` and the field. Unknown tasks are not checked.
+
+    ``task_module`` (the task's module, when the caller may import it: ``refimpl``'s loaders) supplies the
+    synthesis task's ``TABLE1_ROWS`` for the row/variant agreement; ``deploy``'s loaders check the rest."""
     check = TASK_CHECKS.get(task)
     if check is not None:
-        check(model_config, config, where)
+        check(model_config, config, where, task_module)

@@ -18,7 +18,8 @@ from refimpl.models.acrnn import ACRNNConfig
 from deploy.graph import OPSET
 from deploy.models.arguments import count, frames_array
 from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
-from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
+from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
+                                    write_models)
 from deploy.runtime import DeployedModel, load_model
 
 __all__ = ["load_acrnn_checkpoint", "export_acrnn_dir", "ACRNNRuntime"]
@@ -28,7 +29,8 @@ def load_acrnn_checkpoint(path):
     """``(params, config, meta)`` of an acRNN training checkpoint (parameters ``param.<name>``, config from
     ``meta["model_config"]``; the statistics, representation and skeleton are in ``meta["model_config"]`` too)."""
     arrays, meta = read_checkpoint(path)
-    return checkpoint_params(arrays), config_from_meta(ACRNNConfig, meta), meta
+    config = config_from_meta(ACRNNConfig, meta, task="synthesis", where=str(path))
+    return checked_params(checkpoint_params(arrays), config, str(path)), config, meta
 
 
 def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, parents=None, opset=None,

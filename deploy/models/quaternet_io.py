@@ -24,7 +24,8 @@ from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
 
 from deploy.graph import OPSET
 from deploy.models.arguments import count, frames_array, metadata_int
-from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
+from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
+                                    write_models)
 from deploy.models.quaternet import (export_quaternet_cnn_window, export_quaternet_init, export_quaternet_predict,
                                      export_quaternet_step)
 from deploy.runtime import DeployedModel, load_model
@@ -43,8 +44,10 @@ def load_quaternet_checkpoint(path):
     state-dict ``.npz`` (the config's defaults: the paper's short-term model)."""
     params, meta = _read(path)
     legacy = {"quat": "quaternion"}  # the registry's representation name, stored by checkpoints before §9
-    return params, config_from_meta(QuaterNetConfig, meta, lambda c: {
-        **c, **({"representation": legacy[c["representation"]]} if c.get("representation") in legacy else {})}), meta
+    config = config_from_meta(QuaterNetConfig, meta, lambda c: {
+        **c, **({"representation": legacy[c["representation"]]} if c.get("representation") in legacy else {})},
+        task="prediction" if meta else None, where=str(path))
+    return checked_params(params, config, str(path)), config, meta
 
 
 def load_cnn_checkpoint(path):
@@ -57,7 +60,8 @@ def load_cnn_checkpoint(path):
         return cfg
 
     params, meta = _read(path)
-    return params, config_from_meta(QuaterNetCNNConfig, meta, convert), meta
+    config = config_from_meta(QuaterNetCNNConfig, meta, convert, task="prediction" if meta else None, where=str(path))
+    return checked_params(params, config, str(path)), config, meta
 
 
 def _network(config):

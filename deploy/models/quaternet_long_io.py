@@ -17,12 +17,14 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.atomic import atomic_write_bytes
+from refimpl.bounds import MAX_CONFIG_SIZE
+from refimpl.task_schemas import validate_task_checkpoint
 from refimpl.models import pace
 from refimpl.models.quaternet import QuaterNetConfig
 
 from deploy.graph import save_model
 from deploy.models.arguments import count, frames_array
-from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint
+from deploy.models.entry_io import checked_params, checkpoint_params, config_from_meta, read_checkpoint
 from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model
@@ -39,17 +41,40 @@ def load_checkpoint(path):
     ``pace`` checkpoint its ``PaceConfig``."""
     arrays, meta = read_checkpoint(path)
     params = checkpoint_params(arrays)
-    cfg = dict(meta.get("model_config") or {})
+    where = str(path)
     if meta.get("model") == "pace":
-        return params, config_from_meta(pace.PaceConfig, meta), meta
+        config = config_from_meta(pace.PaceConfig, meta, task="locomotion", where=where)
+        return checked_params(params, config, where), config, meta
     if meta.get("model") != NAME:
         raise ValueError(f"{path}: expected a quaternet-long or pace checkpoint, got model {meta.get('model')!r}")
-    net = QuaterNetConfig.long_term(num_joints=int(cfg["num_joints"]), hidden_size=int(cfg["hidden_size"]),
-                                    num_layers=int(cfg["num_layers"]), controls_hidden=int(cfg["controls_hidden"]),
-                                    negative_slope=float(cfg["negative_slope"]),
-                                    representation="dual_quaternion" if cfg.get("output") == "dual_quaternion"
-                                    else "quaternion")
-    return params, net, meta
+    cfg = meta.get("model_config")
+    fields = {"num_joints": int, "hidden_size": int, "num_layers": int, "controls_hidden": int,
+              "negative_slope": float}
+    if not isinstance(cfg, dict) or any(k not in cfg for k in fields):
+        raise ValueError(f"{where}: model_config: expected an object with {sorted(fields)}")
+    values = {k: _config_number(cfg[k], t, f"{where}: model_config.{k}") for k, t in fields.items()}
+    if cfg.get("output", "quaternion") not in ("quaternion", "dual_quaternion"):
+        raise ValueError(f"{where}: model_config.output: expected 'quaternion' or 'dual_quaternion' for export, got "
+                         f"{cfg.get('output')!r}")
+    try:
+        net = QuaterNetConfig.long_term(**values, representation="dual_quaternion"
+                                        if cfg.get("output") == "dual_quaternion" else "quaternion")
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: model_config: {exc}") from None
+    validate_task_checkpoint("locomotion", cfg, net, where)
+    return checked_params(params, net, where), net, meta
+
+
+def _config_number(value, kind, name):
+    """One config number of a long-term checkpoint: an int (not bool) within ``±MAX_CONFIG_SIZE`` or a finite
+    float; ``ValueError`` naming ``name``."""
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int) or abs(value) > MAX_CONFIG_SIZE:
+            raise ValueError(f"{name}: expected an integer within {MAX_CONFIG_SIZE}, got {value!r:.40}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise ValueError(f"{name}: expected a finite number, got {value!r:.40}")
+    return float(value)
 
 
 def _network(config):
