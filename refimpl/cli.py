@@ -48,7 +48,8 @@ import numpy as np
 
 from refimpl.allocator import retain_freed_memory
 from refimpl.errors import DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading
-from refimpl.options import add_data_options, nonneg_int, positive_float, positive_int
+from refimpl.bounds import bounded_float, bounded_int
+from refimpl.options import add_data_options, beta, nonneg_int, positive_float, positive_int
 from refimpl.registry import MODELS, TASKS, task_of
 from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
                               onnx_metadata, read_motion, train_model, verify_onnx)
@@ -108,10 +109,11 @@ def _info_bvh(p: Path, args) -> None:
     kept = motion.translated_joint_names
     if in_file:
         _say(f"            after reading: {', '.join(kept) if kept else 'none varying (folded into the offsets)'}")
-    pos = motion.positions()  # (T, J, 3)
-    ext = pos.max(axis=(0, 1)) - pos.min(axis=(0, 1))
-    _say(f"extent      x {ext[0]:.2f}  y {ext[1]:.2f}  z {ext[2]:.2f} (file units; root travel "
-         f"{np.linalg.norm(motion.root_positions[-1] - motion.root_positions[0]):.2f})")
+    if motion.num_frames:  # a valid file may hold no frame at all
+        pos = motion.positions()  # (T, J, 3)
+        ext = pos.max(axis=(0, 1)) - pos.min(axis=(0, 1))
+        _say(f"extent      x {ext[0]:.2f}  y {ext[1]:.2f}  z {ext[2]:.2f} (file units; root travel "
+             f"{np.linalg.norm(motion.root_positions[-1] - motion.root_positions[0]):.2f})")
     _print_joints(skel, args)
 
 
@@ -238,17 +240,18 @@ def _info_onnx(p: Path, args) -> None:
     for vi in g.output:
         _say(f"output      {dims(vi)}")
     for prop in model.metadata_props:
-        try:
-            value = json.loads(prop.value)
-        except ValueError:
-            value = prop.value
-        if prop.key == "skeleton" and isinstance(value, dict):
-            value = f"{len(value.get('names', []))} joints: " + ", ".join(value.get("names", [])[:6]) + " ..."
-        elif prop.key == "normalization" and isinstance(value, dict):
-            value = f"in graph: {value.get('in_graph')}, root mean {np.round(value.get('mean', [])[:3], 3).tolist()}"
-        elif prop.key == "io":
+        if prop.key == "io":
             continue
-        text = value if isinstance(value, str) else json.dumps(value, sort_keys=True)
+        try:  # metadata is data of unknown shape: a value that does not fit the summary is printed as text
+            value = json.loads(prop.value)
+            if prop.key == "skeleton" and isinstance(value, dict):
+                value = f"{len(value.get('names', []))} joints: " + ", ".join(value.get("names", [])[:6]) + " ..."
+            elif prop.key == "normalization" and isinstance(value, dict):
+                value = (f"in graph: {value.get('in_graph')}, root mean "
+                         f"{np.round(np.asarray(value.get('mean', [])[:3], dtype=float), 3).tolist()}")
+            text = value if isinstance(value, str) else json.dumps(value, sort_keys=True)
+        except (ValueError, TypeError, RecursionError):
+            text = prop.value
         _say(f"meta        {prop.key}: {text[:300]}")
 
 
@@ -736,7 +739,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
     parser.add_argument("--version", action="version", version=f"refimpl {__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=nonneg_int, default=2,
+    parser.add_argument("--blas-threads", type=bounded_int("threads"), default=2,
                         help="BLAS threads for NumPy (default 2: measured fastest on an idle 2-core machine, "
                              "0.58-0.74x the one-thread time per training step of every network and equal or "
                              "faster at batch 1, benchmarks/bench_threads.py; pass 1 when other jobs share the "
@@ -766,14 +769,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_data_options(p)
     p.add_argument("--out", default="runs/qtg", help="output folder (default runs/qtg)")
     length = p.add_mutually_exclusive_group()
-    length.add_argument("--steps", type=nonneg_int, default=None, help="optimiser steps")
-    length.add_argument("--epochs", type=nonneg_int, default=10, help="epochs, when --steps is not given (default 10)")
-    p.add_argument("--batch-size", type=positive_int, default=None,
+    length.add_argument("--steps", type=bounded_int("steps"), default=None, help="optimiser steps")
+    length.add_argument("--epochs", type=bounded_int("steps"), default=10, help="epochs, when --steps is not given (default 10)")
+    p.add_argument("--batch-size", type=bounded_int("batch"), default=None,
                    help="batch size (default: the model's paper value; qtg 32, quaternet 60, quaternet-long and "
                         "pace 40)")
     p.add_argument("--lr", type=positive_float, default=None,
                    help="Adam learning rate (default: the model's paper value; qtg 1e-4)")
-    p.add_argument("--betas", type=float, nargs=2, default=None, metavar=("B1", "B2"),
+    p.add_argument("--betas", type=beta, nargs=2, default=None, metavar=("B1", "B2"),
                    help="Adam betas (default: the model's paper values; qtg 0.5 0.9)")
     p.add_argument("--clip-norm", type=positive_float, default=None, help="global gradient-norm clipping")
     for task_name in sorted(TASKS):  # each task adds its own options, in its own group
@@ -785,10 +788,10 @@ def build_parser() -> argparse.ArgumentParser:
     resume = p.add_mutually_exclusive_group()
     resume.add_argument("--resume", action="store_true", help="continue from --out/checkpoint.npz")
     resume.add_argument("--overwrite", action="store_true", help="start again, replacing --out's checkpoint and logs")
-    p.add_argument("--checkpoint-every", type=positive_int, default=500)
-    p.add_argument("--validate-every", type=positive_int, default=None,
+    p.add_argument("--checkpoint-every", type=bounded_int("every"), default=500)
+    p.add_argument("--validate-every", type=bounded_int("every"), default=None,
                    help="log the held-out MAE every N steps (loss_val.csv)")
-    p.add_argument("--progress-every", type=positive_int, default=50)
+    p.add_argument("--progress-every", type=bounded_int("every"), default=50)
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("eval", help="a network against its task's baselines (QTG: transitions; QuaterNet: "
@@ -801,7 +804,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (omit: baselines only)")
     p.add_argument("--onnx", default=None, help="also evaluate the exported models of this folder (onnxruntime)")
     add_data_options(p)
-    p.add_argument("--transition-length", type=positive_int, default=None, help="T (default: the model's)")
+    p.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
+                   help="T (default: the model's)")
     p.add_argument("--csv", default=None, help="write the per-frame curve as CSV")
     p.add_argument("--json", default=None, help="write all results as JSON")
     p.add_argument("--plot", default=None, help="write the per-frame curves as PNG (matplotlib)")
@@ -820,7 +824,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: onnx/ beside the checkpoint)")
     p.add_argument("--mode", default="unrolled", choices=("unrolled", "loop", "scan"), help="rollout graph form")
     p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
-    p.add_argument("--transition-length", type=positive_int, default=None, help="T of the rollout model")
+    p.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
+                   help="T of the rollout model")
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="skip the onnxruntime-vs-NumPy check on random context poses")
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random poses")
@@ -840,8 +845,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (NumPy backend)")
     p.add_argument("--backend", default="numpy", choices=("numpy", "onnx"))
     p.add_argument("--onnx", default=None, help="folder of exported models (ONNX backend)")
-    p.add_argument("--length", type=positive_int, default=None, help="T (default: the model's)")
-    p.add_argument("--context", type=positive_int, default=10, help="frames kept on each side (default 10)")
+    p.add_argument("--length", type=bounded_int("frames"), default=None, help="T (default: the model's)")
+    p.add_argument("--context", type=bounded_int("context"), default=10, help="frames kept on each side (default 10)")
     p.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
                    help="place the target clip: none = as in its file, continue = after the source (default: "
                         "none for one file, continue for two)")
@@ -859,7 +864,8 @@ def build_parser() -> argparse.ArgumentParser:
     loco.add_argument("--path", default="circle:r=3",
                       help="circle[:r=M], figure8[:size=M], line-turn[:turn=DEG] or a CSV of x,z points in metres")
     loco.add_argument("--speed", default="walk", help="walk, jog, run or units per frame (default walk)")
-    loco.add_argument("--seconds", type=positive_float, default=10.0, help="length of the motion (default 10)")
+    loco.add_argument("--seconds", type=bounded_float("seconds"), default=10.0,
+                      help="length of the motion (default 10)")
     loco.add_argument("--controls", default=None, help="also write the per-frame controls as JSON")
     p.set_defaults(func=cmd_generate)
 
@@ -871,7 +877,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", action="append", default=None,
                    help=".png and/or .gif output (repeatable; default <file stem>.png)")
     p.add_argument("--frames", default=None, help="START:STOP[:STEP] frame range (default all)")
-    p.add_argument("--num-frames", type=positive_int, default=8, help="panels in a PNG strip (default 8)")
+    p.add_argument("--num-frames", type=bounded_int("panels"), default=8, help="panels in a PNG strip (default 8)")
     p.add_argument("--stride", type=positive_int, default=1, help="draw every k-th frame in a GIF")
     p.add_argument("--up", default="y", choices=("y", "z"), help="the data's up axis (BVH: y)")
     p.add_argument("--title", default=None)

@@ -10,10 +10,10 @@ import dataclasses
 import math
 from typing import Mapping, Sequence
 
-from refimpl.bounds import check_config_sizes
+from refimpl.bounds import bounded_int, check_config_sizes
 from refimpl.errors import UsageError
 
-__all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "add_data_options", "parse_overrides",
+__all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "beta", "add_data_options", "parse_overrides",
            "config_with_overrides"]
 
 
@@ -33,6 +33,8 @@ def number_parser(convert, accept, expected: str):
 positive_int = number_parser(int, lambda v: v >= 1, "a positive integer")
 nonneg_int = number_parser(int, lambda v: v >= 0, "an integer >= 0")
 positive_float = number_parser(float, lambda v: math.isfinite(v) and v > 0, "a positive number")
+#: Adam's β₁, β₂ (``--betas``): outside [0, 1) the bias correction divides by zero or changes sign.
+beta = number_parser(float, lambda v: math.isfinite(v) and 0 <= v < 1, "a number in [0, 1)")
 
 
 def add_data_options(p, default="sample") -> None:
@@ -44,7 +46,7 @@ def add_data_options(p, default="sample") -> None:
     p.add_argument("--fps", type=positive_float, default=None,
                    help="true frame rate of the files when the header is wrong (CMU salsa: 60)")
     p.add_argument("--test-fraction", type=float, default=0.2, help="held-out share when splitting (default 0.2)")
-    p.add_argument("--stride", type=positive_int, default=4, help="frames between window starts (default 4)")
+    p.add_argument("--stride", type=bounded_int("stride"), default=4, help="frames between window starts (default 4)")
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -148,7 +148,10 @@ def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict
     if model is not None:
         methods[model.spec.name] = model.spec.make_method(model)
     if onnx_dir is not None:
-        name = model.spec.name if model is not None else _onnx_model_name(onnx_dir)
+        name = _onnx_model_name(onnx_dir)
+        if model is not None and name != model.spec.name:  # the folder must hold this command's model
+            raise BadInputError(f"{onnx_dir}: holds exported {name!r} models, not the {model.spec.name!r} model of "
+                                f"{model.path}")
         methods[f"{name}_onnx"] = onnx_method(onnx_dir)
     return methods
 

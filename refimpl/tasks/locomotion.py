@@ -795,13 +795,15 @@ class LocomotionDataset:
 def add_train_options(parser) -> None:
     """The locomotion task's options of ``refimpl train`` (its own names: every task adds its options to the
     same parser)."""
-    parser.add_argument("--locomotion-prefix", type=int, default=30, metavar="P",
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--locomotion-prefix", type=bounded_int("window"), default=30, metavar="P",
                         help="locomotion: conditioning frames of a pose window (default 30)")
-    parser.add_argument("--locomotion-target", type=int, default=60, metavar="T",
+    parser.add_argument("--locomotion-target", type=bounded_int("window"), default=60, metavar="T",
                         help="locomotion: predicted frames of a pose window (default 60)")
-    parser.add_argument("--locomotion-max-files", type=int, default=0, metavar="N",
+    parser.add_argument("--locomotion-max-files", type=bounded_int("files"), default=0, metavar="N",
                         help="locomotion: use at most N training and N held-out files (evenly spaced; 0 = all)")
-    parser.add_argument("--pace-chunk-length", type=int, default=0, metavar="N",
+    parser.add_argument("--pace-chunk-length", type=bounded_int("chunk"), default=0, metavar="N",
                         help="locomotion: spline points per pace-network chunk (default: min(1000, median))")
 
 

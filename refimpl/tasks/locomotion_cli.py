@@ -3,16 +3,40 @@ controls, and print the stability numbers (spec/cli.md, spec/locomotion.md §9).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from refimpl.errors import UsageError
+from refimpl.bounds import check_number
+from refimpl.errors import UsageError, existing_file, reading
 from refimpl.tasks.locomotion import FPS, QUATERNET_UNIT_CM, rig_of, skeleton_of
 from refimpl.tasks.locomotion_generate import (bone_length_drift, dq_bone_length_drift, facing_of, foot_skating,
-                                              generate_walk, parse_path, parse_speed, write_outputs)
+                                              generate_walk, parse_path, parse_speed, read_path_file,
+                                              write_outputs)
 
-__all__ = ["generate_command", "walk_from_checkpoints"]
+__all__ = ["generate_command", "walk_options", "walk_from_checkpoints"]
+
+
+def walk_options(path_text: str, speed_text: str, seconds) -> tuple:
+    """``(path Spline, speed, frames)`` of ``--path``, ``--speed``, ``--seconds``, checked before any work: a value
+    outside :mod:`refimpl.bounds` is a ``UsageError`` (exit 2), a ``--path`` CSV file that is missing or malformed a
+    ``BadInputError`` naming the file and line (exit 3)."""
+    try:
+        speed = parse_speed(speed_text)
+        seconds = check_number(seconds, "--seconds", "seconds")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if Path(path_text).suffix.lower() == ".csv":
+        p = existing_file(path_text)
+        with reading(p):
+            path = read_path_file(p)
+    else:
+        try:
+            path = parse_path(path_text)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    return path, speed, int(round(seconds * FPS))
 
 
 def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: str, seconds: float):
@@ -22,18 +46,14 @@ def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: st
         raise UsageError(f"--checkpoint: expected a quaternet-long checkpoint, got {pose_model.spec.name!r}")
     if pace_model.spec.name != "pace":
         raise UsageError(f"--pace: expected a pace checkpoint, got {pace_model.spec.name!r}")
-    try:
-        path = parse_path(path_text)
-        speed = parse_speed(speed_text)
-    except (OSError, ValueError) as exc:
-        raise UsageError(str(exc)) from exc
+    path, speed, frames = walk_options(path_text, speed_text, seconds)
     if pose_model.config.output not in ("quaternion", "dual_quaternion"):
         raise UsageError(f"--checkpoint: generation needs a quaternion or dual-quaternion model, got output = "
                          f"{pose_model.config.output!r} (an ablation)")
     seed = pose_model.extra["seed_clip"]
     return generate_walk(pose_model.params, pose_model.config.network(), pace_model.params, pace_model.config,
                          skeleton_of(pose_model.extra), np.asarray(seed["rotations"]), np.asarray(seed["features"]),
-                         path, speed, int(round(seconds * FPS)), dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
+                         path, speed, frames, dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
 
 
 def generate_command(args, load_trained: Callable, say: Callable) -> int:
@@ -42,6 +62,7 @@ def generate_command(args, load_trained: Callable, say: Callable) -> int:
         raise UsageError("--model quaternet-long needs --checkpoint POSE.npz and --pace PACE.npz")
     if args.backend != "numpy":
         raise UsageError("--model quaternet-long runs in NumPy (use `python -m deploy` for the exported models)")
+    walk_options(args.path, args.speed, args.seconds)  # option values and the path file before any work
     pose_model, pace_model = load_trained(args.checkpoint), load_trained(args.pace)
     walk = walk_from_checkpoints(pose_model, pace_model, args.path, args.speed, args.seconds)
     out = args.out if args.out != "transition.bvh" else "walk.bvh"

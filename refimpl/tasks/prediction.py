@@ -779,7 +779,9 @@ SAMPLE_EXPMAP_DIR = Path(__file__).resolve().parent.parent / "data" / "sample" /
 
 def add_train_options(parser) -> None:
     """The task's options of ``refimpl train`` (``--downsample``); its data is ``--data`` (:func:`resolve_data`)."""
-    parser.add_argument("--downsample", type=int, default=2,
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--downsample", type=bounded_int("downsample"), default=2,
                         help="prediction task: keep every k-th frame, every phase for training (default 2: "
                              "H3.6M 50 -> 25 Hz, CMU 120 -> 60 fps)")
 
@@ -788,7 +790,9 @@ def add_eval_options(parser) -> None:
     """The task's options of ``refimpl eval`` (``--protocol``, ``--samples-per-sequence``, ``--wrap``)."""
     parser.add_argument("--protocol", default="standard", choices=("standard", "dense"),
                         help="prediction task: 4 (standard, Table 1) or 128 (dense, Table 2) samples per sequence")
-    parser.add_argument("--samples-per-sequence", type=int, default=None,
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--samples-per-sequence", type=bounded_int("samples"), default=None,
                         help="prediction task: override the protocol's samples per sequence")
     parser.add_argument("--horizons", default="default", choices=("default", "table2"),
                         help="prediction task: the dataset's horizons (default) or the dual-quaternion paper's "
@@ -829,9 +833,11 @@ def resolve_data(data: str, *, downsample: int = 2) -> PredictionData:
 def train_datasets(args):
     """``(data, data)``: the :class:`PredictionData` of ``refimpl train``'s ``--data`` (its ``train`` sequences
     are the training examples, its ``test`` sequences the held-out ones)."""
+    from refimpl.errors import BadInputError
+
     data = resolve_data(args.data, downsample=getattr(args, "downsample", 2))
     if not data.train:
-        raise ValueError(f"--data {args.data}: no training sequences")
+        raise BadInputError(f"--data {args.data}: no training sequences")
     return data, data
 
 

@@ -32,7 +32,7 @@ from refimpl.errors import BadInputError, UsageError, existing_file, file_error,
 from refimpl.expmap import EXPMAP_LAYOUTS
 from refimpl.metrics import evaluate_methods, format_table
 from refimpl.motion import Motion
-from refimpl.options import positive_int
+from refimpl.bounds import bounded_int
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_rotate
 from refimpl.skeleton import Skeleton
 from refimpl.transitions import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
@@ -60,7 +60,8 @@ def _say(*parts) -> None:
 
 def add_train_options(parser) -> None:
     """The task's options of ``refimpl train`` (its data options are the command line's common ones)."""
-    parser.add_argument("--transition-length", type=positive_int, default=30, help="T (default 30 = 1 s)")
+    parser.add_argument("--transition-length", type=bounded_int("transition_length"), default=30,
+                        help="T (default 30 = 1 s)")
 
 
 def source_for_file(path, *, fps: float | None = None, label: str | None = None, frames=(0.0, 1.0)):
