@@ -441,7 +441,7 @@ def _generate_prediction(args, model) -> int:
         dataset, frame_time = model.extra["dataset"], float(model.extra["frame_time"])
         P, name = int(model.config.prefix_length), model.spec.name
     networks = network_methods(None if args.backend == "onnx" else model,
-                               onnx_dir=args.onnx if args.backend == "onnx" else None)
+                               onnx_dir=args.onnx if args.backend == "onnx" else None, expect=model)
     rotations = prediction.load_clip(args.source, dataset, frame_time)
     k = args.length or 25
     pr = prediction.make_prediction(next(iter(networks.values())), rotations, args.source_frame, P, k,
@@ -539,7 +539,7 @@ def cmd_generate(args) -> int:
                             "(both clips must come from the same skeleton)")
     if args.method == "qtg":
         networks = network_methods(None if args.backend == "onnx" else model,
-                                   onnx_dir=args.onnx if args.backend == "onnx" else None)
+                                   onnx_dir=args.onnx if args.backend == "onnx" else None, expect=model)
         method = next(iter(networks.values()))
     else:
         method = transition.methods(fps=fps)[args.method]
@@ -697,7 +697,7 @@ def _generate_synthesis(args, model=None) -> int:
     if args.backend == "onnx" and not args.onnx:
         raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
     networks = network_methods(None if args.backend == "onnx" else model,
-                               onnx_dir=args.onnx if args.backend == "onnx" else None)
+                               onnx_dir=args.onnx if args.backend == "onnx" else None, expect=model)
     method = next(iter(networks.values()))
     n = args.length or 300
     motion, seed_frames = task.continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
@@ -897,6 +897,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(exc: BaseException, limit: int = 1000) -> str:
+    """An exception's message as one line (a checker's report may span several), at most ``limit`` characters."""
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def _prog(args) -> str:
     return f"refimpl {args.command}" if getattr(args, "command", None) else "refimpl"
 
@@ -920,17 +926,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BadInputError as exc:
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except UsageError as exc:
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except (MissingDependency, ImportError) as exc:  # an optional dependency (matplotlib, onnx) is missing
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
@@ -943,7 +949,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.traceback:
             raise
         kind = "" if isinstance(exc, (RuntimeError, ValueError, OSError)) else f"{type(exc).__name__}: "
-        print(f"{prog}: error: {kind}{exc} (run with --traceback for details)", file=sys.stderr)
+        print(f"{prog}: error: {kind}{_one_line(exc)} (run with --traceback for details)", file=sys.stderr)
         return EXIT_FAILURE
 
 

@@ -142,16 +142,20 @@ def _check_writable_checkpoint(spec: ModelSpec, adapter) -> None:
         raise UsageError(f"{exc} (the loader would refuse it; nothing trained)") from None
 
 
-def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict:
-    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``)."""
+def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect: TrainedModel | None = None) -> dict:
+    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``).
+
+    ``onnx_dir`` must hold the exported models of ``model`` (or of ``expect``, the checkpoint the command runs
+    when only the exported models are run): another model's folder is a ``BadInputError`` naming the folder."""
     methods = {}
     if model is not None:
         methods[model.spec.name] = model.spec.make_method(model)
     if onnx_dir is not None:
         name = _onnx_model_name(onnx_dir)
-        if model is not None and name != model.spec.name:  # the folder must hold this command's model
-            raise BadInputError(f"{onnx_dir}: holds exported {name!r} models, not the {model.spec.name!r} model of "
-                                f"{model.path}")
+        want = model if model is not None else expect
+        if want is not None and name != want.spec.name:  # the folder must hold this command's model
+            raise BadInputError(f"{onnx_dir}: holds exported {name!r} models, not the {want.spec.name!r} model of "
+                                f"{want.path}")
         methods[f"{name}_onnx"] = onnx_method(onnx_dir)
     return methods
 

@@ -21,7 +21,8 @@ task            fields (checked when the task writes them; ``required`` ones mus
                 positive integers, ``train_takes`` / ``test_takes`` lists of strings
 ``prediction``  ``dataset`` ``cmu`` or ``h36m`` (required), ``num_joints`` = the dataset skeleton's, ``frame_time``
                 finite > 0 and ``fps`` = 1 / ``frame_time`` (0.1 %)
-``locomotion``  ``rig`` ``cmu`` or ``bandai_namco``, ``skeleton`` (both required), ``prefix`` / ``target``
+``locomotion``  ``rig`` ``cmu`` or ``bandai_namco`` and a ``skeleton`` with that rig's joints (both required),
+                ``prefix`` / ``target``
                 positive integers; the pose network: ``num_joints`` = the skeleton's J, ``seed_clip`` with
                 ``rotations`` (S, J, 4) of non-zero quaternions and ``features`` (S, 8) finite, 1 <= S <= 1000
 ``transition``  ``root_mean`` / ``root_std`` (required; types in ``checkpoint_schema.TASK_FIELDS``)
@@ -199,6 +200,12 @@ def _locomotion(cfg: Mapping, config, where: str, task_module=None) -> None:
     if cfg["rig"] not in rigs:
         raise ValueError(f"{where}: model_config.rig: expected one of {list(rigs)}, got {_kind(cfg['rig'])}")
     sk = _skeleton(cfg["skeleton"], where, want_sides=True)
+    rig_of = getattr(task_module, "rig_of", None)  # the task's rigs, when the caller may import the task
+    if rig_of is not None:
+        keep = set(rig_of({"rig": cfg["rig"]}).keep)
+        if keep != set(sk.names):
+            raise ValueError(f"{where}: model_config.skeleton does not have the joints of the {cfg['rig']!r} rig "
+                             f"(missing {sorted(keep - set(sk.names))[:4]}, extra {sorted(set(sk.names) - keep)[:4]})")
     for key in ("prefix", "target"):
         if key in cfg:
             _positive_int(cfg, key, where)
