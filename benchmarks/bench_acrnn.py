@@ -5,8 +5,8 @@
    decoding in the graph), and PyTorch (three ``nn.LSTMCell`` + ``nn.Linear`` float32, as acRNN's code steps, when torch is installed),
    interleaved round by round; median per-call time and ratios to NumPy.
 2. **Training iteration** (``--train``): one auto-conditioned forward + backward of a batch of 32 windows of
-   100 + 1 frames, float32: the step-by-step reference (:mod:`refimpl.models.acrnn`) against the fast path
-   (:mod:`refimpl.models.acrnn_fast`), interleaved; ratio.
+   100 + 1 frames, float32 (:func:`refimpl.models.acrnn.sequence_forward` / ``sequence_backward``). The fast path
+   once compared here (``acrnn_fast``) measured 1.12x and was removed (benchmarks/README.md).
 
 All with one thread (BLAS, onnxruntime intra-op, torch). A table is printed and JSON written to
 ``benchmarks/results/bench_acrnn.json``. Nothing asserts on time; the machine is shared (±25-40 %).
@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from refimpl.allocator import retain_freed_memory  # noqa: E402
-from refimpl.models import acrnn, acrnn_fast  # noqa: E402
+from refimpl.models import acrnn  # noqa: E402
 
 
 def _per_call(fn, min_time=0.3):
@@ -109,20 +109,15 @@ def bench_train(rounds: int, hidden: int, frame_size: int, batch: int = 32, leng
     x = rng.standard_normal((batch, length + 1, frame_size)).astype(np.float32)
     d = rng.standard_normal((batch, length, frame_size)).astype(np.float32)
 
-    def run(mod):
-        pred, cache = mod.sequence_forward(params, cfg, x)
-        return mod.sequence_backward(d, cache)
-
-    times = {"reference": [], "fast": []}
+    times = []
     for r in range(rounds):
-        for name, mod in (("reference", acrnn), ("fast", acrnn_fast)):
-            t0 = time.perf_counter()
-            run(mod)
-            times[name].append(time.perf_counter() - t0)
-            print(f"  train round {r}: {name} {times[name][-1]:.2f} s", flush=True)
-    med = {k: statistics.median(v) for k, v in times.items()}
+        t0 = time.perf_counter()
+        pred, cache = acrnn.sequence_forward(params, cfg, x)
+        acrnn.sequence_backward(d, cache)
+        times.append(time.perf_counter() - t0)
+        print(f"  train round {r}: {times[-1]:.2f} s", flush=True)
     return {"hidden": hidden, "frame_size": frame_size, "batch": batch, "length": length, "rounds": rounds,
-            "median_s": med, "speedup": med["reference"] / med["fast"]}
+            "seconds": times, "median_s": statistics.median(times)}
 
 
 def main():
@@ -130,7 +125,7 @@ def main():
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--hidden", type=int, default=1024)
     ap.add_argument("--frame-size", type=int, default=251)
-    ap.add_argument("--train", action="store_true", help="also time one training iteration, reference vs fast")
+    ap.add_argument("--train", action="store_true", help="also time one training iteration")
     ap.add_argument("--train-rounds", type=int, default=1)
     ap.add_argument("--train-hidden", type=int, default=1024)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_acrnn.json"))
@@ -144,8 +139,7 @@ def main():
     if a.train:
         res["train_iteration"] = bench_train(a.train_rounds, a.train_hidden, a.frame_size)
         t = res["train_iteration"]
-        print(f"training iteration (B 32, T 100, 3 x {a.train_hidden}): reference {t['median_s']['reference']:.2f} s, "
-              f"fast {t['median_s']['fast']:.2f} s, speed-up x{t['speedup']:.2f}")
+        print(f"training iteration (B 32, T 100, 3 x {a.train_hidden}): median {t['median_s']:.2f} s")
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     Path(a.out).write_text(json.dumps(res, indent=2) + "\n")
     print(f"wrote {a.out}")

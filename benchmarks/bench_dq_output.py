@@ -2,9 +2,9 @@
 
 Variants, interleaved in every round (order rotated between rounds):
 
-* ``composed``: ``refimpl.dq_output._composed_forward`` / ``_composed_backward`` — the composition of the public
-  losses (the path every batch took before the fused kernel, and still its readable reference);
-* ``fused``: ``refimpl.dq_output.dq_output_loss_forward`` / ``dq_output_loss_backward`` (the fused kernel);
+* ``composed``: ``refimpl.dq_output.dq_output_loss_forward`` / ``dq_output_loss_backward`` — the composition of
+  the public losses (the path every batch took before the fused kernel, and still its readable reference);
+* ``fused``: ``refimpl.dq_output_fast.dq_output_loss_forward`` / ``dq_output_loss_backward`` (the fused kernel);
 * ``loss_composed`` / ``loss_fused``: the whole acRNN training loss ``refimpl.models.acrnn.loss_forward`` +
   ``loss_backward`` of the row "dual quaternions (all losses)" (MSE + 0.01 L_reg + ⅓ L_pos + ⅓ L_offset + local
   L_quat on the de-standardised output), with the DQ path switched between the two.
@@ -31,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from refimpl import dq_output  # noqa: E402
+from refimpl import dq_output, dq_output_fast  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.dualquat import dq_normalize  # noqa: E402
 from refimpl.models import acrnn  # noqa: E402
@@ -39,8 +39,8 @@ from refimpl.skeleton import Skeleton  # noqa: E402
 
 
 def _composed_public(raw, target, parents, weights=dq_output.DQ_TERMS, eps=1e-12):
-    total, parts, cache = dq_output._composed_forward(raw, target, parents, dq_output._check_weights(weights), eps)
-    return total, parts, ("composed", cache)
+    total, parts, cache = dq_output.dq_output_loss_forward(raw, target, parents, weights, eps)
+    return total, parts, ("composed", cache)  # the fast module's backward dispatches on the tag
 
 
 def main():
@@ -67,16 +67,17 @@ def main():
     pred = (tgt + 0.1 * rng.standard_normal(tgt.shape)).astype(np.float32)
 
     def path(kind):
-        fwd = _composed_public if kind == "composed" else dq_output.dq_output_loss_forward
+        fwd = _composed_public if kind == "composed" else dq_output_fast.dq_output_loss_forward
 
         def run():
             total, _, cache = fwd(raw, target, parents, w)
-            return total, dq_output.dq_output_loss_backward(1.0, cache)
+            return total, dq_output_fast.dq_output_loss_backward(1.0, cache)
         return run
 
     def whole(kind):
         def run():
-            acrnn.dq_output_loss_forward = _composed_public if kind == "composed" else dq_output.dq_output_loss_forward
+            fast = dq_output_fast.dq_output_loss_forward
+            acrnn.dq_output_loss_forward = _composed_public if kind == "composed" else fast
             total, _, cache = acrnn.loss_forward(pred, tgt, spec)
             return total, acrnn.loss_backward(1.0, cache)
         return run

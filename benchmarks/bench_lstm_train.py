@@ -1,5 +1,5 @@
 """Benchmark: the acRNN-sized LSTM training iteration and acRNN's auto-conditioned training iteration, NumPy vs
-PyTorch eager (and the fast vs the reference LSTM kernels).
+PyTorch eager.
 
 What is timed (spec/layers.md §5.6; reference/performance_facts.md "Training acRNN"): a 3-layer LSTM 251 -> 1024
 (acRNN's skewed stack for NumPy; PyTorch's ``nn.LSTM`` is the ordinary stack, which has exactly the same products),
@@ -9,20 +9,19 @@ zero initial states, a linear head 1024 -> 251 on every frame, an MSE loss, the 
 Variants, interleaved in every round (the order rotates from round to round; 0.15 s of settling between variants,
 because OpenBLAS and PyTorch thread pools spin after a call and slow the next framework's first call):
 
-* ``numpy_fast``: ``lstm_forward`` / ``lstm_backward`` (the feature-major fast layer kernels) +
+* ``numpy_fast`` (the key of the recorded results; there is one NumPy LSTM): ``lstm_forward`` / ``lstm_backward`` +
   ``refimpl.optim.adam_step``;
-* ``numpy_reference``: ``_lstm_forward_reference`` (the readable batch-major kernels kept beside the fast ones);
 * ``torch``: ``torch.nn.LSTM`` (oneDNN) + ``nn.Linear`` + ``mse_loss`` + ``torch.optim.Adam`` (its default
   implementation on CPU), if ``torch`` is importable;
 * ``acrnn_numpy`` (unless ``--no-acrnn``): acRNN's training iteration with auto-conditioning (mask 5 ground-truth /
   5 own frames, the prediction fed back not detached; ordinary stack, the config's default):
-  :mod:`refimpl.models.acrnn_fast` rollout and BPTT + MSE against the next frames + Adam;
+  :func:`refimpl.models.acrnn.sequence_forward` rollout and BPTT + MSE against the next frames + Adam;
 * ``acrnn_torch``: the same in PyTorch eager, as fast as eager allows: each ground-truth segment one ``nn.LSTM``
   call (oneDNN, all layers), each own-output step one ``nn.LSTM`` call on the previous prediction.
 
 Every round also measures the float32 GEMM peak (best of 3 ``2048^3`` products, NumPy/OpenBLAS with the same
 threads), so each iteration is paired with the peak of its own round: "share of limit" = (matmul GFLOP / peak) /
-time. The ratios numpy_fast / torch, acrnn_numpy / acrnn_torch and numpy_fast / numpy_reference are taken per
+time. The ratios numpy_fast / torch and acrnn_numpy / acrnn_torch are taken per
 round (paired) and reported as ranges, with the 1-min load average at the end of each round; absolute times on
 this shared 2-vCPU machine drift by ±25-40 % within minutes (far more when other jobs run) and are not comparable
 between runs.
@@ -57,9 +56,9 @@ sys.path.insert(0, str(ROOT))
 
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
-from refimpl.models import acrnn, acrnn_fast  # noqa: E402
+from refimpl.models import acrnn  # noqa: E402
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init  # noqa: E402
-from refimpl.nn.lstm import _lstm_forward_reference, lstm_backward, lstm_forward, lstm_init  # noqa: E402
+from refimpl.nn.lstm import lstm_backward, lstm_forward, lstm_init  # noqa: E402
 from refimpl.nn.params import count_parameters, merge_grads  # noqa: E402
 from refimpl.optim import ACRNN_ADAM, adam_init, adam_step  # noqa: E402
 
@@ -93,12 +92,11 @@ def make_numpy_model():
     return params, x, target
 
 
-def numpy_loss_and_grads(params, x, target, skewed: bool, reference: bool):
+def numpy_loss_and_grads(params, x, target, skewed: bool):
     """Forward, MSE, backward. Returns (y, loss, grads, dx, seconds forward, seconds backward)."""
     t0 = time.perf_counter()
     zeros = np.zeros((L, x.shape[0], H), np.float32)
-    forward = _lstm_forward_reference if reference else lstm_forward
-    y, _, cache = forward(x, (zeros, zeros), params, "rnn", L, skewed)
+    y, _, cache = lstm_forward(x, (zeros, zeros), params, "rnn", L, skewed)
     pred, hcache = linear_forward(y, params, "fc")
     diff = pred - target
     loss = float(np.mean(diff * diff, dtype=np.float64))
@@ -111,8 +109,8 @@ def numpy_loss_and_grads(params, x, target, skewed: bool, reference: bool):
     return y, loss, grads, dx, t1 - t0, t2 - t1
 
 
-def numpy_iteration(params, x, target, state, reference: bool) -> dict:
-    _, _, grads, _, tf, tb = numpy_loss_and_grads(params, x, target, True, reference)
+def numpy_iteration(params, x, target, state) -> dict:
+    _, _, grads, _, tf, tb = numpy_loss_and_grads(params, x, target, True)
     return _with_adam(tf, tb, params, grads, state)
 
 
@@ -164,7 +162,7 @@ def check_against_torch(torch, params, x, target, skew_frames: int) -> dict:
     yt, _ = lstm(xt)
     loss_t = torch.nn.functional.mse_loss(fc(yt), torch.from_numpy(target))
     loss_t.backward()
-    y, loss, grads, dx, _, _ = numpy_loss_and_grads(params, x, target, skewed=False, reference=False)
+    y, loss, grads, dx, _, _ = numpy_loss_and_grads(params, x, target, skewed=False)
     errs = {"ordinary.y": _rel_err(y, yt.detach().numpy()), "ordinary.loss": abs(loss - loss_t.item()) / loss_t.item(),
             "ordinary.dx": _rel_err(dx, xt.grad.numpy())}
     for name, p in lstm.named_parameters():
@@ -193,8 +191,7 @@ def check_against_torch(torch, params, x, target, skew_frames: int) -> dict:
     fc.zero_grad()
     loss_s.backward()
     y2, loss2, grads2, dx2, _, _ = numpy_loss_and_grads(params, np.ascontiguousarray(x[:, :tf]),
-                                                        np.ascontiguousarray(target[:, :tf]), skewed=True,
-                                                        reference=False)
+                                                        np.ascontiguousarray(target[:, :tf]), skewed=True)
     errs["skewed.y"] = _rel_err(y2, ys.detach().numpy())
     errs["skewed.loss"] = abs(loss2 - loss_s.item()) / loss_s.item()
     errs["skewed.dx"] = _rel_err(dx2, xs.grad.numpy())
@@ -214,7 +211,7 @@ def torch_iteration_fn(torch, params, x, target):
 
 
 # ----------------------------------------------------------------------------------------------------------
-# acRNN with auto-conditioning (the training iteration of refimpl.models.acrnn_fast)
+# acRNN with auto-conditioning (the training iteration of refimpl.models.acrnn)
 
 
 def acrnn_config() -> "acrnn.ACRNNConfig":
@@ -241,14 +238,14 @@ def acrnn_matmul_flops(t_len: int) -> int:
 
 
 def acrnn_numpy_loss_and_grads(params, cfg, frames):
-    """Auto-conditioned rollout (acrnn_fast), MSE against ``frames[:, 1:]``, BPTT. Returns (pred, loss, grads, tf,
+    """Auto-conditioned rollout (refimpl.models.acrnn), MSE against ``frames[:, 1:]``, BPTT. Returns (pred, loss, grads, tf,
     tb)."""
     t0 = time.perf_counter()
-    pred, cache = acrnn_fast.sequence_forward(params, cfg, frames)
+    pred, cache = acrnn.sequence_forward(params, cfg, frames)
     diff = pred - frames[:, 1:]
     loss = float(np.mean(diff * diff, dtype=np.float64))
     t1 = time.perf_counter()
-    grads = acrnn_fast.sequence_backward(diff * np.float32(2.0 / diff.size), cache)
+    grads = acrnn.sequence_backward(diff * np.float32(2.0 / diff.size), cache)
     t2 = time.perf_counter()
     return pred, loss, grads, t1 - t0, t2 - t1
 
@@ -357,10 +354,9 @@ def main(argv=None) -> int:
               f"{'OK' if checks[worst] < CHECK_TOL else 'MISMATCH'} (tolerance {CHECK_TOL:g})", flush=True)
 
     variants = {}
-    for name, ref in (("numpy_fast", False), ("numpy_reference", True)):
-        p = {k: v.copy() for k, v in params.items()}
-        st = adam_init(p)
-        variants[name] = (lambda p=p, st=st, ref=ref: numpy_iteration(p, x, target, st, ref))
+    p = {k: v.copy() for k, v in params.items()}
+    st = adam_init(p)
+    variants["numpy_fast"] = lambda p=p, st=st: numpy_iteration(p, x, target, st)
     if torch is not None:
         variants["torch"] = torch_iteration_fn(torch, params, x, target)
     if not args.no_acrnn:
@@ -393,20 +389,18 @@ def main(argv=None) -> int:
             row["fast_over_torch"] = row["numpy_fast"]["iteration"] / row["torch"]["iteration"]
             if not args.no_acrnn:
                 row["acrnn_numpy_over_torch"] = row["acrnn_numpy"]["iteration"] / row["acrnn_torch"]["iteration"]
-        row["fast_over_reference"] = row["numpy_fast"]["iteration"] / row["numpy_reference"]["iteration"]
         rounds.append(row)
         print(f"round {r + 1}: peak {peak:.0f}/{peak_after:.0f} GF/s, limit {limit:.2f} s; " + "; ".join(
             f"{n} {row[n]['iteration']:.2f} s (fwd {row[n]['forward']:.2f}, bwd {row[n]['backward']:.2f}, "
             f"adam {1e3 * row[n]['adam']:.0f} ms; {100 * row['share_of_limit'][n]:.0f} % of limit)" for n in names)
             + (f"; fast/torch {row['fast_over_torch']:.2f}" if torch is not None else "")
-            + f"; fast/reference {row['fast_over_reference']:.2f}"
             + (f"; acrnn numpy/torch {row['acrnn_numpy_over_torch']:.2f}" if "acrnn_numpy_over_torch" in row else "")
             + f"; load {os.getloadavg()[0]:.1f}", flush=True)
 
     def rng_of(key):
         vals = [r[key] for r in rounds]
         return {"min": min(vals), "median": statistics.median(vals), "max": max(vals)}
-    summary = {"fast_over_reference": rng_of("fast_over_reference")}
+    summary = {}
     if torch is not None:
         summary["fast_over_torch"] = rng_of("fast_over_torch")
         if not args.no_acrnn:

@@ -69,7 +69,7 @@ from refimpl.models.qtg_fast import prepare_inference, rollout_forward, rollout_
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.nn.gru import gru_init, gru_step_forward  # noqa: E402
 from refimpl.quat import quat_normalize  # noqa: E402
-from refimpl.transitions import denormalize_poses, split_pose  # noqa: E402
+from refimpl.protocols.transition import denormalize_poses, split_pose  # noqa: E402
 
 try:
     from threadpoolctl import threadpool_info, threadpool_limits
@@ -367,7 +367,7 @@ def _model_params(args, cfg):
     """``(params float64, description, test data or None)``."""
     data = None
     try:
-        from refimpl.transitions import build_transition_datasets, sample_sources
+        from refimpl.protocols.transition import build_transition_datasets, sample_sources
         train, data = build_transition_datasets(*sample_sources(), stride=5, test_stride=10)
     except Exception as exc:  # the sample is part of the package; keep the benchmark running regardless
         print(f"note: no sample data ({exc}); accuracy on random contexts only", file=sys.stderr)

@@ -3,18 +3,16 @@
 Built with the onnx package's own graph API (no PyTorch, no tracing). One builder module per layer family
 (``linear``, ``activations``, ``gru``, ``lstm``, ``conv1d``, ``quat``, ``kinematics``, ``features``), block
 quantisation for onnxruntime's ``MatMulNBits`` (``quantize``), the per-model exporters and runtimes with the
-exporter table (``deploy.models``: ``qtg``, ``qtg_compact``, ``qtg_io``), validation (``validate``: checker,
+exporter table (``deploy.models``: one graph module and one entry module ``*_io`` per model; QTG's ``qtg``,
+``qtg_compact``, ``qtg_io`` are re-exported here), validation (``validate``: checker,
 strict shape inference, the ONNX reference evaluator, onnxruntime), sessions (``session``) and the generic
 runtime wrapper (``runtime``). See ``spec/deploy.md`` and
 ``deploy/README.md`` (input/output contract, C API example).
 
 Requires the ``deploy`` extra: ``pip install 'refimpl[deploy]'``.
 """
-from . import (graph as _graph, linear as _linear, activations as _activations, recurrent as _recurrent,
-               gru as _gru, lstm as _lstm, conv1d as _conv1d, quat as _quat, kinematics as _kinematics,
-               features as _features, metadata as _metadata, quantize as _quantize, validate as _validate,
-               session as _session, runtime as _runtime)
-from .models import qtg as _qtg, qtg_compact as _qtg_compact, qtg_io as _qtg_io
+import importlib
+
 from .graph import *  # noqa: F401,F403
 from .linear import *  # noqa: F401,F403
 from .activations import *  # noqa: F401,F403
@@ -34,6 +32,8 @@ from .models.qtg import *  # noqa: F401,F403
 from .models.qtg_compact import *  # noqa: F401,F403
 from .models.qtg_io import *  # noqa: F401,F403
 
-__all__ = [n for m in (_graph, _linear, _activations, _recurrent, _gru, _lstm, _conv1d, _quat, _kinematics,
-                       _features, _metadata, _quantize, _validate, _session, _runtime, _qtg, _qtg_compact, _qtg_io)
-           for n in m.__all__]
+# (the functions deploy.linear, deploy.gru, deploy.lstm shadow their modules here, so the modules are looked up)
+__all__ = [n for m in ("graph", "linear", "activations", "recurrent", "gru", "lstm", "conv1d", "quat", "kinematics",
+                       "features", "metadata", "quantize", "validate", "session", "runtime", "models.qtg",
+                       "models.qtg_compact", "models.qtg_io")
+           for n in importlib.import_module(f"{__name__}.{m}").__all__]

@@ -29,12 +29,12 @@ import numpy as np
 
 from deploy.graph import GraphBuilder
 from deploy.quantize import WEIGHT_FORMATS, WeightMatmul
-from deploy.recurrent import (GRU_PERM, check_layer_shapes as _check_layer_shapes, concat_layers as _concat_layers,
-                              input_projection as _input_projection, merge_directions as _merge_directions,
-                              onnx_layer_weights as _onnx_layer_weights,
-                              primitive_layer_weights as _primitive_layer_weights, scan_recurrence as _scan_recurrence,
-                              split_layers as _split_layers, squeeze0 as _squeeze0, time_major as _time_major,
-                              unsqueeze0 as _unsqueeze0)
+from deploy.recurrent import (GRU_PERM, check_layer_shapes, concat_layers,
+                              input_projection, merge_directions,
+                              onnx_layer_weights,
+                              primitive_layer_weights, scan_recurrence,
+                              split_layers, squeeze0, time_major,
+                              unsqueeze0)
 
 __all__ = ["gru", "gru_step", "gru_onnx_weights"]
 
@@ -45,7 +45,7 @@ def gru_onnx_weights(params: Mapping[str, np.ndarray], prefix: str, layer: int =
 
     Missing biases count as zeros. The reverse direction reads the ``*_reverse`` parameters.
     """
-    w, r, b, _ = _onnx_layer_weights(params, prefix, layer, 2 if bidirectional else 1, GRU_PERM)
+    w, r, b, _ = onnx_layer_weights(params, prefix, layer, 2 if bidirectional else 1, GRU_PERM)
     return w, r, b
 
 
@@ -79,24 +79,24 @@ def gru(g: GraphBuilder, x: str, h0: str, params: Mapping[str, np.ndarray], pref
         ``(L·D, B, H)``: final state of every layer and direction.
     """
     dirs = 2 if bidirectional else 1
-    seq = _time_major(g, x, f"{name}.x_tm")                              # (T, B, I)
-    h0s = _split_layers(g, h0, num_layers, dirs, f"{name}.h0")           # L × (D, B, H)
+    seq = time_major(g, x, f"{name}.x_tm")                              # (T, B, I)
+    h0s = split_layers(g, h0, num_layers, dirs, f"{name}.h0")           # L × (D, B, H)
     hns = []
     for k in range(num_layers):
-        _check_layer_shapes(params, prefix, k, 3, dirs)
+        check_layer_shapes(params, prefix, k, 3, dirs)
         lname, wl = f"{name}.l{k}", f"{wname or name}.l{k}"
         if g.primitive:
             seq, hn = _primitive_layer(g, seq, h0s[k], params, prefix, k, dirs, lname, wl)
         else:
-            w, r, b, hidden = _onnx_layer_weights(params, prefix, k, dirs, GRU_PERM)
+            w, r, b, hidden = onnx_layer_weights(params, prefix, k, dirs, GRU_PERM)
             y, hn = g.node("GRU", [seq, g.weight(f"{wl}.W", w), g.weight(f"{wl}.R", r),
                                    g.weight(f"{wl}.B", b), "", h0s[k]],
                            lname, outputs=("Y", "Y_h"), hidden_size=hidden, linear_before_reset=1,
                            direction="bidirectional" if bidirectional else "forward")  # (T, D, B, H), (D, B, H)
-            seq = _merge_directions(g, y, dirs, f"{lname}.y")           # (T, B, D·H)
+            seq = merge_directions(g, y, dirs, f"{lname}.y")           # (T, B, D·H)
         hns.append(hn)
-    y = _time_major(g, seq, f"{name}.y")                                 # (B, T, D·H)
-    return y, _concat_layers(g, hns, f"{name}.h_n")                     # (L·D, B, H)
+    y = time_major(g, seq, f"{name}.y")                                 # (B, T, D·H)
+    return y, concat_layers(g, hns, f"{name}.h_n")                     # (L·D, B, H)
 
 
 def gru_step(g: GraphBuilder, x_t: str, h: str, params: Mapping[str, np.ndarray], prefix: str, *, name: str,
@@ -181,49 +181,49 @@ def gru_step(g: GraphBuilder, x_t: str, h: str, params: Mapping[str, np.ndarray]
                              f"primitive={g.primitive}")
         return _quantized_step(g, x_t, h, params, prefix, name, num_layers, wname or name,
                                WeightMatmul(g, weights, block_size=block_size, accuracy_level=accuracy_level))
-    hs = _split_layers(g, h, num_layers, 1, f"{name}.h")                 # L × (1, B, H)
+    hs = split_layers(g, h, num_layers, 1, f"{name}.h")                 # L × (1, B, H)
     hn = []
     if g.primitive:
         inp = x_t                                                        # (B, I)
         for k in range(num_layers):
-            _check_layer_shapes(params, prefix, k, 3, 1)
+            check_layer_shapes(params, prefix, k, 3, 1)
             lname, wl = f"{name}.l{k}", f"{wname or name}.l{k}"
-            w_ih, w_hh, b_ih, b_hh = _primitive_layer_weights(params, prefix, k, False)
-            xp = _input_projection(g, inp, w_ih, b_ih, lname, wl)           # (B, 3H)
+            w_ih, w_hh, b_ih, b_hh = primitive_layer_weights(params, prefix, k, False)
+            xp = input_projection(g, inp, w_ih, b_ih, lname, wl)           # (B, 3H)
             wh, bh = g.weight(f"{wl}.Wh", w_hh.T), g.weight(f"{wl}.bh", b_hh)
-            h_k = _squeeze0(g, hs[k], f"{lname}.h")                      # (B, H)
+            h_k = squeeze0(g, hs[k], f"{lname}.h")                      # (B, H)
             inp = _gru_cell(g, xp, h_k, wh, bh, w_hh.shape[1], f"{lname}.cell")  # (B, H)
-            hn.append(_unsqueeze0(g, inp, f"{lname}.h_new"))             # (1, B, H)
-        return inp, _concat_layers(g, hn, f"{name}.h_new")
+            hn.append(unsqueeze0(g, inp, f"{lname}.h_new"))             # (1, B, H)
+        return inp, concat_layers(g, hn, f"{name}.h_new")
     inp = g.node("Unsqueeze", [x_t, g.ints([0])], f"{name}.x_seq")       # (1, B, I)
     for k in range(num_layers):
-        _check_layer_shapes(params, prefix, k, 3, 1)
+        check_layer_shapes(params, prefix, k, 3, 1)
         lname, wl = f"{name}.l{k}", f"{wname or name}.l{k}"
-        w, r, b, hidden = _onnx_layer_weights(params, prefix, k, 1, GRU_PERM)
+        w, r, b, hidden = onnx_layer_weights(params, prefix, k, 1, GRU_PERM)
         (_, inp) = g.node("GRU", [inp, g.weight(f"{wl}.W", w), g.weight(f"{wl}.R", r),
                                   g.weight(f"{wl}.B", b), "", hs[k]],
                           lname, outputs=("", "Y_h"), hidden_size=hidden, linear_before_reset=1)  # (1, B, H)
         hn.append(inp)
-    y = _squeeze0(g, inp, f"{name}.y")                                   # (B, H)
-    return y, _concat_layers(g, hn, f"{name}.h_new")                    # (L, B, H)
+    y = squeeze0(g, inp, f"{name}.y")                                   # (B, H)
+    return y, concat_layers(g, hn, f"{name}.h_new")                    # (L, B, H)
 
 
 # --------------------------------------------------------------------------------------- quantised step
 def _quantized_step(g: GraphBuilder, x_t: str, h: str, params, prefix: str, name: str, num_layers: int,
                     wname: str, W: WeightMatmul) -> tuple[str, str]:
     """The int8/int4 step of :func:`gru_step` (its Notes); layer states kept ``(1, B, H)``."""
-    hs = _split_layers(g, h, num_layers, 1, f"{name}.h")                 # L × (1, B, H)
+    hs = split_layers(g, h, num_layers, 1, f"{name}.h")                 # L × (1, B, H)
     inp, hn = x_t, []                                                    # (B, I), then (1, B, H)
     for k in range(num_layers):
-        _check_layer_shapes(params, prefix, k, 3, 1)
+        check_layer_shapes(params, prefix, k, 3, 1)
         lname, wl = f"{name}.l{k}", f"{wname}.l{k}"
-        w_ih, w_hh, b_ih, b_hh = _primitive_layer_weights(params, prefix, k, False)
+        w_ih, w_hh, b_ih, b_hh = primitive_layer_weights(params, prefix, k, False)
         gi = W.matmul(inp, np.asarray(w_ih).T, f"{wl}.ih", f"{lname}.gi", bias=np.asarray(b_ih))  # (·, B, 3H)
         gh = W.matmul(hs[k], np.asarray(w_hh).T, f"{wl}.hh", f"{lname}.gh", bias=np.asarray(b_hh))  # (1, B, 3H)
         inp = _gates(g, gi, gh, hs[k], w_hh.shape[1], f"{lname}.cell")   # (1, B, H)
         hn.append(inp)
-    y = _squeeze0(g, inp, f"{name}.y")                                   # (B, H)
-    return y, _concat_layers(g, hn, f"{name}.h_new")                    # (L, B, H)
+    y = squeeze0(g, inp, f"{name}.y")                                   # (B, H)
+    return y, concat_layers(g, hn, f"{name}.h_new")                    # (L, B, H)
 
 
 def _gates(g: GraphBuilder, gi: str, gh: str, h: str, hidden: int, name: str) -> str:
@@ -231,10 +231,10 @@ def _gates(g: GraphBuilder, gi: str, gh: str, h: str, hidden: int, name: str) ->
     sizes = g.ints([2 * hidden, hidden])
     i_rz, i_n = g.node("Split", [gi, sizes], f"{name}.gi", axis=-1, outputs=("rz", "n"))  # (·, B, 2H), (·, B, H)
     h_rz, h_n = g.node("Split", [gh, sizes], f"{name}.gh", axis=-1, outputs=("rz", "n"))  # (1, B, 2H), (1, B, H)
-    return _gru_gates(g, i_rz, i_n, h_rz, h_n, h, hidden, name)          # (1, B, H)
+    return gru_gates(g, i_rz, i_n, h_rz, h_n, h, hidden, name)          # (1, B, H)
 
 
-def _gru_gates(g: GraphBuilder, i_rz: str, i_n: str, h_rz: str | None, h_n: str, h: str | None, hidden: int,
+def gru_gates(g: GraphBuilder, i_rz: str, i_n: str, h_rz: str | None, h_n: str, h: str | None, hidden: int,
                name: str) -> str:
     """The GRU cell from its split pre-activations (gate order r|z|n); shared by every primitive-operator form.
 
@@ -265,7 +265,7 @@ def _gru_cell(g: GraphBuilder, xp: str, h: str, wh: str, bh: str, hidden: int, n
     sizes = g.ints([2 * hidden, hidden])
     x_rz, x_n = g.node("Split", [xp, sizes], f"{name}.xs", axis=-1, outputs=("rz", "n"))  # (B, 2H), (B, H)
     h_rz, h_n = g.node("Split", [hp, sizes], f"{name}.hs", axis=-1, outputs=("rz", "n"))  # (B, 2H), (B, H)
-    return _gru_gates(g, x_rz, x_n, h_rz, h_n, h, hidden, name)          # (B, H)
+    return gru_gates(g, x_rz, x_n, h_rz, h_n, h, hidden, name)          # (B, H)
 
 
 def _primitive_layer(g, seq, h0_layer, params, prefix, layer, dirs, lname, wl):
@@ -275,24 +275,24 @@ def _primitive_layer(g, seq, h0_layer, params, prefix, layer, dirs, lname, wl):
         g.node("Split", [h0_layer, g.ints([1, 1])], f"{lname}.h0", axis=0, outputs=("f", "b")))
     for d in range(dirs):
         dname, wd = f"{lname}.d{d}", f"{wl}.d{d}"
-        w_ih, w_hh, b_ih, b_hh = _primitive_layer_weights(params, prefix, layer, d == 1)
+        w_ih, w_hh, b_ih, b_hh = primitive_layer_weights(params, prefix, layer, d == 1)
         hidden = w_hh.shape[1]
-        xp = _input_projection(g, seq, w_ih, b_ih, dname, wd)                # (T, B, 3H)
+        xp = input_projection(g, seq, w_ih, b_ih, dname, wd)                # (T, B, 3H)
         wh, bh = g.weight(f"{wd}.Wh", w_hh.T), g.weight(f"{wd}.bh", b_hh)
-        h_init = _squeeze0(g, h0_dirs[d], f"{dname}.h_init")             # (B, H)
+        h_init = squeeze0(g, h0_dirs[d], f"{dname}.h_init")             # (B, H)
 
         def cell(body, x_t, states, wh=wh, bh=bh, hidden=hidden, dname=dname):
             h_new = _gru_cell(body, x_t, states[0], wh, bh, hidden, f"{dname}.body.cell")
             return [h_new], h_new
 
-        (h_last,), y = _scan_recurrence(g, xp, [h_init], cell, name=f"{dname}.scan", reverse=d == 1,
+        (h_last,), y = scan_recurrence(g, xp, [h_init], cell, name=f"{dname}.scan", reverse=d == 1,
                                         state_shapes=[["B", hidden]], xp_width=3 * hidden)
         ys.append(y)                                                     # (T, B, H)
-        hs.append(_unsqueeze0(g, h_last, f"{dname}.h_n"))               # (1, B, H)
+        hs.append(unsqueeze0(g, h_last, f"{dname}.h_n"))               # (1, B, H)
     y = ys[0] if dirs == 1 else g.node("Concat", ys, f"{lname}.y", axis=-1)     # (T, B, D·H)
     hn = hs[0] if dirs == 1 else g.node("Concat", hs, f"{lname}.h_n", axis=0)   # (D, B, H)
     return y, hn
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-gru_gates = _gru_gates
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# gru_gates.

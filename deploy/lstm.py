@@ -24,12 +24,12 @@ from typing import Mapping
 import numpy as np
 
 from deploy.graph import GraphBuilder
-from deploy.recurrent import (LSTM_PERM, check_layer_shapes as _check_layer_shapes, concat_layers as _concat_layers,
-                              input_projection as _input_projection, merge_directions as _merge_directions,
-                              onnx_layer_weights as _onnx_layer_weights,
-                              primitive_layer_weights as _primitive_layer_weights, scan_recurrence as _scan_recurrence,
-                              split_layers as _split_layers, squeeze0 as _squeeze0, time_major as _time_major,
-                              unsqueeze0 as _unsqueeze0)
+from deploy.recurrent import (LSTM_PERM, check_layer_shapes, concat_layers,
+                              input_projection, merge_directions,
+                              onnx_layer_weights,
+                              primitive_layer_weights, scan_recurrence,
+                              split_layers, squeeze0, time_major,
+                              unsqueeze0)
 
 __all__ = ["lstm", "lstm_step", "lstm_onnx_weights"]
 
@@ -37,7 +37,7 @@ __all__ = ["lstm", "lstm_step", "lstm_onnx_weights"]
 def lstm_onnx_weights(params: Mapping[str, np.ndarray], prefix: str, layer: int = 0,
                       bidirectional: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ONNX ``W (D, 4H, I)``, ``R (D, 4H, H)``, ``B (D, 8H)`` of LSTM layer ``layer`` (gates i|o|f|c)."""
-    w, r, b, _ = _onnx_layer_weights(params, prefix, layer, 2 if bidirectional else 1, LSTM_PERM)
+    w, r, b, _ = onnx_layer_weights(params, prefix, layer, 2 if bidirectional else 1, LSTM_PERM)
     return w, r, b
 
 
@@ -74,12 +74,12 @@ def lstm(g: GraphBuilder, x: str, h0: str, c0: str, params: Mapping[str, np.ndar
     if skewed and bidirectional:
         raise ValueError("skewed: the skewed stacking is defined for unidirectional LSTMs only")
     dirs = 2 if bidirectional else 1
-    seq = _time_major(g, x, f"{name}.x_tm")                              # (T, B, I)
-    h0s = _split_layers(g, h0, num_layers, dirs, f"{name}.h0")           # L × (D, B, H)
-    c0s = _split_layers(g, c0, num_layers, dirs, f"{name}.c0")
+    seq = time_major(g, x, f"{name}.x_tm")                              # (T, B, I)
+    h0s = split_layers(g, h0, num_layers, dirs, f"{name}.h0")           # L × (D, B, H)
+    c0s = split_layers(g, c0, num_layers, dirs, f"{name}.c0")
     hns, cns = [], []
     for k in range(num_layers):
-        _check_layer_shapes(params, prefix, k, 4, dirs)
+        check_layer_shapes(params, prefix, k, 4, dirs)
         lname, wl = f"{name}.l{k}", f"{wname or name}.l{k}"
         if skewed and k > 0:
             # input of layer k at step t is h^{k-1}_{t-1}: [h0^{k-1}, y^{k-1}_0 .. y^{k-1}_{T-2}]
@@ -88,16 +88,16 @@ def lstm(g: GraphBuilder, x: str, h0: str, c0: str, params: Mapping[str, np.ndar
         if g.primitive:
             seq, hn, cn = _primitive_layer(g, seq, h0s[k], c0s[k], params, prefix, k, dirs, lname, wl)
         else:
-            w, r, b, hidden = _onnx_layer_weights(params, prefix, k, dirs, LSTM_PERM)
+            w, r, b, hidden = onnx_layer_weights(params, prefix, k, dirs, LSTM_PERM)
             y, hn, cn = g.node("LSTM", [seq, g.weight(f"{wl}.W", w), g.weight(f"{wl}.R", r),
                                         g.weight(f"{wl}.B", b), "", h0s[k], c0s[k]],
                                lname, outputs=("Y", "Y_h", "Y_c"), hidden_size=hidden,
                                direction="bidirectional" if bidirectional else "forward")  # (T, D, B, H)
-            seq = _merge_directions(g, y, dirs, f"{lname}.y")           # (T, B, D·H)
+            seq = merge_directions(g, y, dirs, f"{lname}.y")           # (T, B, D·H)
         hns.append(hn)
         cns.append(cn)
-    y = _time_major(g, seq, f"{name}.y")                                 # (B, T, D·H)
-    return y, _concat_layers(g, hns, f"{name}.h_n"), _concat_layers(g, cns, f"{name}.c_n")
+    y = time_major(g, seq, f"{name}.y")                                 # (B, T, D·H)
+    return y, concat_layers(g, hns, f"{name}.h_n"), concat_layers(g, cns, f"{name}.c_n")
 
 
 def lstm_step(g: GraphBuilder, x_t: str, h: str, c: str, params: Mapping[str, np.ndarray], prefix: str, *,
@@ -123,32 +123,32 @@ def lstm_step(g: GraphBuilder, x_t: str, h: str, c: str, params: Mapping[str, np
     h_new, c_new : str
         ``(L, B, H)``.
     """
-    hs = _split_layers(g, h, num_layers, 1, f"{name}.h")                 # L × (1, B, H)
-    cs = _split_layers(g, c, num_layers, 1, f"{name}.c")
+    hs = split_layers(g, h, num_layers, 1, f"{name}.h")                 # L × (1, B, H)
+    cs = split_layers(g, c, num_layers, 1, f"{name}.c")
     h_out, c_out = [], []
     inp = g.node("Unsqueeze", [x_t, g.ints([0])], f"{name}.x_seq")       # (1, B, I)
     for k in range(num_layers):
-        _check_layer_shapes(params, prefix, k, 4, 1)
+        check_layer_shapes(params, prefix, k, 4, 1)
         lname, wl = f"{name}.l{k}", f"{wname or name}.l{k}"
         if skewed and k > 0:
             inp = hs[k - 1]                                              # (1, B, H): old state of layer k-1
         if g.primitive:
-            w_ih, w_hh, b_ih, b_hh = _primitive_layer_weights(params, prefix, k, False)
-            xp = _input_projection(g, _squeeze0(g, inp, f"{lname}.x"), w_ih, b_ih, lname, wl)  # (B, 4H)
+            w_ih, w_hh, b_ih, b_hh = primitive_layer_weights(params, prefix, k, False)
+            xp = input_projection(g, squeeze0(g, inp, f"{lname}.x"), w_ih, b_ih, lname, wl)  # (B, 4H)
             wh, bh = g.weight(f"{wl}.Wh", w_hh.T), g.weight(f"{wl}.bh", b_hh)
-            hk, ck = _lstm_cell(g, xp, _squeeze0(g, hs[k], f"{lname}.h"), _squeeze0(g, cs[k], f"{lname}.c"),
+            hk, ck = _lstm_cell(g, xp, squeeze0(g, hs[k], f"{lname}.h"), squeeze0(g, cs[k], f"{lname}.c"),
                                 wh, bh, w_hh.shape[1], f"{lname}.cell")  # (B, H) each
-            hn, cn = _unsqueeze0(g, hk, f"{lname}.h_new"), _unsqueeze0(g, ck, f"{lname}.c_new")
+            hn, cn = unsqueeze0(g, hk, f"{lname}.h_new"), unsqueeze0(g, ck, f"{lname}.c_new")
         else:
-            w, r, b, hidden = _onnx_layer_weights(params, prefix, k, 1, LSTM_PERM)
+            w, r, b, hidden = onnx_layer_weights(params, prefix, k, 1, LSTM_PERM)
             _, hn, cn = g.node("LSTM", [inp, g.weight(f"{wl}.W", w), g.weight(f"{wl}.R", r),
                                         g.weight(f"{wl}.B", b), "", hs[k], cs[k]],
                                lname, outputs=("", "Y_h", "Y_c"), hidden_size=hidden)  # (1, B, H) each
         h_out.append(hn)
         c_out.append(cn)
         inp = hn
-    y = _squeeze0(g, inp, f"{name}.y")                                   # (B, H)
-    return y, _concat_layers(g, h_out, f"{name}.h_new"), _concat_layers(g, c_out, f"{name}.c_new")
+    y = squeeze0(g, inp, f"{name}.y")                                   # (B, H)
+    return y, concat_layers(g, h_out, f"{name}.h_new"), concat_layers(g, c_out, f"{name}.c_new")
 
 
 # --------------------------------------------------------------------------------------- primitive form
@@ -180,23 +180,23 @@ def _primitive_layer(g, seq, h0_layer, c0_layer, params, prefix, layer, dirs, ln
         c0_dirs = list(g.node("Split", [c0_layer, g.ints([1, 1])], f"{lname}.c0", axis=0, outputs=("f", "b")))
     for d in range(dirs):
         dname, wd = f"{lname}.d{d}", f"{wl}.d{d}"
-        w_ih, w_hh, b_ih, b_hh = _primitive_layer_weights(params, prefix, layer, d == 1)
+        w_ih, w_hh, b_ih, b_hh = primitive_layer_weights(params, prefix, layer, d == 1)
         hidden = w_hh.shape[1]
-        xp = _input_projection(g, seq, w_ih, b_ih, dname, wd)                # (T, B, 4H)
+        xp = input_projection(g, seq, w_ih, b_ih, dname, wd)                # (T, B, 4H)
         wh, bh = g.weight(f"{wd}.Wh", w_hh.T), g.weight(f"{wd}.bh", b_hh)
-        h_init = _squeeze0(g, h0_dirs[d], f"{dname}.h_init")             # (B, H)
-        c_init = _squeeze0(g, c0_dirs[d], f"{dname}.c_init")             # (B, H)
+        h_init = squeeze0(g, h0_dirs[d], f"{dname}.h_init")             # (B, H)
+        c_init = squeeze0(g, c0_dirs[d], f"{dname}.c_init")             # (B, H)
 
         def cell(body, x_t, states, wh=wh, bh=bh, hidden=hidden, dname=dname):
             h_new, c_new = _lstm_cell(body, x_t, states[0], states[1], wh, bh, hidden, f"{dname}.body.cell")
             return [h_new, c_new], h_new
 
-        (h_last, c_last), y = _scan_recurrence(g, xp, [h_init, c_init], cell, name=f"{dname}.scan",
+        (h_last, c_last), y = scan_recurrence(g, xp, [h_init, c_init], cell, name=f"{dname}.scan",
                                                reverse=d == 1, state_shapes=[["B", hidden], ["B", hidden]],
                                                xp_width=4 * hidden)
         ys.append(y)                                                     # (T, B, H)
-        hs.append(_unsqueeze0(g, h_last, f"{dname}.h_n"))
-        cs.append(_unsqueeze0(g, c_last, f"{dname}.c_n"))
+        hs.append(unsqueeze0(g, h_last, f"{dname}.h_n"))
+        cs.append(unsqueeze0(g, c_last, f"{dname}.c_n"))
     if dirs == 1:
         return ys[0], hs[0], cs[0]
     return (g.node("Concat", ys, f"{lname}.y", axis=-1), g.node("Concat", hs, f"{lname}.h_n", axis=0),

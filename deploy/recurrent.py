@@ -52,11 +52,11 @@ def tiled_state(g: GraphBuilder, state: np.ndarray, like: str, *, name: str, bat
 
 
 # ---------------------------------------------------------------------------------------------- layouts
-def _time_major(g: GraphBuilder, x: str, name: str) -> str:
+def time_major(g: GraphBuilder, x: str, name: str) -> str:
     return g.node("Transpose", [x], name, perm=[1, 0, 2])                # (B, T, F) <-> (T, B, F)
 
 
-def _split_layers(g: GraphBuilder, h: str, num_layers: int, per_layer: int, name: str) -> list[str]:
+def split_layers(g: GraphBuilder, h: str, num_layers: int, per_layer: int, name: str) -> list[str]:
     """``(L·D, B, H)`` → L tensors ``(D, B, H)``."""
     if num_layers == 1:
         return [h]
@@ -65,11 +65,11 @@ def _split_layers(g: GraphBuilder, h: str, num_layers: int, per_layer: int, name
     return list(outs)
 
 
-def _concat_layers(g: GraphBuilder, hs: list[str], name: str) -> str:
+def concat_layers(g: GraphBuilder, hs: list[str], name: str) -> str:
     return hs[0] if len(hs) == 1 else g.node("Concat", hs, name, axis=0)  # (L·D, B, H)
 
 
-def _merge_directions(g: GraphBuilder, y: str, num_directions: int, name: str) -> str:
+def merge_directions(g: GraphBuilder, y: str, num_directions: int, name: str) -> str:
     """ONNX ``Y`` ``(T, D, B, H)`` → ``(T, B, D·H)`` (forward direction first)."""
     if num_directions == 1:
         return g.node("Squeeze", [y, g.ints([1])], name)                 # (T, B, H)
@@ -78,7 +78,7 @@ def _merge_directions(g: GraphBuilder, y: str, num_directions: int, name: str) -
 
 
 # ---------------------------------------------------------------------------------- fused ONNX weights
-def _onnx_layer_weights(params: Mapping[str, np.ndarray], prefix: str, layer: int, directions: int,
+def onnx_layer_weights(params: Mapping[str, np.ndarray], prefix: str, layer: int, directions: int,
                         perm: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """ONNX ``W (D, G·H, I)``, ``R (D, G·H, H)``, ``B (D, 2·G·H)`` of one layer from PyTorch parameters."""
     ws, rs, bs = [], [], []
@@ -103,7 +103,7 @@ def _bias(params, prefix, key, size):
     return np.asarray(params[full])
 
 
-def _check_layer_shapes(params, prefix, layer, gates, directions, input_size=None):
+def check_layer_shapes(params, prefix, layer, gates, directions, input_size=None):
     for d in range(directions):
         sfx = f"_l{layer}" + ("_reverse" if d == 1 else "")
         w_ih = get_param(params, prefix, "weight_ih" + sfx)
@@ -115,7 +115,7 @@ def _check_layer_shapes(params, prefix, layer, gates, directions, input_size=Non
 
 
 # ------------------------------------------------------------------------------------ primitive forms
-def _primitive_layer_weights(params, prefix, layer, reverse):
+def primitive_layer_weights(params, prefix, layer, reverse):
     sfx = f"_l{layer}" + ("_reverse" if reverse else "")
     w_ih = get_param(params, prefix, "weight_ih" + sfx)                 # (G·H, I)
     w_hh = get_param(params, prefix, "weight_hh" + sfx)                 # (G·H, H)
@@ -124,7 +124,7 @@ def _primitive_layer_weights(params, prefix, layer, reverse):
     return w_ih, w_hh, b_ih, b_hh
 
 
-def _scan_recurrence(g: GraphBuilder, xp: str, states: list[str], cell: Callable, *, name: str,
+def scan_recurrence(g: GraphBuilder, xp: str, states: list[str], cell: Callable, *, name: str,
                      reverse: bool, state_shapes: list[list], xp_width: int | str) -> tuple[list[str], str]:
     """Run ``cell`` over time with ``Scan``: ``xp`` ``(T, B, G·H)`` precomputed input projections.
 
@@ -155,7 +155,7 @@ def _flip_time(g: GraphBuilder, x: str, name: str) -> str:
     return g.node("Slice", [x, g.ints([-1]), g.ints([int64_min]), g.ints([0]), g.ints([-1])], name)
 
 
-def _input_projection(g: GraphBuilder, x: str, w_ih: np.ndarray, b_ih: np.ndarray, name: str,
+def input_projection(g: GraphBuilder, x: str, w_ih: np.ndarray, b_ih: np.ndarray, name: str,
                       wname: str) -> str:
     w = g.weight(f"{wname}.Wx", w_ih.T)                                  # (I, G·H)
     b = g.weight(f"{wname}.bx", b_ih)                                    # (G·H,)
@@ -163,23 +163,14 @@ def _input_projection(g: GraphBuilder, x: str, w_ih: np.ndarray, b_ih: np.ndarra
     return g.node("Add", [xw, b], f"{name}.xp")                          # (..., G·H)
 
 
-def _squeeze0(g, x, name):
+def squeeze0(g, x, name):
     return g.node("Squeeze", [x, g.ints([0])], name)                     # (1, B, H) -> (B, H)
 
 
-def _unsqueeze0(g, x, name):
+def unsqueeze0(g, x, name):
     return g.node("Unsqueeze", [x, g.ints([0])], name)                   # (B, H) -> (1, B, H)
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-check_layer_shapes = _check_layer_shapes
-concat_layers = _concat_layers
-input_projection = _input_projection
-merge_directions = _merge_directions
-onnx_layer_weights = _onnx_layer_weights
-primitive_layer_weights = _primitive_layer_weights
-scan_recurrence = _scan_recurrence
-split_layers = _split_layers
-squeeze0 = _squeeze0
-time_major = _time_major
-unsqueeze0 = _unsqueeze0
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# check_layer_shapes, concat_layers, input_projection, merge_directions, onnx_layer_weights, primitive_layer_weights,
+# scan_recurrence, split_layers, squeeze0, time_major, unsqueeze0.

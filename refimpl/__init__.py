@@ -7,11 +7,9 @@ right-handed frames, dual quaternions ``(q_r | q_d)`` with ``q_d = ½ (0, t) ⊗
 The top level re-exports layers 1-3 and 6 (math, kinematics, data, optimisation and checkpoints) by name.
 Layers, losses and models keep their namespaces, because their names are only meaningful there:
 ``refimpl.nn`` (layers), ``refimpl.losses``, ``refimpl.models.qtg``, ``refimpl.representations``,
-``refimpl.baselines``, ``refimpl.transitions``, ``refimpl.metrics``, ``refimpl.train``.
+``refimpl.protocols`` (each paper's data, protocol, metrics and baselines), ``refimpl.train``.
 """
-from . import quat as _quat, dualquat as _dualquat, skeleton as _skeleton, motion as _motion, bvh as _bvh
-from . import expmap as _expmap, skeletons as _skeletons, preprocess as _preprocess
-from . import optim as _optim, schedules as _schedules, checkpoint as _checkpoint
+import importlib
 
 from .quat import *  # noqa: F401,F403
 from .dualquat import *  # noqa: F401,F403
@@ -29,6 +27,7 @@ from . import nn, losses, models, representations  # noqa: F401  (namespaces)
 
 __version__ = "0.1.0"
 
-__all__ = [name for mod in (_quat, _dualquat, _skeleton, _motion, _bvh, _expmap, _skeletons, _preprocess,
-                            _optim, _schedules, _checkpoint) for name in mod.__all__]
+__all__ = [name for mod in ("quat", "dualquat", "skeleton", "motion", "bvh", "expmap", "skeletons", "preprocess",
+                            "optim", "schedules", "checkpoint")
+           for name in importlib.import_module(f"{__name__}.{mod}").__all__]
 __all__ += ["nn", "losses", "models", "representations", "__version__"]

@@ -10,7 +10,7 @@ train       train a network by name (today ``qtg``) on the sample, ``../shared/d
             exp-map files; resumable, progress with rate and ETA, CSV loss log
             (:func:`refimpl.train.train`)
 eval        the QTG paper's protocol: QTG vs inertialisation vs interpolation on held-out windows, mean
-            joint-position error per joint per frame in cm, per-frame curve (:mod:`refimpl.metrics`)
+            joint-position error per joint per frame in cm, per-frame curve (:mod:`refimpl.protocols.transition_metrics`)
 export      ONNX models ``qtg_init/step/rollout.onnx`` via ``deploy`` (imported lazily: the ``deploy`` extra)
 generate    a transition between two clips with QTG (NumPy or onnxruntime) or a baseline; BVH out
 render      a BVH / exp-map motion (optionally against a second one) to a PNG strip or a GIF
@@ -53,8 +53,10 @@ from refimpl.options import add_data_options, beta, nonneg_int, positive_float, 
 from refimpl.registry import MODELS, TASKS, task_of
 from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
                               onnx_metadata, read_motion, train_model, verify_onnx)
+from refimpl import weights_cli
 from refimpl.tasks import transition
 from refimpl.train import check_resumable, output_lock
+from refimpl.protocols.transition_join import JOIN_MODES, with_join
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
 
@@ -187,6 +189,10 @@ def _info_npz(p: Path, args) -> None:
         cfg = dict(meta["model_config"])
         stats = {k: cfg.pop(k) for k in ("root_mean", "root_std") if k in cfg}
         _say(f"model       {meta['model']}")
+        if isinstance(meta.get("imported"), dict):  # `refimpl import` (spec/import.md)
+            imp = meta["imported"]
+            _say(f"imported    from {imp.get('source')} ({imp.get('layout')} names, sha256 "
+                 f"{str(imp.get('sha256'))[:16]}...), not trained here")
         _say(f"progress    step {meta.get('step')} of {meta.get('steps_target')}, epoch {meta.get('epoch')}, "
              f"trained for {_seconds(meta.get('elapsed_s', 0.0))}")
         _say(f"config      {json.dumps(cfg, sort_keys=True)}")
@@ -327,10 +333,12 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
 
 def _eval_prediction(args, model) -> int:
     """``refimpl eval`` on the prediction task: the network(s) and the baselines, the paper's table, JSON."""
+    from refimpl.protocols import prediction as PP
+    from refimpl.protocols import prediction_data as PD
     from refimpl.tasks import prediction
 
     _say(f"reading {args.data} ...")
-    stride = prediction.stride_of(model.extra["dataset"], model.extra["frame_time"]) if model else 2
+    stride = PD.stride_of(model.extra["dataset"], model.extra["frame_time"]) if model else 2
     data = prediction.resolve_data(args.data, downsample=stride)
     if model is not None and model.extra.get("dataset") != data.dataset:
         raise UsageError(f"--data {args.data} is {data.dataset}, the model was trained on {model.extra.get('dataset')}")
@@ -342,21 +350,21 @@ def _eval_prediction(args, model) -> int:
         raise UsageError(str(exc)) from None
     networks = network_methods(model, onnx_dir=args.onnx) if (model is not None or args.onnx) else {}
     try:
-        results = prediction.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line,
-                                          actions=actions)
+        results = PP.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line,
+                                  actions=actions)
     except ValueError as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
     if model is not None:
         _say(f"network {model.spec.name} from {model.path} (step {model.meta.get('step')})")
     _say("Mean Euler-angle error (radians, zyx, joint 0 excluded) per action and horizon:")
-    _say(prediction.format_table(results))
+    _say(PP.format_table(results))
     if args.json:
-        prediction.write_results_json(args.json, results[0] if len(results) == 1 else results)
+        PP.write_results_json(args.json, results[0] if len(results) == 1 else results)
         _say(f"results          {args.json}")
     if args.plot:
         from refimpl.render import render_error_curves
 
-        render_error_curves(args.plot, prediction.average_curves(results), frame_time=protocol.frame_ms / 1000.0)
+        render_error_curves(args.plot, PP.average_curves(results), frame_time=protocol.frame_ms / 1000.0)
         _say(f"plot             {args.plot}")
     return EXIT_OK
 
@@ -376,7 +384,7 @@ def cmd_eval(args) -> int:
     _, test_ds = transition.build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
     if test_ds.num_windows == 0:
         raise BadInputError(f"--data {args.data}: no held-out window of {T + 4} frames")
-    results = evaluate_model(model, test_ds, onnx_dir=args.onnx)
+    results = evaluate_model(model, test_ds, onnx_dir=args.onnx, join=args.join)
     transition.print_results(results, test_ds, model)
     frame_time = 1.0 / test_ds.fps
     transition.write_results(results, frame_time, json_path=args.json, csv_path=args.csv)
@@ -396,7 +404,11 @@ def cmd_export(args) -> int:
     """``refimpl export``."""
     model = load_trained(args.checkpoint)
     out = Path(args.out) if args.out else Path(model.path).parent / "onnx"
-    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length)
+    join = {} if args.join == "none" else {"join": args.join}
+    if join and model.spec.task != "transition":
+        raise UsageError(f"--join applies to transition models, not {model.spec.name}")
+    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length,
+                          **join)
     for role, path in written.items():
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
@@ -423,6 +435,7 @@ def cmd_export(args) -> int:
 def _generate_prediction(args, model) -> int:
     """``refimpl generate`` on the prediction task: a prefix of ``--source`` -> ``--length`` frames, BVH out."""
     from refimpl.bvh import write_bvh
+    from refimpl.protocols import prediction_data as PD
     from refimpl.tasks import prediction
 
     if args.backend == "onnx":
@@ -445,7 +458,7 @@ def _generate_prediction(args, model) -> int:
     rotations = prediction.load_clip(args.source, dataset, frame_time)
     k = args.length or 25
     pr = prediction.make_prediction(next(iter(networks.values())), rotations, args.source_frame, P, k,
-                                    skeleton=prediction.skeleton_of(dataset), frame_time=frame_time,
+                                    skeleton=PD.skeleton_of(dataset), frame_time=frame_time,
                                     method_name=name, name=Path(args.out).stem)
     write_bvh(args.out, pr.motion)
     _say(f"wrote {args.out}: {pr.motion.num_frames} frames at {1.0 / frame_time:g} fps ({dataset} skeleton, root "
@@ -543,15 +556,17 @@ def cmd_generate(args) -> int:
         method = next(iter(networks.values()))
     else:
         method = transition.methods(fps=fps)[args.method]
+    method = with_join(method, args.join, dt=1.0 / fps)
     same = Path(args.source).resolve() == Path(target_path).resolve()
     target_frame = args.target_frame if args.target_frame is not None else (
         args.source_frame + T + 1 if same else 1)
     tr = transition.make_transition(method, skel, src_clip, args.source_frame, tgt_clip, target_frame, T,
                          frame_time=1.0 / fps, context=args.context, align=args.align, same_clip=same,
-                         method_name=args.method, name=Path(args.out).stem)
+                         method_name=args.method + ("" if args.join == "none" else "+join"),
+                         name=Path(args.out).stem)
     write_bvh(args.out, transition.with_end_sites(tr.motion))
     _say(f"wrote {args.out}: {tr.motion.num_frames} frames at {fps:g} fps, 22 joints (centimetres); "
-         f"generated frames {tr.start}..{tr.stop - 1} ({args.method}, {args.backend})")
+         f"generated frames {tr.start}..{tr.stop - 1} ({tr.method}, {args.backend})")
     err = tr.error_cm()
     if err is not None:
         _say(f"ground truth available (same clip, target = source + T + 1): mean joint error {err:.2f} cm")
@@ -605,7 +620,8 @@ def _parse_slice(text: str | None, n: int) -> slice:
 
 def cmd_render(args) -> int:
     """``refimpl render``."""
-    from refimpl.render import render_gif, render_strip
+    from refimpl.render import render_gif
+    from refimpl.render_strip import limb_sides, render_strip
 
     motion = read_motion(args.file, fps=args.fps, layout=args.layout)
     other = read_motion(args.compare, fps=args.fps, layout=args.layout) if args.compare else None
@@ -620,16 +636,17 @@ def cmd_render(args) -> int:
     pred = None if other is None else other.positions()[idx]
     parents = np.asarray(motion.skeleton.parents)
     outs = args.out or [Path(args.file).stem + ".png"]
+    sides = limb_sides(motion.skeleton)  # left limbs dark, right limbs light (the skeleton's mirror map)
     labels = (Path(args.file).stem, Path(args.compare).stem if args.compare else "")
     step = sel.step or 1
     for out in outs:
         suffix = Path(out).suffix.lower()
         if suffix == ".png":
             render_strip(out, pos, parents, prediction=pred, num_frames=args.num_frames, labels=labels,
-                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title)
+                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title, sides=sides)
         elif suffix == ".gif":
             render_gif(out, pos, parents, prediction=pred, fps=motion.fps / step, stride=args.stride, labels=labels,
-                       up=args.up, frame_numbers=idx, title=args.title)
+                       up=args.up, frame_numbers=idx, title=args.title, sides=sides)
         else:
             raise UsageError(f"--out {out}: expected a .png or .gif file name")
         _say(f"wrote {out} ({len(idx)} frames of {args.file})")
@@ -674,7 +691,9 @@ def _eval_locomotion(args, model) -> int:
     results = task.evaluate(data, task.methods(nets))
     _say(f"held-out windows: {next(iter(results.values()))['windows']} of {data.prefix} + {data.target} frames "
          f"({len(data.files)} files); error in QuaterNet units (1 unit = 5.6444 cm)")
-    _say(task.format_results(results))
+    from refimpl.protocols.locomotion import format_results
+
+    _say(format_results(results))
     if args.json:
         from refimpl.atomic import atomic_write_text
 
@@ -701,12 +720,13 @@ def _generate_synthesis(args, model=None) -> int:
     method = next(iter(networks.values()))
     n = args.length or 300
     motion, seed_frames = task.continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
-    write_bvh(args.out, transition.with_end_sites(motion))
+    write_bvh(args.out, transition.with_end_sites(task.in_source_units(motion)))   # the take's centimetres
     _say(f"wrote {args.out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
-         "metres")
+         "centimetres (the take's units)")
     if args.png or args.gif:
-        from refimpl.render import render_gif, render_strip
+        from refimpl.render import render_gif
+        from refimpl.render_strip import render_strip
 
         pos = motion.positions()
         parents = np.asarray(motion.skeleton.parents)
@@ -829,6 +849,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="skip the onnxruntime-vs-NumPy check on random context poses")
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random poses")
+    p.add_argument("--join", default="none", choices=JOIN_MODES,
+                   help="transition models: inertialize = bake the join option into the rollout graph (spec/qtg.md "
+                        "7.4; the C example gets it too); default none")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("generate", help="generate a transition between two clips, BVH out",
@@ -847,6 +870,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--onnx", default=None, help="folder of exported models (ONNX backend)")
     p.add_argument("--length", type=bounded_int("frames"), default=None, help="T (default: the model's)")
     p.add_argument("--context", type=bounded_int("context"), default=10, help="frames kept on each side (default 10)")
+    p.add_argument("--join", default="none", choices=JOIN_MODES,
+                   help="inertialize: carry the jump at each end of the transition away (spec/qtg.md 7.4)")
     p.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
                    help="place the target clip: none = as in its file, continue = after the source (default: "
                         "none for one file, continue for two)")
@@ -894,6 +919,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-onnx", action="store_true", help="skip export and verification")
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
     p.set_defaults(func=cmd_demo)
+
+    weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
     return parser
 
 

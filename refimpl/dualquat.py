@@ -20,14 +20,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import (as_float as _as_float, atan_ratio as _atan_ratio,
-                          check_rotation_matrix as _check_rotation_matrix, hemisphere_sign as _hemisphere_sign,
-                          matrix_from_quat_kernel as _matrix_from_quat, prescaled as _prescaled,
-                          quat_conj_kernel as _quat_conj, quat_from_matrix_kernel as _quat_from_matrix,
-                          quat_mul_kernel as _quat_mul, quat_norm_kernel as _quat_norm,
-                          quat_rotate_kernel as _quat_rotate, sin_over_x as _sin_over_x,
-                          check_scalar as _check_scalar, finite_output as _finite_output,
-                          zeros_of as _zeros_of)
+from refimpl.quat import (as_float, atan_ratio,
+                          check_rotation_matrix, hemisphere_sign,
+                          matrix_from_quat_kernel, prescaled,
+                          quat_conj_kernel, quat_from_matrix_kernel,
+                          quat_mul_kernel, quat_norm_kernel,
+                          quat_rotate_kernel, sin_over_x,
+                          check_scalar, finite_output,
+                          zeros_of)
 
 __all__ = [
     "dq_identity", "dq_mul", "dq_conj", "dq_conj_dual", "dq_conj_combined", "dq_inv", "dq_norm", "dq_is_unit",
@@ -45,27 +45,27 @@ def _join(r: np.ndarray, d: np.ndarray) -> np.ndarray:
 
 
 def _dq_prescaled(a: np.ndarray, name: str, what: str = "real part") -> np.ndarray:
-    """``a`` times the power of two that :func:`refimpl.quat._prescaled` applies to its real part (where
+    """``a`` times the power of two that :func:`refimpl.quat.prescaled` applies to its real part (where
     needed), for the functions invariant to a common scale of both parts (``a`` and ``c·a``, ``c > 0``, are the
     same rigid transform); ValueError naming ``name`` if some real part is zero."""
-    _, e = _prescaled(a[..., :4], name, what)
+    _, e = prescaled(a[..., :4], name, what)
     return a if e is None else np.ldexp(a, -e[..., None])
 
 
 def dq_identity(shape=(), dtype=np.float64) -> np.ndarray:
     """Identity DQs ``(1, 0, 0, 0 | 0, 0, 0, 0)`` of shape ``shape + (8,)`` (spec/math.md §5.1)."""
-    a = _zeros_of(shape, dtype, 8)
+    a = zeros_of(shape, dtype, 8)
     a[..., 0] = 1
     return a
 
 
-def _dq_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def dq_mul_kernel(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ar, ad = _split(a)
     br, bd = _split(b)
-    return _join(_quat_mul(ar, br), _quat_mul(ar, bd) + _quat_mul(ad, br))
+    return _join(quat_mul_kernel(ar, br), quat_mul_kernel(ar, bd) + quat_mul_kernel(ad, br))
 
 
-@_finite_output
+@finite_output
 def dq_mul(a, b) -> np.ndarray:
     """DQ product ``a ⊗ b = a_r b_r + ε (a_r b_d + a_d b_r)`` (paper Eq. 1; spec/math.md §5.2).
 
@@ -78,9 +78,9 @@ def dq_mul(a, b) -> np.ndarray:
     -------
     ndarray, (..., 8)
     """
-    a = _as_float(a, "a", (8,))
-    b = _as_float(b, "b", (8,))
-    return _dq_mul(a, b)
+    a = as_float(a, "a", (8,))
+    b = as_float(b, "b", (8,))
+    return dq_mul_kernel(a, b)
 
 
 _SIGN_CONJ = (1, -1, -1, -1, 1, -1, -1, -1)
@@ -88,38 +88,38 @@ _SIGN_DUAL = (1, 1, 1, 1, -1, -1, -1, -1)
 _SIGN_COMBINED = (1, -1, -1, -1, -1, 1, 1, 1)
 
 
-def _dq_conj(a: np.ndarray) -> np.ndarray:
+def dq_conj_kernel(a: np.ndarray) -> np.ndarray:
     return a * np.array(_SIGN_CONJ, dtype=a.dtype)
 
 
-@_finite_output
+@finite_output
 def dq_conj(a) -> np.ndarray:
     """Quaternion conjugate of both parts ``(q_r*, q_d*)`` = inverse of a UNIT DQ (spec/math.md §5.3).
 
     This is the paper's "conjugate" (§3.1) and acRNN/PoseRepresentation's ``dqinv``.
     """
-    a = _as_float(a, "a", (8,))
-    return _dq_conj(a)
+    a = as_float(a, "a", (8,))
+    return dq_conj_kernel(a)
 
 
-@_finite_output
+@finite_output
 def dq_conj_dual(a) -> np.ndarray:
     """Dual-number conjugate ``(q_r, −q_d)`` (spec/math.md §5.3)."""
-    a = _as_float(a, "a", (8,))
+    a = as_float(a, "a", (8,))
     return a * np.array(_SIGN_DUAL, dtype=a.dtype)
 
 
-@_finite_output
+@finite_output
 def dq_conj_combined(a) -> np.ndarray:
     """Combined conjugate ``(q_r*, −q_d*)`` (used in point transforms ``σ (1 + ε p) σ†``) (spec/math.md §5.3).
 
     This is acRNN/PoseRepresentation's ``dqconj``.
     """
-    a = _as_float(a, "a", (8,))
+    a = as_float(a, "a", (8,))
     return a * np.array(_SIGN_COMBINED, dtype=a.dtype)
 
 
-@_finite_output
+@finite_output
 def dq_inv(a) -> np.ndarray:
     """General inverse ``(q_r⁻¹, −q_r⁻¹ q_d q_r⁻¹)`` of a DQ with non-zero real part (spec/math.md §5.3).
 
@@ -130,17 +130,17 @@ def dq_inv(a) -> np.ndarray:
     ValueError
         If some real part is zero.
     """
-    a = _as_float(a, "a", (8,))
+    a = as_float(a, "a", (8,))
     r, d = _split(a)
-    rs, e = _prescaled(r, "a", "real part")  # r = 2^e rs where needed: no under/overflow of |r|²
-    rs_inv = _quat_conj(rs) / np.sum(rs * rs, axis=-1, keepdims=True)
-    real, dual = rs_inv, -_quat_mul(_quat_mul(rs_inv, d), rs_inv)
+    rs, e = prescaled(r, "a", "real part")  # r = 2^e rs where needed: no under/overflow of |r|²
+    rs_inv = quat_conj_kernel(rs) / np.sum(rs * rs, axis=-1, keepdims=True)
+    real, dual = rs_inv, -quat_mul_kernel(quat_mul_kernel(rs_inv, d), rs_inv)
     if e is not None:  # r⁻¹ = 2^-e rs⁻¹ and r⁻¹ d r⁻¹ = 2^-2e rs⁻¹ d rs⁻¹
         real, dual = np.ldexp(real, -e[..., None]), np.ldexp(dual, -2 * e[..., None])
     return _join(real, dual)
 
 
-@_finite_output
+@finite_output
 def dq_norm(a):
     """Dual-number magnitude ``|q| = |q_r| + ε ⟨q_r, q_d⟩/|q_r|`` (paper Eq. 2; spec/math.md §5.4).
 
@@ -153,14 +153,14 @@ def dq_norm(a):
     ValueError
         If some real part is zero (the dual part is undefined).
     """
-    a = _as_float(a, "a", (8,))
+    a = as_float(a, "a", (8,))
     r, d = _split(a)
-    rs, e = _prescaled(r, "a", "real part")  # r = 2^e rs where needed, exact
-    ns = _quat_norm(rs)
+    rs, e = prescaled(r, "a", "real part")  # r = 2^e rs where needed, exact
+    ns = quat_norm_kernel(rs)
     return (ns if e is None else np.ldexp(ns, e)), np.sum(rs * d, axis=-1) / ns
 
 
-@_finite_output
+@finite_output
 def dq_is_unit(a, atol_norm: float | None = None, atol_dot: float | None = None) -> np.ndarray:
     """Unit test (paper Eq. 3): ``| |q_r| − 1 | <= atol_norm`` and ``|⟨q_r, q_d⟩| <= atol_dot`` (spec/math.md §5.4).
 
@@ -177,22 +177,22 @@ def dq_is_unit(a, atol_norm: float | None = None, atol_dot: float | None = None)
     -------
     ndarray of bool, (...)
     """
-    a = _as_float(a, "a", (8,))
+    a = as_float(a, "a", (8,))
     default = 1e-6 if a.dtype.itemsize >= 8 else 1e-4
-    atol_norm = default if atol_norm is None else _check_scalar(atol_norm, "atol_norm")
-    atol_dot = default if atol_dot is None else _check_scalar(atol_dot, "atol_dot")
+    atol_norm = default if atol_norm is None else check_scalar(atol_norm, "atol_norm")
+    atol_dot = default if atol_dot is None else check_scalar(atol_dot, "atol_dot")
     r, d = _split(a)
-    return (np.abs(_quat_norm(r) - 1) <= atol_norm) & (np.abs(np.sum(r * d, axis=-1)) <= atol_dot)
+    return (np.abs(quat_norm_kernel(r) - 1) <= atol_norm) & (np.abs(np.sum(r * d, axis=-1)) <= atol_dot)
 
 
 def _dq_normalize(a: np.ndarray) -> np.ndarray:
     r, d = _split(a)
-    n = _quat_norm(r)[..., None]  # (..., 1)
+    n = quat_norm_kernel(r)[..., None]  # (..., 1)
     rh = r / n
     return _join(rh, d / n - rh * (np.sum(r * d, axis=-1, keepdims=True) / (n * n)))
 
 
-@_finite_output
+@finite_output
 def dq_normalize(a) -> np.ndarray:
     """Unit DQ ``q / |q|`` (paper Eq. 13; spec/math.md §5.5).
 
@@ -205,7 +205,7 @@ def dq_normalize(a) -> np.ndarray:
     ValueError
         If some real part is exactly zero (no rigid transform; no identity is substituted).
     """
-    a = _as_float(a, "a", (8,))
+    a = as_float(a, "a", (8,))
     return _dq_normalize(_dq_prescaled(a, "a"))
 
 
@@ -213,11 +213,11 @@ def _pure(t: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros_like(t[..., :1]), t], axis=-1)
 
 
-def _dq_from_quat_translation(q: np.ndarray, t: np.ndarray) -> np.ndarray:
-    return _join(q, 0.5 * _quat_mul(_pure(t), q))
+def dq_from_quat_translation_kernel(q: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return _join(q, 0.5 * quat_mul_kernel(_pure(t), q))
 
 
-@_finite_output
+@finite_output
 def dq_from_quat_translation(q, t) -> np.ndarray:
     """DQ of ``p ↦ R(q) p + t``: ``(q | ½ (0, t) ⊗ q)`` (paper Eq. 6, typo corrected; spec/math.md §5.6).
 
@@ -232,20 +232,20 @@ def dq_from_quat_translation(q, t) -> np.ndarray:
     -------
     ndarray, (..., 8)
     """
-    q = _as_float(q, "q", (4,))
-    t = _as_float(t, "t", (3,))
+    q = as_float(q, "q", (4,))
+    t = as_float(t, "t", (3,))
     lead = np.broadcast_shapes(q.shape[:-1], t.shape[:-1])
     q = np.broadcast_to(q, lead + (4,))
     t = np.broadcast_to(t, lead + (3,))
-    return _dq_from_quat_translation(q, t)
+    return dq_from_quat_translation_kernel(q, t)
 
 
 def _translation_from_dq(a: np.ndarray) -> np.ndarray:
     r, d = _split(a)
-    return 2 * _quat_mul(d, _quat_conj(r))[..., 1:] / np.sum(r * r, axis=-1, keepdims=True)
+    return 2 * quat_mul_kernel(d, quat_conj_kernel(r))[..., 1:] / np.sum(r * r, axis=-1, keepdims=True)
 
 
-@_finite_output
+@finite_output
 def translation_from_dq(a) -> np.ndarray:
     """Translation ``t = vec(2 q_d ⊗ q_r*) / |q_r|²`` (paper Eq. 8; spec/math.md §5.7).
 
@@ -261,11 +261,11 @@ def translation_from_dq(a) -> np.ndarray:
     ValueError
         If some real part is zero.
     """
-    a = _as_float(a, "a", (8,))
+    a = as_float(a, "a", (8,))
     return _translation_from_dq(_dq_prescaled(a, "a"))
 
 
-@_finite_output
+@finite_output
 def quat_translation_from_dq(a):
     """Rotation and translation of a DQ: ``(q_r/|q_r|, translation_from_dq(a))`` (spec/math.md §5.7).
 
@@ -275,11 +275,11 @@ def quat_translation_from_dq(a):
         Unit rotation quaternion (sign as stored).
     t : ndarray, (..., 3)
     """
-    a = _dq_prescaled(_as_float(a, "a", (8,)), "a")
-    return a[..., :4] / _quat_norm(a[..., :4])[..., None], _translation_from_dq(a)
+    a = _dq_prescaled(as_float(a, "a", (8,)), "a")
+    return a[..., :4] / quat_norm_kernel(a[..., :4])[..., None], _translation_from_dq(a)
 
 
-@_finite_output
+@finite_output
 def dq_from_matrix(m) -> np.ndarray:
     """Unit DQ of homogeneous rigid transforms ``[[R, t], [0, 1]]``, ``(..., 4, 4) → (..., 8)`` (spec/math.md §5.8).
 
@@ -291,25 +291,25 @@ def dq_from_matrix(m) -> np.ndarray:
         If ``m`` is not ``(..., 4, 4)``, its rotation block is not a rotation (see ``quat_from_matrix``) or its
         last row is not ``(0, 0, 0, 1)`` (tolerance 1e-6 for float64, 1e-3 for float32).
     """
-    m = _as_float(m, "m", (4, 4))
+    m = as_float(m, "m", (4, 4))
     tol = 1e-6 if m.dtype.itemsize >= 8 else 1e-3
     if np.any(np.abs(m[..., 3, :] - np.array([0, 0, 0, 1], dtype=m.dtype)) > tol):
         raise ValueError(f"m: last row of a homogeneous transform must be (0, 0, 0, 1); got shape {m.shape} "
                          f"with max deviation {float(np.max(np.abs(m[..., 3, :] - np.array([0, 0, 0, 1])))):.3g}")
     rot = m[..., :3, :3]
-    _check_rotation_matrix(rot, "m[..., :3, :3]")
-    return _dq_from_quat_translation(_quat_from_matrix(rot), m[..., :3, 3])
+    check_rotation_matrix(rot, "m[..., :3, :3]")
+    return dq_from_quat_translation_kernel(quat_from_matrix_kernel(rot), m[..., :3, 3])
 
 
-@_finite_output
+@finite_output
 def matrix_from_dq(a) -> np.ndarray:
     """Homogeneous matrix ``[[R(q_r), t], [0, 1]]`` of a DQ with non-zero real part, ``(..., 4, 4)`` (spec/math.md §5.8).
 
     ``R`` is the rotation of ``q_r/|q_r|`` and ``t = translation_from_dq(a)``.
     """
-    a = _dq_prescaled(_as_float(a, "a", (8,)), "a")
+    a = _dq_prescaled(as_float(a, "a", (8,)), "a")
     out = np.zeros(a.shape[:-1] + (4, 4), dtype=a.dtype)
-    out[..., :3, :3] = _matrix_from_quat(a[..., :4])
+    out[..., :3, :3] = matrix_from_quat_kernel(a[..., :4])
     out[..., :3, 3] = _translation_from_dq(a)
     out[..., 3, 3] = 1
     return out
@@ -318,11 +318,11 @@ def matrix_from_dq(a) -> np.ndarray:
 def _dq_transform_point_naive(a: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Point transform as the sandwich ``σ ⊗ (1 + ε (0, p)) ⊗ σ†`` with the combined conjugate (unit ``σ``)."""
     pdq = _join(np.broadcast_to(np.array([1, 0, 0, 0], dtype=p.dtype), p.shape[:-1] + (4,)), _pure(p))
-    out = _dq_mul(_dq_mul(a, pdq), a * np.array(_SIGN_COMBINED, dtype=a.dtype))
+    out = dq_mul_kernel(dq_mul_kernel(a, pdq), a * np.array(_SIGN_COMBINED, dtype=a.dtype))
     return out[..., 5:]
 
 
-@_finite_output
+@finite_output
 def dq_transform_point(a, p) -> np.ndarray:
     """Apply a unit DQ to points: ``R(q_r) p + t`` with ``t = vec(2 q_d q_r*)`` (spec/math.md §5.9).
 
@@ -339,13 +339,13 @@ def dq_transform_point(a, p) -> np.ndarray:
     -------
     ndarray, (..., 3)
     """
-    a = _as_float(a, "a", (8,))
-    p = _as_float(p, "p", (3,))
+    a = as_float(a, "a", (8,))
+    p = as_float(p, "p", (3,))
     lead = np.broadcast_shapes(a.shape[:-1], p.shape[:-1])
     a = np.broadcast_to(a, lead + (8,))
     p = np.broadcast_to(p, lead + (3,))
     r, d = _split(a)
-    return _quat_rotate(r, p) + 2 * _quat_mul(d, _quat_conj(r))[..., 1:]
+    return quat_rotate_kernel(r, p) + 2 * quat_mul_kernel(d, quat_conj_kernel(r))[..., 1:]
 
 
 def _dq_fix(a: np.ndarray) -> np.ndarray:
@@ -367,7 +367,7 @@ def _dq_fix_naive(a: np.ndarray) -> np.ndarray:
     return out
 
 
-@_finite_output
+@finite_output
 def dq_fix(a) -> np.ndarray:
     """Antipodal continuity over time, axis 0 (paper §5.1; spec/math.md §5.10).
 
@@ -379,7 +379,7 @@ def dq_fix(a) -> np.ndarray:
     ----------
     a : array_like, (T, ..., 8)
     """
-    a = _as_float(a, "a", (8,))
+    a = as_float(a, "a", (8,))
     if a.ndim < 2:
         raise ValueError(f"a: expected shape (T, ..., 8) with a time axis, got {a.shape}")
     return _dq_fix(a)
@@ -394,8 +394,8 @@ def _dq_log(a: np.ndarray):
     u3 = r[..., 1:]
     s = np.sqrt(np.sum(u3 * u3, axis=-1))  # sin φ
     phi = np.arctan2(s, r[..., 0])  # (...) in [0, π/2]
-    u = _atan_ratio(s, r[..., 0])[..., None] * u3  # (φ / sin φ) u3, series near φ = 0
-    sinc = _sin_over_x(phi)[..., None]
+    u = atan_ratio(s, r[..., 0])[..., None] * u3  # (φ / sin φ) u3, series near φ = 0
+    sinc = sin_over_x(phi)[..., None]
     c = _dsinc_over_x(phi)[..., None]
     uv = -d[..., :1] / sinc  # ⟨u, v⟩
     v = (d[..., 1:] - u * c * uv) / sinc
@@ -414,7 +414,7 @@ def _dsinc_over_x(x: np.ndarray) -> np.ndarray:
 def _dq_exp(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """``exp(u + ε v)`` for pure dual vectors: ``(cos φ, sinc φ u | −sinc φ ⟨u,v⟩, sinc φ v + c(φ) ⟨u,v⟩ u)``."""
     phi = np.sqrt(np.sum(u * u, axis=-1))
-    sinc = _sin_over_x(phi)[..., None]
+    sinc = sin_over_x(phi)[..., None]
     c = _dsinc_over_x(phi)[..., None]
     uv = np.sum(u * v, axis=-1, keepdims=True)
     real = np.concatenate([np.cos(phi)[..., None], sinc * u], axis=-1)
@@ -422,7 +422,7 @@ def _dq_exp(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return _join(real, dual)
 
 
-@_finite_output
+@finite_output
 def dq_sclerp(a, b, t) -> np.ndarray:
     """Screw linear interpolation ``a ⊗ (a* ⊗ b)^t`` along the shortest path (spec/math.md §5.11).
 
@@ -442,15 +442,15 @@ def dq_sclerp(a, b, t) -> np.ndarray:
     -------
     ndarray, (..., 8)
     """
-    a = _as_float(a, "a", (8,))
-    b = _as_float(b, "b", (8,))
-    t = _as_float(t, "t", ()).astype(np.result_type(a, b), copy=False)  # t does not change the dtype
-    b = _hemisphere_sign(a[..., :4], b[..., :4]) * b
+    a = as_float(a, "a", (8,))
+    b = as_float(b, "b", (8,))
+    t = as_float(t, "t", ()).astype(np.result_type(a, b), copy=False)  # t does not change the dtype
+    b = hemisphere_sign(a[..., :4], b[..., :4]) * b
     a, b = np.broadcast_arrays(a, b)
-    rel = _dq_mul(_dq_conj(a), b)  # (..., 8)
+    rel = dq_mul_kernel(dq_conj_kernel(a), b)  # (..., 8)
     u, v = _dq_log(rel)
     tt = t[..., None]
-    return _dq_mul(a, _dq_exp(tt * u, tt * v))
+    return dq_mul_kernel(a, _dq_exp(tt * u, tt * v))
 
 
 def _dq_blend_naive(weights: np.ndarray, dqs: np.ndarray) -> np.ndarray:
@@ -458,13 +458,13 @@ def _dq_blend_naive(weights: np.ndarray, dqs: np.ndarray) -> np.ndarray:
     pivot = int(np.argmax(weights))
     acc = np.zeros(8, dtype=dqs.dtype)
     for k in range(len(weights)):
-        rel = _quat_mul(_quat_conj(dqs[pivot, :4]), dqs[k, :4])  # w = ⟨r_p, r_k⟩
+        rel = quat_mul_kernel(quat_conj_kernel(dqs[pivot, :4]), dqs[k, :4])  # w = ⟨r_p, r_k⟩
         first = next(c for c in rel if c != 0)
         acc += weights[k] * (-1 if first < 0 else 1) * dqs[k]
     return _dq_normalize(acc)
 
 
-@_finite_output
+@finite_output
 def dq_blend(weights, dqs) -> np.ndarray:
     """Dual quaternion linear blending (DLB, Kavan et al. 2008) (spec/math.md §5.12).
 
@@ -488,23 +488,21 @@ def dq_blend(weights, dqs) -> np.ndarray:
     ValueError
         On shape mismatch, or when the blended real part is zero (e.g. weights summing to 0).
     """
-    dqs = _as_float(dqs, "dqs", (8,))
-    weights = _as_float(weights, "weights", ()).astype(dqs.dtype, copy=False)  # the DQs set the dtype
+    dqs = as_float(dqs, "dqs", (8,))
+    weights = as_float(weights, "weights", ()).astype(dqs.dtype, copy=False)  # the DQs set the dtype
     if dqs.ndim < 2 or weights.ndim < 1 or weights.shape[-1] != dqs.shape[-2]:
         raise ValueError(f"weights, dqs: expected shapes (..., K) and (..., K, 8), got {weights.shape} and {dqs.shape}")
     lead = np.broadcast_shapes(weights.shape[:-1], dqs.shape[:-2])
     k = dqs.shape[-2]
-    weights, _ = _prescaled(weights)  # only the ratios matter: exact power-of-two rescaling where Σ could overflow
+    weights, _ = prescaled(weights)  # only the ratios matter: exact power-of-two rescaling where Σ could overflow
     weights = np.broadcast_to(weights, lead + (k,))
     dqs = np.broadcast_to(dqs, lead + (k, 8))
     pivot = np.argmax(weights, axis=-1)  # (...)
     pr = np.take_along_axis(dqs[..., :4], pivot[..., None, None], axis=-2)  # (..., 1, 4)
-    sign = _hemisphere_sign(pr, dqs[..., :4])[..., 0]  # (..., K)
+    sign = hemisphere_sign(pr, dqs[..., :4])[..., 0]  # (..., K)
     acc = np.sum((weights * sign)[..., None] * dqs, axis=-2)  # (..., 8)
     return _dq_normalize(_dq_prescaled(acc, "weights, dqs", "blended real part"))
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-dq_from_quat_translation_kernel = _dq_from_quat_translation
-dq_conj_kernel = _dq_conj
-dq_mul_kernel = _dq_mul
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# dq_from_quat_translation_kernel, dq_conj_kernel, dq_mul_kernel.

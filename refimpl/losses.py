@@ -36,14 +36,14 @@ from types import MappingProxyType
 
 import numpy as np
 
-from refimpl.nn.kinematics_layers import (check_parents as _check_parents, forward_kinematics_backward,
+from refimpl.nn.kinematics_layers import (check_parents, forward_kinematics_backward,
                                           forward_kinematics_forward, offsets_from_dq_backward, offsets_from_dq_forward,
                                           positions_from_dq_backward, positions_from_dq_forward)
-from refimpl.nn.quat_layers import (as_float_array as _as_float_array, normalize as _normalize,
-                                    normalize_backward as _normalize_backward, quat_conj_kernel as _quat_conj,
-                                    quat_mul_backward_kernel as _quat_mul_backward, euler_from_quat_backward,
+from refimpl.nn.quat_layers import (as_float_array, normalize,
+                                    normalize_backward, quat_conj_kernel,
+                                    quat_mul_backward_kernel, euler_from_quat_backward,
                                     euler_from_quat_forward)
-from refimpl.quat import quat_mul_kernel as _quat_mul
+from refimpl.quat import quat_mul_kernel
 
 __all__ = [
     "WEIGHTS_ACRNN_DQ", "WEIGHT_ACRNN_QUAT_FK", "WEIGHTS_QUATERNET_DQ",
@@ -87,8 +87,8 @@ def _nonempty(x: np.ndarray, name: str) -> np.ndarray:
 
 def _pair(pred, target, last=None, min_ndim: int = 0):
     """Validate a (pred, target) pair of equal shapes."""
-    p = _nonempty(_as_float_array(pred, "pred", last, min_ndim=min_ndim), "pred")
-    t = _as_float_array(target, "target", last, min_ndim=min_ndim)
+    p = _nonempty(as_float_array(pred, "pred", last, min_ndim=min_ndim), "pred")
+    t = as_float_array(target, "target", last, min_ndim=min_ndim)
     if p.shape != t.shape:
         raise ValueError(f"target: expected shape {p.shape} (the shape of pred), got {t.shape}")
     return p, t
@@ -266,9 +266,9 @@ def _local_rotations(q: np.ndarray, par: np.ndarray, eps: float):
     qp = np.empty_like(q)
     qp[..., 0, :] = 0.0
     qp[..., 0, 0] = 1.0
-    qp[..., 1:, :] = _quat_conj(q[..., par[1:], :])
-    raw = _quat_mul(qp, q)
-    loc, n = _normalize(raw, eps)
+    qp[..., 1:, :] = quat_conj_kernel(q[..., par[1:], :])
+    raw = quat_mul_kernel(qp, q)
+    loc, n = normalize(raw, eps)
     return loc, n, qp
 
 
@@ -293,7 +293,7 @@ def local_quat_loss_forward(pred, target, parents, eps: float = 1e-12):
     cache : tuple
     """
     p, t = _pair(pred, target, (4, 8), min_ndim=2)
-    par = _check_parents(parents, p.shape[-2])
+    par = check_parents(parents, p.shape[-2])
     q = p[..., :4]
     loc, n, qp = _local_rotations(q, par, eps)
     tloc, _, _ = _local_rotations(t[..., :4], par, eps)
@@ -306,9 +306,9 @@ def local_quat_loss_backward(dvalue, cache):
     ``q_p* ⊗ q_j`` (each parent collects from all its children)."""
     sg, tloc, loc, n, qp, q, par, eps, shape = cache
     gl = (-_check_dvalue(dvalue) / sg.size) * sg[..., None] * tloc
-    graw = _normalize_backward(gl, loc, n, eps)
-    gqp, gq = _quat_mul_backward(graw, qp, q)
-    gpar = _quat_conj(gqp[..., 1:, :])  # gradient w.r.t. q_p from the conjugated factor
+    graw = normalize_backward(gl, loc, n, eps)
+    gqp, gq = quat_mul_backward_kernel(graw, qp, q)
+    gpar = quat_conj_kernel(gqp[..., 1:, :])  # gradient w.r.t. q_p from the conjugated factor
     np.add.at(gq, (Ellipsis, par[1:], slice(None)), gpar)
     return _embed(gq, shape)
 
@@ -413,7 +413,7 @@ def dq_reg_loss_forward(raw):
     value : float
     cache : tuple
     """
-    x = _nonempty(_as_float_array(raw, "raw", (4, 8)), "raw")
+    x = _nonempty(as_float_array(raw, "raw", (4, 8)), "raw")
     if _max_abs(x) <= _pow2_limit(x.dtype, 8):  # the usual case: 4th powers (and the gradient) cannot overflow
         terms, a, b = _dq_reg_terms(x, 1)
         return _mean_abs(terms), (x, None, a, b)
@@ -462,7 +462,7 @@ def quat_norm_loss_forward(raw):
     value : float
     cache : tuple
     """
-    x = _nonempty(_as_float_array(raw, "raw", 4), "raw")
+    x = _nonempty(as_float_array(raw, "raw", 4), "raw")
     if _max_abs(x) <= _pow2_limit(x.dtype, 8):  # the usual case, as in dq_reg_loss_forward
         terms, a, _ = _dq_reg_terms(x, 1)
         return _mean_abs(terms), (x, None, a)
@@ -507,8 +507,8 @@ def euler_l1_loss_forward(pred, target, order: str = "zyx", eps: float = QUATERN
     value : float
     cache : tuple
     """
-    p = _nonempty(_as_float_array(pred, "pred", 4), "pred")
-    t = _as_float_array(target, "target", (3, 4))
+    p = _nonempty(as_float_array(pred, "pred", 4), "pred")
+    t = as_float_array(target, "target", (3, 4))
     if t.shape[:-1] != p.shape[:-1]:
         raise ValueError(f"target: expected shape {p.shape[:-1] + (4,)} or {p.shape[:-1] + (3,)}, got {t.shape}")
     e, ecache = euler_from_quat_forward(p, order, eps)
@@ -558,15 +558,15 @@ def fk_position_loss_forward(pred_rotations, pred_translations, target_positions
     value : float
     cache : tuple
     """
-    rot = _nonempty(_as_float_array(pred_rotations, "pred_rotations", 4, min_ndim=2), "pred_rotations")
-    tr = _as_float_array(pred_translations, "pred_translations", 2)
+    rot = _nonempty(as_float_array(pred_rotations, "pred_rotations", 4, min_ndim=2), "pred_rotations")
+    tr = as_float_array(pred_translations, "pred_translations", 2)
     lead = rot.shape[:-2]
     if tr.shape != lead + (2,):
         raise ValueError(f"pred_translations: expected shape {lead + (2,)}, got {tr.shape}")
-    tpos = _as_float_array(target_positions, "target_positions", 3, min_ndim=2)
+    tpos = as_float_array(target_positions, "target_positions", 3, min_ndim=2)
     if tpos.shape != rot.shape[:-1] + (3,):
         raise ValueError(f"target_positions: expected shape {rot.shape[:-1] + (3,)}, got {tpos.shape}")
-    ttr = _as_float_array(target_translations, "target_translations", 2)
+    ttr = as_float_array(target_translations, "target_translations", 2)
     if ttr.shape != tr.shape:
         raise ValueError(f"target_translations: expected shape {tr.shape}, got {ttr.shape}")
     if up_axis not in (0, 1, 2):

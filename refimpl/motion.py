@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from refimpl.quat import quat_mul, quat_rotate
-from refimpl.skeleton import Skeleton, check_unit as _check_unit
+from refimpl.skeleton import Skeleton, check_unit
 
 __all__ = ["Motion", "simplify_translations", "reroot_at_child", "fold_constant_translations",
            "TRANSLATION_TOLERANCE"]
@@ -78,7 +78,7 @@ class Motion:
         rot = _as_stored(self.rotations, "rotations")
         if rot.ndim != 3 or rot.shape[1:] != (num, 4):
             raise ValueError(f"rotations: expected shape (T, {num}, 4), got {rot.shape}")
-        _check_unit(rot, "rotations")
+        check_unit(rot, "rotations")
         pos = _as_stored(self.root_positions, "root_positions")
         if pos.shape != (rot.shape[0], 3):
             raise ValueError(f"root_positions: expected shape ({rot.shape[0]}, 3) to match rotations "

@@ -47,7 +47,7 @@ ACRNN_ADAM = MappingProxyType({"lr": 1e-4, "betas": (0.9, 0.999), "eps": 1e-8, "
 #: QTG (Geleijn et al.): Adam lr 1e-4, β1 = 0.5, β2 = 0.9.
 QTG_ADAM = MappingProxyType({"lr": 1e-4, "betas": (0.5, 0.9), "eps": 1e-8, "weight_decay": 0.0})
 
-_BLOCK = 1 << 17  # elements per block in adam_step (spec/optim.md §1: L2-sized 2^15 blocks were not measurably faster)
+_BLOCK = 1 << 17  # elements per block in adam_step (benchmarks/README.md "Adam": 2^15 blocks were not faster)
 _THREAD_MIN_SIZE = 1 << 20  # adam_step uses two threads from this many parameter elements on (when threads=None)
 
 

@@ -49,7 +49,7 @@ _AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 # validation helpers (shared with refimpl.dualquat)
 # ----------------------------------------------------------------------------------------------------------------
 
-def _as_float(x, name: str, tail: tuple, finite: bool = True) -> np.ndarray:
+def as_float(x, name: str, tail: tuple, finite: bool = True) -> np.ndarray:
     """Return ``x`` as a floating ndarray whose trailing axes are ``tail``; raise ValueError otherwise.
 
     Integer and boolean arrays become float64; floating arrays keep their dtype; anything else is rejected.
@@ -71,11 +71,11 @@ def _as_float(x, name: str, tail: tuple, finite: bool = True) -> np.ndarray:
     return a
 
 
-def _finite_output(fn):
+def finite_output(fn):
     """Public-boundary guard (spec/math.md §6, spec/robustness.md §8): run ``fn`` with NumPy's floating-point
     warnings silenced and raise ``ValueError`` if a floating result is not finite.
 
-    Inputs are checked finite by :func:`_as_float`, so a non-finite result can only come from a result (or an
+    Inputs are checked finite by :func:`as_float`, so a non-finite result can only come from a result (or an
     intermediate of it) beyond the float range: e.g. ``quat_mul`` of components near ``1e308``, ``quat_exp`` with
     ``w > 709``, ``dq_inv`` of a real part near ``1e-310``. One vectorised ``isfinite`` pass over the output.
     """
@@ -92,7 +92,7 @@ def _finite_output(fn):
     return guarded
 
 
-def _check_scalar(x, name: str, low: float = 0.0) -> float:
+def check_scalar(x, name: str, low: float = 0.0) -> float:
     """``x`` as a Python float; ValueError unless it is a real, finite number ``>= low`` (bool refused)."""
     if isinstance(x, (bool, np.bool_)) or not isinstance(x, (numbers.Real, np.integer, np.floating)):
         raise ValueError(f"{name}: expected a real number, got {type(x).__name__} {x!r:.60}")
@@ -109,7 +109,7 @@ def _check_nonzero(norm: np.ndarray, name: str, what: str = "quaternion") -> Non
         raise ValueError(f"{name}: zero {what} at index {idx} (norm 0); the operation is undefined there")
 
 
-def _prescaled(q: np.ndarray, name: str | None = None, what: str = "quaternion"):
+def prescaled(q: np.ndarray, name: str | None = None, what: str = "quaternion"):
     """``(q_s, e)`` with ``q = 2^e · q_s`` per object (last axis), for the public functions that only depend on
     the direction of ``q`` (or whose result scales with ``|q|``).
 
@@ -118,7 +118,7 @@ def _prescaled(q: np.ndarray, name: str | None = None, what: str = "quaternion")
     can under/overflow, and ``(q, None)`` is returned. Otherwise every object is multiplied by ``2^-e``, ``e`` the
     binary exponent of its largest component, so that component lies in ``[0.5, 1)``: exact (a power of two), so
     results do not change, only under/overflow disappears. With ``name``, a zero object raises ValueError naming
-    it. Hot kernels (``_quat_mul``, ``_quat_rotate``) never pay for this.
+    it. Hot kernels (``quat_mul_kernel``, ``quat_rotate_kernel``) never pay for this.
     """
     with np.errstate(over="ignore", under="ignore"):  # detected here
         n2 = np.sum(q * q, axis=-1)  # (...)
@@ -167,12 +167,12 @@ def _eps(dtype) -> float:
 
 def quat_identity(shape=(), dtype=np.float64) -> np.ndarray:
     """Identity quaternions ``(1, 0, 0, 0)`` of shape ``shape + (4,)`` (spec/math.md §1.1)."""
-    q = _zeros_of(shape, dtype, 4)
+    q = zeros_of(shape, dtype, 4)
     q[..., 0] = 1
     return q
 
 
-def _zeros_of(shape, dtype, size: int) -> np.ndarray:
+def zeros_of(shape, dtype, size: int) -> np.ndarray:
     """``np.zeros(shape + (size,), dtype)`` for :func:`quat_identity` / ``dq_identity``; ValueError unless
     ``shape`` is a non-negative int or a sequence of them and ``dtype`` a floating dtype, or if the array would
     not fit in memory."""
@@ -196,7 +196,7 @@ def _zeros_of(shape, dtype, size: int) -> np.ndarray:
         raise ValueError(f"shape: {shape!r:.60} is too large ({exc})") from None
 
 
-def _quat_mul(q: np.ndarray, r: np.ndarray) -> np.ndarray:
+def quat_mul_kernel(q: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Hamilton product kernel (broadcasting; dtype ``result_type(q, r)``), shared with refimpl.nn.quat_layers.
 
     Each component is written into a preallocated output: 2.5× faster than ``np.stack`` of the four components
@@ -230,7 +230,7 @@ def _quat_mul_naive(q: np.ndarray, r: np.ndarray) -> np.ndarray:
     return out.reshape(q.shape)
 
 
-@_finite_output
+@finite_output
 def quat_mul(q, r) -> np.ndarray:
     """Hamilton product ``q ⊗ r`` (spec/math.md §1.2).
 
@@ -245,41 +245,41 @@ def quat_mul(q, r) -> np.ndarray:
         ``w = w1w2 − x1x2 − y1y2 − z1z2``, ``x = w1x2 + x1w2 + y1z2 − z1y2``,
         ``y = w1y2 − x1z2 + y1w2 + z1x2``, ``z = w1z2 + x1y2 − y1x2 + z1w2``.
     """
-    q = _as_float(q, "q", (4,))
-    r = _as_float(r, "r", (4,))
+    q = as_float(q, "q", (4,))
+    r = as_float(r, "r", (4,))
     try:
-        return _quat_mul(q, r)
+        return quat_mul_kernel(q, r)
     except ValueError:
         raise ValueError(f"q, r: leading axes do not broadcast: shapes {q.shape} and {r.shape}") from None
 
 
-def _quat_conj(q: np.ndarray) -> np.ndarray:
+def quat_conj_kernel(q: np.ndarray) -> np.ndarray:
     return q * np.array([1, -1, -1, -1], dtype=q.dtype)
 
 
-@_finite_output
+@finite_output
 def quat_conj(q) -> np.ndarray:
     """Conjugate ``q* = (w, −x, −y, −z)`` (spec/math.md §1.3). Equals the inverse for a unit quaternion."""
-    return _quat_conj(_as_float(q, "q", (4,)))
+    return quat_conj_kernel(as_float(q, "q", (4,)))
 
 
-def _quat_norm(q: np.ndarray) -> np.ndarray:
+def quat_norm_kernel(q: np.ndarray) -> np.ndarray:
     return np.sqrt(np.sum(q * q, axis=-1))  # (...)
 
 
-@_finite_output
+@finite_output
 def quat_norm(q) -> np.ndarray:
     """Euclidean norm ``|q| = sqrt(w² + x² + y² + z²)``, shape ``(...)`` (spec/math.md §1.3).
 
     Computed as ``2^e |q 2^-e|`` (exact power-of-two scaling by the largest component), so it is accurate for
     tiny and huge quaternions; ``inf`` only when ``|q|`` exceeds the float range.
     """
-    qs, e = _prescaled(_as_float(q, "q", (4,)))
-    n = _quat_norm(qs)
+    qs, e = prescaled(as_float(q, "q", (4,)))
+    n = quat_norm_kernel(qs)
     return n if e is None else np.ldexp(n, e)
 
 
-@_finite_output
+@finite_output
 def quat_inv(q) -> np.ndarray:
     """Inverse ``q⁻¹ = q* / |q|²`` of a non-zero quaternion (spec/math.md §1.3).
 
@@ -288,18 +288,14 @@ def quat_inv(q) -> np.ndarray:
     ValueError
         If some quaternion is exactly zero.
     """
-    q = _as_float(q, "q", (4,))
+    q = as_float(q, "q", (4,))
     scale = np.max(np.abs(q), axis=-1, keepdims=True)  # (..., 1); scaling avoids under/overflow of |q|²
     _check_nonzero(scale[..., 0], "q")
     qs = q / scale
-    return _quat_conj(qs) / (np.sum(qs * qs, axis=-1, keepdims=True) * scale)
+    return quat_conj_kernel(qs) / (np.sum(qs * qs, axis=-1, keepdims=True) * scale)
 
 
-def _quat_normalize(q: np.ndarray) -> np.ndarray:
-    return q / _quat_norm(q)[..., None]
-
-
-@_finite_output
+@finite_output
 def quat_normalize(q, eps: float = 0.0) -> np.ndarray:
     """Unit quaternion ``q / |q|`` (spec/math.md §1.4).
 
@@ -317,21 +313,21 @@ def quat_normalize(q, eps: float = 0.0) -> np.ndarray:
     ValueError
         If some ``|q| <= eps`` (the direction of a zero quaternion is undefined; no identity is substituted).
     """
-    q = _as_float(q, "q", (4,))
-    eps = _check_scalar(eps, "eps")
+    q = as_float(q, "q", (4,))
+    eps = check_scalar(eps, "eps")
     scale = np.max(np.abs(q), axis=-1, keepdims=True)  # (..., 1)
     bad = scale[..., 0] == 0
     if eps > 0:
         with np.errstate(divide="ignore", invalid="ignore"):  # zero rows are already bad
-            bad |= _quat_norm(q / scale) * scale[..., 0] <= eps  # scaled: no under/overflow of |q|²
+            bad |= quat_norm_kernel(q / scale) * scale[..., 0] <= eps  # scaled: no under/overflow of |q|²
     if np.any(bad):
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
         raise ValueError(f"q: quaternion with norm <= {eps} at index {idx}; normalisation is undefined")
     qs = q / scale  # max |component| = 1: no under/overflow in the norm
-    return qs / _quat_norm(qs)[..., None]
+    return qs / quat_norm_kernel(qs)[..., None]
 
 
-def _quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+def quat_rotate_kernel(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     w = q[..., :1]  # (..., 1)
     u = q[..., 1:]  # (..., 3)
     uv = np.cross(u, v)
@@ -339,7 +335,7 @@ def _quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v + 2 * (w * uv + uuv)  # (..., 3)
 
 
-@_finite_output
+@finite_output
 def quat_rotate(q, v) -> np.ndarray:
     """Rotate vectors: ``vec(q ⊗ (0, v) ⊗ q*) = v + 2 (w (u × v) + u × (u × v))``, ``u = (x, y, z)`` (spec/math.md §1.5).
 
@@ -355,21 +351,21 @@ def quat_rotate(q, v) -> np.ndarray:
     -------
     ndarray, (..., 3)
     """
-    q = _as_float(q, "q", (4,))
-    v = _as_float(v, "v", (3,))
+    q = as_float(q, "q", (4,))
+    v = as_float(v, "v", (3,))
     lead = np.broadcast_shapes(q.shape[:-1], v.shape[:-1])
-    return _quat_rotate(np.broadcast_to(q, lead + (4,)), np.broadcast_to(v, lead + (3,)))
+    return quat_rotate_kernel(np.broadcast_to(q, lead + (4,)), np.broadcast_to(v, lead + (3,)))
 
 
-@_finite_output
+@finite_output
 def quat_dot(q, r) -> np.ndarray:
     """Four-dimensional dot product ``⟨q, r⟩ = w1w2 + x1x2 + y1y2 + z1z2``, shape ``(...)`` (spec/math.md §1.6)."""
-    q = _as_float(q, "q", (4,))
-    r = _as_float(r, "r", (4,))
+    q = as_float(q, "q", (4,))
+    r = as_float(r, "r", (4,))
     return np.sum(q * r, axis=-1)
 
 
-@_finite_output
+@finite_output
 def quat_angle(q, r=None) -> np.ndarray:
     """Geodesic angle in ``[0, π]`` of the rotation ``q`` (or of ``q* ⊗ r`` when ``r`` is given) (spec/math.md §1.6).
 
@@ -380,14 +376,14 @@ def quat_angle(q, r=None) -> np.ndarray:
     -------
     ndarray, (...)
     """
-    q, _ = _prescaled(_as_float(q, "q", (4,)))  # exact rescaling where needed: no under/overflow below
+    q, _ = prescaled(as_float(q, "q", (4,)))  # exact rescaling where needed: no under/overflow below
     if r is not None:
-        r, _ = _prescaled(_as_float(r, "r", (4,)))
-        q = _quat_mul(_quat_conj(q), r)
+        r, _ = prescaled(as_float(r, "r", (4,)))
+        q = quat_mul_kernel(quat_conj_kernel(q), r)
     return 2 * np.arctan2(np.sqrt(np.sum(q[..., 1:] ** 2, axis=-1)), np.abs(q[..., 0]))
 
 
-def _sin_over_x(x: np.ndarray) -> np.ndarray:
+def sin_over_x(x: np.ndarray) -> np.ndarray:
     """``sin(x)/x`` with its Taylor series ``1 − x²/6 + x⁴/120`` for small ``|x|``."""
     small = np.abs(x) < 1e-3
     xs = np.where(small, 1, x)
@@ -395,7 +391,7 @@ def _sin_over_x(x: np.ndarray) -> np.ndarray:
     return np.where(small, 1 - x2 / 6 + x2 * x2 / 120, np.sin(xs) / xs)
 
 
-@_finite_output
+@finite_output
 def quat_exp(q) -> np.ndarray:
     """Quaternion exponential ``exp(w, u) = e^w (cos|u|, sin|u| u/|u|)`` (spec/math.md §1.7).
 
@@ -414,20 +410,20 @@ def quat_exp(q) -> np.ndarray:
     -------
     ndarray, (..., 4)
     """
-    q = _as_float(q, "q", (4,))
+    q = as_float(q, "q", (4,))
     u = q[..., 1:]
-    us, e = _prescaled(u)  # u = 2^e us where |u|² could under/overflow: exact
-    a = _quat_norm(us) if e is None else np.ldexp(_quat_norm(us), e)  # (...) |u|, finite (|u| <= 2 max|u_i|)
+    us, e = prescaled(u)  # u = 2^e us where |u|² could under/overflow: exact
+    a = quat_norm_kernel(us) if e is None else np.ldexp(quat_norm_kernel(us), e)  # (...) |u|, finite (<= 2 max|u_i|)
     ew = np.exp(q[..., 0])
     if e is None:
-        vec = (ew * _sin_over_x(a))[..., None] * u
+        vec = (ew * sin_over_x(a))[..., None] * u
     else:  # sin|u| · u/|u| with the unit axis us/|us|: no overflow of a and no underflow of sin|u|/|u|
-        axis = us / np.where(a == 0, 1, _quat_norm(us))[..., None]
-        vec = np.where((a < 1)[..., None], (ew * _sin_over_x(a))[..., None] * u, (ew * np.sin(a))[..., None] * axis)
+        axis = us / np.where(a == 0, 1, quat_norm_kernel(us))[..., None]
+        vec = np.where((a < 1)[..., None], (ew * sin_over_x(a))[..., None] * u, (ew * np.sin(a))[..., None] * axis)
     return np.concatenate([(ew * np.cos(a))[..., None], vec], axis=-1)
 
 
-def _atan_ratio(s: np.ndarray, w: np.ndarray) -> np.ndarray:
+def atan_ratio(s: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``atan2(s, w) / s`` for ``s >= 0``; the series ``(1/w)(1 − r²/3 + r⁴/5)``, ``r = s/w``, when ``0 <= s <= 1e-4 w``.
 
     For ``w < 0`` the direct quotient is used (``≈ π/s``, large but exact); ``s = 0, w < 0`` gives inf·0 issues,
@@ -440,7 +436,7 @@ def _atan_ratio(s: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.where(small, (1 - r2 / 3 + r2 * r2 / 5) / ws, np.arctan2(ss, w) / ss)
 
 
-@_finite_output
+@finite_output
 def quat_log(q) -> np.ndarray:
     """Quaternion logarithm ``log q = (log|q|, atan2(|u|, w) u/|u|)`` (spec/math.md §1.7).
 
@@ -452,28 +448,28 @@ def quat_log(q) -> np.ndarray:
     ValueError
         If some quaternion is zero (``log 0`` is undefined).
     """
-    q = _as_float(q, "q", (4,))
-    q, e = _prescaled(q, "q")  # input = 2^e q: log|input| = log|q| + e log 2
-    log_n = np.log(_quat_norm(q))
+    q = as_float(q, "q", (4,))
+    q, e = prescaled(q, "q")  # input = 2^e q: log|input| = log|q| + e log 2
+    log_n = np.log(quat_norm_kernel(q))
     if e is not None:
         log_n = log_n + (e * math.log(2)).astype(q.dtype)
     w = q[..., 0]
     u = q[..., 1:]
     s = np.sqrt(np.sum(u * u, axis=-1))
     neg_real = (s == 0) & (w < 0)
-    f = np.where(neg_real, 0, _atan_ratio(s, w))
+    f = np.where(neg_real, 0, atan_ratio(s, w))
     vec = f[..., None] * u
     vec[..., 0] = np.where(neg_real, np.pi, vec[..., 0])
     return np.concatenate([log_n[..., None], vec], axis=-1)
 
 
-@_finite_output
+@finite_output
 def quat_canonical(q) -> np.ndarray:
     """The representative of ``±q`` whose first non-zero component is positive (spec/math.md §1.8).
 
     So ``w >= 0``; when ``w = 0`` the sign is fixed by x, then y, then z. Unique for every non-zero ``q``.
     """
-    return _quat_canonical(_as_float(q, "q", (4,)))
+    return _quat_canonical(as_float(q, "q", (4,)))
 
 
 def _quat_canonical(q: np.ndarray) -> np.ndarray:
@@ -501,7 +497,7 @@ def _quat_fix_naive(q: np.ndarray) -> np.ndarray:
     return out
 
 
-@_finite_output
+@finite_output
 def quat_fix(q) -> np.ndarray:
     """Antipodal continuity over time, axis 0 (QuaterNet's ``qfix``) (spec/math.md §1.8).
 
@@ -515,25 +511,25 @@ def quat_fix(q) -> np.ndarray:
     q : array_like, (T, ..., 4)
         T >= 1 frames; any further axes (e.g. joints) are independent tracks.
     """
-    q = _as_float(q, "q", (4,))
+    q = as_float(q, "q", (4,))
     if q.ndim < 2:
         raise ValueError(f"q: expected shape (T, ..., 4) with a time axis, got {q.shape}")
     return _quat_fix(q)
 
 
-def _hemisphere_sign(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+def hemisphere_sign(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     """``±1`` of shape ``(..., 1)`` making ``q0* ⊗ (±q1)`` canonical (first non-zero component > 0).
 
     Away from ties this is ``sign⟨q0, q1⟩`` (the w of ``q0* ⊗ q1`` is ``⟨q0, q1⟩``); when ``⟨q0, q1⟩ = 0`` the
     x, y, z of the relative rotation break the tie, so the choice does not depend on the stored sign of ``q1``.
     """
-    rel = _quat_mul(_quat_conj(q0), q1)
+    rel = quat_mul_kernel(quat_conj_kernel(q0), q1)
     first = np.argmax(rel != 0, axis=-1)
     lead = np.take_along_axis(rel, first[..., None], axis=-1)  # (..., 1)
     return np.where(lead < 0, -1, 1).astype(rel.dtype)
 
 
-@_finite_output
+@finite_output
 def quat_slerp(q0, q1, t) -> np.ndarray:
     """Spherical linear interpolation along the shortest arc (spec/math.md §1.9).
 
@@ -556,14 +552,14 @@ def quat_slerp(q0, q1, t) -> np.ndarray:
     -------
     ndarray, (..., 4)
     """
-    q0 = _as_float(q0, "q0", (4,))
-    q1 = _as_float(q1, "q1", (4,))
-    t = _as_float(t, "t", ()).astype(np.result_type(q0, q1), copy=False)  # t does not change the dtype
-    q1 = _hemisphere_sign(q0, q1) * q1
-    omega = 2 * np.arctan2(_quat_norm(q0 - q1), _quat_norm(q0 + q1))  # (...)
+    q0 = as_float(q0, "q0", (4,))
+    q1 = as_float(q1, "q1", (4,))
+    t = as_float(t, "t", ()).astype(np.result_type(q0, q1), copy=False)  # t does not change the dtype
+    q1 = hemisphere_sign(q0, q1) * q1
+    omega = 2 * np.arctan2(quat_norm_kernel(q0 - q1), quat_norm_kernel(q0 + q1))  # (...)
     omega, t = np.broadcast_arrays(omega, t)
-    c0 = _sin_over_x((1 - t) * omega) * (1 - t) / _sin_over_x(omega)
-    c1 = _sin_over_x(t * omega) * t / _sin_over_x(omega)
+    c0 = sin_over_x((1 - t) * omega) * (1 - t) / sin_over_x(omega)
+    c1 = sin_over_x(t * omega) * t / sin_over_x(omega)
     return c0[..., None] * q0 + c1[..., None] * q1
 
 
@@ -571,7 +567,7 @@ def quat_slerp(q0, q1, t) -> np.ndarray:
 # axis-angle (exponential map)
 # ----------------------------------------------------------------------------------------------------------------
 
-@_finite_output
+@finite_output
 def quat_from_axis_angle(v) -> np.ndarray:
     """Unit quaternion of the rotation vector ``v = θ n`` (exponential map) (spec/math.md §2.1).
 
@@ -589,19 +585,19 @@ def quat_from_axis_angle(v) -> np.ndarray:
     -------
     ndarray, (..., 4)
     """
-    v = _as_float(v, "v", (3,))
-    vs, e = _prescaled(v)  # v = 2^e vs where θ² could under/overflow: exact
+    v = as_float(v, "v", (3,))
+    vs, e = prescaled(v)  # v = 2^e vs where θ² could under/overflow: exact
     if e is None:
         half = 0.5 * np.sqrt(np.sum(v * v, axis=-1))  # (...) θ/2
-        return np.concatenate([np.cos(half)[..., None], (0.5 * _sin_over_x(half))[..., None] * v], axis=-1)
-    ns = _quat_norm(vs)  # (...) |vs|
+        return np.concatenate([np.cos(half)[..., None], (0.5 * sin_over_x(half))[..., None] * v], axis=-1)
+    ns = quat_norm_kernel(vs)  # (...) |vs|
     half = np.ldexp(ns, e - 1)  # θ/2 = 2^(e-1) |vs|: finite for every finite v (θ/2 <= 0.87 max|v_i|)
     axis = vs / np.where(ns == 0, 1, ns)[..., None]  # (..., 3) unit axis (0 for v = 0)
-    vec = np.where((half < 1)[..., None], (0.5 * _sin_over_x(half))[..., None] * v, np.sin(half)[..., None] * axis)
+    vec = np.where((half < 1)[..., None], (0.5 * sin_over_x(half))[..., None] * v, np.sin(half)[..., None] * axis)
     return np.concatenate([np.cos(half)[..., None], vec], axis=-1)
 
 
-@_finite_output
+@finite_output
 def axis_angle_from_quat(q) -> np.ndarray:
     """Rotation vector ``θ n`` with ``θ ∈ [0, π]`` of a non-zero quaternion (logarithm map) (spec/math.md §2.1).
 
@@ -615,26 +611,27 @@ def axis_angle_from_quat(q) -> np.ndarray:
     ValueError
         If some quaternion is zero.
     """
-    q = _as_float(q, "q", (4,))
-    q, _ = _prescaled(q, "q")
+    q = as_float(q, "q", (4,))
+    q, _ = prescaled(q, "q")
     q = _quat_canonical(q)
     u = q[..., 1:]
     s = np.sqrt(np.sum(u * u, axis=-1))
-    return (2 * _atan_ratio(s, q[..., 0]))[..., None] * u
+    return (2 * atan_ratio(s, q[..., 0]))[..., None] * u
 
 
 # ----------------------------------------------------------------------------------------------------------------
 # Euler angles
 # ----------------------------------------------------------------------------------------------------------------
 
-def _quat_elementary(axis: int, angle: np.ndarray) -> np.ndarray:
+def quat_elementary_kernel(axis: int, angle: np.ndarray) -> np.ndarray:
+    """The rotation by ``angle`` (...) about axis ``axis`` (0, 1, 2 = x, y, z): ``(cos a/2, sin a/2 e_axis)`` (...) 4."""
     q = np.zeros(angle.shape + (4,), dtype=angle.dtype)
     q[..., 0] = np.cos(0.5 * angle)
     q[..., 1 + axis] = np.sin(0.5 * angle)
     return q
 
 
-@_finite_output
+@finite_output
 def quat_from_euler(angles, order: str) -> np.ndarray:
     """Quaternion ``q_{order[0]}(a0) ⊗ q_{order[1]}(a1) ⊗ q_{order[2]}(a2)`` (spec/math.md §3.1; paper Eq. 4-5).
 
@@ -652,10 +649,10 @@ def quat_from_euler(angles, order: str) -> np.ndarray:
     ndarray, (..., 4)
     """
     o = _parse_order(order)
-    a = _as_float(angles, "angles", (3,))
-    q = _quat_elementary(_AXIS_INDEX[o[0]], a[..., 0])
-    q = _quat_mul(q, _quat_elementary(_AXIS_INDEX[o[1]], a[..., 1]))
-    return _quat_mul(q, _quat_elementary(_AXIS_INDEX[o[2]], a[..., 2]))
+    a = as_float(angles, "angles", (3,))
+    q = quat_elementary_kernel(_AXIS_INDEX[o[0]], a[..., 0])
+    q = quat_mul_kernel(q, quat_elementary_kernel(_AXIS_INDEX[o[1]], a[..., 1]))
+    return quat_mul_kernel(q, quat_elementary_kernel(_AXIS_INDEX[o[2]], a[..., 2]))
 
 
 def _wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -669,7 +666,7 @@ def _euler_from_quat(q: np.ndarray, o: str) -> np.ndarray:
     k = 3 - i - j
     sign = 1 if (j - i) % 3 == 1 else -1  # e_i e_j = sign · e_k
     w, qi, qj, qk = q[..., 0], q[..., 1 + i], q[..., 1 + j], sign * q[..., 1 + k]
-    tol = math.sqrt(_eps(q.dtype)) * _quat_norm(q)
+    tol = math.sqrt(_eps(q.dtype)) * quat_norm_kernel(q)
     if proper:
         # q = (c cosσ, [i] c sinσ, [j] s cosδ, [k] sign·s sinδ), c = cos(b/2), s = sin(b/2), σ=(a+g)/2, δ=(a−g)/2
         m_sum, m_dif = np.hypot(w, qi), np.hypot(qj, qk)
@@ -695,7 +692,7 @@ def _euler_from_quat(q: np.ndarray, o: str) -> np.ndarray:
     return np.stack([_wrap_angle(alpha), beta, _wrap_angle(gamma)], axis=-1)
 
 
-@_finite_output
+@finite_output
 def euler_from_quat(q, order: str) -> np.ndarray:
     """Euler angles (radians) in ``order`` of a non-zero quaternion (spec/math.md §3.2; paper Eq. 7 for ``zyx``).
 
@@ -713,18 +710,18 @@ def euler_from_quat(q, order: str) -> np.ndarray:
         For a bad order or a zero quaternion.
     """
     o = _parse_order(order)
-    q = _as_float(q, "q", (4,))
-    q, _ = _prescaled(q, "q")
+    q = as_float(q, "q", (4,))
+    q, _ = prescaled(q, "q")
     return _euler_from_quat(q, o)
 
 
-@_finite_output
+@finite_output
 def matrix_from_euler(angles, order: str) -> np.ndarray:
     """Rotation matrix ``R_{order[0]}(a0) R_{order[1]}(a1) R_{order[2]}(a2)``, ``(..., 3, 3)`` (spec/math.md §3.3)."""
-    return _matrix_from_quat(quat_from_euler(angles, order))
+    return matrix_from_quat_kernel(quat_from_euler(angles, order))
 
 
-@_finite_output
+@finite_output
 def euler_from_matrix(m, order: str) -> np.ndarray:
     """Euler angles in ``order`` of rotation matrices ``(..., 3, 3)``, via :func:`quat_from_matrix` (spec/math.md §3.3)."""
     o = _parse_order(order)
@@ -735,7 +732,7 @@ def euler_from_matrix(m, order: str) -> np.ndarray:
 # matrices and 6-D
 # ----------------------------------------------------------------------------------------------------------------
 
-def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
+def matrix_from_quat_kernel(q: np.ndarray) -> np.ndarray:
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     s = 2 / np.sum(q * q, axis=-1)
     xx, yy, zz = s * x * x, s * y * y, s * z * z
@@ -749,7 +746,7 @@ def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
     return m.reshape(q.shape[:-1] + (3, 3))
 
 
-@_finite_output
+@finite_output
 def matrix_from_quat(q) -> np.ndarray:
     """Rotation matrix of a non-zero quaternion (of ``q/|q|``), ``(..., 3, 3)`` (spec/math.md §4.1).
 
@@ -761,16 +758,16 @@ def matrix_from_quat(q) -> np.ndarray:
     ValueError
         If some quaternion is zero.
     """
-    q = _as_float(q, "q", (4,))
-    q, _ = _prescaled(q, "q")
-    return _matrix_from_quat(q)
+    q = as_float(q, "q", (4,))
+    q, _ = prescaled(q, "q")
+    return matrix_from_quat_kernel(q)
 
 
 def _orthonormality_tol(dtype) -> float:
     return 1e-6 if np.dtype(dtype).itemsize >= 8 else 1e-3
 
 
-def _check_rotation_matrix(m: np.ndarray, name: str) -> None:
+def check_rotation_matrix(m: np.ndarray, name: str) -> None:
     """Raise ValueError unless ``m`` is orthonormal with det +1 (to the dtype's tolerance)."""
     if not isinstance(m, np.ndarray) or m.dtype.kind != "f" or m.shape[-2:] != (3, 3):
         raise ValueError(f"{name}: expected a floating array of rotation matrices (..., 3, 3), got "
@@ -792,7 +789,7 @@ def _check_rotation_matrix(m: np.ndarray, name: str) -> None:
         raise ValueError(f"{name}: determinant <= 0 at index {idx} (a reflection, not a rotation)")
 
 
-def _quat_from_matrix(m: np.ndarray) -> np.ndarray:
+def quat_from_matrix_kernel(m: np.ndarray) -> np.ndarray:
     m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
     m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
     m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
@@ -806,7 +803,7 @@ def _quat_from_matrix(m: np.ndarray) -> np.ndarray:
     ], axis=-2)  # (..., 4, 4)
     best = np.argmax(np.stack([tr, m00, m11, m22], axis=-1), axis=-1)  # (...)
     q = np.take_along_axis(cand, best[..., None, None], axis=-2)[..., 0, :]  # (..., 4)
-    q = q / _quat_norm(q)[..., None]
+    q = q / quat_norm_kernel(q)[..., None]
     return np.where(q[..., :1] < 0, -q, q)
 
 
@@ -834,7 +831,7 @@ def _quat_from_matrix_naive(m: np.ndarray) -> np.ndarray:
     return out.reshape(m.shape[:-2] + (4,))
 
 
-@_finite_output
+@finite_output
 def quat_from_matrix(m) -> np.ndarray:
     """Unit quaternion with ``w >= 0`` of rotation matrices ``(..., 3, 3)`` (spec/math.md §4.2).
 
@@ -848,12 +845,12 @@ def quat_from_matrix(m) -> np.ndarray:
         If ``m`` is not ``(..., 3, 3)``, not finite, not orthonormal (``max |MᵀM − I|`` above 1e-6 for float64,
         1e-3 for float32) or has det <= 0.
     """
-    m = _as_float(m, "m", (3, 3))
-    _check_rotation_matrix(m, "m")
-    return _quat_from_matrix(m)
+    m = as_float(m, "m", (3, 3))
+    check_rotation_matrix(m, "m")
+    return quat_from_matrix_kernel(m)
 
 
-@_finite_output
+@finite_output
 def ortho6d_from_matrix(m) -> np.ndarray:
     """6-D rotation representation (Zhou et al. 2019): the first two COLUMNS of ``R`` (spec/math.md §4.3).
 
@@ -864,11 +861,11 @@ def ortho6d_from_matrix(m) -> np.ndarray:
     -------
     ndarray, (..., 6)
     """
-    m = _as_float(m, "m", (3, 3))
+    m = as_float(m, "m", (3, 3))
     return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
 
 
-@_finite_output
+@finite_output
 def matrix_from_ortho6d(x) -> np.ndarray:
     """Rotation matrix from 6 numbers by Gram-Schmidt (Zhou et al. 2019) (spec/math.md §4.3).
 
@@ -880,10 +877,10 @@ def matrix_from_ortho6d(x) -> np.ndarray:
     ValueError
         If ``a1`` is zero or ``a2`` is parallel to ``a1`` (relative residual ``<= eps``).
     """
-    x = _as_float(x, "x", (6,))
+    x = as_float(x, "x", (6,))
     a1, a2 = x[..., :3], x[..., 3:]
-    a1, _ = _prescaled(a1)  # exact rescaling of each column where needed (the result is invariant to it):
-    a2, _ = _prescaled(a2)  # no under/overflow of the norms
+    a1, _ = prescaled(a1)  # exact rescaling of each column where needed (the result is invariant to it):
+    a2, _ = prescaled(a2)  # no under/overflow of the norms
     n1 = np.sqrt(np.sum(a1 * a1, axis=-1))
     _check_nonzero(n1, "x", "first column x[..., 0:3]")
     b1 = a1 / n1[..., None]
@@ -902,33 +899,21 @@ def matrix_from_ortho6d(x) -> np.ndarray:
 # layout converters
 # ----------------------------------------------------------------------------------------------------------------
 
-@_finite_output
+@finite_output
 def quat_xyzw_from_wxyz(q) -> np.ndarray:
     """``(w, x, y, z) → (x, y, z, w)`` (scalar-last, as scipy and ROS) (spec/conventions.md)."""
-    q = _as_float(q, "q", (4,))
+    q = as_float(q, "q", (4,))
     return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
-@_finite_output
+@finite_output
 def quat_wxyz_from_xyzw(q) -> np.ndarray:
     """``(x, y, z, w) → (w, x, y, z)`` (spec/conventions.md)."""
-    q = _as_float(q, "q", (4,))
+    q = as_float(q, "q", (4,))
     return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-as_float = _as_float
-atan_ratio = _atan_ratio
-check_rotation_matrix = _check_rotation_matrix
-hemisphere_sign = _hemisphere_sign
-matrix_from_quat_kernel = _matrix_from_quat
-prescaled = _prescaled
-quat_conj_kernel = _quat_conj
-quat_from_matrix_kernel = _quat_from_matrix
-quat_mul_kernel = _quat_mul
-quat_norm_kernel = _quat_norm
-quat_rotate_kernel = _quat_rotate
-sin_over_x = _sin_over_x
-check_scalar = _check_scalar
-finite_output = _finite_output
-zeros_of = _zeros_of
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# as_float, atan_ratio, check_rotation_matrix, hemisphere_sign, matrix_from_quat_kernel, prescaled, quat_conj_kernel,
+# quat_elementary_kernel, quat_from_matrix_kernel, quat_mul_kernel, quat_norm_kernel, quat_rotate_kernel,
+# sin_over_x, check_scalar, finite_output, zeros_of.

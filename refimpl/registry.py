@@ -131,7 +131,7 @@ class TrainedModel:
     def pose_normalization(self) -> tuple[np.ndarray, np.ndarray]:
         """Transition task: ``(mean (P,), std (P,))`` over the whole pose vector: root statistics, then 0 / 1 for
         quaternions."""
-        from refimpl.transitions import pose_statistics
+        from refimpl.protocols.transition import pose_statistics
 
         if self.root_mean is None:
             raise ValueError(f"model {self.spec.name!r} has no pose normalisation (not a transition model)")

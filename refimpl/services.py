@@ -18,7 +18,7 @@ import numpy as np
 
 from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
-from refimpl.transitions import SAMPLE_DIR
+from refimpl.protocols.transition import SAMPLE_DIR
 
 __all__ = ["SAMPLE_DIR", "blas_threads", "read_motion", "load_trained", "train_model", "network_methods",
            "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata"]
@@ -143,7 +143,8 @@ def _check_writable_checkpoint(spec: ModelSpec, adapter) -> None:
 
 
 def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect: TrainedModel | None = None) -> dict:
-    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``).
+    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``;
+    ``<name>_onnx+join`` when the files were exported with the join option, spec/qtg.md §7.4).
 
     ``onnx_dir`` must hold the exported models of ``model`` (or of ``expect``, the checkpoint the command runs
     when only the exported models are run): another model's folder is a ``BadInputError`` naming the folder."""
@@ -156,15 +157,18 @@ def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect:
         if want is not None and name != want.spec.name:  # the folder must hold this command's model
             raise BadInputError(f"{onnx_dir}: holds exported {name!r} models, not the {want.spec.name!r} model of "
                                 f"{want.path}")
-        methods[f"{name}_onnx"] = onnx_method(onnx_dir)
+        joined = (onnx_metadata(onnx_dir).get("join") or {}).get("mode", "none") != "none"
+        methods[f"{name}_onnx" + ("+join" if joined else "")] = onnx_method(onnx_dir)
     return methods
 
 
-def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition") -> dict:
+def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition",
+                   **options) -> dict:
     """The task's protocol on ``test_ds`` for the network (NumPy, and onnxruntime from ``onnx_dir``) and the
-    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`)."""
+    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`); ``options`` go to the task's
+    ``methods`` (transition: ``join``)."""
     mod = task_of(model.spec if model is not None else task)
-    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps))
+    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps, **options))
 
 
 def _deploy_models(what: str):

@@ -31,10 +31,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from refimpl.dualquat import (dq_conj_kernel as _dq_conj, dq_from_quat_translation_kernel as _dq_from_quat_translation,
-                              dq_mul_kernel as _dq_mul, dq_from_quat_translation, dq_mul, translation_from_dq)
-from refimpl.quat import (check_scalar as _check_scalar, finite_output as _finite_output,
-                          quat_mul_kernel as _quat_mul, quat_rotate_kernel as _quat_rotate, matrix_from_quat,
+from refimpl.dualquat import (dq_conj_kernel, dq_from_quat_translation_kernel,
+                              dq_mul_kernel, dq_from_quat_translation, dq_mul, translation_from_dq)
+from refimpl.quat import (check_scalar, finite_output,
+                          quat_mul_kernel, quat_rotate_kernel, matrix_from_quat,
                           quat_from_axis_angle, quat_mul, quat_rotate)
 
 __all__ = [
@@ -85,7 +85,7 @@ def _validate_parents(parents, name: str = "parents") -> np.ndarray:
     return arr
 
 
-def _as_float_array(x, name: str) -> np.ndarray:
+def as_float_array(x, name: str) -> np.ndarray:
     try:
         arr = np.asarray(x)
     except (TypeError, OverflowError, ValueError) as exc:  # ragged nesting, objects refusing conversion
@@ -103,7 +103,7 @@ UNIT_TOLERANCE = 1e-3
 """Largest accepted ``| |q| - 1 |`` for rotations entering forward kinematics and :class:`refimpl.motion.Motion`."""
 
 
-def _check_unit(rot: np.ndarray, name: str) -> None:
+def check_unit(rot: np.ndarray, name: str) -> None:
     """Raise ValueError unless every quaternion in ``rot (..., 4)`` has norm within ``UNIT_TOLERANCE`` of 1."""
     if rot.size == 0:
         return
@@ -222,7 +222,7 @@ class Skeleton:
                  joints_left: Sequence[int] | None = None, joints_right: Sequence[int] | None = None):
         par = _validate_parents(parents)
         num = par.size
-        off = _as_float_array(offsets, "offsets").astype(np.float64)
+        off = as_float_array(offsets, "offsets").astype(np.float64)
         if off.shape != (num, 3):
             raise ValueError(f"offsets: expected shape ({num}, 3) for {num} joints, got {off.shape}")
         if names is None:
@@ -312,20 +312,20 @@ class Skeleton:
 
     # -- kinematics ----------------------------------------------------------------------------------------
     def _check_motion(self, rotations, root_positions=None, unit: bool = False):
-        rot = _as_float_array(rotations, "rotations")
+        rot = as_float_array(rotations, "rotations")
         _check_last_axes(rot, "rotations", (self.num_joints, 4), f"(..., {self.num_joints}, 4)")
         if unit:
-            _check_unit(rot, "rotations")
+            check_unit(rot, "rotations")
         if root_positions is None:
             return rot, None
-        pos = _as_float_array(root_positions, "root_positions")
+        pos = as_float_array(root_positions, "root_positions")
         if pos.shape != rot.shape[:-2] + (3,):
             raise ValueError(f"root_positions: expected shape {rot.shape[:-2] + (3,)} to match rotations "
                              f"{rot.shape}, got {pos.shape}")
         dtype = np.result_type(rot.dtype, pos.dtype)
         return rot.astype(dtype, copy=False), pos.astype(dtype, copy=False)
 
-    @_finite_output
+    @finite_output
     def world_rotations(self, rotations) -> np.ndarray:
         """World (global) rotation of every joint: ``q_world[j] = q_world[p(j)] ⊗ q[j]``, ``q_world[0] = q[0]``.
 
@@ -341,7 +341,7 @@ class Skeleton:
         rot, _ = self._check_motion(rotations, unit=True)
         return _world_rotations(self._levels, rot)
 
-    @_finite_output
+    @finite_output
     def forward_kinematics(self, rotations, root_positions, translations=None) -> np.ndarray:
         """Joint positions by quaternion forward kinematics (QuaterNet, quaternet_reference_code.md §3.2).
 
@@ -372,13 +372,13 @@ class Skeleton:
         """``offsets`` (J, 3) or the checked per-frame ``translations`` (..., J, 3), in ``rot``'s dtype."""
         if translations is None:
             return self._offsets.astype(rot.dtype)
-        tr = _as_float_array(translations, "translations")
+        tr = as_float_array(translations, "translations")
         if tr.shape != rot.shape[:-1] + (3,):
             raise ValueError(f"translations: expected shape {rot.shape[:-1] + (3,)} to match rotations "
                              f"{rot.shape}, got {tr.shape}")
         return tr.astype(rot.dtype, copy=False)
 
-    @_finite_output
+    @finite_output
     def forward_kinematics_matrices(self, rotations, root_positions, translations=None) -> np.ndarray:
         """Joint positions by chaining 4x4 homogeneous matrices (an independent oracle for the quaternion FK).
 
@@ -416,7 +416,7 @@ def _world_rotations(levels, rot: np.ndarray) -> np.ndarray:
     world = np.empty_like(rot)                                              # (..., J, 4)
     world[..., 0, :] = rot[..., 0, :]
     for idx, par in levels:
-        world[..., idx, :] = _quat_mul(world[..., par, :], rot[..., idx, :])
+        world[..., idx, :] = quat_mul_kernel(world[..., par, :], rot[..., idx, :])
     return world
 
 
@@ -428,8 +428,8 @@ def _forward_kinematics(levels, offsets: np.ndarray, rot: np.ndarray, root_pos: 
     for idx, par in levels:
         q_par = world[..., par, :]                                          # (..., n, 4)
         off = np.broadcast_to(offsets[..., idx, :], q_par.shape[:-1] + (3,))  # (..., n, 3)
-        pos[..., idx, :] = pos[..., par, :] + _quat_rotate(q_par, off)
-        world[..., idx, :] = _quat_mul(q_par, rot[..., idx, :])
+        pos[..., idx, :] = pos[..., par, :] + quat_rotate_kernel(q_par, off)
+        world[..., idx, :] = quat_mul_kernel(q_par, rot[..., idx, :])
     return pos
 
 
@@ -452,7 +452,7 @@ def _forward_kinematics_naive(parents, offsets, rot, root_pos):
 # current coordinates (dual-quaternion paper Eq. 8-12)
 # ---------------------------------------------------------------------------------------------------------
 
-@_finite_output
+@finite_output
 def current_dq_from_local(rotations, offsets, parents) -> np.ndarray:
     """Current (root-relative) dual quaternions from local rotations and offsets (paper Eq. 9-11).
 
@@ -475,9 +475,9 @@ def current_dq_from_local(rotations, offsets, parents) -> np.ndarray:
     position relative to the root.
     """
     par = _validate_parents(parents)
-    rot = _as_float_array(rotations, "rotations")
+    rot = as_float_array(rotations, "rotations")
     _check_last_axes(rot, "rotations", (par.size, 4), f"(..., {par.size}, 4)")
-    off = _as_float_array(offsets, "offsets")
+    off = as_float_array(offsets, "offsets")
     _check_last_axes(off, "offsets", (par.size, 3), f"({par.size}, 3) or (..., {par.size}, 3)")
     dtype = np.result_type(rot.dtype, off.dtype)
     return _current_dq_from_local(_depth_levels(par), rot.astype(dtype, copy=False), off.astype(dtype, copy=False))
@@ -485,12 +485,12 @@ def current_dq_from_local(rotations, offsets, parents) -> np.ndarray:
 
 def _current_dq_from_local(levels, rot, off):
     off = np.broadcast_to(off, rot.shape[:-1] + (3,))
-    local = _dq_from_quat_translation(rot, off)                             # (..., J, 8)
+    local = dq_from_quat_translation_kernel(rot, off)                             # (..., J, 8)
     cur = np.empty_like(local)
     cur[..., 0, :4] = rot[..., 0, :]
     cur[..., 0, 4:] = 0.0
     for idx, par in levels:
-        cur[..., idx, :] = _dq_mul(cur[..., par, :], local[..., idx, :])
+        cur[..., idx, :] = dq_mul_kernel(cur[..., par, :], local[..., idx, :])
     return cur
 
 
@@ -506,7 +506,7 @@ def _current_dq_from_local_naive(parents, rot, off):
     return cur
 
 
-@_finite_output
+@finite_output
 def local_from_current_dq(dqs, parents) -> tuple[np.ndarray, np.ndarray]:
     """Local rotations and offsets from current dual quaternions (paper Eq. 12).
 
@@ -527,7 +527,7 @@ def local_from_current_dq(dqs, parents) -> tuple[np.ndarray, np.ndarray]:
         Local offsets (the root's is its own translation, 0 for data built by :func:`current_dq_from_local`).
     """
     par = _validate_parents(parents)
-    dq = _as_float_array(dqs, "dqs")
+    dq = as_float_array(dqs, "dqs")
     _check_last_axes(dq, "dqs", (par.size, 8), f"(..., {par.size}, 8)")
     local = _local_dq_from_current(par, dq)
     return local[..., :4].copy(), translation_from_dq(local)
@@ -536,10 +536,10 @@ def local_from_current_dq(dqs, parents) -> tuple[np.ndarray, np.ndarray]:
 def _local_dq_from_current(par, dq):
     parent_dq = dq[..., np.maximum(par, 0), :].copy()                       # (..., J, 8)
     parent_dq[..., 0, :] = np.array([1, 0, 0, 0, 0, 0, 0, 0], dtype=dq.dtype)
-    return _dq_mul(_dq_conj(parent_dq), dq)                                 # (..., J, 8)
+    return dq_mul_kernel(dq_conj_kernel(parent_dq), dq)                                 # (..., J, 8)
 
 
-@_finite_output
+@finite_output
 def positions_from_current_dq(dqs) -> np.ndarray:
     """Root-relative joint positions from current dual quaternions: ``p[j] = vec(2 q_d ⊗ q_r*)`` (paper Eq. 8).
 
@@ -553,12 +553,12 @@ def positions_from_current_dq(dqs) -> np.ndarray:
     -------
     ndarray, shape (..., J, 3)
     """
-    dq = _as_float_array(dqs, "dqs")
+    dq = as_float_array(dqs, "dqs")
     _check_last_axes(dq, "dqs", (8,), "(..., 8)")
     return translation_from_dq(dq)
 
 
-@_finite_output
+@finite_output
 def offsets_from_current_dq(dqs, parents) -> np.ndarray:
     """Local bone offsets ``vec(2 L_d ⊗ L_r*)`` with ``L[j] = C[p(j)]⁻¹ ⊗ C[j]`` (root: its own translation).
 
@@ -654,7 +654,7 @@ def _axis_index(axis) -> int:
     raise ValueError(f"axis: expected 'x', 'y', 'z' or 0, 1, 2, got {axis!r}")
 
 
-@_finite_output
+@finite_output
 def mirror(skeleton: Skeleton, rotations, root_positions, axis="x", mirror_offsets: bool = False):
     """Reflect a motion across the plane normal to ``axis`` through the origin and swap left and right.
 
@@ -704,7 +704,7 @@ def mirror(skeleton: Skeleton, rotations, root_positions, axis="x", mirror_offse
     return new_skel, new_rot, new_pos
 
 
-@_finite_output
+@finite_output
 def rotate_about_up(rotations, root_positions, angle, up="y"):
     """Rotate a whole motion about the vertical axis through the origin (data augmentation).
 
@@ -727,14 +727,14 @@ def rotate_about_up(rotations, root_positions, angle, up="y"):
     root_positions : ndarray, shape (..., 3)
     """
     a = _axis_index(up)
-    rot = _as_float_array(rotations, "rotations")
+    rot = as_float_array(rotations, "rotations")
     _check_last_axes(rot, "rotations", (4,), "(..., J, 4)")
     if rot.ndim < 2 or rot.shape[-2] == 0:
         raise ValueError(f"rotations: expected shape (..., J, 4) with J >= 1 joints, got {rot.shape}")
-    pos = _as_float_array(root_positions, "root_positions")
+    pos = as_float_array(root_positions, "root_positions")
     if pos.shape != rot.shape[:-2] + (3,):
         raise ValueError(f"root_positions: expected shape {rot.shape[:-2] + (3,)}, got {pos.shape}")
-    ang = _as_float_array(angle, "angle")
+    ang = as_float_array(angle, "angle")
     try:
         ang = np.broadcast_to(ang, pos.shape[:-1])
     except ValueError:
@@ -748,7 +748,7 @@ def rotate_about_up(rotations, root_positions, angle, up="y"):
     return new_rot, quat_rotate(q_up, pos.astype(dtype))
 
 
-@_finite_output
+@finite_output
 def random_rotate_about_up(rotations, root_positions, rng: np.random.Generator, low: float = -np.pi,
                            high: float = np.pi, up="y"):
     """:func:`rotate_about_up` by one angle drawn from ``U(low, high)`` for the whole motion.
@@ -769,7 +769,7 @@ def random_rotate_about_up(rotations, root_positions, rng: np.random.Generator, 
     """
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
-    low, high = _check_scalar(low, "low", -np.inf), _check_scalar(high, "high", -np.inf)
+    low, high = check_scalar(low, "low", -np.inf), check_scalar(high, "high", -np.inf)
     if not (high >= low and np.isfinite(high - low)):
         raise ValueError(f"low, high: expected low <= high with a finite difference, got {low!r}, {high!r}")
     angle = float(rng.uniform(low, high))
@@ -777,6 +777,5 @@ def random_rotate_about_up(rotations, root_positions, rng: np.random.Generator, 
     return rot, pos, angle
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-as_float_array = _as_float_array
-check_unit = _check_unit
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# as_float_array, check_unit.

@@ -18,8 +18,8 @@ import numpy as np
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from refimpl.dualquat import dq_from_quat_translation_kernel as _dq_from_quat_translation
-from refimpl.quat import EULER_ORDERS, TAIT_BRYAN_ORDERS, matrix_from_quat_kernel as _matrix_from_quat
+from refimpl.dualquat import dq_from_quat_translation_kernel
+from refimpl.quat import EULER_ORDERS, TAIT_BRYAN_ORDERS, matrix_from_quat_kernel
 
 __all__ = [
     "small_shapes", "unit_quaternions", "quaternions", "translations", "unit_dual_quaternions", "angles",
@@ -83,7 +83,7 @@ def unit_dual_quaternions(shape=(), max_translation: float = 10.0) -> st.SearchS
     """Unit dual quaternions ``(..., 8)`` = ``(q | ½ (0, t) ⊗ q)`` from a unit quaternion and a translation."""
     def build(s):
         return st.tuples(_directions(s, 4), _uniform(s + (3,), -max_translation, max_translation)).map(
-            lambda p: _dq_from_quat_translation(p[0], p[1]))
+            lambda p: dq_from_quat_translation_kernel(p[0], p[1]))
     return _shape_strategy(shape).flatmap(build)
 
 
@@ -121,7 +121,7 @@ def euler_angles(order: str, shape=(), margin: float = 0.05) -> st.SearchStrateg
 
 def rotation_matrices(shape=()) -> st.SearchStrategy:
     """Rotation matrices ``(..., 3, 3)`` (orthonormal, det +1 to rounding), from :func:`unit_quaternions`."""
-    return unit_quaternions(shape).map(_matrix_from_quat)
+    return unit_quaternions(shape).map(matrix_from_quat_kernel)
 
 
 @st.composite

@@ -39,15 +39,13 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-__all__ = ["MAX_TASK_ABS", "MAX_TASK_JOINTS", "LOCOMOTION_RIGS", "validate_task_checkpoint", "TASK_CHECKS"]
+__all__ = ["MAX_TASK_ABS", "MAX_TASK_JOINTS", "validate_task_checkpoint", "TASK_CHECKS"]
 
 #: Largest magnitude of a stored statistic, offset or seed value (the data of this project stay below ~10^4).
 MAX_TASK_ABS = 1e6
 #: Largest skeleton (joints) a task field may describe.
 MAX_TASK_JOINTS = 1000
 _MIN_STD = 1e-6
-#: Rigs of the locomotion task (``refimpl.tasks.locomotion.CMU_RIG`` / ``BANDAI_NAMCO_RIG``; tested equal).
-LOCOMOTION_RIGS = ("cmu", "bandai_namco")
 
 
 def _kind(v) -> str:
@@ -195,17 +193,17 @@ def _prediction(cfg: Mapping, config, where: str, task_module=None) -> None:
 
 
 def _locomotion(cfg: Mapping, config, where: str, task_module=None) -> None:
+    from refimpl.protocols.locomotion_data import BANDAI_NAMCO_RIG, CMU_RIG
+
     _require(cfg, ("skeleton", "rig"), where, "locomotion")
-    rigs = LOCOMOTION_RIGS
-    if cfg["rig"] not in rigs:
+    rigs = {r.name: r for r in (CMU_RIG, BANDAI_NAMCO_RIG)}
+    if not isinstance(cfg["rig"], str) or cfg["rig"] not in rigs:
         raise ValueError(f"{where}: model_config.rig: expected one of {list(rigs)}, got {_kind(cfg['rig'])}")
     sk = _skeleton(cfg["skeleton"], where, want_sides=True)
-    rig_of = getattr(task_module, "rig_of", None)  # the task's rigs, when the caller may import the task
-    if rig_of is not None:
-        keep = set(rig_of({"rig": cfg["rig"]}).keep)
-        if keep != set(sk.names):
-            raise ValueError(f"{where}: model_config.skeleton does not have the joints of the {cfg['rig']!r} rig "
-                             f"(missing {sorted(keep - set(sk.names))[:4]}, extra {sorted(set(sk.names) - keep)[:4]})")
+    keep = set(rigs[cfg["rig"]].keep)
+    if keep != set(sk.names):
+        raise ValueError(f"{where}: model_config.skeleton does not have the joints of the {cfg['rig']!r} rig "
+                         f"(missing {sorted(keep - set(sk.names))[:4]}, extra {sorted(set(sk.names) - keep)[:4]})")
     for key in ("prefix", "target"):
         if key in cfg:
             _positive_int(cfg, key, where)
@@ -248,7 +246,8 @@ def validate_task_checkpoint(task: str, model_config: Mapping, config, where: st
     config); ``ValueError`` naming ``where`` and the field. Unknown tasks are not checked.
 
     ``task_module`` (the task's module, when the caller may import it: ``refimpl``'s loaders) supplies the
-    synthesis task's ``TABLE1_ROWS`` for the row/variant agreement; ``deploy``'s loaders check the rest."""
+    synthesis task's ``TABLE1_ROWS`` for the row/variant agreement; ``deploy``'s loaders check the rest (the
+    locomotion rigs come from :mod:`refimpl.protocols.locomotion_data`)."""
     check = TASK_CHECKS.get(task)
     if check is not None:
         check(model_config, config, where, task_module)

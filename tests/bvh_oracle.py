@@ -9,7 +9,7 @@ OFFSET (missing position axes 0), as Blender's importer reads them (spec/data.md
     M_world[j] = M_world[parent] · M_local[j],   position = M_world[j][:3, 3]
 
 End Sites are named ``<parent>_end`` (the name ``refimpl.bvh`` gives them, so results can be matched).
-Used by tests/test_bvh_oracle.py and benchmarks/bvh_fk_check.py.
+Used by tests/test_bvh_oracle.py and experiments/bvh_fk_check.py.
 """
 from __future__ import annotations
 

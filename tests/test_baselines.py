@@ -6,14 +6,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from refimpl.baselines import (METHOD_NAMES, _inertialization_coefficients, _inertialize_naive, inertialize,
+from refimpl.protocols.transition_baselines import (METHOD_NAMES, _inertialization_coefficients, _inertialize_naive, inertialize,
                                interpolate, method_registry, quintic_inertialization)
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import rollout_forward
 from refimpl.quat import quat_angle, quat_from_axis_angle, quat_mul, quat_normalize
 from refimpl.recipes.qtg import qtg_method
 from refimpl.testing import TOL_EXACT, assert_close, assert_quat_close
-from refimpl.transitions import denormalize_poses, join_pose, normalize_poses, split_pose
+from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, split_pose
 
 
 def _random_poses(rng, B, J):
@@ -143,7 +143,7 @@ def test_interpolate_endpoints_and_spacing():
     # shortest path: total angle travelled <= π per joint
     assert np.all(ang.sum(axis=1) <= np.pi + 1e-9)
     # endpoints of the underlying interpolant
-    from refimpl.baselines import _interpolate_at
+    from refimpl.protocols.transition_baselines import _interpolate_at
     ends = _interpolate_at(past[:, 1], target[:, 0], np.array([0.0, 1.0]))
     assert_close(ends[:, 0, :3], past[:, 1, :3], **TOL_EXACT)
     assert_close(ends[:, 1, :3], target[:, 0, :3], **TOL_EXACT)

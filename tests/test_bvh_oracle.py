@@ -1,7 +1,7 @@
 """refimpl's BVH reading + FK against an independent reading (tests/bvh_oracle.py), spec/data.md §2.1.
 
 Every shared BVH file except the Bandai Namco set, and a deterministic subset (every 40th file, a few frames
-each) of the Bandai Namco set; ``benchmarks/bvh_fk_check.py`` runs every frame of every file.
+each) of the Bandai Namco set; ``experiments/bvh_fk_check.py`` runs every frame of every file.
 """
 from __future__ import annotations
 

@@ -1,10 +1,8 @@
 """Strict readers (issue #18, spec/robustness.md §1, spec/data.md §2.3): one-line reproducers of each failure
-family of the fuzz campaign (benchmarks/fuzz_readers.py), and the documented limits.
+family of the fuzz campaign (tests/fuzz/readers.py), and the documented limits.
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
 import time
 from pathlib import Path
 
@@ -13,21 +11,11 @@ import pytest
 
 from refimpl.bvh import MAX_DEPTH, MAX_FRAME_VALUES, MAX_JOINTS, read_bvh
 from refimpl.expmap import read_expmap
+from tests.fuzz import readers as F
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load_fuzz_module():
-    if "fuzz_readers" in sys.modules:
-        return sys.modules["fuzz_readers"]
-    spec = importlib.util.spec_from_file_location("fuzz_readers", ROOT / "benchmarks" / "fuzz_readers.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["fuzz_readers"] = mod
-    spec.loader.exec_module(mod)
-    return mod
-
-
-F = _load_fuzz_module()
 
 BVH = ("HIERARCHY\nROOT R\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n"
        "JOINT A\n{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Yrotation Xrotation\nEnd Site\n{\nOFFSET 0 1 0\n}\n}\n}\n"

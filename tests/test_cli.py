@@ -336,7 +336,7 @@ def _oracle(window):
 def test_make_transition_round_trip():
     """spec/cli.md §7: window transform and its inverse are exact — an oracle method reproduces the truth."""
     from refimpl.tasks.transition import make_transition
-    from refimpl.transitions import load_source, make_windows
+    from refimpl.protocols.transition import load_source, make_windows
 
     skel, clips = load_source(source_for_file(WALK_TXT))
     rot, pos = clips[0]
@@ -353,7 +353,7 @@ def test_align_target_continues_the_source():
     """spec/cli.md §7: --align continue turns the target to the source's heading and keeps its height."""
     from refimpl.tasks.transition import _align_target, _heading
     from refimpl.quat import quat_angle
-    from refimpl.transitions import load_source
+    from refimpl.protocols.transition import load_source
 
     _, (src_clip, *_) = load_source(source_for_file(WALK_TXT))
     _, (tgt_clip, *_) = load_source(source_for_file(RUN_TXT))
@@ -373,7 +373,7 @@ def test_with_end_sites_keeps_joints_and_round_trips(tmp_path):
     from refimpl.bvh import read_bvh, write_bvh
     from refimpl.tasks.transition import with_end_sites
     from refimpl.motion import Motion
-    from refimpl.transitions import load_source
+    from refimpl.protocols.transition import load_source
 
     skel, clips = load_source(source_for_file(WALK_TXT))
     rot, pos = clips[0]

@@ -179,7 +179,7 @@ def test_consumer_from_metadata_reproduces_refimpl_transition(checkpoint, tmp_pa
     (``make_transition`` with the NumPy network) on the real CMU clip 02_01.bvh, in world coordinates."""
     from refimpl.services import load_trained
     from refimpl.tasks.transition import make_transition
-    from refimpl.transitions import TransitionSource, load_source
+    from refimpl.protocols.transition import TransitionSource, load_source
     from deploy.graph import save_model
     from deploy.models.qtg import export_qtg_rollout
 

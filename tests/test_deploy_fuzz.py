@@ -1,21 +1,17 @@
 """Runtime wrapper and model-size limits under hostile input (spec/robustness.md "Runtime wrapper and model-size
-limits", spec/deploy.md §7): the test suite's share of ``benchmarks/fuzz_deploy.py`` and one test per family."""
+limits", spec/deploy.md §7): the test suite's share of ``tests/fuzz/deploy_runtime.py`` and one test per family."""
 from __future__ import annotations
 
 import random
 import resource
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytest.importorskip("onnxruntime")
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import fuzz_deploy as F  # noqa: E402
-
 from deploy.session import MAX_LOOP_ITERATIONS, MAX_TENSOR_BYTES, check_model_size, make_session  # noqa: E402
+from tests.fuzz import deploy_runtime as F  # noqa: E402
 
 
 def test_fuzz_campaign_share():

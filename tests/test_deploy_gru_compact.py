@@ -86,7 +86,7 @@ def test_quantized_step_equals_numpy_with_dequantized_weights(weights, H, L, B, 
 @pytest.mark.parametrize("weights", ["int8", "int4"])
 @pytest.mark.parametrize("H,L,B", [(7, 2, 3), (40, 3, 1), (64, 2, 3)])
 def test_quantized_step_close_to_float_weights(weights, H, L, B):
-    """spec/deploy.md §9: the deployed form (int8 activations, accuracy_level 4) against the float weights stays
+    """spec/deploy.md §2.3: the deployed form (int8 activations, accuracy_level 4) against the float weights stays
     within the measured quantisation bound (QUANT_BOUND); int4 is coarser than int8."""
     rng = np.random.default_rng(100 + H)
     I = 5

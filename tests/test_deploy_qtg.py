@@ -20,7 +20,7 @@ from refimpl.models.qtg import QTGConfig, QTGState, init_params, init_state, ste
 from refimpl.models.qtg_fast import rollout_forward
 from refimpl.skeletons import cmu_skeleton
 from refimpl.testing import TOL_EXACT, TOL_ORT_ROLLOUT, TOL_ORT_STEP, assert_close
-from refimpl.transitions import TransitionSource, load_source, make_windows, normalize_poses
+from refimpl.protocols.transition import TransitionSource, load_source, make_windows, normalize_poses
 
 SMALL = QTGConfig(pose_size=11, encoder_sizes=(9, 6), gru_hidden=5, gru_layers=2, decoder_sizes=(8,),
                   negative_slope=0.05, transition_length=6)

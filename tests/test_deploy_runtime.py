@@ -16,7 +16,7 @@ from refimpl.checkpoint import save_checkpoint
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import rollout_forward
 from refimpl.testing import TOL_ORT_ROLLOUT, assert_close
-from refimpl.transitions import make_windows
+from refimpl.protocols.transition import make_windows
 
 SMALL = QTGConfig(pose_size=91, encoder_sizes=(16, 8), gru_hidden=12, decoder_sizes=(16,), transition_length=5)
 SAMPLE_BVH = f"{refimpl.__path__[0]}/data/sample/bvh/02_01.bvh"
@@ -146,7 +146,7 @@ def test_cli_export_run_info(tmp_path, capsys):
     assert "hidden_next" in printed and '"model_io": "raw"' in printed and "input_transform: 4 context" in printed
     assert main(["run", str(out), SAMPLE_BVH, str(bvh), "--start", "1"]) == 2
     assert "--start" in capsys.readouterr().err
-    assert main(["export", str(tmp_path / "absent.npz"), str(out)]) == 2
+    assert main(["export", str(tmp_path / "absent.npz"), str(out)]) == 3   # a missing input file (spec/deploy.md §8)
     assert main(["export", str(ck), str(out), "--root-mean", "0", "0", "0"]) == 2
 
 
@@ -215,7 +215,7 @@ def test_export_dir_compact(tmp_path, capsys):
 def test_to_world_inverts_make_windows():
     """spec/deploy.md §8: window_to_world (deploy run, refimpl generate) undoes make_windows' transform exactly."""
     from refimpl.quat import quat_normalize
-    from refimpl.transitions import CMU_22_JOINTS, heading_from_root, subset_22, window_to_world
+    from refimpl.protocols.transition import CMU_22_JOINTS, heading_from_root, subset_22, window_to_world
 
     motion = read_bvh(SAMPLE_BVH)
     skel, rot = subset_22(motion.skeleton, np.asarray(motion.rotations)[::4], CMU_22_JOINTS)

@@ -1,5 +1,5 @@
-"""The fused dual-quaternion output kernel against its readable reference, the composition of the public losses
-(refimpl/dq_output.py; spec/acrnn.md §3). Gradients of the public function: tests/test_acrnn.py (central
+"""The fused dual-quaternion output kernel (refimpl/dq_output_fast.py) against its readable reference, the
+composition of the public losses (refimpl/dq_output.py; spec/acrnn.md §3). Gradients of the public function: tests/test_acrnn.py (central
 differences, vector-Jacobian identity, per-joint loop oracle)."""
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from refimpl.dq_output import (DQ_TERM_NAMES, _composed_backward, _composed_forward, _fused_forward,
-                               _sibling_rounds,
-                               dq_output_loss_backward, dq_output_loss_forward)
+from refimpl import dq_output
+from refimpl.dq_output import DQ_TERM_NAMES
+from refimpl.dq_output_fast import _fused_forward, _sibling_rounds, dq_output_loss_backward, dq_output_loss_forward
 from refimpl.dualquat import dq_normalize
 from refimpl.strategies import skeleton_arrays
 from refimpl.testing import assert_close
@@ -30,9 +30,9 @@ def _inputs(rng, lead, parents, dtype=np.float64):
 
 def _both(raw, target, parents, w):
     total, parts, cache = dq_output_loss_forward(raw, target, parents, w)
-    rtotal, rparts, rcache = _composed_forward(raw, target, parents, w, 1e-12)
+    rtotal, rparts, rcache = dq_output.dq_output_loss_forward(raw, target, parents, w, 1e-12)
     return (total, parts, dq_output_loss_backward(1.7, cache), cache[0]), \
-        (rtotal, rparts, _composed_backward(1.7, rcache))
+        (rtotal, rparts, dq_output.dq_output_loss_backward(1.7, rcache))
 
 
 @pytest.mark.parametrize("w", SUBSETS, ids=lambda w: "+".join(w))
@@ -104,9 +104,10 @@ def test_outside_the_ordinary_range_the_composition_is_used():
     for x in (clamped, huge):
         total, parts, cache = dq_output_loss_forward(x, target, PARENTS, ALL)
         assert cache[0] == "composed"
-        rtotal, _, rcache = _composed_forward(x, target, PARENTS, ALL, 1e-12)
+        rtotal, _, rcache = dq_output.dq_output_loss_forward(x, target, PARENTS, ALL, 1e-12)
         assert total == rtotal
-        np.testing.assert_array_equal(dq_output_loss_backward(1.0, cache), _composed_backward(1.0, rcache))
+        np.testing.assert_array_equal(dq_output_loss_backward(1.0, cache),
+                                      dq_output.dq_output_loss_backward(1.0, rcache))
 
 
 def test_sibling_rounds_scatter_every_child_once_with_unique_parents():

@@ -1,4 +1,4 @@
-"""The test suite's share of the math API fuzz campaign (spec/robustness.md §8; benchmarks/fuzz_math.py).
+"""The test suite's share of the math API fuzz campaign (spec/robustness.md §8; tests/fuzz/math_api.py).
 
 Every public function of ``refimpl.quat``, ``refimpl.dualquat`` and ``refimpl.skeleton`` gets hostile
 arguments (huge, tiny, subnormal, NaN/inf, wrong dtypes and shapes, empty and zero arrays, broadcasting
@@ -7,10 +7,7 @@ result from finite input is finite. Targeted regressions for what the campaign f
 """
 from __future__ import annotations
 
-import importlib.util
 import random
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,22 +15,18 @@ import pytest
 from refimpl import dualquat as DQ
 from refimpl import quat as Q
 from refimpl import skeleton as S
-
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "fuzz_math.py"
-_spec = importlib.util.spec_from_file_location("fuzz_math", _PATH)
-fuzz_math = importlib.util.module_from_spec(_spec)
-sys.modules.setdefault("fuzz_math", fuzz_math)
-_spec.loader.exec_module(fuzz_math)
+from tests.fuzz import math_api
 
 
-@pytest.mark.parametrize("family", fuzz_math.FAMILIES)
+
+@pytest.mark.parametrize("family", math_api.FAMILIES)
 def test_campaign_share(family):
     """30 seeded cases per family (330 in all): no failure of the contract."""
     rng = random.Random(f"test-{family}")
     bad = []
     for _ in range(30):
-        target, fam, arg, kwargs, finite = fuzz_math.make_case(rng, family=family)
-        outcome, detail = fuzz_math.run_case(target, kwargs, finite)
+        target, fam, arg, kwargs, finite = math_api.make_case(rng, family=family)
+        outcome, detail = math_api.run_case(target, kwargs, finite)
         if outcome not in ("ok", "ValueError"):
             bad.append((target, arg, outcome, detail))
     assert not bad, bad
@@ -41,12 +34,12 @@ def test_campaign_share(family):
 
 def test_every_target_is_reached():
     """Each target of the campaign runs with its valid arguments (so the hostile cases test something)."""
-    for target in fuzz_math.TARGETS:
+    for target in math_api.TARGETS:
         rng = random.Random(target)
-        fn, spec = fuzz_math.TARGETS[target]
+        fn, spec = math_api.TARGETS[target]
         g = np.random.default_rng(0)
-        kwargs = {name: fuzz_math._valid(kind, g, (2,)) for name, kind in spec}
-        assert fuzz_math.run_case(target, kwargs, True)[0] == "ok", target
+        kwargs = {name: math_api._valid(kind, g, (2,)) for name, kind in spec}
+        assert math_api.run_case(target, kwargs, True)[0] == "ok", target
 
 
 def test_campaign_detects_failures():
@@ -54,16 +47,16 @@ def test_campaign_detects_failures():
     def raises_type_error(q):
         raise TypeError("x")
 
-    fuzz_math.TARGETS["_probe_type"] = (raises_type_error, [("q", "q")])
-    fuzz_math.TARGETS["_probe_nan"] = (lambda q: np.full(4, np.nan), [("q", "q")])
-    fuzz_math.TARGETS["_probe_id"] = (lambda q: np.asarray(q), [("q", "q")])
+    math_api.TARGETS["_probe_type"] = (raises_type_error, [("q", "q")])
+    math_api.TARGETS["_probe_nan"] = (lambda q: np.full(4, np.nan), [("q", "q")])
+    math_api.TARGETS["_probe_id"] = (lambda q: np.asarray(q), [("q", "q")])
     try:
-        assert fuzz_math.run_case("_probe_type", {"q": np.ones(4)}, True)[0] == "TypeError"
-        assert fuzz_math.run_case("_probe_nan", {"q": np.ones(4)}, True)[0] == "NonFiniteOutput"
-        assert fuzz_math.run_case("_probe_id", {"q": np.array([np.nan, 0, 0, 1])}, False)[0] == "AcceptedNonFinite"
+        assert math_api.run_case("_probe_type", {"q": np.ones(4)}, True)[0] == "TypeError"
+        assert math_api.run_case("_probe_nan", {"q": np.ones(4)}, True)[0] == "NonFiniteOutput"
+        assert math_api.run_case("_probe_id", {"q": np.array([np.nan, 0, 0, 1])}, False)[0] == "AcceptedNonFinite"
     finally:
         for k in ("_probe_type", "_probe_nan", "_probe_id"):
-            fuzz_math.TARGETS.pop(k)
+            math_api.TARGETS.pop(k)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -93,7 +86,7 @@ def test_quat_norm_beyond_range_is_value_error():
 
 @pytest.mark.parametrize("dtype", [np.longdouble, np.float16, np.float32])
 def test_other_float_dtypes_do_not_overflow_the_rescaling(dtype):
-    """B14: _prescaled built 2.0 ** 4096 for long double (OverflowError)."""
+    """B14: prescaled built 2.0 ** 4096 for long double (OverflowError)."""
     q = np.array([3.0, 4.0, 0.0, 0.0], dtype=dtype)
     big = q * np.asarray(np.finfo(dtype).max / 8, dtype=dtype)
     for fn in (Q.quat_normalize, Q.matrix_from_quat, Q.quat_log, Q.axis_angle_from_quat, Q.quat_angle):
@@ -141,14 +134,14 @@ def test_quat_exp_overflowing_real_part_is_value_error():
                                  np.full((3, 3), "a"), None, np.eye(3) * 1e200, np.eye(3, dtype=np.float16),
                                  np.eye(3, dtype=np.longdouble)])
 def test_check_rotation_matrix_only_value_error(bad):
-    """`_check_rotation_matrix` on object/integer/complex/string/huge input: ValueError, never TypeError;
+    """`check_rotation_matrix` on object/integer/complex/string/huge input: ValueError, never TypeError;
     float16 and long double identities are accepted (no LAPACK)."""
     if isinstance(bad, np.ndarray) and bad.dtype.kind == "f" and np.max(bad) == 1:
-        Q._check_rotation_matrix(bad, "m")
+        Q.check_rotation_matrix(bad, "m")
         assert Q.quat_from_matrix(bad).dtype == bad.dtype
         return
     with pytest.raises(ValueError):
-        Q._check_rotation_matrix(bad, "m")
+        Q.check_rotation_matrix(bad, "m")
     with pytest.raises(ValueError):
         Q.quat_from_matrix(bad)
 

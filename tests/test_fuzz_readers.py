@@ -1,6 +1,6 @@
 """Fuzzing the readers of untrusted files (spec/robustness.md §1).
 
-The mutators and the case runner are those of ``benchmarks/fuzz_readers.py`` (the ≥ 10,000-case campaign);
+The mutators and the case runner are those of ``tests/fuzz/readers.py`` (the ≥ 10,000-case campaign);
 here hypothesis drives them for a few hundred cases, plus targeted tests of the cases the brief names
 (deep nesting, huge declared counts, encodings, line endings, empty files) and of the known bugs.
 
@@ -15,10 +15,8 @@ is fixed (then remove both the marker and the ``KNOWN_FAILURES`` entry).
 from __future__ import annotations
 
 import functools
-import importlib.util
 import json
 import os
-import sys
 import tracemalloc
 from pathlib import Path
 
@@ -27,19 +25,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.fuzz import readers as F
+
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "refimpl" / "data" / "sample"
 
 
-def _load_fuzz_module():
-    spec = importlib.util.spec_from_file_location("fuzz_readers", ROOT / "benchmarks" / "fuzz_readers.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("fuzz_readers", mod)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-F = _load_fuzz_module()
 
 # (reader, exception type or failure name) -> reason; each entry has a strict xfail test in this file.
 # None open: the checkpoint bugs B4 (a)-(f) and the ONNX truncated-metadata bug B5 of spec/robustness.md §7
@@ -50,7 +41,7 @@ KNOWN_SUBKINDS: dict[tuple[str, str], str] = {}
 
 
 class HypothesisDrawer:
-    """The drawer interface of benchmarks/fuzz_readers.py on top of hypothesis' ``st.data()``."""
+    """The drawer interface of tests/fuzz/readers.py on top of hypothesis' ``st.data()``."""
 
     def __init__(self, data):
         self.data = data

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 from refimpl.motion import Motion
+from refimpl.protocols import locomotion as L
+from refimpl.protocols import locomotion_data as LD
 from refimpl.quat import euler_from_quat, quat_from_axis_angle, quat_from_euler, quat_mul, quat_rotate
 from refimpl.skeleton import mirror, rotate_about_up
 from refimpl.skeletons import quaternet_locomotion_skeleton
-from refimpl.tasks import locomotion as L
 from refimpl.testing import assert_close
 
 SAMPLE_BVH = Path(__file__).resolve().parents[1] / "refimpl" / "data" / "sample" / "bvh" / "02_01.bvh"
@@ -36,7 +37,7 @@ def test_phase_track_on_a_synthetic_gait():
     left_speed[12] = 5.0  # a glitch inside the cooldown after the switch at 10 is ignored ...
     lf = np.concatenate([[[0.0, 0, 0]], np.cumsum(left_speed)[:, None] * [[1.0, 0, 0]]])
     rf = np.concatenate([[[0.0, 0, 0]], np.cumsum(right_speed)[:, None] * [[1.0, 0, 0]]])
-    ph = L.build_phase_track(lf, rf)
+    ph = LD.build_phase_track(lf, rf)
     assert ph.shape == (frames,)
     # starts with the left foot planted (l[0] < r[0]) → π; each switch adds π at the frame of the switch
     for frame, k in ((0, 1), (10, 2), (20, 3), (30, 4), (40, 5), (50, 6)):
@@ -45,12 +46,12 @@ def test_phase_track_on_a_synthetic_gait():
     assert ph[55] == pytest.approx(6 * math.pi) and ph[-1] == pytest.approx(6 * math.pi)  # constant after the last key
     assert np.all(np.diff(ph) >= 0)
     # same feet, hysteresis larger than the speed difference: no switch at all
-    assert_close(L.build_phase_track(lf, rf, epsilon=10.0), np.full(frames, math.pi))
+    assert_close(LD.build_phase_track(lf, rf, epsilon=10.0), np.full(frames, math.pi))
 
 
 def test_eight_features_on_a_synthetic_straight_walk():
     speed, direction, heading, height = 0.6, 0.4, 0.1, 16.0
-    seqs = L.build_sequences(_straight_walk(speed, direction, heading, height), L.CMU_RIG, mirror=False)
+    seqs = LD.build_sequences(_straight_walk(speed, direction, heading, height), LD.CMU_RIG, mirror=False)
     assert [s.name for s in seqs] == ["walk_d0"]
     f = seqs[0].features
     assert f.shape == (120, 8)
@@ -75,35 +76,35 @@ def test_eight_features_on_a_synthetic_straight_walk():
 
 def test_downsampling_keeps_every_phase():
     m = _straight_walk(frames=121, frame_time=1 / 120)
-    seqs = L.build_sequences(m, L.CMU_RIG)
+    seqs = LD.build_sequences(m, LD.CMU_RIG)
     assert [s.name for s in seqs] == [f"walk{m_}_d{k}" for m_ in ("", "_m") for k in range(4)]
     assert [s.num_frames for s in seqs[:4]] == [31, 30, 30, 30]
     assert_close(seqs[1].trajectory[0], m.root_positions[1])
     assert_close(np.hypot(*seqs[0].features[:, 2:4].T), np.full(31, 4 * 0.6), rtol=1e-9)  # speed per 30-Hz frame
     with pytest.raises(ValueError, match="integer multiple"):
-        L.downsample_strides(1 / 50)
+        LD.downsample_strides(1 / 50)
 
 
 def test_facing_is_the_yzx_euler_heading_for_cmu():
     rng = np.random.default_rng(0)
-    skel = L.prepare_motion(_straight_walk(), L.CMU_RIG).skeleton
+    skel = LD.prepare_motion(_straight_walk(), LD.CMU_RIG).skeleton
     angles = rng.uniform(-1, 1, size=(50, 3)) * [math.pi, 1.2, 1.2]     # (y, z, x)
     rot = np.zeros((50, skel.num_joints, 4))
     rot[..., 0] = 1
     rot[:, 0] = quat_from_euler(angles, "yzx")
-    f = L.facing_vectors(skel, rot, L.CMU_RIG)
+    f = LD.facing_vectors(skel, rot, LD.CMU_RIG)
     theta = euler_from_quat(rot[:, 0], "yzx")[:, 0]
     assert_close(f, np.stack([np.sin(theta), np.cos(theta)], axis=-1), atol=1e-9)
 
 
 def test_rotation_augmentation_and_feature_invariance():
-    seq = L.build_sequences(L.load_cmu_bvh(SAMPLE_BVH), L.CMU_RIG, mirror=False, all_phases=False)[0]
+    seq = LD.build_sequences(LD.load_cmu_bvh(SAMPLE_BVH), LD.CMU_RIG, mirror=False, all_phases=False)[0]
     angle = 1.3
     motion = Motion(skeleton=seq.skeleton, rotations=seq.rotations, root_positions=seq.trajectory,
                     frame_time=1 / 30, name="x")
     rot, pos = rotate_about_up(motion.rotations, motion.root_positions, angle)
-    turned = L.build_sequences(Motion(skeleton=motion.skeleton, rotations=rot, root_positions=pos,
-                                      frame_time=1 / 30, name="x"), L.CMU_RIG, mirror=False)[0]
+    turned = LD.build_sequences(Motion(skeleton=motion.skeleton, rotations=rot, root_positions=pos,
+                                      frame_time=1 / 30, name="x"), LD.CMU_RIG, mirror=False)[0]
     # offset, height and phase are invariant; direction and facing rotate like the augmentation rotates them
     assert_close(turned.features[:, :4], seq.features[:, :4], atol=1e-9)
     assert_close(turned.features, L.rotate_controls(seq.features, angle), atol=1e-9)
@@ -129,14 +130,14 @@ def test_rotation_augmentation_and_feature_invariance():
 
 
 def test_mirroring_cmu_matches_quaternet_and_is_an_involution():
-    m = L.prepare_motion(L.load_cmu_bvh(SAMPLE_BVH), L.CMU_RIG)
-    mm, err = L.mirror_motion(m)
+    m = LD.prepare_motion(LD.load_cmu_bvh(SAMPLE_BVH), LD.CMU_RIG)
+    mm, err = LD.mirror_motion(m)
     assert err < 0.5  # the CMU legs differ in length by up to ~0.26 units
     _, rq, pq = mirror(m.skeleton, m.rotations, m.root_positions)
     dots = np.abs(np.sum(rq * mm.rotations, axis=-1))
     assert np.all(dots > 1 - 1e-3)                                       # QuaterNet's sign flip, within ~3.6°
     assert_close(mm.root_positions, pq)
-    back, _ = L.mirror_motion(mm)
+    back, _ = LD.mirror_motion(mm)
     assert_close(back.positions(), m.positions(), atol=1e-8)
     # with the skeleton made exactly symmetric the mirror image is exact
     sym, _, _ = mirror(m.skeleton, m.rotations, m.root_positions, mirror_offsets=True)
@@ -144,34 +145,34 @@ def test_mirroring_cmu_matches_quaternet_and_is_an_involution():
     from refimpl.skeleton import Skeleton
     sk = Skeleton(m.skeleton.parents, avg, names=m.skeleton.names, joints_left=m.skeleton.joints_left,
                   joints_right=m.skeleton.joints_right)
-    _, err_sym = L.mirror_motion(Motion(skeleton=sk, rotations=m.rotations, root_positions=m.root_positions,
+    _, err_sym = LD.mirror_motion(Motion(skeleton=sk, rotations=m.rotations, root_positions=m.root_positions,
                                         frame_time=m.frame_time, name="s"))
     assert err_sym < 1e-9
 
 
 def test_prepare_motion_keeps_the_papers_26_joints():
-    m = L.prepare_motion(L.load_cmu_bvh(SAMPLE_BVH), L.CMU_RIG)
-    assert m.skeleton.names == L.CMU_RIG.keep and m.num_joints == 26
+    m = LD.prepare_motion(LD.load_cmu_bvh(SAMPLE_BVH), LD.CMU_RIG)
+    assert m.skeleton.names == LD.CMU_RIG.keep and m.num_joints == 26
     ref = quaternet_locomotion_skeleton(reduced=True)
     assert_close(m.skeleton.parents, ref.parents)
     assert len(m.skeleton.joints_left) == 10
     with pytest.raises(ValueError, match="needs joints"):
-        L.prepare_motion(m, L.BANDAI_NAMCO_RIG)
+        LD.prepare_motion(m, LD.BANDAI_NAMCO_RIG)
 
 
 def test_splits_are_file_disjoint(tmp_path):
     names = [f"dataset-2_{c}_{s}_{i:03d}.bvh" for c in ("walk", "run", "walk-turn-left") for s in ("normal", "elderly")
              for i in range(1, 25)]
-    train, test = L.bandai_namco_split(names)
+    train, test = LD.bandai_namco_split(names)
     assert not set(train) & set(test) and len(train) + len(test) == len(names)
     assert all(int(Path(n).stem[-3:]) % 10 == 1 for n in test) and len(test) == 3 * 2 * 3
     with pytest.raises(ValueError, match="dataset-2"):
-        L.bandai_namco_split(["foo.bvh"])
+        LD.bandai_namco_split(["foo.bvh"])
     cmu = ["d/train/walking/walking_1.txt", "d/test/walking/walking_1.txt", "d/train/running/running_2.txt"]
-    tr, te = L.cmu_split(cmu)
+    tr, te = LD.cmu_split(cmu)
     assert te == ["d/test/walking/walking_1.txt"] and len(tr) == 2
     # every sequence built from a file stays on that file's side
-    seqs = {f: L.build_sequences(_straight_walk(frames=40, frame_time=1 / 120), L.CMU_RIG, source=f) for f in cmu}
+    seqs = {f: LD.build_sequences(_straight_walk(frames=40, frame_time=1 / 120), LD.CMU_RIG, source=f) for f in cmu}
     train_sources = {s.source for f in tr for s in seqs[f]}
     test_sources = {s.source for f in te for s in seqs[f]}
     assert train_sources and test_sources and not train_sources & test_sources
@@ -179,13 +180,13 @@ def test_splits_are_file_disjoint(tmp_path):
 
 def test_bandai_namco_loader(shared_data):
     path = shared_data / "bandai_namco_locomotion" / "dataset-2_walk-turn-left_normal_001.bvh"
-    raw = L.load_bandai_namco(path)
+    raw = LD.load_bandai_namco(path)
     assert raw.skeleton.names[0] == "Hips" and raw.fps == pytest.approx(30, rel=1e-4)
     pos = raw.positions()
     # position channels replace the OFFSET: the bone Hips→Spine keeps the file's OFFSET length (15.7357 cm)
     assert_close(np.linalg.norm(pos[:, 1] - pos[:, 0], axis=-1), np.full(raw.num_frames, 15.7357), rtol=1e-5)
     assert 80 < raw.root_positions[:, 1].mean() < 100                    # hips ≈ 93 cm above the floor
-    seqs = L.build_sequences(raw, L.BANDAI_NAMCO_RIG, mirror_tolerance=1e-3)
+    seqs = LD.build_sequences(raw, LD.BANDAI_NAMCO_RIG, mirror_tolerance=1e-3)
     assert [s.name for s in seqs] == [path.stem + "_d0", path.stem + "_m_d0"] and seqs[0].skeleton.num_joints == 21
     f = seqs[0].features
     cos_dir_facing = np.sum(f[:, 4:6] * f[:, 6:8], axis=-1) / np.linalg.norm(f[:, 4:6], axis=-1)
@@ -195,19 +196,6 @@ def test_bandai_namco_loader(shared_data):
     assert np.sum(sp.track("turning_angle")) < -0.5
     sp_m = L.sequence_spline(seqs[1])
     assert np.sum(sp_m.track("turning_angle")) > 0.5                     # ... and its mirror image turns right
-
-
-def test_pace_training_runs_and_the_loss_falls():
-    from refimpl.models import pace
-    data = []
-    for k, (spd, d) in enumerate(((0.5, 0.0), (1.0, 0.5), (0.8, -0.3))):
-        seq = L.build_sequences(_straight_walk(speed=spd, direction=d, frames=80), L.CMU_RIG, mirror=False)[0]
-        data.append(L.pace_training_data(L.sequence_spline(seq)))
-    cfg = pace.PaceConfig(hidden_size=8)
-    _, hist = L.train_pace_network(data, cfg, epochs=40, batch_size=4, chunk_length=40, lr=1e-2, log=None,
-                                   valid_data=data[:1])
-    assert hist[-1]["train_l1"] < 0.5 * hist[0]["train_l1"]
-    assert np.isfinite(hist[-1]["valid_l1"])
 
 
 _BN_STYLE = """HIERARCHY
@@ -241,7 +229,7 @@ Frame Time: 0.0333333
 def test_bandai_namco_convention_on_a_small_file(tmp_path):
     path = tmp_path / "bn.bvh"
     path.write_text(_BN_STYLE)
-    m = L.load_bandai_namco(path)
+    m = LD.load_bandai_namco(path)
     assert m.skeleton.names == ("Hips", "Spine", "Spine_end") and m.skeleton.parents.tolist() == [-1, 0, 1]
     # the Hips position channels replace its OFFSET; Spine's channels (= its OFFSET) are not added twice
     assert_close(m.root_positions, [[5.0, 90.0, 1.0], [6.0, 91.0, 3.0]])
@@ -251,22 +239,22 @@ def test_bandai_namco_convention_on_a_small_file(tmp_path):
     bad = tmp_path / "bad.bvh"
     bad.write_text(_BN_STYLE.replace("10 0 0 0 0 0\n0 0 0", "12 0 0 0 0 0\n0 0 0"))
     with pytest.raises(ValueError, match="Spine"):
-        L.load_bandai_namco(bad)
+        LD.load_bandai_namco(bad)
     with pytest.raises(ValueError, match="joint_Root"):
-        L.load_bandai_namco(SAMPLE_BVH)
+        LD.load_bandai_namco(SAMPLE_BVH)
     short = tmp_path / "short.bvh"
     short.write_text(_BN_STYLE.replace("Frames: 2", "Frames: 3"))
     with pytest.raises(ValueError, match="3 frames"):
-        L.load_bandai_namco(short)
+        LD.load_bandai_namco(short)
 
 
 def test_cmu_expmap_loader_gives_the_same_26_joints():
     path = Path(__file__).resolve().parents[1] / "refimpl/data/sample/expmap/train/walking/walking_1.txt"
-    m = L.prepare_motion(L.load_cmu_expmap(path), L.CMU_RIG)
-    b = L.prepare_motion(L.load_cmu_bvh(SAMPLE_BVH), L.CMU_RIG)  # the same trial (CMU 02_01)
+    m = LD.prepare_motion(LD.load_cmu_expmap(path), LD.CMU_RIG)
+    b = LD.prepare_motion(LD.load_cmu_bvh(SAMPLE_BVH), LD.CMU_RIG)  # the same trial (CMU 02_01)
     assert m.skeleton.names == b.skeleton.names and m.num_frames == b.num_frames
     assert_close(m.root_positions, b.root_positions, atol=1e-3)
-    fm = L.build_sequences(m, L.CMU_RIG, mirror=False, all_phases=False)[0].features
-    fb = L.build_sequences(b, L.CMU_RIG, mirror=False, all_phases=False)[0].features
+    fm = LD.build_sequences(m, LD.CMU_RIG, mirror=False, all_phases=False)[0].features
+    fb = LD.build_sequences(b, LD.CMU_RIG, mirror=False, all_phases=False)[0].features
     assert_close(fm[:, :6], fb[:, :6], atol=1e-3)
     assert_close(fm[:, 6:], fb[:, 6:], atol=2e-2)  # the exp-map root agrees with the BVH to ~1e-2 only

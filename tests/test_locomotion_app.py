@@ -14,6 +14,8 @@ from refimpl.cli import main
 from refimpl.gradcheck import check_gradients
 from refimpl.losses import fk_position_loss_forward
 from refimpl.models import pace, quaternet
+from refimpl.protocols import locomotion as LP
+from refimpl.protocols import locomotion_data as LD
 from refimpl.quat import quat_mul, quat_rotate
 from refimpl.recipes import quaternet_long as recipe
 from refimpl.registry import MODELS, TASKS
@@ -91,9 +93,9 @@ def test_augmentation_leaves_fk_loss_invariant():
     """Rotating a window about +Y (root quaternions r ⊗ q, targets r · p) leaves the FK loss unchanged, for the
     ground truth (0) and for any prediction rotated the same way (ref §7.5)."""
     rng = np.random.default_rng(0)
-    seq = L.build_sequences(L.load_cmu_expmap(Path(L.__file__).parents[1] / "data/sample/expmap/train/walking/"
-                                               "walking_2.txt"), L.CMU_RIG, mirror=False, all_phases=False)[0]
-    b = L.pose_batch([seq], rng, 3, 6, 8, augment=False)
+    seq = LD.build_sequences(LD.load_cmu_expmap(Path(L.__file__).parents[1] / "data/sample/expmap/train/walking/"
+                                               "walking_2.txt"), LD.CMU_RIG, mirror=False, all_phases=False)[0]
+    b = LP.pose_batch([seq], rng, 3, 6, 8, augment=False)
     sk = seq.skeleton
     J = sk.num_joints
     rot = b.inputs[:, 6:, :4 * J].reshape(3, 8, J, 4)
@@ -137,7 +139,7 @@ def test_generation_on_a_circle_stays_on_it():
     root = walk.motion.root_positions
     radius = np.hypot(root[:, 0], root[:, 2])
     assert np.max(np.abs(radius - r)) < 0.2 ** 2 / (8 * r) + 1e-3
-    assert np.allclose(root[:, 1], walk.motion.root_positions[:, 1])  # height from the network, finite
+    assert np.all(np.isfinite(root)) and np.ptp(root[:, 1]) > 0  # height from the network: finite, not constant
     assert G.bone_length_drift(walk.motion) < 1e-9
 
 
@@ -179,15 +181,15 @@ def test_foot_skating_metric():
     pos[:, 0, 1] = np.array([0, 0, 1, 1, 0.0])  # joint 0 lifts
     out = G.foot_skating(pos, [1], fps=30)
     assert out["contact_fraction"] == 1.0
-    assert out["speed_cm_s"] == pytest.approx(0.1 * 30 * L.QUATERNET_UNIT_CM)
+    assert out["speed_cm_s"] == pytest.approx(0.1 * 30 * LD.QUATERNET_UNIT_CM)
 
 
 def test_parse_path_and_speed(tmp_path):
-    assert G.parse_path("circle:r=2").length == pytest.approx(2 * math.pi * 200 / L.QUATERNET_UNIT_CM, rel=1e-2)
+    assert G.parse_path("circle:r=2").length == pytest.approx(2 * math.pi * 200 / LD.QUATERNET_UNIT_CM, rel=1e-2)
     assert G.parse_path("figure8").closed and not G.parse_path("line-turn:turn=-45").closed
     f = tmp_path / "p.csv"
     f.write_text("x,z\n0,0\n1,0\n2,1\n")
-    assert G.parse_path(str(f)).points[-1] == pytest.approx([2 * 100 / L.QUATERNET_UNIT_CM, 100 / L.QUATERNET_UNIT_CM])
+    assert G.parse_path(str(f)).points[-1] == pytest.approx([2 * 100 / LD.QUATERNET_UNIT_CM, 100 / LD.QUATERNET_UNIT_CM])
     assert G.parse_speed("run") == 1.2 and G.parse_speed("0.7") == 0.7
     for bad in ("square", "circle:q=1", "circle:r=x"):
         with pytest.raises(ValueError):
@@ -216,7 +218,7 @@ def test_generate_command_writes_bvh_json_png(trained, tmp_path, capsys):
 
 
 def test_export_parity(trained, tmp_path):
-    """spec/deploy.md §9: the exported step (5 chained steps from h0) and pace network against NumPy."""
+    """spec/deploy.md §12: the exported step (5 chained steps from h0) and pace network against NumPy."""
     pytest.importorskip("onnxruntime")
     from refimpl.services import export_onnx, load_trained, verify_onnx
     pose, pm = load_trained(trained / "pose" / "checkpoint.npz"), load_trained(trained / "pace" / "checkpoint.npz")
@@ -229,9 +231,9 @@ def test_export_parity(trained, tmp_path):
     assert check["ok"] and check["pace"] < 1e-4
     from deploy.models import runtime_for_dir
     rt = runtime_for_dir(tmp_path)
-    ds = L.build_dataset("cmu_expmap", [str(Path(L.__file__).parents[1] / "data/sample/expmap/test/walking/"
+    ds = LP.build_dataset("cmu_expmap", [str(Path(L.__file__).parents[1] / "data/sample/expmap/test/walking/"
                                             "walking_1.txt")], prefix=6, target=8)
-    res = L.evaluate(ds, L.methods({"numpy": recipe.make_method(pose), "onnx": L.onnx_method(rt)}))
+    res = LP.evaluate(ds, L.methods({"numpy": recipe.make_method(pose), "onnx": L.onnx_method(rt)}))
     assert abs(res["numpy"]["mean_position"] - res["onnx"]["mean_position"]) < 1e-3
     assert res["zero_velocity"]["windows"] == res["numpy"]["windows"] > 0
 
@@ -284,34 +286,6 @@ def test_generated_bvh_opens_in_blender_with_the_same_motion(tmp_path):
             if name in got[str(f)]:
                 v = pos[f - 1, j]
                 assert np.allclose(got[str(f)][name], [v[0], -v[2], v[1]], atol=0.05), (f, name)
-
-
-@pytest.mark.parametrize("order", ["xyz", "yzx"])
-def test_euler_to_quat_layer(order):
-    """The Euler ablation's conversion equals refimpl.quat.quat_from_euler; its backward = central differences;
-    it inverts euler_from_quat (up to sign)."""
-    from refimpl.quat import euler_from_quat, quat_from_euler
-    rng = np.random.default_rng(1)
-    a = rng.uniform(-3, 3, (6, 3))
-    q, cache = recipe.euler_to_quat_forward(a, order)
-    assert np.allclose(q, quat_from_euler(a, order), atol=1e-15)
-    w = rng.standard_normal(q.shape)
-    check_gradients(lambda: float(np.sum(w * recipe.euler_to_quat_forward(a, order)[0])), {"a": a},
-                    {"a": recipe.euler_to_quat_backward(w, cache)}, **TOL_FD, max_entries=None)
-    q2, _ = recipe.euler_to_quat_forward(euler_from_quat(q, order), order)
-    assert np.allclose(np.abs(np.sum(q2 * q, -1)), 1.0, atol=1e-12)
-
-
-def test_axis_angle_to_quat_layer():
-    from refimpl.quat import quat_from_axis_angle
-    rng = np.random.default_rng(2)
-    v = rng.standard_normal((6, 3)) * np.array([[1e-7], [1e-5], [0.3], [1.0], [2.5], [3.0]])
-    q, cache = recipe.axis_angle_to_quat_forward(v)
-    assert np.allclose(q, quat_from_axis_angle(v), atol=1e-15)
-    w = rng.standard_normal(q.shape)
-    check_gradients(lambda: float(np.sum(w * recipe.axis_angle_to_quat_forward(v)[0])), {"v": v},
-                    {"v": recipe.axis_angle_to_quat_backward(w, cache)}, eps=1e-8, rtol=1e-5, atol=1e-7,
-                    max_entries=None)
 
 
 @pytest.mark.parametrize("output", ["euler_yzx", "axis_angle", "positions"])

@@ -1,11 +1,11 @@
-"""Synthesis metrics of refimpl/metrics.py: Euclidean error, NPSS (two variants), acceleration (spec/acrnn.md §6)."""
+"""Synthesis metrics of refimpl/protocols/synthesis.py: Euclidean error, NPSS (two variants), acceleration (spec/acrnn.md §6)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from refimpl import metrics
+from refimpl.protocols import synthesis as metrics
 from refimpl.quat import quat_normalize
 from refimpl.representations import encode
 from refimpl.skeleton import Skeleton

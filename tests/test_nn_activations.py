@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from refimpl.gradcheck import check_gradients, check_vjp
-from refimpl.nn.activations import (_sigmoid, leaky_relu_backward, leaky_relu_forward, relu_backward, relu_forward,
+from refimpl.nn.activations import (sigmoid, leaky_relu_backward, leaky_relu_forward, relu_backward, relu_forward,
                                     sigmoid_backward, sigmoid_forward, tanh_backward, tanh_forward)
 from refimpl.testing import TOL_EXACT, assert_close
 
@@ -75,26 +75,26 @@ def test_rectifier_derivative_at_zero_is_left_derivative():
 
 
 def test_sigmoid_extremes_without_warnings():
-    """spec/layers.md §3: the kernel _sigmoid saturates to exactly 0 / 1 without overflow warnings, float32 and
+    """spec/layers.md §3: the kernel sigmoid saturates to exactly 0 / 1 without overflow warnings, float32 and
     float64."""
     for dt in (np.float32, np.float64):
         x = np.array([-1e4, -100.0, 0.0, 100.0, 1e4], dtype=dt)
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            y = _sigmoid(x)
+            y = sigmoid(x)
         assert y.dtype == dt
         assert y[0] == 0 and y[-1] == 1 and y[2] == 0.5
         assert np.all(np.isfinite(y))
 
 
 def test_sigmoid_in_place_and_accuracy():
-    """spec/layers.md §3: ``_sigmoid(x, out=x)``; relative accuracy everywhere, including the tails, against an
+    """spec/layers.md §3: ``sigmoid(x, out=x)``; relative accuracy everywhere, including the tails, against an
     extended-precision evaluation."""
     x = np.linspace(-700, 30, 2001)
     xl = x.astype(np.longdouble)
     expect = (1 / (1 + np.exp(-xl))).astype(np.float64)
     y = x.copy()
-    assert _sigmoid(y, out=y) is y
+    assert sigmoid(y, out=y) is y
     assert_close(y, expect, rtol=2e-15, atol=0.0)
 
 

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from conftest import load_golden
 from refimpl.gradcheck import check_gradients, check_vjp
-from refimpl.nn.gru import (_gru_backward_naive, _gru_forward_naive, gru_backward, gru_forward, gru_init,
+from refimpl.nn.gru import (gru_backward_naive, gru_forward_naive, gru_backward, gru_forward, gru_init,
                             gru_step_backward, gru_step_forward)
 from refimpl.nn.params import count_parameters
 from refimpl.testing import TOL_EXACT, TOL_GOLDEN, assert_close
@@ -54,11 +54,11 @@ def test_matches_per_gate_loop_oracle(seed, batch, t_len, n_in, hid, layers, bid
     """spec/layers.md §4.1-4.3: the vectorised GRU equals the per-step, per-gate loop (forward and backward)."""
     params, x, h0, gy, gh = _case(seed, batch, t_len, n_in, hid, layers, bidirectional)
     y, h_n, cache = gru_forward(x, h0, params, "rnn", layers, bidirectional)
-    y_ref, h_ref = _gru_forward_naive(x, h0, params, "rnn", layers, bidirectional)
+    y_ref, h_ref = gru_forward_naive(x, h0, params, "rnn", layers, bidirectional)
     assert_close(y, y_ref, **TOL_EXACT, name="y")
     assert_close(h_n, h_ref, **TOL_EXACT, name="h_n")
     dx, dh0, grads = gru_backward(gy, gh, cache)
-    dx_ref, dh0_ref, grads_ref = _gru_backward_naive(gy, gh, x, h0, params, "rnn", layers, bidirectional)
+    dx_ref, dh0_ref, grads_ref = gru_backward_naive(gy, gh, x, h0, params, "rnn", layers, bidirectional)
     assert_close(dx, dx_ref, **TOL_EXACT, name="dx")
     assert_close(dh0, dh0_ref, **TOL_EXACT, name="dh0")
     _assert_grads(grads, grads_ref, TOL_EXACT)
@@ -333,10 +333,12 @@ def test_backwards_refuse_non_finite_cotangents():
 
 @pytest.mark.parametrize("B, H", [(1, 1), (3, 5), (4, 16)])
 def test_factored_cell_backward_equals_reference_kernel(B, H):
-    """spec/layers.md §4.3: the reverse step from precomputed factors (``_backward_factors`` over all steps, then
-    ``_cell_backward_factored``) equals the per-step reference kernel ``_cell_backward`` (float64), and the
-    forward's element-wise part ``_cell_update`` after an outside product equals ``_cell_forward``."""
+    """spec/layers.md §4.3: the factored reverse step of refimpl/nn/gru_fast.py (``backward_factors`` over all
+    steps, then per step ``cell_backward_gates`` and ``dh_prev = dh z + dgh W_hh``, as QTG's rollout runs it) equals
+    the per-step kernel ``cell_backward`` (float64), and the forward's element-wise part ``cell_update`` after an
+    outside product equals ``cell_forward``."""
     from refimpl.nn import gru as G
+    from refimpl.nn.gru_fast import backward_factors, cell_backward_gates
     rng = np.random.default_rng(B * 100 + H)
     T = 3
     w_hh = rng.standard_normal((3 * H, H))
@@ -346,18 +348,21 @@ def test_factored_cell_backward_equals_reference_kernel(B, H):
     hs[0] = rng.standard_normal((B, H))
     g, n = np.empty((T, B, 3 * H)), np.empty((T, B, H))
     for t in range(T):
-        G._cell_forward(gi[t], hs[t], w_hh, None, b_hn, g[t], n[t], hs[t + 1])
+        G.cell_forward(gi[t], hs[t], w_hh, None, b_hn, g[t], n[t], hs[t + 1])
         g2, n2, h2 = hs[t] @ w_hh.T, np.empty((B, H)), np.empty((B, H))
-        G._cell_update(gi[t], hs[t], b_hn, g2, n2, h2)
+        G.cell_update(gi[t], hs[t], b_hn, g2, n2, h2)
         assert np.array_equal(g2, g[t]) and np.array_equal(n2, n[t]) and np.array_equal(h2, hs[t + 1])
-    f = G._backward_factors(hs[:-1], g, n)
+    f = backward_factors(hs[:-1], g, n)
     dh_ref = rng.standard_normal((B, H))
     dh_fast = dh_ref.copy()
     for t in range(T - 1, -1, -1):
         out_ref = [np.empty((B, 3 * H)), np.empty((B, 3 * H)), np.empty((B, H))]
         out_fast = [np.empty((B, 3 * H)), np.full((B, 3 * H), np.nan), np.empty((B, H))]
-        G._cell_backward(dh_ref, hs[t], g[t], n[t], w_hh, *out_ref)
-        G._cell_backward_factored(dh_fast, f[t], g[t], w_hh, *out_fast)
+        G.cell_backward(dh_ref, hs[t], g[t], n[t], w_hh, *out_ref)
+        dgi, dgh, tmp = out_fast
+        cell_backward_gates(dh_fast, f[t], g[t, :, :H], dgi, dgh)
+        dh_fast *= g[t, :, H:2 * H]
+        dh_fast += dgh @ w_hh
         assert_close(out_fast[0], out_ref[0], **TOL_EXACT, name="dgi")
         assert_close(out_fast[1], out_ref[1], **TOL_EXACT, name="dgh")
         assert_close(dh_fast, dh_ref, **TOL_EXACT, name="dh")

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from conftest import load_golden
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
-from refimpl.nn.linear import _matmul_wt, linear_backward, linear_forward, linear_init
+from refimpl.nn.linear import matmul_wt, linear_backward, linear_forward, linear_init
 from refimpl.nn.params import merge_grads
 from refimpl.testing import TOL_EXACT, TOL_GOLDEN, assert_close
 
@@ -90,9 +90,9 @@ def test_matmul_wt_kernel():
     """spec/layers.md §2: the internal kernel x @ W^T that reads W in its stored layout."""
     rng = np.random.default_rng(4)
     a, w = rng.standard_normal((6, 5)), rng.standard_normal((3, 5))
-    assert_close(_matmul_wt(a, w), a @ w.T, **TOL_EXACT)
+    assert_close(matmul_wt(a, w), a @ w.T, **TOL_EXACT)
     out = np.empty((6, 3))
-    assert _matmul_wt(a, w, out=out) is out and out.flags.c_contiguous
+    assert matmul_wt(a, w, out=out) is out and out.flags.c_contiguous
     assert_close(out, a @ w.T, **TOL_EXACT)
 
 

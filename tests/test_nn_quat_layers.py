@@ -11,10 +11,14 @@ from refimpl.dualquat import dq_from_quat_translation, dq_mul, dq_normalize
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.nn.quat_layers import (
     EULER_ORDERS,
+    axis_angle_to_quat_backward,
+    axis_angle_to_quat_forward,
     dq_normalize_backward,
     dq_normalize_forward,
     euler_from_quat_backward,
     euler_from_quat_forward,
+    euler_to_quat_backward,
+    euler_to_quat_forward,
     dq_velocity_backward,
     dq_velocity_forward,
     qmul_velocity_backward,
@@ -24,8 +28,8 @@ from refimpl.nn.quat_layers import (
     quat_normalize_backward,
     quat_normalize_forward,
 )
-from refimpl.quat import euler_from_quat, quat_from_euler, quat_mul, quat_normalize
-from refimpl.testing import TOL_EXACT, assert_close
+from refimpl.quat import euler_from_quat, quat_from_axis_angle, quat_from_euler, quat_mul, quat_normalize
+from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
 
 lead_shapes = st.lists(st.integers(1, 3), min_size=0, max_size=3).map(tuple)
 seeds = st.integers(0, 2**31 - 1)
@@ -182,7 +186,7 @@ def test_quat_mul_kernel_is_shared_and_keeps_float32():
     import refimpl.nn.quat_layers as QL
     import refimpl.quat as Q
 
-    assert QL._quat_mul is Q._quat_mul
+    assert QL.quat_mul_kernel is Q.quat_mul_kernel
     a32 = np.ones((2, 4), np.float32)
     y, cache = quat_mul_forward(a32, a32[:1])
     assert y.dtype == np.float32 and all(g.dtype == np.float32 for g in quat_mul_backward(np.ones_like(y), cache))
@@ -385,3 +389,40 @@ def test_euler_float32():
     q = quat_from_euler(np.array([[0.1, 0.2, 0.3]]), "zyx").astype(np.float32)
     e, cache = euler_from_quat_forward(q, "zyx", 1e-6)
     assert e.dtype == np.float32 and euler_from_quat_backward(np.ones_like(e), cache).dtype == np.float32
+
+
+@pytest.mark.parametrize("order", ["xyz", "yzx"])
+def test_euler_to_quat_layer(order):
+    """spec/losses.md §2: the Euler ablation's conversion equals refimpl.quat.quat_from_euler; its backward =
+    central differences; it inverts euler_from_quat (up to sign)."""
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-3, 3, (6, 3))
+    q, cache = euler_to_quat_forward(a, order)
+    assert np.allclose(q, quat_from_euler(a, order), atol=1e-15)
+    w = rng.standard_normal(q.shape)
+    check_gradients(lambda: float(np.sum(w * euler_to_quat_forward(a, order)[0])), {"a": a},
+                    {"a": euler_to_quat_backward(w, cache)}, **TOL_FD, max_entries=None)
+    q2, _ = euler_to_quat_forward(euler_from_quat(q, order), order)
+    assert np.allclose(np.abs(np.sum(q2 * q, -1)), 1.0, atol=1e-12)
+
+
+def test_axis_angle_to_quat_layer():
+    """spec/losses.md §2: the axis-angle conversion equals refimpl.quat.quat_from_axis_angle (also below the series
+    threshold θ = 1e-4); its backward = central differences."""
+    rng = np.random.default_rng(2)
+    v = rng.standard_normal((6, 3)) * np.array([[1e-7], [1e-5], [0.3], [1.0], [2.5], [3.0]])
+    q, cache = axis_angle_to_quat_forward(v)
+    assert np.allclose(q, quat_from_axis_angle(v), atol=1e-15)
+    w = rng.standard_normal(q.shape)
+    check_gradients(lambda: float(np.sum(w * axis_angle_to_quat_forward(v)[0])), {"v": v},
+                    {"v": axis_angle_to_quat_backward(w, cache)}, eps=1e-8, rtol=1e-5, atol=1e-7,
+                    max_entries=None)
+
+
+def test_euler_and_axis_angle_layers_check_their_inputs():
+    with pytest.raises(ValueError, match="order"):
+        euler_to_quat_forward(np.zeros((2, 3)), "xyx")
+    with pytest.raises(ValueError, match=r"angles: expected shape \(\.\.\., 3\)"):
+        euler_to_quat_forward(np.zeros((2, 4)), "xyz")
+    with pytest.raises(ValueError, match="v: contains NaN"):
+        axis_angle_to_quat_forward(np.full((2, 3), np.nan))

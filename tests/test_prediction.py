@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
+from refimpl.protocols import prediction as PP
+from refimpl.protocols import prediction_data as PD
 from refimpl.quat import quat_from_axis_angle
 from refimpl.strategies import unit_quaternions
 from refimpl.tasks import prediction as P
@@ -66,30 +68,30 @@ def _expected_starts(lengths, n, low, P_, K):
 
 
 def test_window_starts_reproduce_the_published_sampler():
-    standard = P.make_protocol("h36m")
-    got = P.window_starts([200, 230], standard)
+    standard = PP.make_protocol("h36m")
+    got = PP.window_starts([200, 230], standard)
     assert got == _expected_starts([200, 230], 4, 16, 50, 100)
     # literal pin (RandomState's legacy stream is stable across NumPy versions)
     assert got == [(0, 18), (1, 79), (0, 28), (1, 67), (0, 49), (1, 59), (0, 30), (1, 25)]
-    dense = P.window_starts([200, 230], P.make_protocol("h36m", dense=True))
+    dense = PP.window_starts([200, 230], PP.make_protocol("h36m", dense=True))
     assert len(dense) == 256 and dense == _expected_starts([200, 230], 128, 16, 50, 100)
     assert dense[:8] == got                                    # same stream, more draws
     assert all(16 <= s < t - 150 for (i, s), t in zip(dense, [200, 230] * 128))
     # CMU adaptation: K = 25, low = 0, one sub-sequence
-    assert P.window_starts([81], P.make_protocol("cmu")) == [(0, 2), (0, 4), (0, 3), (0, 1)]
-    assert P.window_starts([179], P.make_protocol("cmu")) == [(0, 2), (0, 102), (0, 47), (0, 12)]
+    assert PP.window_starts([81], PP.make_protocol("cmu")) == [(0, 2), (0, 4), (0, 3), (0, 1)]
+    assert PP.window_starts([179], PP.make_protocol("cmu")) == [(0, 2), (0, 102), (0, 47), (0, 12)]
 
 
 def test_window_starts_rejects_short_sequences():
     with pytest.raises(ValueError, match="too short"):
-        P.window_starts([200, 166], P.make_protocol("h36m"))   # 166 − 150 = 16: empty range [16, 16)
-    assert P.window_starts([167], P.make_protocol("h36m", samples_per_sequence=3)) == [(0, 16)] * 3
+        PP.window_starts([200, 166], PP.make_protocol("h36m"))   # 166 − 150 = 16: empty range [16, 16)
+    assert PP.window_starts([167], PP.make_protocol("h36m", samples_per_sequence=3)) == [(0, 16)] * 3
     with pytest.raises(ValueError):
-        P.window_starts([], P.make_protocol("h36m"))
+        PP.window_starts([], PP.make_protocol("h36m"))
 
 
 def test_protocols():
-    s, d, c = P.make_protocol(), P.make_protocol(dense=True), P.make_protocol("cmu")
+    s, d, c = PP.make_protocol(), PP.make_protocol(dense=True), PP.make_protocol("cmu")
     assert (s.name, s.samples_per_sequence, s.prefix_length, s.target_length, s.low, s.seed) == \
         ("standard", 4, 50, 100, 16, 1234567890)
     assert (d.name, d.samples_per_sequence) == ("dense", 128)
@@ -97,25 +99,25 @@ def test_protocols():
     assert s.horizon_frames == (1, 3, 7, 9, 13, 24, 49, 74, 99)
     assert (c.target_length, c.low, c.horizon_frames) == (25, 0, (1, 3, 7, 9, 13, 24))
     with pytest.raises(ValueError, match="horizons_ms"):
-        P.Protocol(name="x", samples_per_sequence=4, horizons_ms=(100,))
+        PP.Protocol(name="x", samples_per_sequence=4, horizons_ms=(100,))
     with pytest.raises(ValueError, match="horizons_ms"):
-        P.Protocol(name="x", samples_per_sequence=4, target_length=10, horizons_ms=(800,))
+        PP.Protocol(name="x", samples_per_sequence=4, target_length=10, horizons_ms=(800,))
     with pytest.raises(ValueError, match="samples_per_sequence"):
-        P.Protocol(name="x", samples_per_sequence=0)
+        PP.Protocol(name="x", samples_per_sequence=0)
     with pytest.raises(ValueError, match="dataset"):
-        P.make_protocol("amass")
+        PP.make_protocol("amass")
 
 
 def test_windows_from_a_synthetic_directory_follow_the_seed(h36m_dir):
-    data = P.load_h36m(h36m_dir)
+    data = PD.load_h36m(h36m_dir)
     assert data.test_actions() == ("walking", "eating")        # the published order
     for action, lengths in (("walking", [230, 200]), ("eating", [210, 220])):
-        prefix, target, windows = P.evaluation_windows(data, action, P.make_protocol())
+        prefix, target, windows = PP.evaluation_windows(data, action, PP.make_protocol())
         exp = _expected_starts(lengths, 4, 16, 50, 100)
         assert [(w[0].rsplit("_", 1)[1], w[1]) for w in windows] == [(f"{i + 1}.txt", s) for i, s in exp]
         assert prefix.shape == (8, 50, 32, 4) and target.shape == (8, 100, 32, 4)
     # the walking windows hold the right frames: joint 3 is at angle 0.006 · (50 Hz row) = 0.012 · frame
-    prefix, target, windows = P.evaluation_windows(data, "walking", P.make_protocol())
+    prefix, target, windows = PP.evaluation_windows(data, "walking", PP.make_protocol())
     for n, (_, s) in enumerate(windows):
         angle = 2 * np.arctan2(prefix[n, :, 3, 1], prefix[n, :, 3, 0])
         np.testing.assert_allclose(angle, 0.012 * np.arange(s, s + 50), atol=1e-12)
@@ -131,23 +133,23 @@ def test_windows_from_a_synthetic_directory_follow_the_seed(h36m_dir):
 # ------------------------------------------------------------------------------------------------------------
 
 def test_h36m_splits_and_both_strides(h36m_dir):
-    data = P.load_h36m(h36m_dir)
+    data = PD.load_h36m(h36m_dir)
     assert data.dataset == "h36m" and data.skeleton.num_joints == 32 and data.frame_time == pytest.approx(0.04)
     assert sorted(s.key for s in data.train) == sorted(
         f"{s}/walking_{k}_d{p}" for s in ("S1", "S6") for k in (1, 2) for p in (0, 1))
     assert [s.key for s in data.test] == ["S5/walking_1_d0", "S5/walking_2_d0", "S5/eating_1_d0", "S5/eating_2_d0"]
     assert data.valid == ()
-    val = P.load_h36m(h36m_dir, validation=True)
+    val = PD.load_h36m(h36m_dir, validation=True)
     assert {s.subject for s in val.train} == {"S1"} and {s.subject for s in val.valid} == {"S6"}
     assert {s.phase for s in val.valid} == {0, 1}
-    only = P.load_h36m(h36m_dir, actions=["eating"])
+    only = PD.load_h36m(h36m_dir, actions=["eating"])
     assert only.train == () and only.test_actions() == ("eating",)
     with pytest.raises(ValueError, match="unknown"):
-        P.load_h36m(h36m_dir, actions=["jogging"])
+        PD.load_h36m(h36m_dir, actions=["jogging"])
 
 
 def test_decimation_keeps_both_strides_and_converts_with_negated_expmap(h36m_dir):
-    data = P.load_h36m(h36m_dir)
+    data = PD.load_h36m(h36m_dir)
     d0, d1 = [s for s in data.train if s.subject == "S1" and s.subaction == 1]
     assert (d0.phase, d1.phase, d0.num_frames, d1.num_frames) == (0, 1, 11, 10)   # 21 rows → 11 + 10
     rows = np.arange(21)
@@ -165,21 +167,21 @@ def test_antipodal_continuity_after_decimation(tmp_path):
     root = tmp_path / "h"
     _write_h36m(root / "S1" / "walking_1.txt", _ramp(30, {2: math.radians(170)}))
     _write_h36m(root / "S1" / "walking_2.txt", _ramp(30, {}))
-    data = P.load_h36m(root)
+    data = PD.load_h36m(root)
     for s in data.train:
         dots = np.sum(s.rotations[1:] * s.rotations[:-1], axis=-1)
         assert np.all(dots >= 0)
 
 
 def test_cmu_loader_on_the_embedded_sample():
-    data = P.load_cmu(SAMPLE_CMU)
+    data = PD.load_cmu(SAMPLE_CMU)
     assert data.dataset == "cmu" and data.skeleton.num_joints == 38
     assert data.frame_time == pytest.approx(1 / 60)
     assert [(s.key, s.num_frames) for s in data.test] == [("cmu/running_1_d0", 81), ("cmu/walking_1_d0", 179)]
     assert len(data.train) == 20 and {s.phase for s in data.train} == {0, 1}
     walk1 = [s for s in data.train if s.action == "walking" and s.subaction == 1]
     assert [s.num_frames for s in walk1] == [172, 171]                                  # 344 rows − 1 reference
-    keep = P.load_cmu(SAMPLE_CMU, drop_reference_frame=False)
+    keep = PD.load_cmu(SAMPLE_CMU, drop_reference_frame=False)
     assert [s.num_frames for s in keep.test] == [82, 180]
     assert data.test_actions() == ("running", "walking")
 
@@ -190,58 +192,58 @@ def test_cmu_loader_on_the_embedded_sample():
 
 def test_malformed_directories_raise_naming_the_file(tmp_path, h36m_dir):
     with pytest.raises(ValueError, match="no subject folders"):
-        P.load_h36m(tmp_path / "h36m" / "other")
+        PD.load_h36m(tmp_path / "h36m" / "other")
     with pytest.raises(ValueError, match="not a directory"):
-        P.load_h36m(tmp_path / "missing")
+        PD.load_h36m(tmp_path / "missing")
     bad = h36m_dir / "S5" / "walking.txt"
     bad.write_text("0," * 98 + "0\n")
     with pytest.raises(ValueError, match=r"walking\.txt"):
-        P.load_h36m(h36m_dir)
+        PD.load_h36m(h36m_dir)
     bad.unlink()
     (h36m_dir / "S1" / "jogging_1.txt").write_text("0," * 98 + "0\n")
     with pytest.raises(ValueError, match=r"jogging_1\.txt"):
-        P.load_h36m(h36m_dir)
+        PD.load_h36m(h36m_dir)
     (h36m_dir / "S1" / "jogging_1.txt").unlink()
     (h36m_dir / "S1" / "walking_2.txt").write_text("0," * 97 + "0\n")           # 98 values
     with pytest.raises(ValueError, match=r"S1/walking_2\.txt:1"):
-        P.load_h36m(h36m_dir)
+        PD.load_h36m(h36m_dir)
     _write_h36m(h36m_dir / "S1" / "walking_2.txt", np.zeros((5, 32, 3)))
     (h36m_dir / "S5" / "eating_2.txt").unlink()
     with pytest.raises(ValueError, match=r"S5/eating_2\.txt: missing"):
-        P.load_h36m(h36m_dir)
+        PD.load_h36m(h36m_dir)
 
 
 def test_too_short_test_sequence_names_the_file(tmp_path):
     root = tmp_path / "h"
     _write_h36m(root / "S5" / "posing_1.txt", np.zeros((400, 32, 3)))
     _write_h36m(root / "S5" / "posing_2.txt", np.zeros((300, 32, 3)))                  # 150 frames at 25 Hz
-    data = P.load_h36m(root)
+    data = PD.load_h36m(root)
     with pytest.raises(ValueError, match=r"posing_2\.txt"):
-        P.evaluate(P.zero_velocity, data, P.make_protocol())
+        PP.evaluate(PP.zero_velocity, data, PP.make_protocol())
 
 
 def test_cmu_malformed(tmp_path):
     with pytest.raises(ValueError, match="no 'train' or 'test'"):
-        P.load_cmu(tmp_path)
+        PD.load_cmu(tmp_path)
     (tmp_path / "test" / "walking").mkdir(parents=True)
     (tmp_path / "test" / "walking" / "running_1.txt").write_text("0," * 116 + "0\n" + "0," * 116 + "0\n")
     with pytest.raises(ValueError, match=r"running_1\.txt"):
-        P.load_cmu(tmp_path)
+        PD.load_cmu(tmp_path)
 
 
 def test_method_output_shape_is_checked(h36m_dir):
-    data = P.load_h36m(h36m_dir)
+    data = PD.load_h36m(h36m_dir)
     with pytest.raises(ValueError, match="expected output shape"):
-        P.evaluate(lambda prefix, k: prefix[:, -k:], data, P.make_protocol(), method_name="bad")
+        PP.evaluate(lambda prefix, k: prefix[:, -k:], data, PP.make_protocol(), method_name="bad")
     with pytest.raises(ValueError, match="method"):
-        P.evaluate("zero", data, P.make_protocol())
+        PP.evaluate("zero", data, PP.make_protocol())
     with pytest.raises(ValueError, match="not finite"):
-        P.evaluate(lambda prefix, k: np.full(prefix.shape[:1] + (k,) + prefix.shape[2:], np.nan), data,
-                   P.make_protocol(), method_name="nan")
+        PP.evaluate(lambda prefix, k: np.full(prefix.shape[:1] + (k,) + prefix.shape[2:], np.nan), data,
+                   PP.make_protocol(), method_name="nan")
     with pytest.raises(ValueError, match="batch_size"):
-        P.evaluate(P.zero_velocity, data, P.make_protocol(), batch_size=0)
+        PP.evaluate(PP.zero_velocity, data, PP.make_protocol(), batch_size=0)
     with pytest.raises(ValueError, match="jogging"):
-        P.evaluate(P.zero_velocity, data, P.make_protocol(), actions=["jogging"])
+        PP.evaluate(PP.zero_velocity, data, PP.make_protocol(), actions=["jogging"])
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -249,32 +251,32 @@ def test_method_output_shape_is_checked(h36m_dir):
 # ------------------------------------------------------------------------------------------------------------
 
 def test_constant_motion_has_zero_error(h36m_dir):
-    data = P.load_h36m(h36m_dir, actions=["eating"])
-    for name, m in P.baseline_methods().items():
-        res = P.evaluate(m, data, P.make_protocol(), method_name=name)
+    data = PD.load_h36m(h36m_dir, actions=["eating"])
+    for name, m in PP.baseline_methods().items():
+        res = PP.evaluate(m, data, PP.make_protocol(), method_name=name)
         assert res.actions["eating"] == [0.0] * 9
     rng = np.random.default_rng(1)
     q = quat_from_axis_angle(rng.normal(size=(3, 1, 5, 3)))
     prefix = np.repeat(q, 10, axis=1)                                                  # (3, 10, 5, 4) constant
     target = np.repeat(q, 7, axis=1)
-    assert np.all(P.euler_errors(P.zero_velocity(prefix, 7), target) == 0)
-    np.testing.assert_allclose(P.euler_errors(P.running_average(4)(prefix, 7), target), 0, atol=1e-12)
+    assert np.all(PP.euler_errors(PP.zero_velocity(prefix, 7), target) == 0)
+    np.testing.assert_allclose(PP.euler_errors(PP.running_average(4)(prefix, 7), target), 0, atol=1e-12)
 
 
 def test_linear_ramp_errors_in_closed_form(h36m_dir):
     # joints 3 and 17 rotate about x at 0.012 and 0.006 rad per 25 Hz frame (joint 0 too, but it is dropped):
     # zero-velocity error at future frame i is (i + 1)·|ω|, running average over k is (i + 1 + (k − 1)/2)·|ω|
-    data = P.load_h36m(h36m_dir, actions=["walking"])
+    data = PD.load_h36m(h36m_dir, actions=["walking"])
     speed = math.hypot(0.012, 0.006)
     i = np.arange(100)
     for name, k in (("zero-velocity", 1), ("run. avg. 2", 2), ("run. avg. 4", 4)):
-        method = P.zero_velocity if k == 1 else P.running_average(k)
-        res = P.evaluate(method, data, P.make_protocol(), method_name=name)
+        method = PP.zero_velocity if k == 1 else PP.running_average(k)
+        res = PP.evaluate(method, data, PP.make_protocol(), method_name=name)
         np.testing.assert_allclose(res.curves["walking"], (i + 1 + (k - 1) / 2) * speed, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(res.actions["walking"],
                                    [(f + 1 + (k - 1) / 2) * speed for f in res.protocol.horizon_frames], rtol=1e-9)
         assert res.windows_per_action == {"walking": 8}
-    dense = P.evaluate(P.zero_velocity, data, P.make_protocol(dense=True), batch_size=50)
+    dense = PP.evaluate(PP.zero_velocity, data, PP.make_protocol(dense=True), batch_size=50)
     assert dense.windows_per_action == {"walking": 256}
     np.testing.assert_allclose(dense.curves["walking"], (i + 1) * speed, rtol=1e-9)
 
@@ -285,19 +287,19 @@ def test_running_average_is_the_euler_mean_of_the_last_frames():
     from refimpl.quat import euler_from_quat, quat_from_euler
     prefix = quat_from_euler(angles, "zyx")
     for k in (1, 2, 4):
-        out = P.running_average(k)(prefix, 3)
+        out = PP.running_average(k)(prefix, 3)
         assert out.shape == (2, 3, 4, 4)
         np.testing.assert_allclose(euler_from_quat(out, "zyx"),
                                    np.repeat(angles[:, -k:].mean(axis=1, keepdims=True), 3, axis=1), atol=1e-12)
-    np.testing.assert_allclose(P.running_average(1)(prefix, 2), P.zero_velocity(prefix, 2), atol=1e-12)
+    np.testing.assert_allclose(PP.running_average(1)(prefix, 2), PP.zero_velocity(prefix, 2), atol=1e-12)
     with pytest.raises(ValueError, match="at least 7 frames"):
-        P.running_average(7)(prefix, 2)
+        PP.running_average(7)(prefix, 2)
     with pytest.raises(ValueError, match="k"):
-        P.running_average(0)
+        PP.running_average(0)
     with pytest.raises(ValueError, match="n_future"):
-        P.zero_velocity(prefix, 0)
+        PP.zero_velocity(prefix, 0)
     with pytest.raises(ValueError, match="prefix"):
-        P.zero_velocity(prefix[0], 2)
+        PP.zero_velocity(prefix[0], 2)
 
 
 def test_euler_wrap_around():
@@ -307,12 +309,12 @@ def test_euler_wrap_around():
     q = np.tile(np.array([1.0, 0, 0, 0]), (1, 4, 2, 1))
     q[0, :, 1] = track
     prefix, target = q[:, :2], q[:, 2:]                                                # last prefix angle 3.1
-    plain = P.euler_errors(P.zero_velocity(prefix, 2), target)
+    plain = PP.euler_errors(PP.zero_velocity(prefix, 2), target)
     np.testing.assert_allclose(plain[0], [2 * np.pi - 0.1, 2 * np.pi - 0.2], atol=1e-12)  # the published metric
-    wrapped = P.euler_errors(P.zero_velocity(prefix, 2), target, wrap=True)
+    wrapped = PP.euler_errors(PP.zero_velocity(prefix, 2), target, wrap=True)
     np.testing.assert_allclose(wrapped[0], [0.1, 0.2], atol=1e-12)
     # averaging across ±π is not wrap-aware either (as published): mean(3.0, 3.1) is fine, mean(3.1, −3.08) is ≈ 0
-    ra = P.running_average(2)(q[:, 1:3], 1)
+    ra = PP.running_average(2)(q[:, 1:3], 1)
     assert abs(2 * np.arctan2(ra[0, 0, 1, 3], ra[0, 0, 1, 0])) < 0.05
 
 
@@ -320,15 +322,15 @@ def test_error_drops_joint_0_and_masks_constant_angles():
     q = np.tile(np.array([1.0, 0, 0, 0]), (1, 3, 3, 1))
     pred = q.copy()
     pred[..., 0, :] = quat_from_axis_angle(np.array([0.5, 0, 0]))                     # root: ignored
-    assert np.all(P.euler_errors(pred, q) == 0)
-    assert np.allclose(P.euler_errors(pred, q, drop_joints=()), 0.5)
+    assert np.all(PP.euler_errors(pred, q) == 0)
+    assert np.allclose(PP.euler_errors(pred, q, drop_joints=()), 0.5)
     pred[..., 2, :] = quat_from_axis_angle(np.array([0, 0.3, 0]))                     # constant GT joint
-    assert np.allclose(P.euler_errors(pred, q), 0.3)
-    assert np.all(P.euler_errors(pred, q, mask_constant=True) == 0)                   # Martinez's std rule
+    assert np.allclose(PP.euler_errors(pred, q), 0.3)
+    assert np.all(PP.euler_errors(pred, q, mask_constant=True) == 0)                   # Martinez's std rule
     with pytest.raises(ValueError, match="pred"):
-        P.euler_errors(pred[:, :2], q)
+        PP.euler_errors(pred[:, :2], q)
     with pytest.raises(ValueError, match="target"):
-        P.euler_errors(pred[0], q[0])
+        PP.euler_errors(pred[0], q[0])
 
 
 def _qeuler_zyx(q):
@@ -341,13 +343,13 @@ def _qeuler_zyx(q):
 
 
 def test_error_matches_the_published_formula_on_real_windows():
-    data = P.load_cmu(SAMPLE_CMU)
+    data = PD.load_cmu(SAMPLE_CMU)
     for action in data.test_actions():
-        prefix, target, _ = P.evaluation_windows(data, action, P.make_protocol("cmu", samples_per_sequence=16))
-        pred = P.running_average(2)(prefix, 25)
+        prefix, target, _ = PP.evaluation_windows(data, action, PP.make_protocol("cmu", samples_per_sequence=16))
+        pred = PP.running_average(2)(prefix, 25)
         d = _qeuler_zyx(pred[:, :, 1:]) - _qeuler_zyx(target[:, :, 1:])
         oracle = np.sqrt(np.sum(d.reshape(d.shape[0], d.shape[1], -1) ** 2, axis=-1))
-        np.testing.assert_allclose(P.euler_errors(pred, target), oracle, atol=1e-9)
+        np.testing.assert_allclose(PP.euler_errors(pred, target), oracle, atol=1e-9)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -355,11 +357,11 @@ def test_error_matches_the_published_formula_on_real_windows():
 # ------------------------------------------------------------------------------------------------------------
 
 def test_json_schema_and_table(tmp_path, h36m_dir):
-    data = P.load_h36m(h36m_dir)
-    results = [P.evaluate(m, data, P.make_protocol(), method_name=n) for n, m in P.baseline_methods().items()]
+    data = PD.load_h36m(h36m_dir)
+    results = [PP.evaluate(m, data, PP.make_protocol(), method_name=n) for n, m in PP.baseline_methods().items()]
     path = tmp_path / "out" / "zv.json"
     path.parent.mkdir()
-    P.write_results_json(path, results[-1])
+    PP.write_results_json(path, results[-1])
     doc = json.loads(path.read_text())
     assert set(doc) >= {"dataset", "protocol", "method", "samples_per_sequence", "horizons_ms", "actions", "average"}
     assert (doc["dataset"], doc["protocol"], doc["method"], doc["samples_per_sequence"]) == \
@@ -372,17 +374,17 @@ def test_json_schema_and_table(tmp_path, h36m_dir):
     assert doc["windows_per_action"] == {"walking": 8, "eating": 8}
     assert doc["data_frame_time_s"] == pytest.approx(0.04) and doc["frame_ms"] == 40.0
     assert [p.name for p in path.parent.iterdir()] == ["zv.json"]                       # no temporary left
-    P.write_results_json(path, results)
+    PP.write_results_json(path, results)
     many = json.loads(path.read_text())
     assert [d["method"] for d in many] == ["run. avg. 4", "run. avg. 2", "zero-velocity"]
     with pytest.raises(ValueError):
-        P.write_results_json(path, [])
-    table = P.format_table(results)
+        PP.write_results_json(path, [])
+    table = PP.format_table(results)
     lines = table.splitlines()
     assert lines[0].startswith("dataset h36m, protocol standard (4 samples per sequence, 8 windows per action)")
     assert lines[1].split("|")[1:4] == ["    80 ", "   160 ", "   320 "]
     assert "walking" in lines and "eating" in lines and "average" in lines
-    assert P.format_table([]) == ""
+    assert PP.format_table([]) == ""
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -401,23 +403,23 @@ CMU_STANDARD = {
 
 
 def test_baselines_on_the_cmu_test_files():
-    data = P.load_cmu(SAMPLE_CMU)
-    for name, method in P.baseline_methods().items():
-        res = P.evaluate(method, data, P.make_protocol("cmu"), method_name=name)
+    data = PD.load_cmu(SAMPLE_CMU)
+    for name, method in PP.baseline_methods().items():
+        res = PP.evaluate(method, data, PP.make_protocol("cmu"), method_name=name)
         for action, expected in CMU_STANDARD[name].items():
             np.testing.assert_allclose(res.actions[action], expected, atol=6e-4)
         np.testing.assert_allclose(res.average, np.mean(list(CMU_STANDARD[name].values()), axis=0), atol=6e-4)
-    dense = P.evaluate(P.zero_velocity, data, P.make_protocol("cmu", dense=True))
+    dense = PP.evaluate(PP.zero_velocity, data, PP.make_protocol("cmu", dense=True))
     assert dense.windows_per_action == {"running": 128, "walking": 128}
     np.testing.assert_allclose(dense.average[:4], [0.44, 0.75, 1.10, 1.20], atol=6e-3)
 
 
 @pytest.mark.shared
 def test_baselines_on_the_shared_cmu_copy(shared_data):
-    a = P.load_cmu(shared_data / "dmgnn_cmu_expmap")
-    b = P.load_cmu(SAMPLE_CMU)
-    ra = P.evaluate(P.zero_velocity, a, P.make_protocol("cmu"))
-    rb = P.evaluate(P.zero_velocity, b, P.make_protocol("cmu"))
+    a = PD.load_cmu(shared_data / "dmgnn_cmu_expmap")
+    b = PD.load_cmu(SAMPLE_CMU)
+    ra = PP.evaluate(PP.zero_velocity, a, PP.make_protocol("cmu"))
+    rb = PP.evaluate(PP.zero_velocity, b, PP.make_protocol("cmu"))
     assert ra.actions == rb.actions
     np.testing.assert_allclose(ra.actions["walking"], CMU_STANDARD["zero-velocity"]["walking"], atol=6e-4)
 
@@ -442,11 +444,11 @@ def test_zyx_euler_of_the_negated_expmap_equals_the_srnn_euler_of_the_file_expma
 
 
 def test_table_in_the_spec_is_what_format_table_prints():
-    data = P.load_cmu(SAMPLE_CMU)
-    methods = P.baseline_methods()
-    results = [P.evaluate(methods[n], data, P.make_protocol("cmu"), method_name=n)
+    data = PD.load_cmu(SAMPLE_CMU)
+    methods = PP.baseline_methods()
+    results = [PP.evaluate(methods[n], data, PP.make_protocol("cmu"), method_name=n)
                for n in ("run. avg. 2", "zero-velocity")]
-    assert P.format_table(results) == """\
+    assert PP.format_table(results) == """\
 dataset cmu, protocol standard (4 samples per sequence, 4 windows per action)
 horizons at a nominal 40 ms per frame; the data has 16.7 ms per frame
 milliseconds     |    80 |   160 |   320 |   400 |   560 |  1000
@@ -464,9 +466,9 @@ average
 @given(lengths=st.lists(st.integers(67, 400), min_size=1, max_size=3), n=st.integers(1, 20),
        low=st.integers(0, 16))
 def test_window_starts_property(lengths, n, low):
-    proto = P.Protocol(name="x", samples_per_sequence=n, prefix_length=20, target_length=30, low=low,
+    proto = PP.Protocol(name="x", samples_per_sequence=n, prefix_length=20, target_length=30, low=low,
                        horizons_ms=(40,))
-    draws = P.window_starts(lengths, proto)
+    draws = PP.window_starts(lengths, proto)
     assert [i for i, _ in draws] == list(range(len(lengths))) * n
     assert all(low <= s < lengths[i] - 50 for i, s in draws)
     assert draws == _expected_starts(lengths, n, low, 20, 30)
@@ -476,5 +478,5 @@ def test_window_starts_property(lengths, n, low):
        scale=st.floats(0.5, 2.0), flip=st.lists(st.booleans(), min_size=24, max_size=24))
 def test_euler_errors_ignore_scale_and_sign(pred, target, scale, flip):
     signs = np.where(np.array(flip).reshape(2, 3, 4, 1), -1.0, 1.0)
-    base = P.euler_errors(pred, target, wrap=True)          # wrap: angles are equal modulo 2π at the ±π seam
-    np.testing.assert_allclose(P.euler_errors(pred * signs * scale, target, wrap=True), base, atol=1e-9)
+    base = PP.euler_errors(pred, target, wrap=True)          # wrap: angles are equal modulo 2π at the ±π seam
+    np.testing.assert_allclose(PP.euler_errors(pred * signs * scale, target, wrap=True), base, atol=1e-9)

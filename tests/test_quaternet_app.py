@@ -10,6 +10,8 @@ import pytest
 
 from refimpl.checkpoint import load_checkpoint
 from refimpl.cli import EXIT_OK, EXIT_USAGE, main
+from refimpl.protocols import prediction as PP
+from refimpl.protocols import prediction_data as PD
 from refimpl.recipes import quaternet as rnn_recipe
 from refimpl.recipes import quaternet_cnn as cnn_recipe
 from refimpl.registry import MODELS
@@ -78,20 +80,20 @@ def test_task_data_and_windows():
     data = pr.resolve_data("sample")
     assert data.dataset == "cmu" and pr.num_examples(data) == len(data.train) == 20
     assert "20 training sequences" in pr.describe_data(data)
-    a = pr.training_windows(data, [0, 3, 3], np.random.default_rng(1), 60)
-    b = pr.training_windows(data, [0, 3, 3], np.random.default_rng(1), 60)
+    a = PD.training_windows(data, [0, 3, 3], np.random.default_rng(1), 60)
+    b = PD.training_windows(data, [0, 3, 3], np.random.default_rng(1), 60)
     assert a.shape == (3, 60, 38, 4) and np.array_equal(a, b)
     seq = data.train[3].rotations
     starts = [next(s for s in range(seq.shape[0] - 59) if np.array_equal(seq[s:s + 60], w)) for w in a[1:]]
     assert all(0 <= s <= seq.shape[0] - 60 for s in starts)
     with pytest.raises(ValueError, match="no training sequence"):
-        pr.usable_training(data, 10 ** 6)
+        PD.usable_training(data, 10 ** 6)
 
 
 def test_canonical_prefix_keeps_rotations():
     data = pr.resolve_data("sample")
     x = data.test[0].rotations[None, :20]
-    c = pr.canonical_prefix(x)
+    c = PP.canonical_prefix(x)
     assert np.allclose(np.abs(np.sum(c * x, axis=-1)), 1.0, atol=1e-9)
     assert np.all(np.sum(c[:, 1:] * c[:, :-1], axis=-1) >= 0)
 
@@ -196,7 +198,7 @@ def test_eval_baselines_alone_dense(capsys, tmp_path):
     doc = json.loads(path.read_text())
     assert [d["method"] for d in doc] == ["zero-velocity", "run. avg. 2", "run. avg. 4"]
     assert all(d["samples_per_sequence"] == 128 for d in doc)
-    direct = pr.evaluate(pr.zero_velocity, pr.resolve_data("sample"), pr.make_protocol("cmu", dense=True))
+    direct = PP.evaluate(PP.zero_velocity, pr.resolve_data("sample"), PP.make_protocol("cmu", dense=True))
     assert np.allclose(doc[0]["average"], direct.average)
 
 
@@ -310,10 +312,10 @@ def test_eval_protocol_and_curves():
     assert pr.eval_protocol("h36m", "standard", 8).samples_per_sequence == 8
     with pytest.raises(ValueError, match="standard"):
         pr.eval_protocol("cmu", "sparse")
-    assert pr.stride_of("cmu", 1 / 60) == 2 and pr.stride_of("h36m", 0.04) == 2
+    assert PD.stride_of("cmu", 1 / 60) == 2 and PD.stride_of("h36m", 0.04) == 2
     data = pr.resolve_data("sample")
-    res = pr.evaluate_all(data, pr.methods())
-    curves = pr.average_curves(res)
+    res = PP.evaluate_all(data, pr.methods())
+    curves = PP.average_curves(res)
     assert list(curves) == ["zero-velocity", "run. avg. 2", "run. avg. 4"]
     assert np.allclose(curves["zero-velocity"], np.mean([res[0].curves[a] for a in res[0].curves], axis=0))
 

@@ -13,6 +13,7 @@ from refimpl import dq_prediction as dqp
 from refimpl.cli import EXIT_OK, main
 from refimpl.gradcheck import check_vjp, numerical_gradient
 from refimpl.models import quaternet as net
+from refimpl.protocols import prediction as PP
 from refimpl.quat import quat_from_axis_angle
 from refimpl.recipes import quaternet as rnn_recipe
 from refimpl.services import load_trained
@@ -207,7 +208,7 @@ def test_method_decodes_to_local_quaternions():
     prefix = data.test[0].rotations[None, :20]
     out = method(prefix, 5)
     assert out.shape == (1, 5, 38, 4) and np.allclose(np.linalg.norm(out, axis=-1), 1.0)
-    d = dqp.dq_frames_from_rotations(pr.canonical_prefix(prefix), data.skeleton).reshape(1, 20, -1)
+    d = dqp.dq_frames_from_rotations(PP.canonical_prefix(prefix), data.skeleton).reshape(1, 20, -1)
     y = net.predict(params, d, 5, cfg.network).reshape(1, 5, 38, 8)
     assert np.allclose(np.abs(np.sum(out * dqp.rotations_from_dq_frames(y, data.skeleton.parents), -1)), 1.0)
 
@@ -215,29 +216,29 @@ def test_method_decodes_to_local_quaternions():
 # ---------------------------------------------------------------------------------------------- protocol
 def test_table2_protocol_at_the_real_frame_rate():
     data = pr.resolve_data("sample")   # 60 fps, test running 81 frames, walking 179
-    p = pr.table2_protocol(data)
+    p = PP.table2_protocol(data)
     assert p.round_horizons and np.isclose(p.frame_ms, 1000 / 60)
     assert p.horizons_ms == (80, 160, 320, 400)        # running: 81 − 50 − 1 = 30 frames at most
     assert p.horizon_frames == (4, 9, 18, 23) and p.target_length == 24
     assert np.allclose(p.horizon_times_ms, (250 / 3, 500 / 3, 950 / 3, 400))
-    w = pr.table2_protocol(data, "dense", actions=["walking"])
+    w = PP.table2_protocol(data, "dense", actions=["walking"])
     assert w.horizons_ms == (80, 160, 320, 400, 600, 800, 1000, 2000) and w.target_length == 120
     assert w.samples_per_sequence == 128
     with pytest.raises(ValueError, match="frames leave at most"):
-        pr.table2_protocol(data, prefix_length=80)
+        PP.table2_protocol(data, prefix_length=80)
     with pytest.raises(ValueError, match="no test sequence"):
-        pr.table2_protocol(data, actions=["jumping"])
+        PP.table2_protocol(data, actions=["jumping"])
     with pytest.raises(ValueError, match="beyond"):
-        pr.Protocol("x", 1, target_length=4, horizons_ms=(100,), frame_ms=20.0, round_horizons=True)
+        PP.Protocol("x", 1, target_length=4, horizons_ms=(100,), frame_ms=20.0, round_horizons=True)
     assert pr.eval_protocol("cmu", "standard", horizons="table2", data=data) == p
     with pytest.raises(ValueError, match="data"):
         pr.eval_protocol("cmu", horizons="table2")
     # the baselines on it: the first columns are the zero-velocity error at frames 5, 10, 19, 24
-    res = pr.evaluate(pr.zero_velocity, data, w, actions=["walking"])
-    prefix, target, _ = pr.evaluation_windows(data, "walking", w)
-    ref = pr.euler_errors(pr.zero_velocity(prefix, 120), target).mean(axis=0)
+    res = PP.evaluate(PP.zero_velocity, data, w, actions=["walking"])
+    prefix, target, _ = PP.evaluation_windows(data, "walking", w)
+    ref = PP.euler_errors(PP.zero_velocity(prefix, 120), target).mean(axis=0)
     assert_close(np.array(res.actions["walking"]), ref[list(w.horizon_frames)], rtol=1e-12)
-    assert pr.results_to_dict(res)["horizon_times_ms"][-1] == pytest.approx(2000)
+    assert PP.results_to_dict(res)["horizon_times_ms"][-1] == pytest.approx(2000)
 
 
 # ---------------------------------------------------------------------------------------------- commands

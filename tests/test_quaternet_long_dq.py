@@ -158,6 +158,7 @@ import pytest  # noqa: E402
 from refimpl.bvh import read_bvh  # noqa: E402
 from refimpl.cli import main  # noqa: E402
 from refimpl.tasks import locomotion as L  # noqa: E402
+from refimpl.protocols import locomotion as LP
 from refimpl.tasks import locomotion_generate as G  # noqa: E402
 
 SMALL = ["--data", "sample", "--set", "hidden_size=8", "--set", "output=dual_quaternion", "--locomotion-prefix", "6",
@@ -194,13 +195,13 @@ def test_eval_prints_fk_and_dq_positions_against_zero_velocity(trained, capsys, 
     assert set(got) == {"quaternet-long", "quaternet-long_dq_positions", "zero_velocity"}
     model = load_trained(ckpt)
     ds = L.load_eval_data("sample", model.extra)
-    inputs, tpos, _ = L.evaluation_windows(ds)
+    inputs, tpos, _ = LP.evaluation_windows(ds)
     sk = L.skeleton_of(model.extra)
     dq, tr = dqr.rollout(model.params, model.config.network(), inputs, ds.prefix, sk)
     dec = dqr.decode(dq, tr, sk)
-    perr, _ = L.position_errors(sk, dec["dq_positions"], tr, tpos)
+    perr, _ = LP.position_errors(sk, dec["dq_positions"], tr, tpos)
     np.testing.assert_allclose(got["quaternet-long_dq_positions"]["position"], perr, rtol=1e-6)
-    perr, _ = L.position_errors(sk, dec["fk_positions"], tr, tpos)
+    perr, _ = LP.position_errors(sk, dec["fk_positions"], tr, tpos)
     np.testing.assert_allclose(got["quaternet-long"]["position"], perr, rtol=1e-6)
 
 

@@ -187,7 +187,7 @@ def test_bad_config():
 
 def test_train_qtg_reduces_the_loss(tmp_path):
     """spec/qtg.md §10.2: the QTG convenience runs on a TransitionDataset and learns (tiny sizes)."""
-    from refimpl.transitions import TransitionDataset
+    from refimpl.protocols.transition import TransitionDataset
 
     rng = np.random.default_rng(0)
     poses = np.cumsum(0.1 * rng.standard_normal((16, 7, 11)), axis=1)

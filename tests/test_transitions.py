@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from refimpl.bvh import read_bvh
-from refimpl.metrics import evaluate_methods, format_table, joint_position_errors, positions_from_poses
+from refimpl.protocols.transition_metrics import evaluate_methods, format_table, joint_position_errors, positions_from_poses
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_normalize, quat_rotate
 from refimpl.testing import TOL_EXACT, assert_close, assert_quat_close
-from refimpl.transitions import (CMU_22_JOINTS, CMU_UNIT_CM, SALSA_22_JOINTS, TransitionDataset, TransitionSource,
+from refimpl.protocols.transition import (CMU_22_JOINTS, CMU_UNIT_CM, SALSA_22_JOINTS, TransitionDataset, TransitionSource,
                                  build_transition_datasets, denormalize_poses, heading_from_root, join_pose,
                                  load_source, make_windows, normalize_poses, pose_size, sample_sources,
                                  scale_skeleton, split_pose, subset_22)
@@ -188,7 +188,7 @@ def test_metrics():
 
 def test_shared_sources_exist_and_are_disjoint(shared_data):
     """spec/qtg.md §8.3: the ../shared/data split names existing files, split by file (01_01 by time)."""
-    from refimpl.transitions import shared_sources
+    from refimpl.protocols.transition import shared_sources
 
     tr, te = shared_sources(shared_data)
     for s in tr + te:

@@ -47,6 +47,18 @@ def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, pare
     frame_rate = float(extra.pop("frame_rate", 30.0))
     if parents is not None:
         extra["parents"] = [int(p) for p in parents]
+    extra.setdefault("input_transform", {
+        "summary": "raw frames in metres at 30 fps (the graphs standardise inside: normalization.in_graph)",
+        "steps": ["a BVH take: keep every 2nd frame of 60 fps (30 fps), drop the End Sites, multiply offsets and "
+                  "root positions by 0.01 (centimetres -> metres)",
+                  f"frame t = [x_(t+1) - x_t, y_t, z_(t+1) - z_t | the joints of frame t as representation."
+                  f"fields[1].layout], {representation}; quaternion-like values made continuous over time (negate a "
+                  "joint's values when their rotation part has a negative dot product with the previous frame's)",
+                  "seed: 10 such frames in the paper's protocol; any S >= 1 works"]})
+    extra.setdefault("output_transform", {
+        "summary": "frames as the inputs, in metres; the hip's ground position is x_0 + cumulative sum of dx (and "
+                   "z likewise), its height y; the decoded outputs (joints, positions) are computed in the graph",
+        "steps": ["to write the source BVH's units again, multiply lengths by 100 (metres -> centimetres)"]})
     kw = dict(mean=np.asarray(mean), std=np.asarray(std), representation=representation, dtype=dtype,
               opset=OPSET if opset is None else opset, skeleton=skeleton, frame_rate=frame_rate, metadata=extra)
     models = {"step": export_acrnn_step(params, config, **kw), "generate": export_acrnn_generate(params, config, **kw)}
@@ -134,3 +146,6 @@ class ACRNNRuntime:
 load_checkpoint = load_acrnn_checkpoint
 export_dir = export_acrnn_dir
 Runtime = ACRNNRuntime
+
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.run_commands import run_synthesis as run_command  # noqa: E402,F401

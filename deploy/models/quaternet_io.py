@@ -108,6 +108,20 @@ def _load(m, role, intra_op_threads):
     return dm
 
 
+def _canonical(x: np.ndarray, meta: dict) -> np.ndarray:
+    """``x (B, P, F)`` with the sign rule (``deploy.models.quaternet_sign``) applied to its joint quaternions when
+    the model's frames are quaternions (``representation.name == "quaternet_frame"``); else unchanged."""
+    rep = meta.get("representation") or {}
+    if rep.get("name") != "quaternet_frame":
+        return x
+    from deploy.models.quaternet_sign import canonical_signs
+
+    R = int(rep["fields"][0]["size"])
+    B, P = x.shape[:2]
+    q = canonical_signs(x[..., :R].reshape(B, P, R // 4, 4)).reshape(B, P, R)
+    return np.concatenate([q, x[..., R:]], axis=-1).astype(np.float32)
+
+
 def _frames(prefix, name="prefix") -> tuple[np.ndarray, tuple]:
     """``(B, P, J, 4)`` or ``(B, P, F)`` -> ``(B, P, F)`` float32 and the trailing shape to restore (refused, not
     coerced: :func:`deploy.models.arguments.frames_array`)."""
@@ -168,6 +182,7 @@ class QuaterNetRuntime:
         if use_graph and self.predict_model is not None and self.k == k:
             out = self.predict_model.run(prefix=x)["frames"]
         else:
+            x = _canonical(x, (self.step_model or self.init_model).metadata)   # the predict graph does it inside
             h = self.start(x[:, 0])
             for t in range(P):
                 y, h = self.step(x[:, t], h)
@@ -206,6 +221,7 @@ class QuaterNetCNNRuntime:
         x, tail = _frames(prefix)
         k = count(k, "k")
         R = self.receptive_field
+        x = _canonical(x, self.window_model.metadata)   # the sign rule on the whole prefix (input_transform)
         window, ys = x[:, -R:], []
         for _ in range(int(k)):
             y = self.step(window)
@@ -218,3 +234,7 @@ class QuaterNetCNNRuntime:
 load_checkpoint = load_quaternet_checkpoint
 export_dir = export_quaternet_dir
 Runtime = QuaterNetRuntime
+
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.run_commands import add_prediction_run_options as add_run_options  # noqa: E402,F401
+from deploy.models.run_commands import run_prediction as run_command  # noqa: E402,F401

@@ -1,5 +1,5 @@
 """QuaterNet long-term's entry of the exporter table (``deploy.models.EXPORTERS["quaternet-long"]``): the pose
-network's step and the pace network (spec/deploy.md §9).
+network's step and the pace network (spec/deploy.md §12).
 
 * :func:`load_checkpoint` — ``(params, config, meta)`` of a ``refimpl train`` checkpoint of ``quaternet-long``
   (config: :class:`~refimpl.models.quaternet.QuaterNetConfig`) or ``pace`` (:class:`~refimpl.models.pace.PaceConfig`);
@@ -82,7 +82,8 @@ def _network(config):
     return config.network() if hasattr(config, "network") else config
 
 
-def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, **_ignored) -> dict[str, Path]:
+def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, skeleton=None,
+               **_ignored) -> dict[str, Path]:
     """Export, validate and write the model(s) of ``config`` into ``out_dir``; returns role -> path.
 
     A pose network writes ``step`` (and its ``h0`` as ``.npy``), a pace network ``pace``. Options of other
@@ -95,7 +96,8 @@ def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, **_i
         m = validate_model(export_pace(params, config, dtype=dtype, metadata=metadata))
         save_model(m, out / PACE_FILE)
         return {"pace": out / PACE_FILE}
-    m = validate_model(export_pose_step(params, config, dtype=dtype, metadata=metadata))
+    m = validate_model(export_pose_step(params, config, dtype=dtype, metadata=metadata, skeleton=skeleton,
+                                        h0_file=H0_FILE))
     save_model(m, out / STEP_FILE)
     buf = io.BytesIO()
     np.save(buf, np.asarray(params["h0"], dtype=dtype), allow_pickle=False)
@@ -186,3 +188,6 @@ class Runtime:
             ys.append(y)
         y = np.stack(ys, axis=1)
         return y[..., :4 * J].reshape(B, -1, J, 4), y[..., 4 * J:]
+
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.run_commands import run_locomotion as run_command  # noqa: E402,F401

@@ -33,7 +33,8 @@ from typing import Mapping
 import numpy as np
 
 from refimpl.models._shared import check_param_dict
-from refimpl.dq_output import DQ_TERM_NAMES, DQ_TERMS, dq_output_loss_backward, dq_output_loss_forward
+from refimpl.dq_output import DQ_TERM_NAMES, DQ_TERMS
+from refimpl.dq_output_fast import dq_output_loss_backward, dq_output_loss_forward
 from refimpl.losses import (WEIGHT_ACRNN_QUAT_FK, euclidean_loss_backward, euclidean_loss_forward,
                             mse_loss_backward, mse_loss_forward, quat_loss_backward, quat_loss_forward,
                             quat_norm_loss_backward, quat_norm_loss_forward)
@@ -47,7 +48,7 @@ from refimpl.schedules import ACRNN_CONDITION_LENGTH, ACRNN_GROUND_TRUTH_LENGTH,
 
 __all__ = [
     "ACRNNConfig", "Variant", "VARIANTS", "LossSpec", "TABLE4_PARAMETERS",
-    "param_shapes", "count_parameters", "init_params", "init_state", "step",
+    "param_shapes", "published_names", "count_parameters", "init_params", "init_state", "step",
     "sequence_forward", "sequence_backward", "generate",
     "loss_forward", "loss_backward", "loss_and_grads", "config_for",
 ]
@@ -125,6 +126,25 @@ def param_shapes(config: ACRNNConfig) -> dict[str, tuple[int, ...]]:
     shapes["decoder.weight"] = (F, H)
     shapes["decoder.bias"] = (F,)
     return shapes
+
+
+def published_names(config: ACRNNConfig) -> dict[str, tuple[str, tuple[int, ...]]]:
+    """Name map to the published code (papagina/Auto_Conditioned_RNN_motion, ``code/pytorch_train_aclstm.py``):
+    our name -> ``(published name, published shape)``.
+
+    The published network holds one ``nn.LSTMCell`` per layer, ``lstm1`` … ``lstm3`` (``lstm{k+1}.weight_ih``
+    ``(4H, I_k)``, ``weight_hh``, ``bias_ih``, ``bias_hh``, gate blocks i|f|g|o as ``nn.LSTM``), and
+    ``decoder.weight`` / ``decoder.bias``; the tensors are ours (``lstm.weight_ih_l{k}``, ...) under other names.
+    Its stack is the skewed one (``skewed=True``, spec/acrnn.md §1).
+    """
+    out = {}
+    for name, shape in param_shapes(config).items():
+        if name.startswith("lstm."):
+            what, _, layer = name[len("lstm."):].rpartition("_l")
+            out[name] = (f"lstm{int(layer) + 1}.{what}", shape)
+        else:
+            out[name] = (name, shape)
+    return out
 
 
 def count_parameters(config: ACRNNConfig) -> int:
@@ -309,6 +329,7 @@ class Variant:
 #: local L_quat + 0.01 L_reg; quaternions-FK: MSE + L_quat + 1/4 FK position loss).
 VARIANTS = {v.name: v for v in (
     Variant("positions", "positions"),
+    Variant("positions_acrnn", "positions_acrnn"),      # the published code's 171-value frame (End Sites kept)
     Variant("euler", "euler"),
     Variant("quaternions", "quaternions"),
     Variant("quaternions_fk", "quaternions", {"mse": 1.0, "quat": 1.0, "fk": WEIGHT_ACRNN_QUAT_FK}),
@@ -386,6 +407,7 @@ class LossSpec:
 
     @property
     def num_joints(self) -> int:
+        """Joint blocks in a frame (J, or J − 1 for a representation without the root's block)."""
         return (self.mean.size - 3) // REPRESENTATIONS[self.representation].dim
 
 
@@ -393,7 +415,7 @@ def loss_forward(pred, target, spec: LossSpec):
     """Training loss of acRNN over every step.
 
     ``total = w_mse · MSE(pred, target) + Σ geometric terms`` on the de-standardised output
-    ``raw = pred · std + mean`` (dual quaternions: :func:`refimpl.dq_output.dq_output_loss_forward`; quaternions:
+    ``raw = pred · std + mean`` (dual quaternions: :func:`refimpl.dq_output_fast.dq_output_loss_forward`; quaternions:
     normalise per joint, then L_quat and the FK position loss).
 
     Parameters
@@ -493,26 +515,15 @@ def loss_and_grads(params: Mapping[str, np.ndarray], config: ACRNNConfig, frames
     parts : dict
     grads : dict
     """
-    return loss_and_grads_with(sequence_forward, sequence_backward, params, config, frames, spec, mask)
-
-
-def loss_and_grads_with(forward, backward, params: Mapping[str, np.ndarray], config: ACRNNConfig, frames,
-                        spec: LossSpec, mask=None):
-    """:func:`loss_and_grads` with the rollout's ``forward(params, config, frames, mask) -> (pred, cache)`` and
-    ``backward(dpred, cache) -> grads`` given (this module's, or :mod:`refimpl.models.acrnn_fast`'s)."""
     if config.frame_size != spec.mean.size:
         raise ValueError(f"spec: expected frames of size {config.frame_size} (config.frame_size), got "
                          f"{spec.mean.size}")
-    pred, cache = forward(params, config, frames, mask)
+    pred, cache = sequence_forward(params, config, frames, mask)
     total, parts, lcache = loss_forward(pred, np.asarray(frames)[:, 1:], spec)
-    grads = backward(loss_backward(1.0, lcache), cache)
+    grads = sequence_backward(loss_backward(1.0, lcache), cache)
     return total, parts, grads
 
 
 def config_for(representation: str, num_joints: int, **kwargs) -> ACRNNConfig:
     """The config whose frame size is ``3 + D·J`` for ``representation``."""
     return ACRNNConfig(frame_size=frame_size(representation, num_joints), **kwargs)
-
-
-# Kernel tier (spec/architecture.md §kernel tier): public names of helpers other modules use.
-check_sequence_inputs = _check_sequence

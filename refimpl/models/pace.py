@@ -44,7 +44,7 @@ from refimpl.nn.linear import linear_backward, linear_forward, linear_init
 from refimpl.nn.params import check_float_array, init_normal
 
 __all__ = [
-    "PaceConfig", "init_params", "count_parameters", "param_shapes", "forward", "backward",
+    "PaceConfig", "init_params", "count_parameters", "param_shapes", "published_names", "forward", "backward",
     "loss_forward", "loss_backward", "init_state", "delayed_step", "predict", "facing_from_outputs",
     "MIN_AMPLITUDE", "MIN_FREQUENCY", "INPUT_NAMES", "OUTPUT_NAMES",
 ]
@@ -106,6 +106,16 @@ def param_shapes(config: PaceConfig) -> dict[str, tuple[int, ...]]:
     shapes["fc.weight"] = (o, d * h)
     shapes["fc.bias"] = (o,)
     return shapes
+
+
+def published_names(config: PaceConfig) -> dict[str, tuple[str, tuple[int, ...]]]:
+    """Name map to the published code (facebookresearch/QuaterNet ``long_term/pace_network.py``,
+    ``BidirectionalModel`` / ``DelayedModel``): our name -> ``(published name, published shape)``. The same names;
+    only the delayed model's ``eos`` differs in shape, ``(1, 1, I)`` there and ``(I,)`` here."""
+    out = {name: (name, shape) for name, shape in param_shapes(config).items()}
+    if "eos" in out:
+        out["eos"] = ("eos", (1, 1, config.input_size))
+    return out
 
 
 def count_parameters(config: PaceConfig) -> int:
@@ -321,12 +331,12 @@ def predict(params: Mapping[str, np.ndarray], config: PaceConfig, spline, averag
 
 def _forward_naive(params, config: PaceConfig, x: np.ndarray) -> np.ndarray:
     """Loop oracle for :func:`forward`: the GRU's per-gate loop and one ``W h + b`` per point."""
-    from refimpl.nn.gru import gru_forward_naive as _gru_forward_naive
+    from refimpl.nn.gru import gru_forward_naive
     batch, n, _ = x.shape
     h0 = np.repeat(params["h0"], batch, axis=1)
     seq = x if config.bidirectional else np.concatenate(
         [x, np.tile(params["eos"], (batch, config.delay, 1))], axis=1)
-    hs, _ = _gru_forward_naive(seq, h0, params, "rnn", 1, config.bidirectional)
+    hs, _ = gru_forward_naive(seq, h0, params, "rnn", 1, config.bidirectional)
     if not config.bidirectional:
         hs = hs[:, config.delay:]
     y = np.empty((batch, n, config.output_size))
@@ -338,12 +348,12 @@ def _forward_naive(params, config: PaceConfig, x: np.ndarray) -> np.ndarray:
 
 def _backward_naive(dy: np.ndarray, params, config: PaceConfig, x: np.ndarray):
     """Loop oracle for :func:`backward` (recomputes the forward): ``(dx, grads)``."""
-    from refimpl.nn.gru import gru_backward_naive as _gru_backward_naive, gru_forward_naive as _gru_forward_naive
+    from refimpl.nn.gru import gru_backward_naive, gru_forward_naive
     batch, n, _ = x.shape
     h0 = np.repeat(params["h0"], batch, axis=1)
     seq = x if config.bidirectional else np.concatenate(
         [x, np.tile(params["eos"], (batch, config.delay, 1))], axis=1)
-    hs, _ = _gru_forward_naive(seq, h0, params, "rnn", 1, config.bidirectional)
+    hs, _ = gru_forward_naive(seq, h0, params, "rnn", 1, config.bidirectional)
     off = 0 if config.bidirectional else config.delay
     dw = np.zeros_like(params["fc.weight"])
     db = np.zeros_like(params["fc.bias"])
@@ -353,7 +363,7 @@ def _backward_naive(dy: np.ndarray, params, config: PaceConfig, x: np.ndarray):
             dw += np.outer(dy[b, t], hs[b, off + t])
             db += dy[b, t]
             dhs[b, off + t] = params["fc.weight"].T @ dy[b, t]
-    dseq, dh0, grads = _gru_backward_naive(dhs, None, seq, h0, params, "rnn", 1, config.bidirectional)
+    dseq, dh0, grads = gru_backward_naive(dhs, None, seq, h0, params, "rnn", 1, config.bidirectional)
     grads = dict(grads)
     grads["fc.weight"], grads["fc.bias"] = dw, db
     grads["h0"] = dh0.sum(axis=1, keepdims=True)

@@ -15,8 +15,8 @@ step and the oracles there (``_rollout_naive``, ``_rollout_backward_per_step``) 
   :func:`rollout_inference` runs the steps with buffers allocated once per call and written in place.
 
 Kernels from the layers' kernel tier: :func:`refimpl.nn.linear.matmul_wt`, :func:`refimpl.nn.gru.input_gates`,
-:func:`refimpl.nn.gru.cell_forward`, :func:`refimpl.nn.gru.cell_update`, :func:`refimpl.nn.gru.backward_factors`,
-:func:`refimpl.nn.gru.cell_backward_gates` (no checks; the public functions
+:func:`refimpl.nn.gru.cell_forward`, :func:`refimpl.nn.gru.cell_update`, :func:`refimpl.nn.gru_fast.backward_factors`,
+:func:`refimpl.nn.gru_fast.cell_backward_gates` (no checks; the public functions
 here validate at their boundary with :func:`refimpl.models.qtg.check_params` and friends).
 
 Shape legend: B batch, T transition frames, P pose size, Z latent size, H GRU hidden size, L GRU layers.
@@ -29,9 +29,9 @@ from typing import Mapping, NamedTuple
 import numpy as np
 
 from refimpl.models.qtg import QTGConfig, check_context, check_length, check_params
-from refimpl.nn.gru import (backward_factors as _backward_factors, cell_backward_gates as _cell_backward_gates,
-                            cell_forward as _cell_forward, cell_update as _cell_update, input_gates as _input_gates)
-from refimpl.nn.linear import matmul_wt as _matmul_wt
+from refimpl.nn.gru import cell_forward, cell_update, input_gates
+from refimpl.nn.gru_fast import backward_factors, cell_backward_gates
+from refimpl.nn.linear import matmul_wt
 from refimpl.nn.params import check_float_array
 
 __all__ = ["QTGInference", "rollout_forward", "rollout_backward", "prepare_inference", "rollout_inference"]
@@ -101,7 +101,7 @@ class _Record(NamedTuple):
     enc: list  # enc[i] (T + 3, B, n_i): input of encoder layer i (enc[0] has T + 4 blocks); enc[-1]: latents
     gru_x: np.ndarray  # (T, B, 3Z): x_t = [z_t − z_{t−1} | e1 − z_t | e2 − e1], filled after the loop
     hidden: np.ndarray  # (T + 1, L, B, H): s_t of every layer, s_0 = 0
-    gates: list  # gates[k] (T, B, 3H): [r | u | W_hn s_t + b_hn] (refimpl.nn.gru._cell_update)
+    gates: list  # gates[k] (T, B, 3H): [r | u | W_hn s_t + b_hn] (refimpl.nn.gru.cell_update)
     cand: np.ndarray  # (L, T, B, H): the candidate state n
     dec: list  # dec[j] (T, B, m_j): input of decoder layer j; dec[0] = z_t + v_t
     top: np.ndarray  # (T + 1, B, 3H + Z): s_t hv_stackᵀ (top GRU layer)
@@ -126,7 +126,7 @@ def _dense(x, weight, bias, slope, out):
     """``out = x Wᵀ + b`` (x (N, I), out (N, O)), then LeakyReLU in place unless ``slope`` is None.
 
     ``max(a, slope a)`` equals ``a`` for ``a > 0`` and ``slope a`` otherwise, since ``0 <= slope < 1``."""
-    _matmul_wt(x, weight, out=out)
+    matmul_wt(x, weight, out=out)
     out += bias
     if slope is not None:
         np.maximum(out, out * slope, out=out)
@@ -153,7 +153,7 @@ def _target_term(w: _Weights, e1, e2):
     """``k = W2 e1 + W3 (e2 − e1) + b_ih + [b_hr, b_hz, 0]`` (B, 3H): layer 0's input term constant over the
     transition, so that ``W_ih x_t + b_ih + [b_hr, b_hz, 0] = (W1 − W2) z_t + k − W1 z_{t−1}``."""
     Z = e1.shape[1]
-    k = _matmul_wt(np.concatenate([e1, e2 - e1], axis=1), w.gru[0][0][:, Z:])  # (B, 3H)
+    k = matmul_wt(np.concatenate([e1, e2 - e1], axis=1), w.gru[0][0][:, Z:])  # (B, 3H)
     k += w.k_bias
     return k
 
@@ -171,21 +171,21 @@ def _step_into(w: _Weights, rec: _Record, t: int, k, c, zz, gi_up) -> np.ndarray
         x = _dense(x, weight, bias, w.slope, rec.enc[i + 1][3 + t])
     z = x  # z_t (B, Z)
     H3 = c.shape[1]
-    _matmul_wt(z, w.z_stack.reshape(2 * H3, -1), out=zz)  # [(W1 − W2) z_t | W1 z_t] (B, 6H)
+    matmul_wt(z, w.z_stack.reshape(2 * H3, -1), out=zz)  # [(W1 − W2) z_t | W1 z_t] (B, 6H)
     gi = np.add(zz[:, :H3], c, out=gi_up)  # W_ih x_t + b_ih + [b_hr, b_hz, 0]
     np.subtract(k, zz[:, H3:], out=c)  # c_{t+1}
     top = len(w.gru) - 1
     for layer, (w_ih, w_hh, b_ih, b_hh) in enumerate(w.gru):
         H = w_hh.shape[1]
         if layer:
-            gi = _input_gates(rec.hidden[t + 1, layer - 1], w_ih, b_ih, b_hh, H, out=gi_up)  # (B, 3H)
+            gi = input_gates(rec.hidden[t + 1, layer - 1], w_ih, b_ih, b_hh, H, out=gi_up)  # (B, 3H)
         if layer < top:
-            _cell_forward(gi, rec.hidden[t, layer], w_hh, None, b_hh[2 * H:], rec.gates[layer][t],
+            cell_forward(gi, rec.hidden[t, layer], w_hh, None, b_hh[2 * H:], rec.gates[layer][t],
                           rec.cand[layer, t], rec.hidden[t + 1, layer])
         else:
-            _cell_update(gi, rec.hidden[t, layer], b_hh[2 * H:], rec.gates[layer][t], rec.cand[layer, t],
+            cell_update(gi, rec.hidden[t, layer], b_hh[2 * H:], rec.gates[layer][t], rec.cand[layer, t],
                          rec.hidden[t + 1, layer])
-    _matmul_wt(rec.hidden[t + 1, top], w.hv_stack, out=rec.top[t + 1])  # [W_hh s_{t+1} | W_v s_{t+1}]
+    matmul_wt(rec.hidden[t + 1, top], w.hv_stack, out=rec.top[t + 1])  # [W_hh s_{t+1} | W_v s_{t+1}]
     h = np.add(rec.top[t + 1, :, H3:], w.vel[1], out=rec.dec[0][t])  # v_t (B, Z)
     h += z  # z_t + v_t
     last = len(w.dec) - 1
@@ -233,14 +233,14 @@ class _Factors(NamedTuple):
     """Everything of the backward that does not depend on the incoming cotangents, formed for all steps at once
     before the reverse loop (a few whole-rollout calls instead of many per step)."""
 
-    gru: list  # gru[k] (T, B, 3H): refimpl.nn.gru._backward_factors of layer k
+    gru: list  # gru[k] (T, B, 3H): refimpl.nn.gru_fast.backward_factors of layer k
     enc: list  # enc[i] (T + 3, B, n_{i+1}): LeakyReLU derivative of encoder layer i (1 or slope)
     dec: list  # dec[j] (T, B, m_{j+1}), j < last: LeakyReLU derivative of decoder layer j
 
 
 def _factors(w: _Weights, rec: _Record) -> _Factors:
     return _Factors(
-        gru=[_backward_factors(rec.hidden[:-1, k], rec.gates[k], rec.cand[k]) for k in range(len(w.gru))],
+        gru=[backward_factors(rec.hidden[:-1, k], rec.gates[k], rec.cand[k]) for k in range(len(w.gru))],
         enc=[_leaky_factor(rec.enc[i + 1], w.slope) for i in range(len(w.enc))],
         dec=[_leaky_factor(rec.dec[j + 1], w.slope) for j in range(len(w.dec) - 1)])
 
@@ -276,7 +276,7 @@ def _step_backward(w: _Weights, rec: _Record, cot: _Cotangents, fac: _Factors, t
         dh += tmp  # total cotangent of s_{t+1} (layer k)
         g = rec.gates[k][t]
         H = w_hh.shape[1]
-        _cell_backward_gates(dh, fac.gru[k][t], g[:, :H], cot.gru_in[k, t], cot.gru_hh[k][t])
+        cell_backward_gates(dh, fac.gru[k][t], g[:, :H], cot.gru_in[k, t], cot.gru_hh[k][t])
         dh *= g[:, H:2 * H]  # the part of ds_t without a product
         if k < top:  # lower layers: add their recurrent product now
             np.matmul(cot.gru_hh[k][t], w_hh, out=tmp)
@@ -360,7 +360,7 @@ def rollout_forward(params: Mapping[str, np.ndarray], past, target, T: int | Non
     latents = rec.enc[-1]  # (T + 3, B, Z): e1, e2, z_{-1}, …
     H3 = 3 * config.gru_hidden
     k = _target_term(w, latents[0], latents[1])  # (B, 3H)
-    c = k - _matmul_wt(latents[2], w.z_stack[1])  # (B, 3H): k − W1 z_{-1}
+    c = k - matmul_wt(latents[2], w.z_stack[1])  # (B, 3H): k − W1 z_{-1}
     zz = np.empty((B, 2 * H3), dtype=dtype)
     gi = np.empty((B, H3), dtype=dtype)
     for t in range(T):

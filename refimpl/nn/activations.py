@@ -18,7 +18,7 @@ QuaterNet's control block uses ``slope = 0.05``; PyTorch's default (``nn.LeakyRe
 
 Checks (spec/layers.md §3): every ``*_forward`` validates ``x`` (float32/float64, finite; any shape, 0-d
 included); every ``*_backward`` validates ``dy`` (float32/float64, the shape of the forward's output, finite) and
-raises ``ValueError`` naming it. :func:`_sigmoid` is the unchecked kernel used inside the recurrent cells.
+raises ``ValueError`` naming it. :func:`sigmoid` is the unchecked kernel used inside the recurrent cells.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ __all__ = [
 ]
 
 
-def _sigmoid(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def sigmoid(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Internal kernel (no checks): the logistic function ``1 / (1 + exp(-x))``, elementwise, without overflow warnings.
 
     Parameters
@@ -115,7 +115,7 @@ def tanh_backward(dy: np.ndarray, cache) -> np.ndarray:
 def sigmoid_forward(x: np.ndarray):
     """``y = 1 / (1 + exp(-x))``; returns ``y, cache`` (cache: ``y``)."""
     x = check_float_array(x, "x", (...,))
-    y = _sigmoid(x, out=np.empty_like(x))  # an array out: also a 0-d x gives a 0-d array, not a scalar
+    y = sigmoid(x, out=np.empty_like(x))  # an array out: also a 0-d x gives a 0-d array, not a scalar
     return y, y
 
 
@@ -126,5 +126,4 @@ def sigmoid_backward(dy: np.ndarray, cache) -> np.ndarray:
     return dy * y * (1 - y)
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-sigmoid = _sigmoid
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names): sigmoid.

@@ -22,14 +22,11 @@ Implementation (spec/layers.md §4.3, reference/performance_facts.md): a teacher
 layer by layer; the input projections of all time steps of a layer are ONE GEMM ``(T*B, I) @ W_ih^T``; the
 per-step recurrent product uses a weight transposed once per call; back-propagation through time stores the
 per-step pre-activation gradients and forms ``dW_hh``, ``dW_ih`` and ``dx`` with one GEMM each after the loop.
-Kernels for callers that run their own step loops (QTG's fused rollout): ``_cell_update`` (the element-wise part
-of a step after an outside product), ``_backward_factors`` (the state-independent factors of every step's gate
-cotangents, for a whole sequence at once) and ``_cell_backward_factored`` / ``_cell_backward_gates`` (a reverse
-step from them: 7 calls instead of 19), tested equal to the per-step kernel ``_cell_backward``. The sequence
-backward here keeps ``_cell_backward``: at QuaterNet's size (2 x 1000, B 32, T 60) the factored reverse loop
-measured the same CPU time (ratio 0.99-1.03, GEMM-bound), spec/layers.md §4.3.
+The step kernels ``cell_forward`` (and its element-wise part ``cell_update``, for a caller that formed
+``W_hh h`` itself), ``input_gates`` and ``cell_backward`` form the kernel tier QTG's fused rollout builds on; the
+factored reverse step it also uses lives in :mod:`refimpl.nn.gru_fast`.
 Internally arrays are time-major ``(T, B, ...)`` so that each step reads contiguous rows.
-The per-step, per-gate loop versions ``_gru_forward_naive`` / ``_gru_backward_naive`` are the test oracles.
+The per-step, per-gate loop versions ``gru_forward_naive`` / ``gru_backward_naive`` are the test oracles.
 
 Checks (spec/layers.md §4.5), once per public call, never inside the step loops: the sizes I and H are read
 from layer 0's parameters first, then ``x`` / ``x_t`` (dtype, shape ``(.., I)``, finite) and ``h0`` / ``h``
@@ -44,8 +41,8 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.nn.activations import sigmoid as _sigmoid
-from refimpl.nn.linear import matmul_wt as _matmul_wt
+from refimpl.nn.activations import sigmoid
+from refimpl.nn.linear import matmul_wt
 from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["gru_forward", "gru_backward", "gru_step_forward", "gru_step_backward", "gru_init"]
@@ -137,28 +134,28 @@ def gru_init(rng: np.random.Generator, input_size: int, hidden_size: int, num_la
 # one cell step (internal kernels, no checks; all outputs written into preallocated arrays)
 
 
-def _cell_forward(gi, h, w_hh, whh_t, b_hn, g, n, h_new):
+def cell_forward(gi, h, w_hh, whh_t, b_hn, g, n, h_new):
     """One GRU step.
 
     gi (B, 3H): ``W_ih x + b_ih`` with ``b_hr, b_hz`` already added to the r, z blocks.
     h (B, H): previous state. ``whh_t`` (H, 3H) C-contiguous ``W_hh^T`` or None (then ``w_hh`` is used via
-    :func:`~refimpl.nn.linear._matmul_wt`). Writes g (B, 3H) = [r | z | W_hn h + b_hn], n (B, H), h_new (B, H).
+    :func:`~refimpl.nn.linear.matmul_wt`). Writes g (B, 3H) = [r | z | W_hn h + b_hn], n (B, H), h_new (B, H).
     """
     if whh_t is not None:
         np.matmul(h, whh_t, out=g)  # (B, 3H)
     else:
-        _matmul_wt(h, w_hh, out=g)  # (B, 3H)
-    _cell_update(gi, h, b_hn, g, n, h_new)
+        matmul_wt(h, w_hh, out=g)  # (B, 3H)
+    cell_update(gi, h, b_hn, g, n, h_new)
 
 
-def _cell_update(gi, h, b_hn, g, n, h_new):
-    """The element-wise part of :func:`_cell_forward`, for a caller that formed ``g = W_hh h`` (B, 3H) itself
+def cell_update(gi, h, b_hn, g, n, h_new):
+    """The element-wise part of :func:`cell_forward`, for a caller that formed ``g = W_hh h`` (B, 3H) itself
     (e.g. in one product with another weight); ``g`` may be a strided view. Overwrites g with
     [r | z | W_hn h + b_hn] and writes n (B, H), h_new (B, H)."""
     hid = h.shape[1]
     rz = g[:, :2 * hid]  # (B, 2H)
     rz += gi[:, :2 * hid]
-    _sigmoid(rz, out=rz)
+    sigmoid(rz, out=rz)
     ghn = g[:, 2 * hid:]  # (B, H)
     ghn += b_hn
     np.multiply(g[:, :hid], ghn, out=n)  # r * (W_hn h + b_hn)
@@ -169,7 +166,7 @@ def _cell_update(gi, h, b_hn, g, n, h_new):
     h_new += n
 
 
-def _cell_backward(dh, h, g, n, w_hh, dgi, dgh, tmp):
+def cell_backward(dh, h, g, n, w_hh, dgi, dgh, tmp):
     """Back-propagate one GRU step.
 
     dh (B, H): total cotangent of h' on entry, overwritten with the cotangent of the previous state h.
@@ -200,57 +197,9 @@ def _cell_backward(dh, h, g, n, w_hh, dgi, dgh, tmp):
     dh += tmp
 
 
-def _backward_factors(h, g, n):
-    """The state-independent factors of the GRU backward, for many steps at once (fast path of BPTT).
-
-    h (..., H): the states each step started from; g (..., 3H) = [r | z | W_hn h + b_hn] and n (..., H) from
-    :func:`_cell_forward`. Returns f (..., 3H) = [a_r | a_z | a_n] with ``a_r = (1 - r) r (W_hn h + b_hn)``,
-    ``a_z = (h - n) z (1 - z)``, ``a_n = (1 - n²)(1 - z)``, so that a step's pre-activation cotangents are
-    ``da_n = dh a_n``, ``da_z = dh a_z``, ``da_r = da_n a_r`` (:func:`_cell_backward_factored`); ``a_n`` and
-    ``a_r`` are formed in the order :func:`_cell_backward` uses (same rounding), ``a_z`` multiplies ``dh`` last.
-    """
-    hid = h.shape[-1]
-    r, z, ghn = g[..., :hid], g[..., hid:2 * hid], g[..., 2 * hid:]
-    f = np.empty_like(g)  # (..., 3H)
-    f_r, f_z, f_n = f[..., :hid], f[..., hid:2 * hid], f[..., 2 * hid:]
-    one_minus_z = np.subtract(1, z)  # (..., H)
-    np.multiply(n, n, out=f_n)
-    np.subtract(1, f_n, out=f_n)
-    f_n *= one_minus_z
-    np.subtract(h, n, out=f_z)
-    f_z *= z
-    f_z *= one_minus_z
-    np.subtract(1, r, out=f_r)
-    f_r *= r
-    f_r *= ghn
-    return f
-
-
-def _cell_backward_gates(dh, f, r, dgi, dgh):
-    """A step's pre-activation cotangents from its state cotangent ``dh`` (B, H) and factors ``f`` (B, 3H)
-    (:func:`_backward_factors`): writes dgi (B, 3H) = [da_r | da_z | da_n] (C-contiguous rows) and dgh (B, 3H) =
-    [da_r | da_z | r da_n] (may be a strided view); ``r`` (B, H). Four element-wise calls; dh is not changed."""
-    batch, hid = dh.shape
-    np.multiply(f[:, hid:].reshape(batch, 2, hid), dh[:, None, :],
-                out=dgi.reshape(batch, 3, hid)[:, 1:])  # da_z, da_n in one call
-    np.multiply(dgi[:, 2 * hid:], f[:, :hid], out=dgi[:, :hid])  # da_r
-    dgh[:, :2 * hid] = dgi[:, :2 * hid]
-    np.multiply(dgi[:, 2 * hid:], r, out=dgh[:, 2 * hid:])
-
-
-def _cell_backward_factored(dh, f, g, w_hh, dgi, dgh, tmp):
-    """:func:`_cell_backward` with the factors of the step precomputed (``f`` (B, 3H) from
-    :func:`_backward_factors`): 7 calls per step instead of 19. Same arguments otherwise (``h``, ``n`` are in f)."""
-    hid = dh.shape[1]
-    _cell_backward_gates(dh, f, g[:, :hid], dgi, dgh)
-    dh *= g[:, hid:2 * hid]  # dL/dh = dh z + dgh W_hh
-    np.matmul(dgh, w_hh, out=tmp)
-    dh += tmp
-
-
-def _input_gates(x2, w_ih, b_ih, b_hh, hid, out=None):
+def input_gates(x2, w_ih, b_ih, b_hh, hid, out=None):
     """``x W_ih^T + b_ih``, with ``b_hr, b_hz`` folded into the r, z blocks: (N, 3H)."""
-    gi = _matmul_wt(x2, w_ih, out=out)  # (N, 3H)
+    gi = matmul_wt(x2, w_ih, out=out)  # (N, 3H)
     gi += b_ih
     gi[:, :2 * hid] += b_hh[:2 * hid]
     return gi
@@ -265,7 +214,7 @@ def _direction_forward(xs, h0, w_ih, w_hh, b_ih, b_hh, reverse):
     (hs[0] = h0), g (T, B, 3H) and n (T, B, H) per processing step."""
     t_len, batch, in_size = xs.shape
     hid = w_hh.shape[1]
-    gi = _input_gates(xs.reshape(t_len * batch, in_size), w_ih, b_ih, b_hh, hid).reshape(t_len, batch, 3 * hid)
+    gi = input_gates(xs.reshape(t_len * batch, in_size), w_ih, b_ih, b_hh, hid).reshape(t_len, batch, 3 * hid)
     whh_t = np.ascontiguousarray(w_hh.T)  # (H, 3H), transposed once per call
     b_hn = b_hh[2 * hid:]
     hs = np.empty((t_len + 1, batch, hid), dtype=xs.dtype)  # (T+1, B, H)
@@ -274,7 +223,7 @@ def _direction_forward(xs, h0, w_ih, w_hh, b_ih, b_hh, reverse):
     n = np.empty((t_len, batch, hid), dtype=xs.dtype)  # (T, B, H)
     for s in range(t_len):
         t = t_len - 1 - s if reverse else s
-        _cell_forward(gi[t], hs[s], w_hh, whh_t, b_hn, g[s], n[s], hs[s + 1])
+        cell_forward(gi[t], hs[s], w_hh, whh_t, b_hn, g[s], n[s], hs[s + 1])
     return hs, g, n
 
 
@@ -294,7 +243,7 @@ def _direction_backward(dys, dh_last, xs, hs, g, n, w_ih, w_hh, reverse):
     for s in range(t_len - 1, -1, -1):
         t = t_len - 1 - s if reverse else s
         dh += dys[t]
-        _cell_backward(dh, hs[s], g[s], n[s], w_hh, dgi[t], dgh[s], tmp)
+        cell_backward(dh, hs[s], g[s], n[s], w_hh, dgi[t], dgh[s], tmp)
     dgi2 = dgi.reshape(t_len * batch, 3 * hid)  # (T*B, 3H)
     dgh2 = dgh.reshape(t_len * batch, 3 * hid)
     dw_hh = dgh2.T @ hs[:-1].reshape(t_len * batch, hid)  # (3H, H), one GEMM over all steps
@@ -484,10 +433,10 @@ def gru_step_forward(x_t: np.ndarray, h: np.ndarray, params: Mapping[str, np.nda
     inp = x_t
     for k in range(num_layers):
         w_ih, w_hh, b_ih, b_hh = weights[k][0]
-        gi = _input_gates(inp, w_ih, b_ih, b_hh, hid)  # (B, 3H)
+        gi = input_gates(inp, w_ih, b_ih, b_hh, hid)  # (B, 3H)
         g = np.empty((batch, 3 * hid), dtype=x_t.dtype)
         n = np.empty((batch, hid), dtype=x_t.dtype)
-        _cell_forward(gi, h[k], w_hh, None, b_hh[2 * hid:], g, n, h_new[k])
+        cell_forward(gi, h[k], w_hh, None, b_hh[2 * hid:], g, n, h_new[k])
         layers.append((inp, h[k], g, n))
         inp = h_new[k]
     cache = dict(layers=layers, weights=weights, prefix=prefix, num_layers=num_layers, shape=(batch, in_size, hid))
@@ -543,7 +492,7 @@ def gru_step_backward(dy: np.ndarray | None, dh_new: np.ndarray | None, cache, a
             dh += d_out
         dgi = np.empty((batch, 3 * hid), dtype=dtype)
         dgh = np.empty((batch, 3 * hid), dtype=dtype)
-        _cell_backward(dh, h, g, n, w_hh, dgi, dgh, tmp)
+        cell_backward(dh, h, g, n, w_hh, dgi, dgh, tmp)
         sfx = _suffix(k, 0)
         for name, value in ((f"weight_ih_{sfx}", dgi.T @ inp), (f"weight_hh_{sfx}", dgh.T @ h),
                             (f"bias_ih_{sfx}", dgi.sum(axis=0)), (f"bias_hh_{sfx}", dgh.sum(axis=0))):
@@ -594,7 +543,7 @@ def _gru_naive_direction(inp, h, params, prefix, k, d):
     return steps, h
 
 
-def _gru_forward_naive(x, h0, params, prefix, num_layers=1, bidirectional=False):
+def gru_forward_naive(x, h0, params, prefix, num_layers=1, bidirectional=False):
     """Slow oracle for :func:`gru_forward`: returns ``(y, h_n)``."""
     d_count = 2 if bidirectional else 1
     inp = x
@@ -609,7 +558,7 @@ def _gru_forward_naive(x, h0, params, prefix, num_layers=1, bidirectional=False)
     return inp, np.stack(h_n)
 
 
-def _gru_backward_naive(dy, dh_n, x, h0, params, prefix, num_layers=1, bidirectional=False):
+def gru_backward_naive(dy, dh_n, x, h0, params, prefix, num_layers=1, bidirectional=False):
     """Slow oracle for :func:`gru_backward` (recomputes the forward): returns ``(dx, dh0, grads)``.
 
     Per step and per gate, weight gradients accumulated step by step."""
@@ -673,13 +622,5 @@ def _gru_backward_naive(dy, dh_n, x, h0, params, prefix, num_layers=1, bidirecti
     return d_above, dh0, grads
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-cell_backward = _cell_backward
-cell_forward = _cell_forward
-cell_update = _cell_update
-backward_factors = _backward_factors
-cell_backward_gates = _cell_backward_gates
-cell_backward_factored = _cell_backward_factored
-input_gates = _input_gates
-gru_forward_naive = _gru_forward_naive
-gru_backward_naive = _gru_backward_naive
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# cell_forward, cell_update, cell_backward, input_gates, gru_forward_naive, gru_backward_naive.

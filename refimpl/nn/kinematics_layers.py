@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.nn.quat_layers import (as_float_array as _as_float_array, check_grad as _check_grad,
-                                    quat_conj_kernel as _quat_conj, unbroadcast as _unbroadcast)
-from refimpl.quat import quat_mul_kernel as _quat_mul
+from refimpl.nn.quat_layers import (as_float_array, check_grad,
+                                    quat_conj_kernel, unbroadcast)
+from refimpl.quat import quat_mul_kernel
 
 __all__ = [
     "forward_kinematics_forward", "forward_kinematics_backward",
@@ -46,7 +46,7 @@ __all__ = [
 # --------------------------------------------------------------------------------------------------
 # skeleton topology
 
-def _check_parents(parents, num_joints: int) -> np.ndarray:
+def check_parents(parents, num_joints: int) -> np.ndarray:
     """Validate ``parents`` (root first, each parent before its child) for ``num_joints`` joints."""
     p = np.asarray(parents)
     if p.ndim != 1 or not (np.issubdtype(p.dtype, np.integer) or p.size == 0):
@@ -129,17 +129,17 @@ def _quat_rotate_backward(g: np.ndarray, q: np.ndarray, v: np.ndarray) -> tuple[
 def _dq_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Dual-quaternion product ``(a_r ⊗ b_r | a_r ⊗ b_d + a_d ⊗ b_r)`` (Eq. 1)."""
     ar, ad, br, bd = a[..., :4], a[..., 4:], b[..., :4], b[..., 4:]
-    return np.concatenate([_quat_mul(ar, br), _quat_mul(ar, bd) + _quat_mul(ad, br)], axis=-1)
+    return np.concatenate([quat_mul_kernel(ar, br), quat_mul_kernel(ar, bd) + quat_mul_kernel(ad, br)], axis=-1)
 
 
 def _dq_mul_backward(g: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gradients of :func:`_dq_mul` (same shapes)."""
     ar, ad, br, bd = a[..., :4], a[..., 4:], b[..., :4], b[..., 4:]
     gr, gd = g[..., :4], g[..., 4:]
-    da = np.concatenate([_quat_mul(gr, _quat_conj(br)) + _quat_mul(gd, _quat_conj(bd)),
-                         _quat_mul(gd, _quat_conj(br))], axis=-1)
-    db = np.concatenate([_quat_mul(_quat_conj(ar), gr) + _quat_mul(_quat_conj(ad), gd),
-                         _quat_mul(_quat_conj(ar), gd)], axis=-1)
+    da = np.concatenate([quat_mul_kernel(gr, quat_conj_kernel(br)) + quat_mul_kernel(gd, quat_conj_kernel(bd)),
+                         quat_mul_kernel(gd, quat_conj_kernel(br))], axis=-1)
+    db = np.concatenate([quat_mul_kernel(quat_conj_kernel(ar), gr) + quat_mul_kernel(quat_conj_kernel(ad), gd),
+                         quat_mul_kernel(quat_conj_kernel(ar), gd)], axis=-1)
     return da, db
 
 
@@ -153,13 +153,14 @@ def _dq_conj(x: np.ndarray) -> np.ndarray:
 
 def _translation(dq: np.ndarray) -> np.ndarray:
     """``vec(2 q_d ⊗ q_r*)`` (Eq. 8)."""
-    return 2.0 * _quat_mul(dq[..., 4:], _quat_conj(dq[..., :4]))[..., 1:]
+    return 2.0 * quat_mul_kernel(dq[..., 4:], quat_conj_kernel(dq[..., :4]))[..., 1:]
 
 
 def _translation_backward(g: np.ndarray, dq: np.ndarray) -> np.ndarray:
     """Gradient of :func:`_translation`: with ``G = (0, g)``, ``dq_d = 2 G ⊗ q_r``, ``dq_r = 2 G* ⊗ q_d``."""
     g4 = np.concatenate([np.zeros(g.shape[:-1] + (1,), dtype=g.dtype), g], axis=-1)
-    return np.concatenate([2.0 * _quat_mul(_quat_conj(g4), dq[..., 4:]), 2.0 * _quat_mul(g4, dq[..., :4])], axis=-1)
+    return np.concatenate([2.0 * quat_mul_kernel(quat_conj_kernel(g4), dq[..., 4:]),
+                           2.0 * quat_mul_kernel(g4, dq[..., :4])], axis=-1)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -167,7 +168,7 @@ def _translation_backward(g: np.ndarray, dq: np.ndarray) -> np.ndarray:
 
 def _check_joint_array(x, name: str, last: int) -> np.ndarray:
     """A per-joint array ``(..., J, last)`` (at least 2 axes), validated."""
-    return _as_float_array(x, name, last, min_ndim=2)
+    return as_float_array(x, name, last, min_ndim=2)
 
 
 def forward_kinematics_forward(rotations, root_positions, offsets, parents):
@@ -199,10 +200,10 @@ def forward_kinematics_forward(rotations, root_positions, offsets, parents):
     """
     rot = _check_joint_array(rotations, "rotations", 4)
     lead, num_joints = rot.shape[:-2], rot.shape[-2]
-    root = _as_float_array(root_positions, "root_positions", 3)
+    root = as_float_array(root_positions, "root_positions", 3)
     if root.shape != lead + (3,):
         raise ValueError(f"root_positions: expected shape {lead + (3,)}, got {root.shape}")
-    off = _as_float_array(offsets, "offsets", 3)
+    off = as_float_array(offsets, "offsets", 3)
     try:
         ok = off.ndim <= rot.ndim and np.broadcast_shapes(off.shape, lead + (num_joints, 3)) == lead + (num_joints, 3)
     except ValueError:
@@ -210,7 +211,7 @@ def forward_kinematics_forward(rotations, root_positions, offsets, parents):
     if not ok:
         raise ValueError(f"offsets: expected shape ({num_joints}, 3) or broadcastable to "
                          f"{lead + (num_joints, 3)}, got {off.shape}")
-    par = _check_parents(parents, num_joints)
+    par = check_parents(parents, num_joints)
     dtype = np.result_type(rot, root)
     rot = rot.astype(dtype, copy=False)
     offb = np.broadcast_to(off.astype(dtype, copy=False), lead + (num_joints, 3))
@@ -227,7 +228,7 @@ def _forward_kinematics(rot, root, offb, schedule):
     for joints, pars in schedule:
         qp = qw[..., pars, :]  # (..., n, 4)
         pos[..., joints, :] = pos[..., pars, :] + _quat_rotate(qp, offb[..., joints, :])
-        qw[..., joints, :] = _quat_mul(qp, rot[..., joints, :])
+        qw[..., joints, :] = quat_mul_kernel(qp, rot[..., joints, :])
     return pos, qw
 
 
@@ -271,7 +272,7 @@ def forward_kinematics_backward(dpositions, cache):
     doffsets : ndarray, shape of ``offsets`` (the root row is 0)
     """
     rot, qw, offb, off_shape, schedule = cache
-    g = _check_grad(dpositions, rot.shape[:-1] + (3,), "dpositions")
+    g = check_grad(dpositions, rot.shape[:-1] + (3,), "dpositions")
     dpos = np.array(g, dtype=np.result_type(rot, g))  # (..., J, 3), accumulates children
     dqw = np.zeros(rot.shape, dtype=dpos.dtype)  # (..., J, 4)
     drot = np.zeros(rot.shape, dtype=dpos.dtype)
@@ -281,13 +282,13 @@ def forward_kinematics_backward(dpositions, cache):
         gj = dpos[..., joints, :]
         gq = dqw[..., joints, :]
         dqp_rot, doff_j = _quat_rotate_backward(gj, qp, offb[..., joints, :])
-        dqp_mul = _quat_mul(gq, _quat_conj(rot[..., joints, :]))
-        drot[..., joints, :] = _quat_mul(_quat_conj(qp), gq)
+        dqp_mul = quat_mul_kernel(gq, quat_conj_kernel(rot[..., joints, :]))
+        drot[..., joints, :] = quat_mul_kernel(quat_conj_kernel(qp), gq)
         doff[..., joints, :] = doff_j
         dqw[..., pars, :] += dqp_rot + dqp_mul
         dpos[..., pars, :] += gj
     drot[..., 0, :] = dqw[..., 0, :]
-    return drot, dpos[..., 0, :].copy(), _unbroadcast(doff, off_shape)
+    return drot, dpos[..., 0, :].copy(), unbroadcast(doff, off_shape)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -308,14 +309,14 @@ def dq_from_quat_translation_forward(rotations, translations):
     dq : ndarray, shape (..., 8)
     cache : tuple
     """
-    q = _as_float_array(rotations, "rotations", 4)
-    t = _as_float_array(translations, "translations", 3)
+    q = as_float_array(rotations, "rotations", 4)
+    t = as_float_array(translations, "translations", 3)
     if t.shape[:-1] != q.shape[:-1]:
         raise ValueError(f"translations: expected shape {q.shape[:-1] + (3,)}, got {t.shape}")
     dtype = np.result_type(q, t)
     q, t = q.astype(dtype, copy=False), t.astype(dtype, copy=False)
     t4 = np.concatenate([np.zeros(t.shape[:-1] + (1,), dtype=dtype), t], axis=-1)
-    return np.concatenate([q, 0.5 * _quat_mul(t4, q)], axis=-1), (q, t4)
+    return np.concatenate([q, 0.5 * quat_mul_kernel(t4, q)], axis=-1), (q, t4)
 
 
 def dq_from_quat_translation_backward(ddq, cache):
@@ -329,10 +330,10 @@ def dq_from_quat_translation_backward(ddq, cache):
     dtranslations : ndarray, shape (..., 3)
     """
     q, t4 = cache
-    g = _check_grad(ddq, q.shape[:-1] + (8,), "ddq")
+    g = check_grad(ddq, q.shape[:-1] + (8,), "ddq")
     gr, gd = g[..., :4], g[..., 4:]
-    dq = gr + 0.5 * _quat_mul(_quat_conj(t4), gd)
-    dt = 0.5 * _quat_mul(gd, _quat_conj(q))[..., 1:]
+    dq = gr + 0.5 * quat_mul_kernel(quat_conj_kernel(t4), gd)
+    dt = 0.5 * quat_mul_kernel(gd, quat_conj_kernel(q))[..., 1:]
     return dq, dt
 
 
@@ -357,7 +358,7 @@ def current_dq_from_local_forward(local_dqs, parents):
     cache : tuple
     """
     loc = _check_joint_array(local_dqs, "local_dqs", 8)
-    par = _check_parents(parents, loc.shape[-2])
+    par = check_parents(parents, loc.shape[-2])
     schedule = _depth_schedule(par)
     cur = np.empty_like(loc)
     cur[..., 0, :] = loc[..., 0, :]
@@ -383,7 +384,7 @@ def current_dq_from_local_backward(dcurrent, cache):
     dlocal : ndarray, shape (..., J, 8)
     """
     loc, cur, schedule = cache
-    g = _check_grad(dcurrent, loc.shape, "dcurrent")
+    g = check_grad(dcurrent, loc.shape, "dcurrent")
     dcur = np.array(g, dtype=np.result_type(loc, g))
     dloc = np.zeros_like(dcur)
     for joints, pars in reversed(schedule):
@@ -412,7 +413,7 @@ def local_dq_from_current_forward(current_dqs, parents):
     cache : tuple
     """
     cur = _check_joint_array(current_dqs, "current_dqs", 8)
-    par = _check_parents(parents, cur.shape[-2])
+    par = check_parents(parents, cur.shape[-2])
     loc = np.empty_like(cur)
     loc[..., 0, :] = cur[..., 0, :]
     inv_par = _dq_conj(cur[..., par[1:], :])  # (..., J-1, 8)
@@ -438,7 +439,7 @@ def local_dq_from_current_backward(dlocal, cache):
     dcurrent : ndarray, shape (..., J, 8)
     """
     cur, inv_par, par, groups = cache
-    g = _check_grad(dlocal, cur.shape, "dlocal")
+    g = check_grad(dlocal, cur.shape, "dlocal")
     dcur = np.zeros(cur.shape, dtype=np.result_type(cur, g))
     dinv, dchild = _dq_mul_backward(g[..., 1:, :], inv_par, cur[..., 1:, :])  # (..., J-1, 8) each
     dcur[..., 1:, :] = dchild
@@ -468,7 +469,7 @@ def positions_from_dq_forward(dqs):
     positions : ndarray, shape (..., 3)
     cache : ndarray
     """
-    dq = _as_float_array(dqs, "dqs", 8)
+    dq = as_float_array(dqs, "dqs", 8)
     return _translation(dq), dq
 
 
@@ -481,7 +482,7 @@ def positions_from_dq_backward(dpositions, cache):
     ddqs : ndarray, shape (..., 8)
     """
     dq = cache
-    g = _check_grad(dpositions, dq.shape[:-1] + (3,), "dpositions")
+    g = check_grad(dpositions, dq.shape[:-1] + (3,), "dpositions")
     return _translation_backward(g, dq)
 
 
@@ -516,10 +517,10 @@ def offsets_from_dq_backward(doffsets, cache):
     dcurrent : ndarray, shape (..., J, 8)
     """
     loc, lcache = cache
-    g = np.array(_check_grad(doffsets, loc.shape[:-1] + (3,), "doffsets"))
+    g = np.array(check_grad(doffsets, loc.shape[:-1] + (3,), "doffsets"))
     g[..., 0, :] = 0.0
     return local_dq_from_current_backward(_translation_backward(g, loc), lcache)
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-check_parents = _check_parents
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# check_parents.

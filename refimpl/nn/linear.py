@@ -8,7 +8,7 @@ Parameters are read from the model's flat dict under ``prefix`` (``"fc"`` -> ``"
 
 Checks (spec/layers.md §2): :func:`linear_forward` validates ``x`` (dtype, last axis, finite) and the parameters
 (shape, dtype; not their values); :func:`linear_backward` validates ``dy`` (dtype, shape ``(..., O)`` of ``y``,
-finite). :func:`_matmul_wt` is the unchecked kernel the recurrent layers call inside their step loops.
+finite). :func:`matmul_wt` is the unchecked kernel the recurrent layers call inside their step loops.
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from refimpl.nn.params import (check_float_array, check_same_dtype, fan_in_bound
 __all__ = ["linear_forward", "linear_backward", "linear_init"]
 
 
-def _matmul_wt(a: np.ndarray, w: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def matmul_wt(a: np.ndarray, w: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``a @ w.T`` for a PyTorch-layout weight ``w (O, I)`` and ``a (N, I)``, into a C-contiguous ``(N, O)``.
 
     Internal kernel: no checks (called inside the recurrent layers' step loops; the public functions validate).
@@ -69,7 +69,7 @@ def linear_forward(x: np.ndarray, params: Mapping[str, np.ndarray], prefix: str,
     check_same_dtype(x, "x", {param_name(prefix, "weight"): w, param_name(prefix, "bias"): b})
     lead = x.shape[:-1]
     x2 = x.reshape(-1, in_f)  # (N, I)
-    y = _matmul_wt(x2, w)  # (N, O)
+    y = matmul_wt(x2, w)  # (N, O)
     if bias:
         y += b
     return y.reshape(*lead, out_f), (x2, w, lead, prefix, bias)
@@ -127,5 +127,5 @@ def linear_init(rng: np.random.Generator, in_features: int, out_features: int, p
     return out
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-matmul_wt = _matmul_wt
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# matmul_wt.

@@ -25,14 +25,11 @@ state is the output, so with L layers ``y_t`` depends on ``x_0 .. x_{t-L+1}`` on
 Shapes: B batch, T time, I input size, H hidden size, L layers. ``x (B, T, I)`` batch-first;
 ``h0, c0, h_n, c_n (L, B, H)``; ``y (B, T, H)``. No bidirectional variant (no network here uses one).
 
-Implementation (spec/layers.md §5.6): layer by layer, with the fast kernels ``_layer_forward`` /
-``_layer_backward`` in a feature-major layout (the batch is the last, contiguous axis: states ``(H, T+1, B)``,
-gates ``(T, 4H, B)``), so that every per-step product has the weight as its left operand (``W_hh @ h_{t-1}``,
-``W_hh^T @ dG_t``); one GEMM for all input projections of a layer (both biases folded in), one GEMM each for
-``dW_hh``, ``dW_ih``, ``dx`` after the BPTT loop. The readable batch-major kernels ``_layer_forward_reference`` /
-``_layer_backward_reference`` (one ``_cell_forward`` / ``_cell_backward`` call per step) are kept beside them under an
-equality test and reached through ``_lstm_forward_reference``. The skew is only a shift of the input sequence:
-layer k's inputs are ``[h0[k-1], h^{k-1}_0, ..., h^{k-1}_{T-2}]`` instead of ``[h^{k-1}_0, ..., h^{k-1}_{T-1}]``.
+Implementation (spec/layers.md §5.6): layer by layer, time-major and batch-major (``(T, B, ...)``, so that each
+step reads contiguous rows): one GEMM for all input projections of a layer (both biases folded in), one
+``_cell_forward`` / ``_cell_backward`` call per step with ``W_hh^T`` made contiguous once per call, and one GEMM
+each for ``dW_hh``, ``dW_ih``, ``dx`` after the BPTT loop. The skew is only a shift of the input sequence: layer
+k's inputs are ``[h0[k-1], h^{k-1}_0, ..., h^{k-1}_{T-2}]`` instead of ``[h^{k-1}_0, ..., h^{k-1}_{T-1}]``.
 ``_lstm_forward_naive`` / ``_lstm_backward_naive`` (time-outer, per-gate loops, as acRNN's code steps its
 cells) are the test oracles.
 
@@ -48,8 +45,8 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.nn.activations import sigmoid as _sigmoid
-from refimpl.nn.linear import matmul_wt as _matmul_wt
+from refimpl.nn.activations import sigmoid
+from refimpl.nn.linear import matmul_wt
 from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["lstm_forward", "lstm_backward", "lstm_step_forward", "lstm_step_backward", "lstm_init"]
@@ -141,58 +138,23 @@ def _cell_forward(gi, h, c, w_hh, whh_t, g, c_new, tc, h_new):
     """One LSTM step.
 
     gi (B, 4H): ``W_ih x + b_ih + b_hh``. h, c (B, H): previous state. ``whh_t`` (H, 4H) C-contiguous
-    ``W_hh^T`` or None (then ``w_hh`` is used via :func:`~refimpl.nn.linear._matmul_wt`). Writes g (B, 4H) =
+    ``W_hh^T`` or None (then ``w_hh`` is used via :func:`~refimpl.nn.linear.matmul_wt`). Writes g (B, 4H) =
     activated gates [i | f | g | o], c_new, tc = tanh(c_new), h_new (all (B, H)).
     """
     if whh_t is not None:
         np.matmul(h, whh_t, out=g)  # (B, 4H)
     else:
-        _matmul_wt(h, w_hh, out=g)
+        matmul_wt(h, w_hh, out=g)
     g += gi
-    _cell_activate(g, c, c_new, tc, h_new)
-
-
-def _cell_activate(g, c, c_new, tc, h_new):
-    """The activations and state update of one LSTM step: g (B, 4H) holds the gate pre-activations on entry and
-    the activated gates [i | f | g | o] on exit; writes c_new, tc = tanh(c_new), h_new (all (B, H)) from c."""
     hid = c.shape[1]
-    _sigmoid(g[:, :2 * hid], out=g[:, :2 * hid])  # i, f
+    sigmoid(g[:, :2 * hid], out=g[:, :2 * hid])  # i, f
     np.tanh(g[:, 2 * hid:3 * hid], out=g[:, 2 * hid:3 * hid])  # g
-    _sigmoid(g[:, 3 * hid:], out=g[:, 3 * hid:])  # o
+    sigmoid(g[:, 3 * hid:], out=g[:, 3 * hid:])  # o
     np.multiply(g[:, hid:2 * hid], c, out=c_new)  # c' = f c + i g
     np.multiply(g[:, :hid], g[:, 2 * hid:3 * hid], out=tc)
     c_new += tc
     np.tanh(c_new, out=tc)
     np.multiply(g[:, 3 * hid:], tc, out=h_new)  # h' = o tanh(c')
-
-
-def _output_gate_backward(dh, dc, o, tc, do, tmp):
-    """``da_o = dh tanh(c') o (1 - o)`` into ``do`` and ``dc += dh o (1 - tanh(c')^2)`` (all (B, H); tmp scratch)."""
-    np.subtract(1, o, out=do)
-    do *= o
-    do *= tc
-    do *= dh
-    np.multiply(tc, tc, out=tmp)
-    np.subtract(1, tmp, out=tmp)
-    tmp *= o
-    tmp *= dh
-    dc += tmp
-
-
-def _cell_gate_g_and_carry(dh, dc, i, f, gg, dgg, dg, w_hh):
-    """The end of a step's backward: ``da_g = dc i (1 - g^2)`` into ``dgg``; then ``dc_prev = dc f`` and
-    ``dh_prev = dg W_hh`` overwrite ``dc`` and ``dh`` (dg (B, 4H) must hold all four gate cotangents)."""
-    _cell_gate_g_and_dc(dc, i, f, gg, dgg)
-    np.matmul(dg, w_hh, out=dh)
-
-
-def _cell_gate_g_and_dc(dc, i, f, gg, dgg):
-    """``da_g = dc i (1 - g^2)`` into ``dgg``, then ``dc_prev = dc f`` overwrites ``dc``."""
-    np.multiply(gg, gg, out=dgg)
-    np.subtract(1, dgg, out=dgg)
-    dgg *= i
-    dgg *= dc
-    dc *= f
 
 
 def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
@@ -202,139 +164,10 @@ def _cell_backward(dh, dc, c, g, tc, w_hh, dg, tmp):
     h, c. c (B, H): previous cell state. Writes dg (B, 4H): cotangents of the gate pre-activations
     [a_i | a_f | a_g | a_o]. tmp (B, H) is scratch.
     """
-    _cell_gates_backward(dh, dc, c, g, tc, dg, tmp)
-    np.matmul(dg, w_hh, out=dh)  # dh_prev = dg W_hh
-
-
-def _cell_gates_backward(dh, dc, c, g, tc, dg, tmp):
-    """:func:`_cell_backward` without ``dh_prev``: writes dg (B, 4H) and overwrites dc with the cotangent of the
-    previous c; dh is left as is (the caller forms ``dh_prev = dg W_hh``). tmp (B, H) is scratch."""
     hid = c.shape[1]
     i, f, gg, o = g[:, :hid], g[:, hid:2 * hid], g[:, 2 * hid:3 * hid], g[:, 3 * hid:]
     di, df, dgg, do = dg[:, :hid], dg[:, hid:2 * hid], dg[:, 2 * hid:3 * hid], dg[:, 3 * hid:]
-    _output_gate_backward(dh, dc, o, tc, do, tmp)  # da_o; dc += dh o (1 - tanh(c')^2)
-    np.subtract(1, i, out=di)  # da_i = dc g i (1 - i)
-    di *= i
-    di *= gg
-    di *= dc
-    np.subtract(1, f, out=df)  # da_f = dc c f (1 - f)
-    df *= f
-    df *= c
-    df *= dc
-    _cell_gate_g_and_dc(dc, i, f, gg, dgg)  # da_g; dc_prev = dc f
-
-
-# ----------------------------------------------------------------------------------------------------------
-# one layer over the whole sequence, feature-major: the fast kernels (spec/layers.md §5.6)
-#
-# Layouts (feature-major: the batch is the last, contiguous axis): inputs xf (I, T, B), states hf (H, T+1, B)
-# (index 0 along T = initial state), cell states cf (T+1, H, B), gates gf (T, 4H, B), tanh(c) tcf (T, H, B),
-# gate cotangents dgf (4H, T, B). Every per-step product then has the weight as its LEFT operand,
-# ``W_hh (4H, H) @ h_{t-1} (H, B)`` and ``W_hh^T (H, 4H) @ dG_t (4H, B)`` (with two OpenBLAS threads on the shared,
-# loaded VM these ran 1.6x (best) to 2.7x (median) faster than ``(B, H) @ (H, 4H)``; with one thread the forward
-# one 25 % slower; spec/layers.md §5.6), each gate block ``[i | f | g | o]`` of a step is one contiguous (H, B)
-# slab, and ``xf.reshape(I, T*B)``, ``hf[:, :T]``, ``dgf.reshape(4H, T*B)`` are the (., T*B) matrices of the
-# one-GEMM-per-sequence products without a copy.
-
-
-def _layer_forward(xf, h0, c0, w_ih, w_hh, b_ih, b_hh):
-    """One layer over the sequence, feature-major. xf (I, T, B) (a view whose (T, B) axes merge, e.g. a slice of
-    the layer below's ``hf``); h0, c0 (B, H). Returns hf (H, T+1, B) (index 0 = h0), cf (T+1, H, B),
-    gf (T, 4H, B) activated gates [i | f | g | o], tcf (T, H, B) = tanh(c_t).
-
-    Same arithmetic as :func:`_layer_forward_reference` (module docstring equations): one GEMM
-    ``W_ih @ X`` (4H, T*B) for the input projections of all steps with ``b_ih + b_hh`` folded in; per step
-    ``G_t = W_hh @ h_{t-1} + GI_t`` written straight into the gate cache and activated in place; the
-    floating-point error state set once per layer.
-    """
-    in_size, t_len, batch = xf.shape
-    hid = w_hh.shape[1]
-    dt = xf.dtype
-    gi = np.matmul(w_ih, xf.reshape(in_size, t_len * batch))  # (4H, T*B), one GEMM for all steps
-    gi += (b_ih + b_hh)[:, None]
-    gi = gi.reshape(4 * hid, t_len, batch)
-    hf = np.empty((hid, t_len + 1, batch), dtype=dt)
-    cf = np.empty((t_len + 1, hid, batch), dtype=dt)
-    hf[:, 0] = h0.T
-    cf[0] = c0.T
-    gf = np.empty((t_len, 4 * hid, batch), dtype=dt)
-    tcf = np.empty((t_len, hid, batch), dtype=dt)
-    with np.errstate(over="ignore"):  # exp(-a) -> inf for a < -88 (float32) gives sigmoid 0 exactly
-        for t in range(t_len):
-            gt = gf[t]  # (4H, B)
-            np.matmul(w_hh, hf[:, t], out=gt)  # W_hh h_{t-1}
-            gt += gi[:, t]
-            _activate_fm(gt, cf[t], cf[t + 1], tcf[t], hf[:, t + 1])
-    return hf, cf, gf, tcf
-
-
-def _activate_fm(g, c, c_new, tc, h_new):
-    """Activations and state update of one step, feature-major (no checks; call inside ``np.errstate(over=
-    "ignore")``). g (4H, B) holds the pre-activations on entry and the activated gates [i ; f ; g ; o] on exit;
-    c (H, B) previous cell state; writes c_new, tc = tanh(c_new), h_new (H, B; h_new may be a strided view)."""
-    hid = c.shape[0]
-    for s in (g[:2 * hid], g[3 * hid:]):  # i, f | o: 1 / (1 + exp(-a)), in place
-        np.negative(s, out=s)
-        np.exp(s, out=s)
-        s += 1
-        np.reciprocal(s, out=s)
-    i, f, gg, o = g[:hid], g[hid:2 * hid], g[2 * hid:3 * hid], g[3 * hid:]
-    np.tanh(gg, out=gg)
-    np.multiply(f, c, out=c_new)  # c' = f c + i g
-    np.multiply(i, gg, out=tc)
-    c_new += tc
-    np.tanh(c_new, out=tc)
-    np.multiply(o, tc, out=h_new)  # h' = o tanh(c')
-
-
-def _layer_backward(dyf, dh_last, dc_last, xf, hf, cf, gf, tcf, w_ih, w_hh):
-    """BPTT through one layer, feature-major. dyf (H, T', B) cotangents of the outputs h_1..h_T' (T' <= T; the
-    skewed stack passes the layer above's input cotangents shifted by one step as a view); dh_last, dc_last
-    (B, H) or None. Returns dxf (I, T, B), dh0, dc0 (H, B), dW_ih, dW_hh, db (the same for b_ih and b_hh).
-
-    Same arithmetic as :func:`_layer_backward_reference`: per step the gate cotangents are formed in one
-    reused (4H, B) scratch (19 in-place ufunc calls: ``i(1 - i)``, ``f(1 - f)`` in one pass over the contiguous
-    [i | f] slab, [da_i | da_f] scaled by ``dc`` in one broadcast pass), ``dh_{t-1} = W_hh^T dG_t`` is one GEMM,
-    and the scratch is copied into ``dgf[:, t]``; after the loop ``dW_hh = dG H_prev^T``, ``dW_ih = dG X^T``,
-    ``dX = W_ih^T dG`` are one GEMM each over all ``T*B`` columns and ``db = dG 1`` one matrix-vector product.
-    """
-    in_size, t_len, batch = xf.shape
-    hid = w_hh.shape[1]
-    dt = xf.dtype
-    n_dy = 0 if dyf is None else dyf.shape[1]
-    whh_t = np.ascontiguousarray(w_hh.T)  # (H, 4H), transposed once per call
-    dgf = np.empty((4 * hid, t_len, batch), dtype=dt)
-    dgs = np.empty((4 * hid, batch), dtype=dt)  # this step's [da_i | da_f | da_g | da_o]
-    dh = np.zeros((hid, batch), dtype=dt) if dh_last is None else np.array(dh_last.T, dtype=dt, order="C")
-    dc = np.zeros((hid, batch), dtype=dt) if dc_last is None else np.array(dc_last.T, dtype=dt, order="C")
-    tmp = np.empty((hid, batch), dtype=dt)
-    for t in range(t_len - 1, -1, -1):
-        if t < n_dy:
-            dh += dyf[:, t]
-        _gates_backward_fm(dh, dc, cf[t], gf[t], tcf[t], dgs, tmp)
-        np.matmul(whh_t, dgs, out=dh)  # dh_prev = W_hh^T dG_t
-        dgf[:, t] = dgs
-    dg2 = dgf.reshape(4 * hid, t_len * batch)  # (4H, T*B)
-    dw_hh = dg2 @ hf[:, :t_len].reshape(hid, t_len * batch).T  # (4H, H), one GEMM over all steps
-    dw_ih = dg2 @ xf.reshape(in_size, t_len * batch).T  # (4H, I)
-    dxf = (w_ih.T @ dg2).reshape(in_size, t_len, batch)  # (I, T, B)
-    db = dg2 @ np.ones(t_len * batch, dtype=dt)  # (4H,) = sum over steps and batch, one GEMV
-    return dxf, dh, dc, dw_ih, dw_hh, db
-
-
-def _gates_backward_fm(dh, dc, c, g, tc, dg, tmp):
-    """The gate cotangents of one step, feature-major (no checks; 19 in-place ufunc calls). dh, dc (H, B): total
-    cotangents of h', c'; dc is overwritten with the cotangent of the previous c (``dc f``), dh is only read (the
-    caller forms ``dh_prev = W_hh^T dG``). c (H, B) previous cell state, g (4H, B) activated gates [i ; f ; g ; o],
-    tc (H, B) = tanh(c'). Writes dg (4H, B, C-contiguous) = [da_i ; da_f ; da_g ; da_o]; tmp (H, B) is scratch::
-
-        da_o = dh tanh(c') o (1 - o)     dc += dh o (1 - tanh(c')^2)
-        da_i = dc g i (1 - i)            da_f = dc c f (1 - f)        da_g = dc i (1 - g^2)
-    """
-    hid = c.shape[0]
-    i, f, gg, o = g[:hid], g[hid:2 * hid], g[2 * hid:3 * hid], g[3 * hid:]
-    dif, dgg, do = dg[:2 * hid], dg[2 * hid:3 * hid], dg[3 * hid:]
-    np.subtract(1, o, out=do)  # da_o
+    np.subtract(1, o, out=do)  # da_o = dh tanh(c') o (1 - o)
     do *= o
     do *= tc
     do *= dh
@@ -343,29 +176,32 @@ def _gates_backward_fm(dh, dc, c, g, tc, dg, tmp):
     tmp *= o
     tmp *= dh
     dc += tmp
-    np.subtract(1, g[:2 * hid], out=dif)  # [i (1 - i) ; f (1 - f)] on the contiguous [i ; f] slab
-    dif *= g[:2 * hid]
-    dif[:hid] *= gg  # da_i = dc g i (1 - i)
-    dif[hid:] *= c  # da_f = dc c f (1 - f)
-    dif2 = dif.reshape(2, hid, -1)  # [da_i ; da_f] as two (H, B) slabs (a view: dg is C-contiguous)
-    dif2 *= dc  # one broadcast pass
-    np.multiply(gg, gg, out=dgg)  # da_g
+    np.subtract(1, i, out=di)  # da_i = dc g i (1 - i)
+    di *= i
+    di *= gg
+    di *= dc
+    np.subtract(1, f, out=df)  # da_f = dc c f (1 - f)
+    df *= f
+    df *= c
+    df *= dc
+    np.multiply(gg, gg, out=dgg)  # da_g = dc i (1 - g^2)
     np.subtract(1, dgg, out=dgg)
     dgg *= i
     dgg *= dc
     dc *= f  # dc_prev = dc f
+    np.matmul(dg, w_hh, out=dh)  # dh_prev = dg W_hh
 
 
 # ----------------------------------------------------------------------------------------------------------
-# one layer over the whole sequence (time-major, batch-major): the readable reference kernels (spec/layers.md §5.6)
+# one layer over the whole sequence (time-major, batch-major)
 
 
-def _layer_forward_reference(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
-    """Reference of :func:`_layer_forward` (one cell call per step). xs (T, B, I). Returns hs, cs (T+1, B, H)
+def _layer_forward(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
+    """One layer over the sequence (one cell call per step). xs (T, B, I). Returns hs, cs (T+1, B, H)
     (index 0 = initial state), g (T, B, 4H), tc (T, B, H)."""
     t_len, batch, in_size = xs.shape
     hid = w_hh.shape[1]
-    gi = _matmul_wt(xs.reshape(t_len * batch, in_size), w_ih)  # (T*B, 4H), one GEMM for all steps
+    gi = matmul_wt(xs.reshape(t_len * batch, in_size), w_ih)  # (T*B, 4H), one GEMM for all steps
     gi += b_ih + b_hh
     gi = gi.reshape(t_len, batch, 4 * hid)
     whh_t = np.ascontiguousarray(w_hh.T)  # (H, 4H), transposed once per call
@@ -380,8 +216,8 @@ def _layer_forward_reference(xs, h0, c0, w_ih, w_hh, b_ih, b_hh):
     return hs, cs, g, tc
 
 
-def _layer_backward_reference(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
-    """Reference of :func:`_layer_backward`. dys (T', B, H) cotangents of the outputs h_1..h_T' (T' <= T; the
+def _layer_backward(dys, dh_last, dc_last, xs, hs, cs, g, tc, w_ih, w_hh):
+    """BPTT through one layer. dys (T', B, H) cotangents of the outputs h_1..h_T' (T' <= T; the
     outputs after T' get none; may be a view); dh_last, dc_last (B, H) or None. Returns dxs (T, B, I), dh0, dc0,
     dW_ih, dW_hh, db (the same for b_ih and b_hh)."""
     t_len, batch, in_size = xs.shape
@@ -444,35 +280,25 @@ def lstm_forward(x: np.ndarray, state: tuple, params: Mapping[str, np.ndarray], 
     if t_len < 1:
         raise ValueError(f"x: expected at least one time step (B, T >= 1, I), got {x.shape}")
     h0, c0 = _check_state(state, "state", ("h0", "c0"), (num_layers, batch, hid), x, "x", prefix, weights)
-    return _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed, reference=False)
+    return _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed)
 
 
-def _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed, reference):
-    """The layer loop of :func:`lstm_forward` (inputs checked), with the fast (feature-major) or the reference
-    (batch-major) layer kernels. The cache's ``layers[k]`` holds layer k's ``(inputs, hs, cs, g, tc)`` in the
-    kernels' layout."""
+def _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed):
+    """The layer loop of :func:`lstm_forward` (inputs checked). The cache's ``layers[k]`` holds layer k's
+    ``(inputs, hs, cs, g, tc)``, time-major."""
     batch, t_len, in_size = x.shape
     h_n = np.empty_like(h0)
     c_n = np.empty_like(c0)
     layers = []
-    if reference:
-        xs = np.array(x.transpose(1, 0, 2), order="C")  # (T, B, I), always a copy
-        for k in range(num_layers):
-            hs, cs, g, tc = _layer_forward_reference(xs, h0[k], c0[k], *weights[k])
-            layers.append((xs, hs, cs, g, tc))
-            h_n[k], c_n[k] = hs[-1], cs[-1]
-            xs = hs[:-1] if skewed else hs[1:]  # (T, B, H) contiguous views: the next layer's inputs
-        y = np.array(hs[1:].transpose(1, 0, 2), order="C")  # (B, T, H)
-    else:
-        xf = np.array(x.transpose(2, 1, 0), order="C")  # (I, T, B), always a copy
-        for k in range(num_layers):
-            hf, cf, gf, tcf = _layer_forward(xf, h0[k], c0[k], *weights[k])
-            layers.append((xf, hf, cf, gf, tcf))
-            h_n[k], c_n[k] = hf[:, -1].T, cf[-1].T
-            xf = hf[:, :-1] if skewed else hf[:, 1:]  # (H, T, B) views: the next layer's inputs
-        y = np.array(hf[:, 1:].transpose(2, 1, 0), order="C")  # (B, T, H)
+    xs = np.array(x.transpose(1, 0, 2), order="C")  # (T, B, I), always a copy
+    for k in range(num_layers):
+        hs, cs, g, tc = _layer_forward(xs, h0[k], c0[k], *weights[k])
+        layers.append((xs, hs, cs, g, tc))
+        h_n[k], c_n[k] = hs[-1], cs[-1]
+        xs = hs[:-1] if skewed else hs[1:]  # (T, B, H) contiguous views: the next layer's inputs
+    y = np.array(hs[1:].transpose(1, 0, 2), order="C")  # (B, T, H)
     cache = dict(layers=layers, weights=weights, prefix=prefix, num_layers=num_layers, skewed=skewed,
-                 shape=(batch, t_len, in_size, h0.shape[-1]), reference=reference)
+                 shape=(batch, t_len, in_size, h0.shape[-1]))
     return y, (h_n, c_n), cache
 
 
@@ -507,7 +333,6 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
     layers, weights, prefix = cache["layers"], cache["weights"], cache["prefix"]
     num_layers, skewed = cache["num_layers"], cache["skewed"]
     batch, t_len, in_size, hid = cache["shape"]
-    reference = cache.get("reference", False)
     dt = layers[0][0].dtype
     if dy is not None:
         dy = check_float_array(dy, "dy", (batch, t_len, hid))
@@ -520,21 +345,16 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
             dh_n = check_float_array(dh_n, "dstate_n[0] (dh_n)", (num_layers, batch, hid))
         if dc_n is not None:
             dc_n = check_float_array(dc_n, "dstate_n[1] (dc_n)", (num_layers, batch, hid))
-    if reference:  # batch-major (T, B, H) cotangents
-        dys = np.zeros((0, batch, hid), dtype=dt) if dy is None else dy.transpose(1, 0, 2)  # view
-        layer_backward = _layer_backward_reference
-    else:  # feature-major (H, T, B)
-        dys = None if dy is None else np.array(dy.transpose(2, 1, 0), dtype=dt, order="C")
-        layer_backward = _layer_backward
+    dys = np.zeros((0, batch, hid), dtype=dt) if dy is None else dy.transpose(1, 0, 2)  # (T, B, H) view
     dh0 = np.empty((num_layers, batch, hid), dtype=dt)
     dc0 = np.empty((num_layers, batch, hid), dtype=dt)
     grads = {}
     skew_dh0 = None  # skewed: cotangent of h0[k] through layer k+1's first input
     for k in range(num_layers - 1, -1, -1):
         w_ih, w_hh, _, _ = weights[k]
-        dxs, dh_k, dc_k, dw_ih, dw_hh, db = layer_backward(
+        dxs, dh_k, dc_k, dw_ih, dw_hh, db = _layer_backward(
             dys, None if dh_n is None else dh_n[k], None if dc_n is None else dc_n[k], *layers[k], w_ih, w_hh)
-        dh0[k], dc0[k] = (dh_k, dc_k) if reference else (dh_k.T, dc_k.T)
+        dh0[k], dc0[k] = dh_k, dc_k
         if skew_dh0 is not None:
             dh0[k] += skew_dh0
         grads[param_name(prefix, f"weight_ih_l{k}")] = dw_ih
@@ -544,24 +364,12 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
         if skewed and k > 0:
             # inputs were [h0[k-1], h_0, ..., h_{T-2}] of layer k-1: the first input's cotangent goes to dh0[k-1],
             # the others to the outputs of layer k-1 one step earlier (h_{T-1} gets none); views, no copies
-            skew_dh0 = dxs[0] if reference else dxs[:, 0].T
-            dys = dxs[1:] if reference else dxs[:, 1:]
+            skew_dh0 = dxs[0]
+            dys = dxs[1:]
         else:
             dys = dxs
-    dx = np.ascontiguousarray(dys.transpose(1, 0, 2) if reference else dys.transpose(2, 1, 0))  # (B, T, I)
+    dx = np.ascontiguousarray(dys.transpose(1, 0, 2))  # (B, T, I)
     return dx, (dh0, dc0), grads
-
-
-def _lstm_forward_reference(x, state, params, prefix, num_layers=1, skewed=False):
-    """:func:`lstm_forward` with the readable reference layer kernels (``_layer_forward_reference``, one
-    ``_cell_forward`` call per step); its cache makes :func:`lstm_backward` use ``_layer_backward_reference``.
-    Kept beside the fast kernels under an equality test (tests/test_nn_lstm.py) and timed by
-    ``benchmarks/bench_lstm_train.py``."""
-    _check_layers(num_layers)
-    weights, in_size, hid = _all_weights(params, prefix, num_layers)
-    x = check_float_array(x, "x", (None, None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
-    h0, c0 = _check_state(state, "state", ("h0", "c0"), (num_layers, x.shape[0], hid), x, "x", prefix, weights)
-    return _forward_layers(x, h0, c0, weights, prefix, num_layers, skewed, reference=True)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -611,7 +419,7 @@ def lstm_step_forward(x_t: np.ndarray, state: tuple, params: Mapping[str, np.nda
     for k in range(num_layers):
         w_ih, w_hh, b_ih, b_hh = weights[k]
         inp = x_t if k == 0 else (h[k - 1] if skewed else h_new[k - 1])  # (B, I_k)
-        gi = _matmul_wt(inp, w_ih)  # (B, 4H)
+        gi = matmul_wt(inp, w_ih)  # (B, 4H)
         gi += b_ih
         gi += b_hh
         g = np.empty((batch, 4 * hid), dtype=x_t.dtype)
@@ -800,8 +608,3 @@ def _lstm_backward_naive(dy, dstate_n, x, state, params, prefix, num_layers=1, s
     dh0 = np.stack([dh_acc[0][k] for k in range(num_layers)])
     dc0 = np.stack([dc_acc[0][k] for k in range(num_layers)])
     return dx, (dh0, dc0), grads
-
-
-#: Kernel-tier names (no checks; feature-major step kernels, used by refimpl.models.acrnn_fast).
-activate_fm = _activate_fm
-gates_backward_fm = _gates_backward_fm

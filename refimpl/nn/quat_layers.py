@@ -9,6 +9,8 @@ Every layer is a pure function pair ``y, cache = name_forward(...)`` / ``dx = na
 * ``dq_normalize``        dual-quaternion normalisation, Andreou et al. Eq. 13
 * ``dq_velocity``         Eq.-13-normalize(ΔD ⊗ D_in): the velocity block of a dual-quaternion QuaterNet
 * ``euler_from_quat``     QuaterNet's quaternion → Euler conversion (``qeuler``) for the six orders
+* ``euler_to_quat``       q_{o0}(a0) ⊗ q_{o1}(a1) ⊗ q_{o2}(a2): the Euler outputs of the long-term ablation (QN §4.4.2)
+* ``axis_angle_to_quat``  (cos θ/2, sin(θ/2)/θ · v): the axis-angle outputs of the same ablation
 
 Conventions: quaternions ``(w, x, y, z)``, Hamilton product, dual quaternions ``(q_r | q_d)`` (8 numbers). All
 arrays broadcast over leading axes; the last axis holds the object. Layers work on ``(..., 4)`` / ``(..., 8)``
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import quat_mul_kernel as _quat_mul  # the Hamilton-product kernel (broadcasting, keeps float32)
+from refimpl.quat import quat_elementary_kernel, quat_mul_kernel  # Hamilton product (broadcasting, keeps float32)
 
 __all__ = [
     "EULER_ORDERS",
@@ -33,6 +35,8 @@ __all__ = [
     "dq_normalize_forward", "dq_normalize_backward",
     "dq_velocity_forward", "dq_velocity_backward",
     "euler_from_quat_forward", "euler_from_quat_backward",
+    "euler_to_quat_forward", "euler_to_quat_backward",
+    "axis_angle_to_quat_forward", "axis_angle_to_quat_backward",
 ]
 
 #: The Euler orders understood by :func:`euler_from_quat_forward` (QuaterNet's ``qeuler``).
@@ -42,7 +46,7 @@ EULER_ORDERS = ("xyz", "yzx", "zxy", "xzy", "yxz", "zyx")
 # --------------------------------------------------------------------------------------------------
 # validation (public boundaries only)
 
-def _as_float_array(x, name: str, last: int | tuple[int, ...] | None = None, min_ndim: int = 1) -> np.ndarray:
+def as_float_array(x, name: str, last: int | tuple[int, ...] | None = None, min_ndim: int = 1) -> np.ndarray:
     """Return ``x`` as a floating ndarray (integers become float64); raise ValueError on bad shape or non-finite."""
     a = np.asarray(x)
     if a.dtype == object or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
@@ -69,7 +73,7 @@ def _check_eps(eps: float, name: str = "eps") -> float:
     return eps
 
 
-def _check_grad(dy, like_shape: tuple, name: str = "dy") -> np.ndarray:
+def check_grad(dy, like_shape: tuple, name: str = "dy") -> np.ndarray:
     """The upstream gradient of a layer: a finite real array of the forward output's shape."""
     a = np.asarray(dy)
     if a.shape != tuple(like_shape):
@@ -84,7 +88,7 @@ def _check_grad(dy, like_shape: tuple, name: str = "dy") -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 # internal kernels (no checks)
 
-def _unbroadcast(g: np.ndarray, shape: tuple) -> np.ndarray:
+def unbroadcast(g: np.ndarray, shape: tuple) -> np.ndarray:
     """Sum ``g`` over the axes that broadcasting added or stretched, so that it has ``shape``."""
     if g.shape == tuple(shape):
         return g
@@ -97,18 +101,18 @@ def _unbroadcast(g: np.ndarray, shape: tuple) -> np.ndarray:
     return g
 
 
-def _quat_conj(q: np.ndarray) -> np.ndarray:
+def quat_conj_kernel(q: np.ndarray) -> np.ndarray:
     """Quaternion conjugate ``(w, -x, -y, -z)``."""
     out = -q
     out[..., 0] = q[..., 0]
     return out
 
 
-def _quat_mul_backward(dy: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def quat_mul_backward_kernel(dy: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gradients of ``y = a ⊗ b``: ``da = dy ⊗ b*``, ``db = a* ⊗ dy`` (summed back to the input shapes)."""
-    da = _quat_mul(dy, _quat_conj(b))
-    db = _quat_mul(_quat_conj(a), dy)
-    return _unbroadcast(da, a.shape), _unbroadcast(db, b.shape)
+    da = quat_mul_kernel(dy, quat_conj_kernel(b))
+    db = quat_mul_kernel(quat_conj_kernel(a), dy)
+    return unbroadcast(da, a.shape), unbroadcast(db, b.shape)
 
 
 def _norm_last(x: np.ndarray) -> np.ndarray:
@@ -118,13 +122,13 @@ def _norm_last(x: np.ndarray) -> np.ndarray:
     return s * np.sqrt(np.sum((x / safe) ** 2, axis=-1, keepdims=True))
 
 
-def _normalize(q: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+def normalize(q: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
     """``(q / max(|q|, eps), |q|)``, norm keepdims."""
     n = _norm_last(q)
     return q / np.maximum(n, eps), n
 
 
-def _normalize_backward(dy: np.ndarray, y: np.ndarray, n: np.ndarray, eps: float) -> np.ndarray:
+def normalize_backward(dy: np.ndarray, y: np.ndarray, n: np.ndarray, eps: float) -> np.ndarray:
     """Gradient of ``y = q / max(|q|, eps)``: ``(dy - y <y, dy>) / |q|`` where ``|q| >= eps``, else ``dy / eps``."""
     radial = np.where(n >= eps, np.sum(y * dy, axis=-1, keepdims=True), 0)  # no radial part under the clamp
     return (dy - y * radial) / np.maximum(n, eps)
@@ -150,9 +154,9 @@ def quat_normalize_forward(q, eps: float = 1e-12):
         Unit quaternions (``q / eps`` when ``|q| < eps``; the zero quaternion maps to zero).
     cache : tuple
     """
-    q = _as_float_array(q, "q", 4)
+    q = as_float_array(q, "q", 4)
     eps = _check_eps(eps)
-    y, n = _normalize(q, eps)  # (..., 4), (..., 1)
+    y, n = normalize(q, eps)  # (..., 4), (..., 1)
     return y, (y, n, eps)
 
 
@@ -167,8 +171,8 @@ def quat_normalize_backward(dy, cache):
     dq : ndarray, shape (..., 4)
     """
     y, n, eps = cache
-    dy = _check_grad(dy, y.shape)
-    return _normalize_backward(dy, y, n, eps)
+    dy = check_grad(dy, y.shape)
+    return normalize_backward(dy, y, n, eps)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -190,13 +194,13 @@ def quat_mul_forward(a, b):
     y : ndarray, shape broadcast(a, b)
     cache : tuple
     """
-    a = _as_float_array(a, "a", 4)
-    b = _as_float_array(b, "b", 4)
+    a = as_float_array(a, "a", 4)
+    b = as_float_array(b, "b", 4)
     try:
         np.broadcast_shapes(a.shape, b.shape)
     except ValueError:
         raise ValueError(f"a and b: shapes {a.shape} and {b.shape} do not broadcast") from None
-    return _quat_mul(a, b), (a, b)
+    return quat_mul_kernel(a, b), (a, b)
 
 
 def quat_mul_backward(dy, cache):
@@ -211,8 +215,8 @@ def quat_mul_backward(dy, cache):
     db : ndarray, shape of ``b``
     """
     a, b = cache
-    dy = _check_grad(dy, np.broadcast_shapes(a.shape, b.shape))
-    return _quat_mul_backward(dy, a, b)
+    dy = check_grad(dy, np.broadcast_shapes(a.shape, b.shape))
+    return quat_mul_backward_kernel(dy, a, b)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -237,13 +241,13 @@ def qmul_velocity_forward(delta, q_in, eps: float = 1e-12):
         Unit quaternions.
     cache : tuple
     """
-    delta = _as_float_array(delta, "delta", 4)
-    q_in = _as_float_array(q_in, "q_in", 4)
+    delta = as_float_array(delta, "delta", 4)
+    q_in = as_float_array(q_in, "q_in", 4)
     if delta.shape != q_in.shape:
         raise ValueError(f"q_in: expected shape {delta.shape} (the shape of delta), got {q_in.shape}")
     eps = _check_eps(eps)
-    p = _quat_mul(delta, q_in)  # (..., 4)
-    y, n = _normalize(p, eps)
+    p = quat_mul_kernel(delta, q_in)  # (..., 4)
+    y, n = normalize(p, eps)
     return y, (delta, q_in, y, n, eps)
 
 
@@ -256,9 +260,9 @@ def qmul_velocity_backward(dy, cache):
     dq_in : ndarray, shape (..., 4)
     """
     delta, q_in, y, n, eps = cache
-    dy = _check_grad(dy, y.shape)
-    dp = _normalize_backward(dy, y, n, eps)
-    return _quat_mul_backward(dp, delta, q_in)
+    dy = check_grad(dy, y.shape)
+    dp = normalize_backward(dy, y, n, eps)
+    return quat_mul_backward_kernel(dp, delta, q_in)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -287,7 +291,7 @@ def dq_normalize_forward(dq, eps: float = 1e-12):
     y : ndarray, shape (..., 8)
     cache : tuple
     """
-    dq = _as_float_array(dq, "dq", 8)
+    dq = as_float_array(dq, "dq", 8)
     eps = _check_eps(eps)
     r, d = dq[..., :4], dq[..., 4:]
     n = _norm_last(r)  # (..., 1)
@@ -315,7 +319,7 @@ def dq_normalize_backward(dy, cache):
     ddq : ndarray, shape (..., 8)
     """
     d, rh, dh, a, n, eps = cache
-    dy = _check_grad(dy, rh.shape[:-1] + (8,))
+    dy = check_grad(dy, rh.shape[:-1] + (8,))
     gr, gd = dy[..., :4], dy[..., 4:]
     big = n >= eps
     nc = np.maximum(n, eps)
@@ -333,8 +337,8 @@ def dq_normalize_backward(dy, cache):
 
 def _dq_mul_parts(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Dual-quaternion product ``a ⊗ b = (a_r ⊗ b_r | a_r ⊗ b_d + a_d ⊗ b_r)`` on ``(..., 8)`` arrays."""
-    r = _quat_mul(a[..., :4], b[..., :4])
-    d = _quat_mul(a[..., :4], b[..., 4:]) + _quat_mul(a[..., 4:], b[..., :4])
+    r = quat_mul_kernel(a[..., :4], b[..., :4])
+    d = quat_mul_kernel(a[..., :4], b[..., 4:]) + quat_mul_kernel(a[..., 4:], b[..., :4])
     return np.concatenate([r, d], axis=-1)
 
 
@@ -362,8 +366,8 @@ def dq_velocity_forward(delta, d_in, eps: float = 1e-12):
         Unit dual quaternions.
     cache : tuple
     """
-    delta = _as_float_array(delta, "delta", 8)
-    d_in = _as_float_array(d_in, "d_in", 8)
+    delta = as_float_array(delta, "delta", 8)
+    d_in = as_float_array(d_in, "d_in", 8)
     if delta.shape != d_in.shape:
         raise ValueError(f"d_in: expected shape {delta.shape} (the shape of delta), got {d_in.shape}")
     y, nc = dq_normalize_forward(_dq_mul_parts(delta, d_in), eps)
@@ -386,9 +390,9 @@ def dq_velocity_backward(dy, cache):
     g = dq_normalize_backward(dy, nc)
     gr, gd = g[..., :4], g[..., 4:]
     ar, ad, br, bd = delta[..., :4], delta[..., 4:], d_in[..., :4], d_in[..., 4:]
-    da_r1, db_r1 = _quat_mul_backward(gr, ar, br)  # r = a_r ⊗ b_r
-    da_r2, db_d = _quat_mul_backward(gd, ar, bd)  # d ∋ a_r ⊗ b_d
-    da_d, db_r2 = _quat_mul_backward(gd, ad, br)  # d ∋ a_d ⊗ b_r
+    da_r1, db_r1 = quat_mul_backward_kernel(gr, ar, br)  # r = a_r ⊗ b_r
+    da_r2, db_d = quat_mul_backward_kernel(gd, ar, bd)  # d ∋ a_r ⊗ b_d
+    da_d, db_r2 = quat_mul_backward_kernel(gd, ad, br)  # d ∋ a_d ⊗ b_r
     return (np.concatenate([da_r1 + da_r2, da_d], axis=-1),
             np.concatenate([db_r1 + db_r2, db_d], axis=-1))
 
@@ -464,7 +468,7 @@ def euler_from_quat_forward(q, order: str = "zyx", eps: float = 0.0):
         Radians, always ordered ``(x, y, z)`` whatever the order.
     cache : tuple
     """
-    q = _as_float_array(q, "q", 4)
+    q = as_float_array(q, "q", 4)
     if order not in _EULER_TABLE:
         raise ValueError(f"order: expected one of {EULER_ORDERS}, got {order!r}")
     eps = float(eps)
@@ -485,7 +489,7 @@ def euler_from_quat_backward(dangles, cache):
     dq : ndarray, shape (..., 4)
     """
     q, order, eps = cache
-    g = _check_grad(dangles, q.shape[:-1] + (3,), "dangles")
+    g = check_grad(dangles, q.shape[:-1] + (3,), "dangles")
     dq = np.zeros(q.shape, dtype=np.result_type(q, g))
     for axis, entry in enumerate(_EULER_TABLE[order]):
         ga = g[..., axis]
@@ -514,11 +518,66 @@ def euler_from_quat_backward(dangles, cache):
     return dq
 
 
-# Kernel tier (spec/architecture.md §kernel tier): public names of unchecked helpers other modules use.
-as_float_array = _as_float_array
-check_grad = _check_grad
-normalize = _normalize
-normalize_backward = _normalize_backward
-quat_conj_kernel = _quat_conj
-quat_mul_backward_kernel = _quat_mul_backward
-unbroadcast = _unbroadcast
+
+# --------------------------------------------------------------------------------------------------
+# Euler angles and axis-angle vectors to quaternions (the long-term QuaterNet's ablation outputs, QN §4.4.2)
+
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+
+def euler_to_quat_forward(angles, order: str):
+    """``q = q_{o0}(a0) ⊗ q_{o1}(a1) ⊗ q_{o2}(a2)`` (:func:`refimpl.quat.quat_from_euler`), with a cache.
+
+    angles : (..., 3) radians, ``angles[..., i]`` about axis ``order[i]``; order : one of :data:`EULER_ORDERS`.
+    Returns q (..., 4) and the cache for :func:`euler_to_quat_backward`."""
+    if order not in EULER_ORDERS:
+        raise ValueError(f"order: expected one of {EULER_ORDERS}, got {order!r}")
+    angles = as_float_array(angles, "angles", 3)
+    e = [quat_elementary_kernel(_AXIS[order[i]], angles[..., i]) for i in range(3)]
+    ab, c1 = quat_mul_forward(e[0], e[1])
+    q, c2 = quat_mul_forward(ab, e[2])
+    return q, (angles, order, c1, c2)
+
+
+def euler_to_quat_backward(dq, cache) -> np.ndarray:
+    """Gradient of :func:`euler_to_quat_forward` w.r.t. the angles (..., 3): ``dq/da_i`` of the elementary
+    quaternion is ``½ (−sin a/2, cos a/2 e_axis)``."""
+    angles, order, c1, c2 = cache
+    dq = check_grad(dq, angles.shape[:-1] + (4,), "dq")
+    dab, de2 = quat_mul_backward(dq, c2)
+    de0, de1 = quat_mul_backward(dab, c1)
+    out = np.empty_like(angles)
+    for i, de in enumerate((de0, de1, de2)):
+        a = angles[..., i]
+        out[..., i] = 0.5 * (-np.sin(a / 2) * de[..., 0] + np.cos(a / 2) * de[..., 1 + _AXIS[order[i]]])
+    return out
+
+
+_SMALL_ANGLE = 1e-4
+
+
+def axis_angle_to_quat_forward(v):
+    """``q = (cos θ/2, sin(θ/2)/θ · v)``, θ = ‖v‖ (:func:`refimpl.quat.quat_from_axis_angle`); below θ = 1e-4
+    the series ``sin(θ/2)/θ ≈ ½ − θ²/48``. v : (..., 3); returns q (..., 4) and the cache."""
+    v = as_float_array(v, "v", 3)
+    th = np.linalg.norm(v, axis=-1)
+    small = th < _SMALL_ANGLE
+    ts = np.where(small, 1.0, th)
+    s = np.where(small, 0.5 - th * th / 48.0, np.sin(ts / 2) / ts)
+    q = np.concatenate([np.cos(th / 2)[..., None], s[..., None] * v], axis=-1)
+    return q, (v, th, ts, small, s)
+
+
+def axis_angle_to_quat_backward(dq, cache) -> np.ndarray:
+    """Gradient of :func:`axis_angle_to_quat_forward`: ``dw/dv = −½ sin(θ/2) v/θ`` (→ −v/4 at 0),
+    ``d(s v)/dv = s I + v (s'(θ)/θ) vᵀ`` with ``s'(θ)/θ = (½ θ cos θ/2 − sin θ/2)/θ³`` (→ −1/24 at 0)."""
+    v, th, ts, small, s = cache
+    dq = check_grad(dq, v.shape[:-1] + (4,), "dq")
+    hw = np.where(small, 0.25 - th * th / 96.0, np.sin(ts / 2) / (2 * ts))       # ½ sin(θ/2)/θ
+    ds = np.where(small, -1.0 / 24.0, (0.5 * ts * np.cos(ts / 2) - np.sin(ts / 2)) / ts ** 3)
+    dxyz = dq[..., 1:]
+    return (-hw * dq[..., 0])[..., None] * v + s[..., None] * dxyz + (ds * np.sum(dxyz * v, -1))[..., None] * v
+
+
+# Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
+# as_float_array, check_grad, normalize, normalize_backward, quat_conj_kernel, quat_mul_backward_kernel, unbroadcast.

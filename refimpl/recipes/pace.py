@@ -3,7 +3,7 @@
 
 Per spline point ``[turning_angle, average_speed]`` → ``[A, ω, cos Δ, sin Δ]``; L1 loss, Adam 1e-3 with
 × 0.999 per epoch, batch 40, no clipping; chunks of spline points drawn by
-:func:`refimpl.tasks.locomotion.pace_batch` (the reference's 1000 points when the data's splines are that long,
+:func:`refimpl.protocols.locomotion.pace_batch` (the reference's 1000 points when the data's splines are that long,
 else their median length). ``--set bidirectional=false`` trains the delayed online variant.
 
 Shape legend: B batch, N spline points.
@@ -21,7 +21,7 @@ from refimpl.optim import QUATERNET_ADAM, QUATERNET_LR_DECAY
 from refimpl.options import config_with_overrides
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
+__all__ = ["published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "MAX_CHUNK", "make_config", "chunk_length", "make_adapter", "make_method", "export_inputs", "verify_onnx"]
 
 NAME = "pace"
@@ -35,6 +35,11 @@ PAPER_OPTIM = OptimConfig(**QUATERNET_ADAM, lr_decay=QUATERNET_LR_DECAY)
 PAPER_BATCH = 40
 #: The reference's chunk length (spline points).
 MAX_CHUNK = 1000
+
+
+def published_names(config: pace.PaceConfig) -> dict:
+    """Our parameter name -> (published name, shape) (:func:`refimpl.models.pace.published_names`)."""
+    return pace.published_names(config)
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> pace.PaceConfig:
@@ -52,9 +57,9 @@ def chunk_length(data, requested: int = 0) -> int:
 
 
 def make_adapter(train_ds, val_ds, config: pace.PaceConfig, dtype, extra: Mapping) -> ModelAdapter:
-    """Chunks of the training splines (:func:`refimpl.tasks.locomotion.pace_batch`), L1 loss; validation = L1
+    """Chunks of the training splines (:func:`refimpl.protocols.locomotion.pace_batch`), L1 loss; validation = L1
     over the whole held-out splines (not the last training batch, ref quirk 8)."""
-    from refimpl.tasks.locomotion import pace_batch
+    from refimpl.protocols.locomotion import pace_batch
 
     data = train_ds.pace_data()
     chunk = chunk_length(data, train_ds.pace_chunk_length)

@@ -5,7 +5,7 @@ Everything the application layer needs to train, run and export QTG, and nothing
 * :func:`make_config` — :class:`~refimpl.models.qtg.QTGConfig` from the training dataset (pose size, T) and
   ``--set FIELD=VALUE`` overrides;
 * :func:`qtg_adapter` / :func:`make_adapter` — the trainer's :class:`~refimpl.train.ModelAdapter` (MAE on the
-  normalised windows, the paper's loss); :func:`train_qtg` trains a :class:`~refimpl.transitions.TransitionDataset`
+  normalised windows, the paper's loss); :func:`train_qtg` trains a :class:`~refimpl.protocols.transition.TransitionDataset`
   with the paper's optimiser (:data:`PAPER_OPTIM`);
 * :func:`qtg_method` / :func:`make_method` — NumPy inference ``f(past, target, T)`` on un-normalised poses
   (:func:`refimpl.models.qtg_fast.rollout_inference`);
@@ -27,7 +27,8 @@ from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import prepare_inference, rollout_backward, rollout_forward, rollout_inference
 from refimpl.optim import QTG_ADAM
 from refimpl.train import ModelAdapter, OptimConfig, StepInfo, TrainConfig, TrainResult, default_progress, train
-from refimpl.transitions import denormalize_poses, join_pose, normalize_poses, split_pose
+from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, split_pose
+from refimpl.protocols.transition_join import inertialize_joins
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "parse_overrides", "make_config", "qtg_adapter", "make_adapter", "train_qtg", "qtg_method",
@@ -129,7 +130,7 @@ def train_qtg(train_data, steps: int, *, config=None, optim: OptimConfig = PAPER
               log_path: str | None = None, validation_data=None, validate_every: int | None = None,
               progress: Callable[[str], None] | None = default_progress, resume: bool = True,
               callback: Callable[[StepInfo], None] | None = None) -> TrainResult:
-    """Train QTG on a :class:`refimpl.transitions.TransitionDataset` (paper: MAE, Adam 1e-4, β = (0.5, 0.9),
+    """Train QTG on a :class:`refimpl.protocols.transition.TransitionDataset` (paper: MAE, Adam 1e-4, β = (0.5, 0.9),
     batch 32).
 
     Parameters
@@ -159,7 +160,7 @@ def qtg_method(params: Mapping[str, np.ndarray], config: QTGConfig, root_mean, r
     statistics), runs the network (:func:`refimpl.models.qtg_fast.rollout_inference` in the parameters' dtype),
     de-normalises the output's root translation and normalises its joint quaternions to unit length.
     """
-    from refimpl.baselines import check_context, check_length
+    from refimpl.protocols.transition_baselines import check_context, check_length
 
     model = prepare_inference(params, config)
     dtype = model.dtype
@@ -216,6 +217,9 @@ def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
     """Compare an exported QTG's onnxruntime outputs with :func:`reference_outputs` on raw context poses
     ``past, target (B, 2, P)``: the ``rollout`` model and the ``init`` + ``step`` loop.
 
+    Models exported with the join option (metadata ``join``) are compared with
+    :func:`refimpl.protocols.transition_join.inertialize_joins` of the reference outputs.
+
     Returns
     -------
     dict ``{"rollout": max |Δ|, "step_loop": max |Δ|, "ok": bool}``; ``ok`` against
@@ -225,6 +229,10 @@ def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
     T = int(T or model.transition_length)
     std = np.asarray(model.pose_normalization[1], dtype=np.float64)  # (P,)
     ref = reference_outputs(model, past, target, T)  # (B, T, P)
+    join = (runtime.rollout_model or runtime.step_model).metadata.get("join") or {}
+    if join.get("mode", "none") != "none":  # exported with the join option: NumPy's join after the network
+        n = int(join["blend_frames"]) if join.get("transition_length") == T else None
+        ref = inertialize_joins(past, ref, target, dt=float(join["frame_time"]), blend_frames=n)
     out = {}
     ok = True
     for key, use_rollout in (("rollout", True), ("step_loop", False)):

@@ -40,7 +40,7 @@ from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
+__all__ = ["published_names", "param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
            "PAPER_BATCH",
            "PAPER_PREFIX", "PAPER_TARGET", "PAPER_EPOCHS", "SCHEDULES", "LOSSES", "ShortTermConfig", "make_config",
            "make_adapter", "loss_terms", "resolve_loss", "teacher_forcing_mask", "network_method", "raw_outputs", "predictor",
@@ -159,6 +159,12 @@ def param_shapes(config) -> dict:
     return net.param_shapes(config.network)
 
 
+def published_names(config) -> dict:
+    """Our parameter name -> (published name, shape): the published short-term state dict's names
+    (:func:`refimpl.models.quaternet.published_names` of ``config.network``; the identity)."""
+    return net.published_names(config.network)
+
+
 def make_config(train_ds, overrides: Sequence[str] = (), config_type=ShortTermConfig):
     """The config for ``train_ds`` (its joint count) with ``--set`` overrides.
 
@@ -236,13 +242,13 @@ def _dq_tracks(data, skeleton) -> list:
 
 def make_adapter(train_ds, val_ds, config: ShortTermConfig, dtype, extra: Mapping, *, name: str = NAME,
                  model_module=net) -> ModelAdapter:
-    """The trainer's adapter on ``train_ds`` (a :class:`~refimpl.tasks.prediction.PredictionData`).
+    """The trainer's adapter on ``train_ds`` (a :class:`~refimpl.protocols.prediction_data.PredictionData`).
 
     Examples are the training sequences (long enough for a window); ``get_batch`` draws one window start per
     sequence and the feeding mask from the trainer's Generator, and reads the epoch for the teacher-forcing ratio.
     The loss the trainer logs is the total (main loss + penalty).
     """
-    from refimpl.tasks.prediction import training_windows, usable_training
+    from refimpl.protocols.prediction_data import training_windows, usable_training
 
     P, T = config.prefix_length, config.target_length
     data = usable_training(train_ds, P + T)
@@ -289,7 +295,7 @@ def _param_dtype(params) -> np.dtype:
 def network_method(predict_fn: Callable, params: Mapping[str, np.ndarray], network_config, name: str) -> Callable:
     """``f(prefix (B, P, J, 4), k) -> (B, k, J, 4)``: the published predict (canonical prefix, then
     ``predict_fn(params, frames (B, P, 4J), k, network_config)``) in the parameters' dtype."""
-    from refimpl.tasks.prediction import canonical_prefix
+    from refimpl.protocols.prediction import canonical_prefix
 
     dtype = _param_dtype(params)
 
@@ -317,7 +323,7 @@ def dq_network_method(params: Mapping[str, np.ndarray], network_config, skeleton
     canonicalisation of the prefix, its current dual quaternions (:func:`refimpl.dq_prediction.
     dq_frames_from_rotations` with ``skeleton``), :func:`refimpl.models.quaternet.predict` in the parameters'
     dtype, and the predicted DQs decoded to unit local quaternions (Eq. 12)."""
-    from refimpl.tasks.prediction import canonical_prefix
+    from refimpl.protocols.prediction import canonical_prefix
 
     dtype = _param_dtype(params)
     parents = skeleton.parents
@@ -345,7 +351,7 @@ def predictor(params: Mapping[str, np.ndarray], config: ShortTermConfig, skeleto
 
 def make_method(model) -> Callable:
     """:func:`predictor` of a :class:`~refimpl.registry.TrainedModel` (the skeleton of its dataset)."""
-    from refimpl.tasks.prediction import skeleton_of
+    from refimpl.protocols.prediction_data import skeleton_of
 
     skeleton = skeleton_of(model.extra["dataset"]) if getattr(model.config, "dual", False) else None
     return predictor(model.params, model.config, skeleton)
@@ -354,7 +360,7 @@ def make_method(model) -> Callable:
 def export_inputs(model) -> dict:
     """Keyword arguments of the exporter (``deploy.models.quaternet.export_dir``): metadata (dataset, frame rate,
     skeleton, checkpoint step) and the predictor's default k."""
-    from refimpl.tasks.prediction import skeleton_of
+    from refimpl.protocols.prediction_data import skeleton_of
 
     skel = skeleton_of(model.extra["dataset"])
     meta = {"frame_rate": float(model.fps), "dataset": model.extra["dataset"],
@@ -369,7 +375,7 @@ def network_frames(model, prefix) -> np.ndarray:
     take)."""
     if not getattr(model.config, "dual", False):
         return np.asarray(prefix)
-    from refimpl.tasks.prediction import skeleton_of
+    from refimpl.protocols.prediction_data import skeleton_of
 
     return dq_frames_from_rotations(prefix, skeleton_of(model.extra["dataset"]))
 
@@ -389,6 +395,9 @@ def verify_onnx(model, runtime, prefix, k: int = 10) -> dict:
     units: ``|Δ| <= (atol + rtol) · max(1, max |ref|)`` over each predicted frame)."""
     from refimpl.testing import TOL_ORT_ROLLOUT
 
+    from refimpl.protocols.prediction import canonical_prefix
+
+    prefix = canonical_prefix(prefix)   # the published sign rule, as the predictor (the predict graph repeats it)
     ref = reference_outputs(model, prefix, k)
     frames = network_frames(model, prefix)
     # float32 rounding scales with the largest number of a frame: for dual quaternions the dual parts carry the

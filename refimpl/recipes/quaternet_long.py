@@ -3,11 +3,11 @@
 
 * :class:`QuaterNetLongConfig` — the recipe's config (``--set hidden_size=256``): the network's sizes; J comes
   from the data; :meth:`QuaterNetLongConfig.network` is the :class:`~refimpl.models.quaternet.QuaterNetConfig`;
-* :func:`loss_and_grads` — the paper's loss on one :class:`~refimpl.tasks.locomotion.PoseBatch`: FK positions
+* :func:`loss_and_grads` — the paper's loss on one :class:`~refimpl.protocols.locomotion.PoseBatch`: FK positions
   with the longitudinal-offset term (:func:`refimpl.losses.fk_position_loss_forward`, through
   :mod:`refimpl.nn.kinematics_layers`) + 0.01 · the quaternion norm penalty (:func:`refimpl.losses.quat_norm_loss_forward`),
   backward through the scheduled-sampling unroll (:func:`refimpl.models.quaternet.backward`);
-* :func:`make_adapter` — windows drawn by :func:`refimpl.tasks.locomotion.pose_batch` (random rotation about +Y),
+* :func:`make_adapter` — windows drawn by :func:`refimpl.protocols.locomotion.pose_batch` (random rotation about +Y),
   teacher-forcing ratio ``0.995^epoch`` (:func:`refimpl.schedules.teacher_forcing_ratio`, from the trainer's
   epoch), one mask per batch, ground-truth controls in free-running steps;
 * :data:`PAPER_OPTIM` — Adam 1e-3, × 0.999 per epoch, gradient-norm clip 0.1; :data:`PAPER_BATCH` 40;
@@ -32,17 +32,17 @@ from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, fk_position_loss_backward,
 from refimpl.losses import euclidean_loss_backward, euclidean_loss_forward
 from refimpl.models import quaternet
 from refimpl.recipes import quaternet_long_dq
-from refimpl.nn.quat_layers import quat_mul_backward, quat_mul_forward
+from refimpl.nn.quat_layers import (axis_angle_to_quat_backward, axis_angle_to_quat_forward, euler_to_quat_backward,
+                                    euler_to_quat_forward)
 from refimpl.quat import axis_angle_from_quat, euler_from_quat
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
 from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
+__all__ = ["published_names", "param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
            "PAPER_BATCH",
-           "OUTPUTS", "QuaterNetLongConfig", "make_config", "euler_to_quat_forward", "euler_to_quat_backward",
-           "axis_angle_to_quat_forward", "axis_angle_to_quat_backward", "rotations_from_quat", "quat_from_rotations",
+           "OUTPUTS", "QuaterNetLongConfig", "make_config", "rotations_from_quat", "quat_from_rotations",
            "quat_from_rotations_backward", "ablation_inputs", "loss_and_grads", "make_adapter", "rollout",
            "make_method", "extra_methods", "export_inputs", "reference_outputs", "verify_onnx"]
 
@@ -114,6 +114,12 @@ def param_shapes(config: QuaterNetLongConfig) -> dict:
     return quaternet.param_shapes(config.network())
 
 
+def published_names(config: QuaterNetLongConfig) -> dict:
+    """Our parameter name -> (published name, shape): the published long-term state dict's names
+    (:func:`refimpl.models.quaternet.published_names` of ``config.network()``; the identity)."""
+    return quaternet.published_names(config.network())
+
+
 def make_config(train_ds, overrides: Sequence[str] = ()) -> QuaterNetLongConfig:
     """J from the data's skeleton, then ``--set`` overrides (``num_joints`` cannot change)."""
     J = int(train_ds.skeleton.num_joints)
@@ -123,64 +129,8 @@ def make_config(train_ds, overrides: Sequence[str] = ()) -> QuaterNetLongConfig:
 
 # ----------------------------------------------------------------------------------------------------------------
 # the ablations' rotation parameterisations (QN §4.4.2): differentiable conversion to quaternions before FK
+# (the layers are refimpl.nn.quat_layers' euler_to_quat and axis_angle_to_quat)
 # ----------------------------------------------------------------------------------------------------------------
-
-_AXIS = {"x": 1, "y": 2, "z": 3}
-
-
-def _elementary(axis: str, a: np.ndarray):
-    q = np.zeros(a.shape + (4,), dtype=a.dtype)
-    q[..., 0] = np.cos(a / 2)
-    q[..., _AXIS[axis]] = np.sin(a / 2)
-    return q
-
-
-def euler_to_quat_forward(angles: np.ndarray, order: str):
-    """``q = q_{o0}(a0) ⊗ q_{o1}(a1) ⊗ q_{o2}(a2)`` (:func:`refimpl.quat.quat_from_euler`), with a cache.
-
-    angles : (..., 3) radians; returns q (..., 4) and the cache for :func:`euler_to_quat_backward`."""
-    e = [_elementary(order[i], angles[..., i]) for i in range(3)]
-    ab, c1 = quat_mul_forward(e[0], e[1])
-    q, c2 = quat_mul_forward(ab, e[2])
-    return q, (angles, order, c1, c2)
-
-
-def euler_to_quat_backward(dq: np.ndarray, cache) -> np.ndarray:
-    """Gradient of :func:`euler_to_quat_forward` w.r.t. the angles (..., 3): ``dq/da_i`` of the elementary
-    quaternion is ``½ (−sin a/2, cos a/2 e_axis)``."""
-    angles, order, c1, c2 = cache
-    dab, de2 = quat_mul_backward(dq, c2)
-    de0, de1 = quat_mul_backward(dab, c1)
-    out = np.empty_like(angles)
-    for i, de in enumerate((de0, de1, de2)):
-        a = angles[..., i]
-        out[..., i] = 0.5 * (-np.sin(a / 2) * de[..., 0] + np.cos(a / 2) * de[..., _AXIS[order[i]]])
-    return out
-
-
-_SMALL_ANGLE = 1e-4
-
-
-def axis_angle_to_quat_forward(v: np.ndarray):
-    """``q = (cos θ/2, sin(θ/2)/θ · v)``, θ = ‖v‖ (:func:`refimpl.quat.quat_from_axis_angle`); below θ = 1e-4
-    the series ``sin(θ/2)/θ ≈ ½ − θ²/48``."""
-    th = np.linalg.norm(v, axis=-1)
-    small = th < _SMALL_ANGLE
-    ts = np.where(small, 1.0, th)
-    s = np.where(small, 0.5 - th * th / 48.0, np.sin(ts / 2) / ts)
-    q = np.concatenate([np.cos(th / 2)[..., None], s[..., None] * v], axis=-1)
-    return q, (v, th, ts, small, s)
-
-
-def axis_angle_to_quat_backward(dq: np.ndarray, cache) -> np.ndarray:
-    """Gradient of :func:`axis_angle_to_quat_forward`: ``dw/dv = −½ sin(θ/2) v/θ`` (→ −v/4 at 0),
-    ``d(s v)/dv = s I + v (s'(θ)/θ) vᵀ`` with ``s'(θ)/θ = (½ θ cos θ/2 − sin θ/2)/θ³`` (→ −1/24 at 0)."""
-    v, th, ts, small, s = cache
-    hw = np.where(small, 0.25 - th * th / 96.0, np.sin(ts / 2) / (2 * ts))       # ½ sin(θ/2)/θ
-    ds = np.where(small, -1.0 / 24.0, (0.5 * ts * np.cos(ts / 2) - np.sin(ts / 2)) / ts ** 3)
-    dxyz = dq[..., 1:]
-    return (-hw * dq[..., 0])[..., None] * v + s[..., None] * dxyz + (ds * np.sum(dxyz * v, -1))[..., None] * v
-
 
 def rotations_from_quat(q: np.ndarray, output: str) -> np.ndarray:
     """Ground-truth quaternions (..., J, 4) in an ablation's parameterisation (..., J, 3)."""
@@ -312,11 +262,11 @@ def rollout(params: Mapping[str, np.ndarray], net: quaternet.QuaterNetConfig, in
 
 
 def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Mapping) -> ModelAdapter:
-    """The trainer's adapter: windows of :func:`refimpl.tasks.locomotion.pose_batch` (augmented), the
+    """The trainer's adapter: windows of :func:`refimpl.protocols.locomotion.pose_batch` (augmented), the
     scheduled-sampling mask of ratio ``0.995^epoch``, :func:`loss_and_grads`; validation = free-running mean
-    position error (units) on the held-out windows (:func:`refimpl.tasks.locomotion.evaluation_windows`, at most
+    position error (units) on the held-out windows (:func:`refimpl.protocols.locomotion.evaluation_windows`, at most
     256 of them)."""
-    from refimpl.tasks.locomotion import evaluation_windows, pose_batch, position_errors
+    from refimpl.protocols.locomotion import evaluation_windows, pose_batch, position_errors
 
     net = config.network()
     skel = train_ds.skeleton
@@ -400,8 +350,11 @@ def export_inputs(model) -> dict:
     if model.config.output not in ("quaternion", "dual_quaternion"):
         raise UsageError(f"export: only quaternion- and dual-quaternion-output models are exported (this one: "
                          f"{model.config.output})")
+    from refimpl.tasks.locomotion import skeleton_of
+
     return {"metadata": {"frame_rate": float(model.fps or 30.0),
-                         "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}}}
+                         "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}},
+            "skeleton": skeleton_of(model.extra)}
 
 
 def reference_outputs(model, x, state=None):

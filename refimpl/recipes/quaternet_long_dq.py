@@ -6,7 +6,7 @@
   from the window's local quaternions after the augmentation's rotation and the skeleton's offsets), made
   antipodally continuous over the window's frames (:func:`refimpl.dualquat.dq_fix`, §5.1);
 * :func:`loss_and_grads` — ``L_pos + L_offset + L_quat + 0.01 · L_reg`` of the raw head output through
-  :func:`refimpl.dq_output.dq_output_loss_forward` (weights :data:`refimpl.losses.WEIGHTS_QUATERNET_DQ`; positions
+  :func:`refimpl.dq_output_fast.dq_output_loss_forward` (weights :data:`refimpl.losses.WEIGHTS_QUATERNET_DQ`; positions
   read from the DQs with Eq. 8, no FK), plus the translations' ``mean |o − õ| + mean |h − h̃|`` (the height is
   inside the FK positions of the quaternion model; the DQs are root-relative, so it is its own term here);
 * :func:`rollout` — free running: unit current DQs and translations; :func:`decode` — local rotations (Eq. 12)
@@ -21,7 +21,7 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.dq_output import dq_output_loss_backward, dq_output_loss_forward
+from refimpl.dq_output_fast import dq_output_loss_backward, dq_output_loss_forward
 from refimpl.dualquat import dq_fix, translation_from_dq
 from refimpl.losses import WEIGHTS_QUATERNET_DQ
 from refimpl.models import quaternet

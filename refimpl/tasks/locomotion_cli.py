@@ -10,7 +10,8 @@ import numpy as np
 
 from refimpl.bounds import check_number
 from refimpl.errors import UsageError, existing_file, reading
-from refimpl.tasks.locomotion import FPS, QUATERNET_UNIT_CM, rig_of, skeleton_of
+from refimpl.protocols.locomotion_data import FPS, QUATERNET_UNIT_CM
+from refimpl.tasks.locomotion import rig_of, skeleton_of
 from refimpl.tasks.locomotion_generate import (bone_length_drift, dq_bone_length_drift, facing_of, foot_skating,
                                               generate_walk, parse_path, parse_speed, read_path_file,
                                               write_outputs)

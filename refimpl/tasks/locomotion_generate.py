@@ -31,11 +31,13 @@ from refimpl.atomic import atomic_write_text
 from refimpl.bounds import BOUNDS, check_number
 from refimpl.models import pace, quaternet
 from refimpl.motion import Motion
-from refimpl.recipes import quaternet_long_dq
+from refimpl.protocols.locomotion import rotate_controls
+from refimpl.protocols.locomotion_data import FPS, QUATERNET_UNIT_CM
 from refimpl.quat import quat_mul
+from refimpl.recipes import quaternet_long_dq
 from refimpl.skeleton import Skeleton
 from refimpl.splines import Spline, circle_path, figure_eight_path, line_with_turn_path, read_path_csv
-from refimpl.tasks.locomotion import FPS, QUATERNET_UNIT_CM, SPEEDS, rotate_controls
+from refimpl.tasks.locomotion import SPEEDS
 
 __all__ = ["GeneratedWalk", "parse_path", "read_path_file", "parse_speed", "align_seed", "generate_walk", "foot_skating",
            "bone_length_drift", "dq_bone_length_drift", "facing_of", "write_outputs", "BUILTIN_PATHS"]
@@ -149,7 +151,7 @@ def _angle(v) -> float:
 def align_seed(rotations: np.ndarray, features: np.ndarray, facing) -> tuple[np.ndarray, np.ndarray]:
     """Turn a seed clip about +Y so that its last facing ``(f6, f7)`` equals ``facing`` (a 2-D (x, z) vector):
     root quaternions ``r ⊗ q`` with ``r = (cos a/2, 0, sin a/2, 0)``, controls by
-    :func:`~refimpl.tasks.locomotion.rotate_controls` (the augmentation's map, so ``a = ∠f_seed − ∠facing``)."""
+    :func:`~refimpl.protocols.locomotion.rotate_controls` (the augmentation's map, so ``a = ∠f_seed − ∠facing``)."""
     rot = np.array(rotations, dtype=np.float64)
     feats = np.asarray(features, dtype=np.float64)
     a = _angle(feats[-1, 6:8]) - _angle(facing)
@@ -238,8 +240,8 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
 
 
 def facing_of(walk: GeneratedWalk, rig) -> np.ndarray:
-    """The character's facing per frame (:func:`refimpl.tasks.locomotion.facing_vectors`), (N, 2) as (x, z)."""
-    from refimpl.tasks.locomotion import facing_vectors
+    """The character's facing per frame (:func:`refimpl.protocols.locomotion_data.facing_vectors`), (N, 2) as (x, z)."""
+    from refimpl.protocols.locomotion_data import facing_vectors
     return facing_vectors(walk.motion.skeleton, walk.motion.rotations, rig)
 
 

@@ -6,13 +6,13 @@ Everything the application layer needs about this task, and nothing about a part
   embedded sample, ``../shared/data``, a folder, a file), :func:`source_for_file`, :func:`build_datasets`,
   :func:`train_datasets`; the checkpoint facts the task needs (:func:`checkpoint_extra`, :func:`check_checkpoint`);
 * baselines and protocol: :func:`methods` (the networks' methods, then inertialisation and interpolation from
-  :mod:`refimpl.baselines`), :func:`evaluate` (:func:`refimpl.metrics.evaluate_methods`, the paper's metric),
+  :mod:`refimpl.protocols.transition_baselines`), :func:`evaluate` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`, the paper's metric),
   :func:`print_results` / :func:`write_results` (table, per-frame curve, CSV, JSON);
 * generation: :func:`make_transition` between two clips in world coordinates, :func:`with_end_sites` for BVH
   readers, :func:`render_transition`, :func:`clip_for`, :func:`random_context` (context poses for numerical checks).
 
-The building blocks live below: windows, sources and datasets in :mod:`refimpl.transitions`, the baselines in
-:mod:`refimpl.baselines`, the metric in :mod:`refimpl.metrics`.
+The building blocks live below: windows, sources and datasets in :mod:`refimpl.protocols.transition`, the baselines in
+:mod:`refimpl.protocols.transition_baselines`, the metric in :mod:`refimpl.protocols.transition_metrics`.
 
 Shape legend: N windows, T transition frames, F frames of a clip, J joints, P pose size (3 + 4 J), B batch.
 """
@@ -26,23 +26,25 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
-from refimpl.baselines import method_registry
+from refimpl.protocols.transition_baselines import method_registry
 from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
-from refimpl.metrics import evaluate_methods, format_table
+from refimpl.protocols.transition_metrics import evaluate_methods, format_table
 from refimpl.motion import Motion
 from refimpl.bounds import bounded_int
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_rotate
 from refimpl.skeleton import Skeleton
-from refimpl.transitions import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
+from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                  build_transition_datasets, declared_rate, heading_from_root, join_pose, load_source,
                                  make_windows, sample_sources, shared_sources, split_pose, window_to_world)
+from refimpl.protocols.transition_join import JOIN_MODES, check_join, with_join
+from refimpl.protocols.transition_quality import evaluate_quality, foot_joints, format_quality
 
 __all__ = [
     "NAME", "add_train_options", "resolve_data", "source_for_file", "build_datasets", "train_datasets",
     "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
-    "methods", "evaluate",
+    "add_eval_options", "methods", "evaluate",
     "print_results", "write_results", "Transition", "make_transition", "with_end_sites", "render_transition",
     "clip_for", "random_context",
 ]
@@ -65,11 +67,11 @@ def add_train_options(parser) -> None:
 
 
 def source_for_file(path, *, fps: float | None = None, label: str | None = None, frames=(0.0, 1.0)):
-    """A :class:`~refimpl.transitions.TransitionSource` for one BVH / exp-map file, its kind found from its joints.
+    """A :class:`~refimpl.protocols.transition.TransitionSource` for one BVH / exp-map file, its kind found from its joints.
 
     ``.txt`` files are CMU exp-map files (117 values per row, 120 fps unless ``fps``). ``.bvh`` files must have
-    the CMU cgspeed joints (:data:`~refimpl.transitions.CMU_22_JOINTS`) or the DAZ salsa joints
-    (:data:`~refimpl.transitions.SALSA_22_JOINTS`); their rate is the declared ``Frame Time`` unless ``fps``
+    the CMU cgspeed joints (:data:`~refimpl.protocols.transition.CMU_22_JOINTS`) or the DAZ salsa joints
+    (:data:`~refimpl.protocols.transition.SALSA_22_JOINTS`); their rate is the declared ``Frame Time`` unless ``fps``
     (the CMU salsa files declare 120 fps but are 60 fps).
     """
     p = existing_file(path)
@@ -92,8 +94,8 @@ def source_for_file(path, *, fps: float | None = None, label: str | None = None,
 def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 0.2):
     """Train and test sources for ``--data``.
 
-    * ``"sample"``: the embedded sample's fixed split (:func:`refimpl.transitions.sample_sources`);
-    * a folder laid out like ``../shared/data`` (``dmgnn_cmu_expmap`` ...): :func:`refimpl.transitions.shared_sources`;
+    * ``"sample"``: the embedded sample's fixed split (:func:`refimpl.protocols.transition.sample_sources`);
+    * a folder laid out like ``../shared/data`` (``dmgnn_cmu_expmap`` ...): :func:`refimpl.protocols.transition.shared_sources`;
     * a folder with ``train/`` and ``test/`` sub-folders: their ``*.bvh`` / ``*.txt`` files (recursively);
     * any other folder: its files sorted by path, the last ``test_fraction`` of them held out (split by file);
     * a single file: its first ``1 − test_fraction`` of frames for training, the rest for testing (split by time).
@@ -137,8 +139,8 @@ def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 
 
 
 def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.2, test_stride=None):
-    """Train and test :class:`~refimpl.transitions.TransitionDataset` of ``2 + T + 2``-pose windows for ``--data``
-    (:func:`resolve_data`, :func:`refimpl.transitions.build_transition_datasets`)."""
+    """Train and test :class:`~refimpl.protocols.transition.TransitionDataset` of ``2 + T + 2``-pose windows for ``--data``
+    (:func:`resolve_data`, :func:`refimpl.protocols.transition.build_transition_datasets`)."""
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
     try:
         return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride)
@@ -206,15 +208,34 @@ def onnx_method(runtime) -> Callable:
 # baselines and protocol
 # ----------------------------------------------------------------------------------------------------------------
 
-def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0) -> dict:
-    """``name -> f(past, target, T)``: the given networks' methods (in order), then both baselines
-    (:func:`refimpl.baselines.method_registry` with ``dt = 1 / fps``)."""
-    return {**dict(networks or {}), **method_registry(dt=1.0 / fps)}
+def add_eval_options(group) -> None:
+    """The task's options of ``refimpl eval``: ``--join``."""
+    group.add_argument("--join", default="none", choices=JOIN_MODES,
+                       help="inertialize: also evaluate each network with its joins inertialised (spec/qtg.md "
+                            "7.4), as <name>+join beside the paper-faithful row (default none)")
+
+
+def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0, join: str = "none") -> dict:
+    """``name -> f(past, target, T)``: the given networks' methods (in order; with ``join="inertialize"`` each
+    followed by ``<name>+join``, :func:`refimpl.protocols.transition_join.with_join`), then both baselines
+    (:func:`refimpl.protocols.transition_baselines.method_registry` with ``dt = 1 / fps``)."""
+    out = {}
+    for name, f in dict(networks or {}).items():
+        out[name] = f
+        if check_join(join) != "none":
+            out[f"{name}+join"] = with_join(f, join, dt=1.0 / fps)
+    return {**out, **method_registry(dt=1.0 / fps)}
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds``: :func:`refimpl.metrics.evaluate_methods`."""
-    return evaluate_methods(test_ds, methods_by_name)
+    """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`) and,
+    under each method's ``"quality"``, the animator's measures
+    (:func:`refimpl.protocols.transition_quality.evaluate_quality`: joins, foot skating, first and last frame, with
+    the ground truth's numbers)."""
+    results = evaluate_methods(test_ds, methods_by_name)
+    for name, q in evaluate_quality(test_ds, methods_by_name).items():
+        results[name]["quality"] = q
+    return results
 
 
 def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
@@ -230,14 +251,16 @@ def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
 def _results_json(results: Mapping[str, dict]) -> str:
     def conv(v):
         if isinstance(v, np.ndarray):
-            return [float(x) for x in v]
+            return [conv(float(x)) for x in v]
         if isinstance(v, dict):
             return {k: conv(x) for k, x in v.items()}
         if isinstance(v, (np.floating, np.integer)):
-            return v.item()
+            v = v.item()
+        if isinstance(v, float) and not np.isfinite(v):
+            return None  # e.g. skating without a contact: null, so that the file is strict JSON
         return v
 
-    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True) + "\n"
+    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def _curve_table(results: Mapping[str, dict], frame_time: float) -> str:
@@ -266,6 +289,11 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
     _say("")
     _say("Mean joint-position error per joint per frame (cm), by motion category and at transition frames fK:")
     _say(format_table(results))
+    if all("quality" in r for r in results.values()):
+        _say("")
+        _say("Joins (mean joint displacement into frame 1 and out of frame T), foot skating (horizontal speed of "
+             "the foot joints in contact) and the error at the first and last frames:")
+        _say(format_quality({k: r["quality"] for k, r in results.items()}))
     if curve:
         _say("")
         _say("Per-frame curve (cm):")
@@ -370,8 +398,8 @@ def make_transition(method: Callable, skeleton, source_clip, source_frame: int, 
     """Generate the ``T`` frames between two clips and return them in world coordinates.
 
     The four context poses (source frames ``s − 1, s``, target frames ``g, g + 1``) are expressed relative to
-    the first one (:func:`refimpl.transitions.make_windows` on the 4 frames), ``method`` generates the
-    transition in that frame, and the result is moved back to the world (:func:`refimpl.transitions.window_to_world`).
+    the first one (:func:`refimpl.protocols.transition.make_windows` on the 4 frames), ``method`` generates the
+    transition in that frame, and the result is moved back to the world (:func:`refimpl.protocols.transition.window_to_world`).
 
     Parameters
     ----------
@@ -424,26 +452,41 @@ def make_transition(method: Callable, skeleton, source_clip, source_frame: int, 
 
 
 def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
-    """Draw a :class:`Transition` (against its ground truth when it has one) as a PNG strip and / or a GIF."""
-    from refimpl.render import render_gif, render_strip
+    """Draw a :class:`Transition` (against its ground truth when it has one) as a PNG strip and / or a GIF.
 
-    parents = np.asarray(tr.motion.skeleton.parents)
+    The strip shows the frames on both sides of each join (:func:`refimpl.render_strip.join_frames`: last past,
+    first generated, a middle one, last generated, first target), left and right limbs in two shades
+    (:func:`refimpl.render_strip.limb_sides`), the feet's floor tracks
+    (:func:`refimpl.protocols.transition_quality.foot_joints`) and a floor grid fixed in the world (spec/cli.md).
+    """
+    from refimpl.render import render_gif
+    from refimpl.render_strip import join_frames, limb_sides, render_strip
+
+    skel = tr.motion.skeleton
+    parents = np.asarray(skel.parents)
     gt = (tr.truth if tr.truth is not None else tr.motion).positions()
     pred = tr.motion.positions() if tr.truth is not None else None
     labels = ("ground truth", tr.method) if pred is not None else (tr.method, "")
+    sides = limb_sides(skel)
     written = []
     if png:
-        n = tr.motion.num_frames
-        frames = sorted(set([0, tr.start - 1] + list(range(tr.start, tr.stop, max(1, (tr.stop - tr.start) // 6)))
-                            + [tr.stop - 1, n - 1]))
+        frames = join_frames(tr.start, tr.stop, tr.motion.num_frames)
         written.append(render_strip(png, gt, parents, prediction=pred, frames=frames, highlight=(tr.start, tr.stop),
-                                    labels=labels, title=title, frame_time=tr.motion.frame_time))
+                                    labels=labels, title=title, frame_time=tr.motion.frame_time, sides=sides,
+                                    feet=_feet(skel)))
         _say(f"wrote {png}")
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred, fps=tr.motion.fps,
-                                  highlight=(tr.start, tr.stop), labels=labels, title=title))
+                                  highlight=(tr.start, tr.stop), labels=labels, title=title, sides=sides))
         _say(f"wrote {gif}")
     return written
+
+
+def _feet(skel):
+    try:
+        return foot_joints(skel)
+    except ValueError:  # a skeleton without foot joints: no tracks
+        return None
 
 
 def clip_for(path, model_fps: float, fps_override):

@@ -2,7 +2,7 @@
 
 Both take the 2 past poses and the 2 target poses of a transition and return the ``T`` frames in between
 (spec/qtg.md §7). Unlike the network, they work in UN-normalised pose space: root translation in the data's
-length unit (relative to the window's first pose, see refimpl/transitions.py), joint rotations as local
+length unit (relative to the window's first pose, see refimpl/protocols/transition.py), joint rotations as local
 quaternions. Input quaternions are normalised before use; output quaternions are unit.
 
 Indexing: past context ``p_{-1}, p_0``; transition ``p_1 … p_T``; targets ``g1 = p_{T+1}``, ``g2 = p_{T+2}``;
@@ -20,8 +20,8 @@ from typing import Callable
 import numpy as np
 
 from refimpl.nn.params import check_float_array
+from refimpl.protocols.transition import join_pose, split_pose
 from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_slerp
-from refimpl.transitions import join_pose, split_pose
 
 __all__ = [
     "quintic_inertialization", "inertialize", "interpolate", "method_registry", "METHOD_NAMES", "check_context",

@@ -36,8 +36,8 @@ from a seeded ``random.Random``.
 
 Usage::
 
-    python benchmarks/fuzz_readers.py --cases 10000 [--seed 0] [--timeout 10] \
-        [--readers bvh,expmap-cmu,expmap-h36m,checkpoint,onnx] [--out benchmarks/results/fuzz_readers.json]
+    python -m tests.fuzz.readers --cases 10000 [--seed 0] [--timeout 10] \
+        [--readers bvh,expmap-cmu,expmap-h36m,checkpoint,onnx] [--out tests/fuzz/results/fuzz_readers.json]
 
 Prints a table of cases per reader and outcomes per exception type, writes JSON, exits 1 on any failure
 (an exception other than ValueError/OSError, a hang, a memory blow-up or a wrong answer).
@@ -66,9 +66,7 @@ __all__ = ["RandomDrawer", "Target", "Outcome", "build_targets", "mutate", "run_
            "synthetic_bvh", "deep_bvh", "deep_unclosed_bvh", "synthetic_expmap", "onnx_seeds", "checkpoint_seeds",
            "BVH_MUTATORS", "EXPMAP_MUTATORS", "CHECKPOINT_MUTATORS", "ONNX_MUTATORS", "main"]
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+ROOT = Path(__file__).resolve().parents[2]
 
 from refimpl.atomic import atomic_write_text  # noqa: E402
 
@@ -1443,7 +1441,7 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=10.0, help="per-case wall-clock limit in seconds")
     ap.add_argument("--readers", default="", help="comma-separated subset (bvh,expmap-cmu,expmap-h36m,checkpoint,onnx)")
     ap.add_argument("--no-memory", action="store_true", help="skip the tracemalloc memory bound (faster)")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fuzz_readers.json"))
+    ap.add_argument("--out", default=str(ROOT / "tests" / "fuzz" / "results" / "fuzz_readers.json"))
     args = ap.parse_args(argv)
     only = {s.strip() for s in args.readers.split(",") if s.strip()} or None
     res = campaign(args.cases, args.seed, args.timeout, only, check_memory=not args.no_memory)

@@ -8,9 +8,9 @@ Train both first with identical settings (same seed, steps, batch, schedules; ``
     OPENBLAS_NUM_THREADS=1 refimpl train --model quaternet --data ../shared/data --set hidden_size=512 \\
         --set representation=dual_quaternion --steps N --seed 0 --out runs/dq
 
-then ``python benchmarks/exp_quaternet_dq.py --quat runs/q/checkpoint.npz --dq runs/dq/checkpoint.npz``.
+then ``python -m experiments.quaternet_dq --quat runs/q/checkpoint.npz --dq runs/dq/checkpoint.npz``.
 
-Evaluates the Table 2 horizons at the data's real frame rate (refimpl.tasks.prediction.table2_protocol) under
+Evaluates the Table 2 horizons at the data's real frame rate (refimpl.protocols.prediction.table2_protocol) under
 the standard (4 windows) and dense (128) samplers, once over both test actions (out to 400 ms: the running test
 file is short) and once on walking alone (out to 2000 ms). Writes ``<out>/<protocol>_<actions>.json`` (the
 task's result objects) and ``<out>/table.md``, and prints the tables.
@@ -24,12 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
+from refimpl.protocols import prediction as PP
+from refimpl.protocols import prediction_data as PD
 from refimpl.services import load_trained
 from refimpl.tasks import prediction as pr
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / ".." / "shared" / "data"
-OUT = ROOT / "benchmarks" / "results" / "quaternet_dq"
+OUT = ROOT / "experiments" / "results" / "quaternet_dq"
 #: The paper's Table 2 (H3.6M subject 5, average over actions, Euler-angle error, radians).
 PAPER_TABLE2 = {"horizons_ms": [80, 160, 320, 400, 600, 800, 1000, 2000, 3000, 4000],
                 "quaternions": [0.3871, 0.6766, 1.0117, 1.1452, 1.4327, 1.7983, 2.3004, 6.0033, 10.7987, 13.1485],
@@ -65,11 +67,11 @@ def _offset_drift(model, data) -> dict:
     from refimpl.models import quaternet as net
     from refimpl.skeleton import local_from_current_dq
 
-    protocol = pr.table2_protocol(data, "standard", actions=("walking",))
-    prefix, _, _ = pr.evaluation_windows(data, "walking", protocol)
+    protocol = PP.table2_protocol(data, "standard", actions=("walking",))
+    prefix, _, _ = PP.evaluation_windows(data, "walking", protocol)
     B, P, J, _ = prefix.shape
     skel = data.skeleton
-    x = dq_frames_from_rotations(pr.canonical_prefix(prefix), skel).reshape(B, P, 8 * J)
+    x = dq_frames_from_rotations(PP.canonical_prefix(prefix), skel).reshape(B, P, 8 * J)
     y = net.predict(model.params, x.astype(np.float32), protocol.target_length, model.config.network)
     _, off = local_from_current_dq(y.astype(np.float64).reshape(B, -1, J, 8), skel.parents)   # (B, K, J, 3)
     err = np.linalg.norm(off[..., 1:, :] - skel.offsets[1:], axis=-1).mean(axis=(0, 2))       # (K,)
@@ -92,18 +94,18 @@ def main(argv=None) -> int:
     fts = {m.extra["frame_time"] for m in models.values()}
     if len(fts) != 1:
         raise SystemExit(f"the two checkpoints were trained at different frame times: {sorted(fts)}")
-    data = pr.resolve_data(args.data, downsample=pr.stride_of("cmu", fts.pop()))
-    methods = {"zero-velocity": pr.zero_velocity,
+    data = pr.resolve_data(args.data, downsample=PD.stride_of("cmu", fts.pop()))
+    methods = {"zero-velocity": PP.zero_velocity,
                **{f"QuaterNet {k}": m.spec.make_method(m) for k, m in models.items()}}
     md = ["# QuaterNet short-term: quaternions vs dual quaternions (Table 2 analogue)", "",
           f"Checkpoints: quaternions {args.quat} (step {steps['quaternions']}), dual quaternions {args.dq} "
           f"(step {steps['dual quaternions']}). Mean Euler-angle error (radians, zyx, joint 0 excluded).", ""]
     for name, actions in SETS:
-        protocol = pr.table2_protocol(data, name, actions=actions)
-        results = pr.evaluate_all(data, methods, protocol, actions=actions,
+        protocol = PP.table2_protocol(data, name, actions=actions)
+        results = PP.evaluate_all(data, methods, protocol, actions=actions,
                                   progress=lambda line: print(line, flush=True))
         tag = f"{name}_{'-'.join(actions) if actions else 'all'}"
-        pr.write_results_json(out / f"{tag}.json", results)
+        PP.write_results_json(out / f"{tag}.json", results)
         md += [f"## {name} ({protocol.samples_per_sequence} samples per sequence), "
                f"{', '.join(actions) if actions else 'all actions'}, P = {protocol.prefix_length}, "
                f"K = {protocol.target_length}", ""] + _table(results, protocol)

@@ -1,8 +1,8 @@
 """The acRNN representation experiment (issue #15, spec/acrnn.md §9): train Table 1 rows on the CMU salsa takes with
 one budget per row, through the command line (``refimpl train --model acrnn``), two rows at a time.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/exp_acrnn_table1.py train --out runs/acrnn_table1
-    python benchmarks/exp_acrnn_table1.py eval --out runs/acrnn_table1     # table, JSON, pictures, long run
+    OPENBLAS_NUM_THREADS=1 python -m experiments.acrnn_table1 train --out runs/acrnn_table1
+    python -m experiments.acrnn_table1 eval --out runs/acrnn_table1     # table, JSON, pictures, long run
 
 Settings (reduced from the paper's 3 × 1024, batch 32, windows of 100 + 1, 150k iterations, lr 1e-4 to fit a
 shared 2-core machine): 3 × :data:`HIDDEN` LSTM, :data:`STEPS` Adam steps at lr :data:`LR`, batch :data:`BATCH`,
@@ -69,6 +69,5 @@ if __name__ == "__main__":
     if a.phase == "train":
         train(Path(a.out), a.parallel)
     else:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from exp_acrnn_eval import main as eval_main  # noqa: E402  (benchmarks/exp_acrnn_eval.py)
-        eval_main(Path(a.out))
+        from experiments import acrnn_eval
+        acrnn_eval.main(Path(a.out))

@@ -5,16 +5,16 @@ contract, in bounded time (a per-case ``SIGALRM``) and memory (``tracemalloc`` w
 reader case, one checkpoint-schema case in ten; command-line subprocesses run under a 4 GiB address-space limit):
 
 ================  ==========================================================================================
-``readers``       BVH and both exp-map layouts: ``benchmarks/fuzz_readers.py``'s mutators (ValueError or a
+``readers``       BVH and both exp-map layouts: ``tests/fuzz/readers.py``'s mutators (ValueError or a
                   correct result)
-``npz``           the checkpoint container (``load_checkpoint``): fuzz_readers' zip/npy/re-signed mutators
-``math``          ``benchmarks/fuzz_math.py``'s families (ValueError or a finite result, no warning)
+``npz``           the checkpoint container (``load_checkpoint``): readers' zip/npy/re-signed mutators
+``math``          ``tests/fuzz/math_api.py``'s families (ValueError or a finite result, no warning)
 ``ckpt-schema``   training checkpoints with one or two fields mutated and the checksum recomputed, through
                   ``refimpl.services.load_trained`` (only ``BadInputError``) and deploy's ``load_qtg_checkpoint``
                   (only ``ValueError``); an accepted file must be sane: a config of the declared types, every
                   parameter of the implied shape, finite, ``fps`` and ``root_std`` > 0, and the loaded network
                   must run (finite output) on a small input
-``onnx``          exported models: fuzz_readers' ONNX mutators (``deploy.runtime.load_model``)
+``onnx``          exported models: readers' ONNX mutators (``deploy.runtime.load_model``)
 ``onnx-meta``     a tiny exported QTG with metadata values replaced (wrong types, 0 frame rate, huge T, ...),
                   opened with its runtime (``deploy.models.runtime_for_dir``) and run once: ValueError or finite
                   poses
@@ -28,10 +28,10 @@ reader case, one checkpoint-schema case in ten; command-line subprocesses run un
 
 Usage::
 
-    python benchmarks/fuzz_campaign.py [--scale 1.0] [--seed 0] [--only ckpt-schema,cli]
+    python -m tests.fuzz.campaign [--scale 1.0] [--seed 0] [--only ckpt-schema,cli]
 
 ``--scale 1`` runs about 26,000 cases. Prints a table (cases, accepted, expected errors, failures, slowest case,
-peak memory per family; failure types with examples), writes ``benchmarks/results/fuzz_campaign.json`` through
+peak memory per family; failure types with examples), writes ``tests/fuzz/results/fuzz_campaign.json`` through
 ``refimpl.atomic`` and exits 1 if any case failed. ``tests/test_fuzz_campaign.py`` runs a few hundred cases.
 """
 from __future__ import annotations
@@ -56,13 +56,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-for p in (str(ROOT), str(ROOT / "benchmarks")):
-    if p not in sys.path:
-        sys.path.insert(0, p)
+ROOT = Path(__file__).resolve().parents[2]
 
-import fuzz_math  # noqa: E402
-import fuzz_readers  # noqa: E402
+from tests.fuzz import math_api, readers  # noqa: E402
 
 from refimpl.atomic import atomic_write_text  # noqa: E402
 
@@ -220,8 +216,8 @@ def write_crafted(path: Path, arrays: dict, meta: dict) -> None:
     entries = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
     entries["__meta__"] = np.frombuffer(json.dumps(meta, sort_keys=True, allow_nan=False).encode("utf-8"),
                                         dtype=np.uint8).copy()
-    entries["__checksum__"] = np.frombuffer(fuzz_readers._documented_checksum(entries), dtype=np.uint8).copy()
-    path.write_bytes(fuzz_readers._zip({f"{k}.npy": fuzz_readers._npy_of(v) for k, v in entries.items()}))
+    entries["__checksum__"] = np.frombuffer(readers._documented_checksum(entries), dtype=np.uint8).copy()
+    path.write_bytes(readers._zip({f"{k}.npy": readers._npy_of(v) for k, v in entries.items()}))
 
 
 def _inference_content(content):
@@ -329,17 +325,17 @@ class Stats:
 # ------------------------------------------------------------------------------------------------------------
 
 def fam_readers(stats, n, seed, only, name, log, include_whole=True):
-    """fuzz_readers' targets, seeds and mutators, one ``run_case`` per case (reference results of the unmodified
+    """readers' targets, seeds and mutators, one ``run_case`` per case (reference results of the unmodified
     seeds first). ``include_whole``: also the whole 02_01.bvh as a seed (slow to prepare; the full campaign)."""
     if n <= 0:
         return
-    targets, skipped = fuzz_readers.build_targets(include_whole=include_whole, only=only)
+    targets, skipped = readers.build_targets(include_whole=include_whole, only=only)
     for t, why in skipped.items():
         stats.examples.append({"family": name, "failure": "skipped", "case": t, "detail": why})
     if not targets:
         return
     rng = random.Random(seed)
-    drawer = fuzz_readers.RandomDrawer(rng)
+    drawer = readers.RandomDrawer(rng)
     tracemalloc.start()
     try:
         with tempfile.TemporaryDirectory(prefix="fuzz_campaign_readers_") as tmp:
@@ -358,8 +354,8 @@ def fam_readers(stats, n, seed, only, name, log, include_whole=True):
                 drawer.chosen = []
                 sname, sdata = drawer.choice(t.seeds)
                 mname = drawer.choice(sorted(t.mutators))
-                data, expectation = fuzz_readers.mutate(t, sdata, mname, drawer)
-                out = fuzz_readers.run_case(t, data, expectation, tmp / f"input{t.suffix}",
+                data, expectation = readers.mutate(t, sdata, mname, drawer)
+                out = readers.run_case(t, data, expectation, tmp / f"input{t.suffix}",
                                             refs.get((t.name, sname)), timeout=10.0, check_memory=True)
                 failure = None if out.failure is None else f"{t.name}:{out.failure}"
                 stats.add(name, out.kind, failure, out.detail, out.seconds,
@@ -373,9 +369,9 @@ def fam_readers(stats, n, seed, only, name, log, include_whole=True):
 def fam_math(stats, n, seed, log):
     rng = random.Random(seed)
     for i in range(n):
-        target, family, spoiled, kwargs, finite = fuzz_math.make_case(rng)
+        target, family, spoiled, kwargs, finite = math_api.make_case(rng)
         t0 = time.perf_counter()
-        outcome, detail = fuzz_math.run_case(target, kwargs, finite)
+        outcome, detail = math_api.run_case(target, kwargs, finite)
         failure = None if outcome in ("ok", "ValueError") else outcome
         stats.add("math", outcome, failure, detail, time.perf_counter() - t0, 0, f"{target}/{family}/{spoiled}")
 
@@ -578,10 +574,10 @@ def _damaged_checkpoint(seeds, rng: random.Random, dst: Path) -> str:
     elif kind == "text":
         dst.write_text(rng.choice(["{}", "PK", "checkpoint", "\x00" * 10, json.dumps({"model": "qtg"})]))
     elif kind == "container":
-        target = next(t for t in fuzz_readers.build_targets(False, {"checkpoint"})[0])
-        drawer = fuzz_readers.RandomDrawer(rng)
+        target = next(t for t in readers.build_targets(False, {"checkpoint"})[0])
+        drawer = readers.RandomDrawer(rng)
         mname = rng.choice(sorted(target.mutators))
-        out, _ = fuzz_readers.mutate(target, data, mname, drawer)
+        out, _ = readers.mutate(target, data, mname, drawer)
         dst.write_bytes(out)
         return f"container/{mname}"
     else:
@@ -738,7 +734,7 @@ def print_table(res: dict) -> None:
     rows = [[name, str(s["cases"]), str(s["accepted"]), str(s["refused"]), str(sum(s["failures"].values())),
              f"{s['max_seconds']:.2f}", f"{s['max_peak_bytes'] / 2**20:.1f}", str(s.get("seconds", ""))]
             for name, s in res["families"].items()]
-    print(fuzz_readers._table(["family", "cases", "accepted", "refused", "failures", "max s", "max MB",
+    print(readers._table(["family", "cases", "accepted", "refused", "failures", "max s", "max MB",
                                "total s"], rows))
     fails = Counter()
     for name, s in res["families"].items():
@@ -746,7 +742,7 @@ def print_table(res: dict) -> None:
             fails[(name, f)] += c
     if fails:
         print()
-        print(fuzz_readers._table(["family", "failure", "count"], [[k[0], k[1], str(v)] for k, v in
+        print(readers._table(["family", "failure", "count"], [[k[0], k[1], str(v)] for k, v in
                                                                    sorted(fails.items())]))
         shown = set()
         for e in res["examples"]:
@@ -761,7 +757,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scale", type=float, default=1.0, help="multiplies every family's number of cases")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", default="", help=f"comma-separated families ({','.join(FAMILIES)})")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fuzz_campaign.json"))
+    ap.add_argument("--out", default=str(ROOT / "tests" / "fuzz" / "results" / "fuzz_campaign.json"))
     args = ap.parse_args(argv)
     only = {s.strip() for s in args.only.split(",") if s.strip()} or None
     res = campaign(args.scale, args.seed, only)

@@ -31,7 +31,7 @@ hundred of them); ``run_case`` classifies one.
 
 Usage::
 
-    python benchmarks/fuzz_math.py --cases 10000 [--seed 0] [--limit 1.0] [--out benchmarks/results/fuzz_math.json]
+    python -m tests.fuzz.math_api --cases 10000 [--seed 0] [--limit 1.0] [--out tests/fuzz/results/fuzz_math.json]
 
 Prints a table of outcomes per family and per target, writes JSON (atomically), exits 1 on any failure.
 """
@@ -50,9 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+ROOT = Path(__file__).resolve().parents[2]
 
 from refimpl import dualquat as DQ  # noqa: E402
 from refimpl import quat as Q  # noqa: E402
@@ -400,7 +398,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=10000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--limit", type=float, default=1.0, help="seconds per case (slower = failure)")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fuzz_math.json"))
+    ap.add_argument("--out", default=str(ROOT / "tests" / "fuzz" / "results" / "fuzz_math.json"))
     args = ap.parse_args(argv)
     rng = random.Random(args.seed)
     by_family = defaultdict(Counter)

@@ -1,4 +1,4 @@
-"""Evaluation half of the acRNN representation experiment (benchmarks/exp_acrnn_table1.py ``eval``).
+"""Evaluation half of the acRNN representation experiment (experiments/acrnn_table1.py ``eval``).
 
 For every trained row in ``<out>/<row>/checkpoint.npz``: the synthesis protocol (refimpl.tasks.synthesis.evaluate,
 152 seeds on the salsa test takes 05 and 20), the long-run behaviour (:data:`LONG_FRAMES` frames from one seed:
@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
-from refimpl.metrics import root_zeroed_positions
+from refimpl.protocols import synthesis as SP
+from refimpl.protocols.synthesis import root_zeroed_positions
 from refimpl.registry import task_of
 from refimpl.services import evaluate_model, load_trained
 from refimpl.tasks import synthesis as S
@@ -58,17 +59,17 @@ def _load_row(d: Path):
 
 def _evaluate_row(d: Path):
     """Protocol of §5 and the long run of one trained row; written to ``eval_row.json`` / ``eval_clip.npz``
-    (so rows can be evaluated as they finish: ``python benchmarks/exp_acrnn_eval.py OUT ROW``)."""
+    (so rows can be evaluated as they finish: ``python -m experiments.acrnn_eval OUT ROW``)."""
     model = load_trained(d / "checkpoint.npz")
     task = task_of(model.spec)
     data = task.load_eval_data(DATA, model.extra)
     res = evaluate_model(model, data)
     # long run from one seed
     i, s = SEED
-    seed = data.test[i][s:s + S.SEED_LENGTH][None]
+    seed = data.test[i][s:s + SP.SEED_LENGTH][None]
     gen = model.spec.make_method(model)(seed, LONG_FRAMES)[0]                          # (N, F)
     pos = root_zeroed_positions(data.representation, data.skeleton, gen)                # (N, J, 3)
-    gt_pos = root_zeroed_positions(data.representation, data.skeleton, data.test[i][s + S.SEED_LENGTH:])
+    gt_pos = root_zeroed_positions(data.representation, data.skeleton, data.test[i][s + SP.SEED_LENGTH:])
     sp, gsp = _speed(pos), _speed(gt_pos)
     hip_y = gen[:, 1]
     longrun = {"windows": {f"{a}-{b}": float(sp[a:b - 1].mean()) for a, b in WINDOWS},

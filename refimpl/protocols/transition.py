@@ -48,7 +48,7 @@ __all__ = [
 ]
 
 #: The embedded CMU sample (see its README.md): the default data of ``refimpl train``, ``eval`` and ``demo``.
-SAMPLE_DIR = Path(__file__).resolve().parent / "data" / "sample"
+SAMPLE_DIR = Path(__file__).resolve().parent.parent / "data" / "sample"
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -6,7 +6,7 @@ For each file: the default reading (``translations="auto"``: re-rooted and folde
 
 Usage::
 
-    python benchmarks/bvh_fk_check.py [--data ../shared/data] [--out benchmarks/results/bvh_fk_check.json]
+    python -m experiments.bvh_fk_check [--data ../shared/data] [--out experiments/results/bvh_fk_check.json]
 """
 from __future__ import annotations
 
@@ -18,14 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-for p in (ROOT, ROOT / "tests"):
-    if str(p) not in sys.path:
-        sys.path.insert(0, str(p))
+from refimpl.atomic import atomic_write_text
+from refimpl.bvh import read_bvh
+from tests import bvh_oracle
 
-import bvh_oracle  # noqa: E402
-from refimpl.atomic import atomic_write_text  # noqa: E402
-from refimpl.bvh import read_bvh  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def check(path: Path) -> dict:
@@ -44,7 +41,7 @@ def check(path: Path) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bvh_fk_check.json"))
+    ap.add_argument("--out", default=str(ROOT / "experiments" / "results" / "bvh_fk_check.json"))
     args = ap.parse_args(argv)
     files = sorted(Path(args.data).glob("*/*.bvh"))
     if not files:

@@ -34,7 +34,7 @@ Families (one drawn per case):
 
 Usage::
 
-    python benchmarks/fuzz_deploy.py --cases 5000 [--seed 0] [--limit 2.0] [--out benchmarks/results/fuzz_deploy.json]
+    python -m tests.fuzz.deploy_runtime --cases 5000 [--seed 0] [--limit 2.0] [--out tests/fuzz/results/fuzz_deploy.json]
 
 Prints a table of outcomes per family, writes JSON (atomically, ``refimpl.atomic``), exits 1 on any failure.
 """
@@ -52,9 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+ROOT = Path(__file__).resolve().parents[2]
 
 import onnx  # noqa: E402
 from onnx import TensorProto, helper, numpy_helper  # noqa: E402
@@ -430,7 +428,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=5000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--limit", type=float, default=2.0, help="seconds per case (slower = failure)")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fuzz_deploy.json"))
+    ap.add_argument("--out", default=str(ROOT / "tests" / "fuzz" / "results" / "fuzz_deploy.json"))
     args = ap.parse_args(argv)
     rng = random.Random(args.seed)
     fixture()

@@ -17,7 +17,7 @@ writes (``--json``):
 
 Usage::
 
-    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python benchmarks/exp_quaternet_long_dq.py \\
+    OPENBLAS_NUM_THREADS=1 python -m experiments.quaternet_long_dq \\
         --quat Q/checkpoint.npz --dq D/checkpoint.npz --pace P/checkpoint.npz --json R.json --png W.png
 """
 from __future__ import annotations
@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from refimpl.protocols import locomotion as LP
+from refimpl.protocols import locomotion_data as LD
 from refimpl.recipes import quaternet_long as recipe
 from refimpl.recipes import quaternet_long_dq as dqr
 from refimpl.services import load_trained
@@ -38,7 +40,7 @@ from refimpl.tasks import locomotion_generate as G
 from refimpl.tasks.locomotion_cli import walk_from_checkpoints
 
 DATA = str(Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "bandai_namco_locomotion")
-CM = L.QUATERNET_UNIT_CM
+CM = LD.QUATERNET_UNIT_CM
 HORIZONS = (1, 10, 30, 60)
 
 
@@ -55,12 +57,12 @@ def _errors(res):
 
 def held_out(quat, dq, data_dir: str, max_files: int = 0) -> dict:
     data = L.load_eval_data(data_dir, quat.extra, max_files=max_files)
-    res = L.evaluate(data, L.methods({"quaternion": recipe.make_method(quat), "dual_quaternion_fk": recipe.make_method(dq),
+    res = LP.evaluate(data, L.methods({"quaternion": recipe.make_method(quat), "dual_quaternion_fk": recipe.make_method(dq),
                                       "dual_quaternion_dq_positions": recipe.extra_methods(dq)[
                                           "quaternet-long_dq_positions"]}))
     out = {k: _errors(v) for k, v in res.items()}
     # the DQ model's two readings on the same windows
-    inputs, _, _ = L.evaluation_windows(data)
+    inputs, _, _ = LP.evaluation_windows(data)
     sk = L.skeleton_of(dq.extra)
     gaps, drifts = [], []
     for i in range(0, len(inputs), 64):
@@ -82,8 +84,8 @@ def held_out(quat, dq, data_dir: str, max_files: int = 0) -> dict:
 def _block_speeds(pos, seconds=10):
     """Mean joint speed (cm/s) of the root-relative pose per block of ``seconds``."""
     rel = pos - pos[:, :1]
-    v = np.linalg.norm(np.diff(rel, axis=0), axis=-1).mean(-1) * L.FPS * CM
-    n = int(seconds * L.FPS)
+    v = np.linalg.norm(np.diff(rel, axis=0), axis=-1).mean(-1) * LD.FPS * CM
+    n = int(seconds * LD.FPS)
     return [round(float(v[i:i + n].mean()), 2) for i in range(0, len(v) - n + 1, n)]
 
 
@@ -94,11 +96,11 @@ def walk_stats(model, pace, seconds: float, path: str = "circle:r=3"):
     rig = L.rig_of(model.extra)
     feet = [m.skeleton.index(rig.left_foot), m.skeleton.index(rig.right_foot)]
     pos = m.positions()
-    n20 = int(20 * L.FPS)
+    n20 = int(20 * LD.FPS)
     face = G.facing_of(walk, rig)
     ang = np.degrees(np.arccos(np.clip(np.sum(face * walk.controls[:, 4:6], -1), -1, 1)))
     radius = np.hypot(m.root_positions[:, 0], m.root_positions[:, 2]) * CM
-    out = {"frames": int(m.num_frames), "seconds": float(m.num_frames / L.FPS), "wall_s": round(time.time() - t0, 1),
+    out = {"frames": int(m.num_frames), "seconds": float(m.num_frames / LD.FPS), "wall_s": round(time.time() - t0, 1),
            "root_radius_cm": [float(radius.min()), float(radius.max())],
            "root_height_cm": [float(m.root_positions[:, 1].min() * CM), float(m.root_positions[:, 1].max() * CM)],
            "facing_deg": {"median": float(np.median(ang)), "p90": float(np.percentile(ang, 90))},
@@ -154,8 +156,8 @@ def side_by_side(walks, titles, png=None, gif=None):
             # one GIF, the first 20 s: the two poses side by side, root x/z removed (the paths are in the PNG)
             a, b = (w.motion.positions() * CM for w in walks)
             a, b = (p - p[:, :1] * np.array([1.0, 0.0, 1.0]) for p in (a, b))
-            n = min(len(a), len(b), int(20 * L.FPS))
-            render_gif(gif, a[:n], walks[0].motion.skeleton.parents, prediction=b[:n], fps=L.FPS, stride=2,
+            n = min(len(a), len(b), int(20 * LD.FPS))
+            render_gif(gif, a[:n], walks[0].motion.skeleton.parents, prediction=b[:n], fps=LD.FPS, stride=2,
                        up="y", labels=tuple(titles), title="same circle, same pace network")
 
 

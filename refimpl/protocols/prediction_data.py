@@ -1,0 +1,311 @@
+"""Short-term motion prediction, the data (spec/prediction.md): Human3.6M and CMU exp-map files as rotation
+sequences at the protocol's rate, their skeletons, and the training windows.
+
+QuaterNet journal paper §4.1; the loading replicates the published code (quaternet_reference_code.md §6).
+
+* Human3.6M exp-map text files ``S{n}/{action}_{subaction}.txt`` (99 values per row, 50 Hz; :func:`load_h36m`)
+  and the CMU exp-map layout ``{train,test}/{action}/{action}_{k}.txt`` (117 values per row; :func:`load_cmu`),
+  read by :func:`refimpl.expmap.read_expmap` (``q = quat_from_axis_angle(−r)``, ``quat_fix``, H3.6M triplet 0
+  discarded), decimated keeping every stride phase for training (``_d0``, ``_d1``) and phase 0 for testing.
+* Training batches: one random window per training sequence (:func:`training_windows`).
+
+The protocol, error and baselines are in :mod:`refimpl.protocols.prediction`.
+
+Shape legend: B batch, T frames, J joints.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from refimpl.expmap import read_expmap
+from refimpl.preprocess import downsample, fix_antipodal
+from refimpl.skeleton import Skeleton
+from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
+
+__all__ = [
+    "H36M_ACTIONS", "H36M_TRAIN_SUBJECTS", "H36M_TEST_SUBJECT", "H36M_VALID_SUBJECT", "SUBJECT_DIR",
+    "PredictionSequence", "PredictionData", "load_h36m", "load_cmu", "skeleton_of", "training_windows",
+    "usable_training", "stride_of",
+]
+
+# The published evaluation's action order (quaternet_reference_code.md §6.6).
+H36M_ACTIONS = ("walking", "eating", "smoking", "discussion", "directions", "greeting", "phoning", "posing",
+                "purchases", "sitting", "sittingdown", "takingphoto", "waiting", "walkingdog", "walkingtogether")
+H36M_TRAIN_SUBJECTS = ("S1", "S6", "S7", "S8", "S9", "S11")
+H36M_TEST_SUBJECT = "S5"
+H36M_VALID_SUBJECT = "S6"
+
+_H36M_FILE = re.compile(r"^([a-z]+)_([0-9]+)\.txt$")
+#: A Human3.6M subject folder name (``S1`` ... ``S11``).
+SUBJECT_DIR = re.compile(r"^S[0-9]+$")
+
+
+# ------------------------------------------------------------------------------------------------------------
+# data
+# ------------------------------------------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PredictionSequence:
+    """One decimated sequence of local joint rotations.
+
+    Attributes
+    ----------
+    rotations : ndarray, (T, J, 4), read-only
+        Unit quaternions ``(w, x, y, z)``, antipodally continuous over time (``quat_fix`` after decimation).
+    action : str
+    subaction : int
+        H3.6M sub-sequence (1 or 2); the ``k`` of a CMU file ``{action}_{k}.txt``.
+    subject : str
+        ``"S1"`` … for H3.6M, ``"cmu"`` for the CMU files.
+    phase : int
+        Decimation phase: frames ``phase, phase + stride, …`` of the file (QuaterNet's ``_d0`` / ``_d1``).
+    path : str
+        The source file.
+    frame_time : float
+        Seconds per frame after decimation.
+    """
+
+    rotations: np.ndarray
+    action: str
+    subaction: int
+    subject: str
+    phase: int
+    path: str
+    frame_time: float
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.rotations.shape[0])
+
+    @property
+    def key(self) -> str:
+        """``"{subject}/{action}_{subaction}_d{phase}"``, the published code's naming."""
+        return f"{self.subject}/{self.action}_{self.subaction}_d{self.phase}"
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PredictionData:
+    """Train / validation / test sequences of one dataset.
+
+    Attributes
+    ----------
+    dataset : {"h36m", "cmu"}
+    skeleton : Skeleton
+        32 joints (H3.6M) or the 38-joint CMU ASF skeleton; the rotations' joint axis follows it.
+    frame_time : float
+        Seconds per frame after decimation (H3.6M 1/25; CMU 1/60 for a 120 fps trial).
+    train, valid : tuple of PredictionSequence
+        Every decimation phase.
+    test : tuple of PredictionSequence
+        Phase 0 only (``_d0``), sorted by action order then sub-sequence.
+    """
+
+    dataset: str
+    skeleton: Skeleton
+    frame_time: float
+    train: tuple
+    valid: tuple
+    test: tuple
+
+    def test_actions(self) -> tuple:
+        """Actions present in the test set, in the published order (H3.6M) or sorted (CMU)."""
+        present = {s.action for s in self.test}
+        order = H36M_ACTIONS if self.dataset == "h36m" else tuple(sorted(present))
+        return tuple(a for a in order if a in present)
+
+
+def _decimate(motion, stride: int, phases, meta: dict) -> list:
+    out = []
+    for phase in phases:
+        m = fix_antipodal(downsample(motion, stride, phase))
+        out.append(PredictionSequence(rotations=m.rotations, phase=phase, frame_time=m.frame_time, **meta))
+    return out
+
+
+def _check_stride(stride) -> int:
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
+        raise ValueError(f"stride: expected a positive int, got {stride!r}")
+    return int(stride)
+
+
+def load_h36m(root, *, validation: bool = False, actions: Sequence[str] | None = None,
+              stride: int = 2) -> PredictionData:
+    """Read a Human3.6M exp-map directory (the Jain et al. / Martinez et al. release, e.g. ``h3.6m/dataset``).
+
+    Layout ``root/S{n}/{action}_{subaction}.txt``, 99 values per row at 50 Hz (:func:`read_expmap`,
+    ``layout="h36m"``: triplet 0, the "corrupted" translation, is discarded and the root position is zero;
+    ``q = quat_from_axis_angle(−r)``; ``quat_fix``). Each file is decimated by ``stride`` (50 → 25 Hz) keeping
+    every phase for training (QuaterNet's ``_d0``, ``_d1``: 15 actions × 2 × 6 subjects × 2 = 360 sequences)
+    and phase 0 for the test subject S5. Splits: train S1, S6, S7, S8, S9, S11; with ``validation=True`` S6
+    moves to ``valid``. Subjects missing from the directory are simply absent; other ``S{n}`` folders are
+    ignored.
+
+    Parameters
+    ----------
+    root : path-like
+    validation : bool
+    actions : sequence of str, optional
+        Subset of :data:`H36M_ACTIONS` to load (default: every action found).
+    stride : int
+        Decimation factor (2).
+
+    Raises
+    ------
+    ValueError
+        No ``S{n}`` folder; a ``.txt`` file whose name is not ``{action}_{1|2}.txt`` with a known action
+        (message names the file); a malformed file (from :func:`read_expmap`, naming file and line); an action
+        of S5 with only one of its two sub-sequences (names the missing file).
+    """
+    stride = _check_stride(stride)
+    base = Path(root)
+    if not base.is_dir():
+        raise ValueError(f"root: {os.fspath(root)!r} is not a directory (expected S{{n}}/{{action}}_{{k}}.txt)")
+    if actions is not None:
+        actions = tuple(actions)
+        bad = [a for a in actions if a not in H36M_ACTIONS]
+        if bad:
+            raise ValueError(f"actions: unknown {bad}; expected names from {list(H36M_ACTIONS)}")
+    subjects = sorted((p for p in base.iterdir() if p.is_dir() and SUBJECT_DIR.match(p.name)),
+                      key=lambda p: int(p.name[1:]))
+    if not subjects:
+        raise ValueError(f"{base}: no subject folders S1 … S11 (expected the layout S{{n}}/{{action}}_{{k}}.txt, "
+                         f"e.g. the 'dataset' folder of h3.6m.zip)")
+    split_of = {s: "train" for s in H36M_TRAIN_SUBJECTS}
+    split_of[H36M_TEST_SUBJECT] = "test"
+    if validation:
+        split_of[H36M_VALID_SUBJECT] = "valid"
+    splits = {"train": [], "valid": [], "test": []}
+    order = {a: i for i, a in enumerate(H36M_ACTIONS)}
+    for sdir in subjects:
+        name = sdir.name
+        if name not in split_of:
+            continue
+        found = {}
+        for f in sorted(sdir.iterdir()):
+            if f.suffix != ".txt" or f.name.startswith("."):
+                continue
+            m = _H36M_FILE.match(f.name)
+            if m is None or m.group(1) not in H36M_ACTIONS or m.group(2) not in ("1", "2"):
+                raise ValueError(f"{f}: expected a file named {{action}}_{{1|2}}.txt with an action from "
+                                 f"{list(H36M_ACTIONS)}")
+            if actions is None or m.group(1) in actions:
+                found[(m.group(1), int(m.group(2)))] = f
+        if name == H36M_TEST_SUBJECT:
+            for action, sub in list(found):
+                if (action, 3 - sub) not in found:
+                    raise ValueError(f"{sdir / f'{action}_{3 - sub}.txt'}: missing (the test protocol draws from "
+                                     f"both sub-sequences of {action!r})")
+        split = split_of[name]
+        for (action, sub), f in sorted(found.items(), key=lambda kv: (order[kv[0][0]], kv[0][1])):
+            motion = read_expmap(f, layout="h36m")
+            meta = dict(action=action, subaction=sub, subject=name, path=os.fspath(f))
+            splits[split] += _decimate(motion, stride, (0,) if split == "test" else range(stride), meta)
+    return PredictionData(dataset="h36m", skeleton=h36m_skeleton(), frame_time=stride / 50.0,
+                          train=tuple(splits["train"]), valid=tuple(splits["valid"]), test=tuple(splits["test"]))
+
+
+def load_cmu(root, *, stride: int = 2, drop_reference_frame: bool = True, frame_time: float = 1.0 / 120.0
+             ) -> PredictionData:
+    """Read the CMU exp-map layout (Li et al. 2018 / DMGNN): ``root/{train,test}/{action}/{action}_{k}.txt``.
+
+    117 values per row (:func:`read_expmap`, ``layout="cmu"``, 38-joint :func:`cmu_asf_skeleton`); the root
+    position is set to zero, as for H3.6M (the task predicts rotations only). The first row of every file is
+    the reference pose the BVH conversion added (not motion) and is dropped by default. Files are decimated by
+    ``stride`` (2, as DMGNN's loader: 120 → 60 fps), every phase for training, phase 0 for testing. There is no
+    validation split.
+
+    Parameters
+    ----------
+    root : path-like
+        E.g. ``refimpl/data/sample/expmap`` or ``../shared/data/dmgnn_cmu_expmap``.
+    stride : int
+    drop_reference_frame : bool
+    frame_time : float
+        Seconds per frame of the files (1/120: verified for ``walking_1`` = CMU 02_01; the other trials are
+        undocumented).
+
+    Raises
+    ------
+    ValueError
+        No ``train`` and no ``test`` folder; a ``.txt`` file not named ``{action}_{k}.txt`` after its folder
+        (names the file); malformed rows (from :func:`read_expmap`).
+    """
+    stride = _check_stride(stride)
+    base = Path(root)
+    if not base.is_dir():
+        raise ValueError(f"root: {os.fspath(root)!r} is not a directory (expected {{train,test}}/{{action}}/…)")
+    if not (base / "train").is_dir() and not (base / "test").is_dir():
+        raise ValueError(f"{base}: no 'train' or 'test' folder "
+                         f"(expected {{train,test}}/{{action}}/{{action}}_{{k}}.txt)")
+    splits = {}
+    for split in ("train", "test"):
+        sdir = base / split
+        seqs = []
+        if sdir.is_dir():
+            for adir in sorted(p for p in sdir.iterdir() if p.is_dir()):
+                pattern = re.compile(rf"^{re.escape(adir.name)}_([0-9]+)\.txt$")
+                for f in sorted(adir.iterdir(), key=lambda p: p.name):
+                    if f.suffix != ".txt" or f.name.startswith("."):
+                        continue
+                    m = pattern.match(f.name)
+                    if m is None:
+                        raise ValueError(f"{f}: expected a file named {adir.name}_{{k}}.txt in folder {adir.name}")
+                    motion = read_expmap(f, layout="cmu", frame_time=frame_time, use_root_position=False)
+                    if drop_reference_frame:
+                        if motion.num_frames < 2:
+                            raise ValueError(f"{f}: expected at least 2 rows (reference pose + motion), "
+                                             f"got {motion.num_frames}")
+                        motion = dataclasses.replace(motion, rotations=motion.rotations[1:],
+                                                     root_positions=motion.root_positions[1:])
+                    meta = dict(action=adir.name, subaction=int(m.group(1)), subject="cmu", path=os.fspath(f))
+                    seqs += _decimate(motion, stride, (0,) if split == "test" else range(stride), meta)
+        splits[split] = tuple(sorted(seqs, key=lambda s: (s.action, s.subaction, s.phase)))
+    return PredictionData(dataset="cmu", skeleton=cmu_asf_skeleton(), frame_time=frame_time * stride,
+                          train=splits["train"], valid=(), test=splits["test"])
+
+
+def skeleton_of(dataset: str) -> Skeleton:
+    """The skeleton of a dataset name (``h36m``: 32 joints; ``cmu``: the 38-joint ASF skeleton)."""
+    if dataset == "h36m":
+        return h36m_skeleton()
+    if dataset == "cmu":
+        return cmu_asf_skeleton()
+    raise ValueError(f"dataset: expected 'h36m' or 'cmu', got {dataset!r}")
+
+
+def training_windows(data: PredictionData, indices, rng: np.random.Generator, length: int) -> np.ndarray:
+    """One random window of ``length`` frames from each training sequence ``indices`` (the published short-term
+    batch: start uniform in ``[0, T_s − length]``, reference §6.3). ``(B,) -> (B, length, J, 4)`` float64."""
+    out = []
+    for i in np.asarray(indices):
+        rot = data.train[int(i)].rotations
+        start = int(rng.integers(0, rot.shape[0] - length + 1))
+        out.append(rot[start:start + length])
+    return np.stack(out)
+
+
+def usable_training(data: PredictionData, length: int) -> PredictionData:
+    """``data`` keeping the training sequences of at least ``length`` frames.
+
+    Raises
+    ------
+    ValueError
+        None is long enough.
+    """
+    keep = tuple(s for s in data.train if s.num_frames >= length)
+    if not keep:
+        raise ValueError(f"no training sequence has the {length} frames of a window (longest "
+                         f"{max((s.num_frames for s in data.train), default=0)})")
+    return dataclasses.replace(data, train=keep)
+
+
+def stride_of(dataset: str, frame_time: float) -> int:
+    """Decimation stride of a trained model: its frame time over the files' (CMU 1/120 s, H3.6M 1/50 s)."""
+    base = {"cmu": 1.0 / 120.0, "h36m": 1.0 / 50.0}[dataset]
+    return max(1, int(round(frame_time / base)))
