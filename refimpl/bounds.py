@@ -74,44 +74,38 @@ BOUNDS: dict[str, Bound] = {
 }
 
 
+def _fmt(v) -> str:
+    return str(v) if isinstance(v, int) else f"{v:g}"
+
+
 def _in(bound: Bound, v) -> bool:
     return bound.lo <= v <= bound.hi
 
 
+def _bounded(name: str, convert, expected: str, finite: bool):
+    bound = BOUNDS[name]
+    span = f"[{_fmt(bound.lo)}, {_fmt(bound.hi)}]"
+
+    def parse(text: str):
+        try:
+            v = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {expected} in {span}, got {text!r}") from None
+        if (finite and not math.isfinite(v)) or not _in(bound, v):
+            raise argparse.ArgumentTypeError(f"expected {expected} in {span} ({bound.what}), got {text!r}")
+        return v
+    parse.__name__ = f"{name} ({expected} in {span})"
+    return parse
+
+
 def bounded_int(name: str):
     """An argparse ``type``: an integer within ``BOUNDS[name]`` (else ``ArgumentTypeError``, exit 2)."""
-    bound = BOUNDS[name]
-
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer in [{bound.lo}, {bound.hi}], got {text!r}") \
-                from None
-        if not _in(bound, v):
-            raise argparse.ArgumentTypeError(f"expected an integer in [{bound.lo}, {bound.hi}] ({bound.what}), "
-                                             f"got {text!r}")
-        return v
-    parse.__name__ = f"{name} (integer in [{bound.lo}, {bound.hi}])"
-    return parse
+    return _bounded(name, int, "an integer", finite=False)
 
 
 def bounded_float(name: str):
     """An argparse ``type``: a finite number within ``BOUNDS[name]`` (else ``ArgumentTypeError``, exit 2)."""
-    bound = BOUNDS[name]
-
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number in [{bound.lo:g}, {bound.hi:g}], got {text!r}") \
-                from None
-        if not (math.isfinite(v) and _in(bound, v)):
-            raise argparse.ArgumentTypeError(f"expected a number in [{bound.lo:g}, {bound.hi:g}] ({bound.what}), "
-                                             f"got {text!r}")
-        return v
-    parse.__name__ = f"{name} (number in [{bound.lo:g}, {bound.hi:g}])"
-    return parse
+    return _bounded(name, float, "a number", finite=True)
 
 
 def check_number(value, name: str, bound: str) -> float:

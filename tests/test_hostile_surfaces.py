@@ -4,21 +4,15 @@
 from __future__ import annotations
 
 import copy
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-import fuzz_campaign as fc  # noqa: E402
-import fuzz_surfaces as fs  # noqa: E402
-
-from refimpl.checkpoint import load_checkpoint  # noqa: E402
-from refimpl.errors import BadInputError  # noqa: E402
-from refimpl.services import load_trained  # noqa: E402
+from refimpl.checkpoint import load_checkpoint
+from refimpl.errors import BadInputError
+from refimpl.services import load_trained
+from tests.fuzz import campaign as fc
+from tests.fuzz import surfaces as fs
 
 pytest.importorskip("onnxruntime")
 

@@ -1,6 +1,6 @@
 """Hostile inputs on the surfaces QuaterNet, locomotion and acRNN added (issue #28, spec/robustness.md §11.1).
 
-Families (each case seeded from ``random.Random``, classified by ``fuzz_campaign._classify``: bounded time per
+Families (each case seeded from ``random.Random``, classified by ``tests.fuzz.campaign._classify``: bounded time per
 case, only the allowed exceptions):
 
 =================  ==========================================================================================
@@ -32,14 +32,13 @@ case, only the allowed exceptions):
 
 Usage::
 
-    python benchmarks/fuzz_surfaces.py [--scale 1.0] [--seed 0] [--only wrapper-args,task-ckpt]
+    python -m tests.fuzz.surfaces [--scale 1.0] [--seed 0] [--only wrapper-args,task-ckpt]
 
-``--scale 1`` runs 5,200 cases. Prints the table, writes ``benchmarks/results/fuzz_surfaces.json`` (atomic) and
-exits 1 on any failure. ``tests/test_fuzz_surfaces.py`` runs a small share and the regression cases of #28.
+``--scale 1`` runs 5,200 cases. Prints the table, writes ``tests/fuzz/results/fuzz_surfaces.json`` (atomic) and
+exits 1 on any failure. ``tests/test_hostile_surfaces.py`` runs a small share and the regression cases of #28.
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import copy
 import dataclasses
@@ -54,14 +53,10 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-for p in (str(ROOT), str(ROOT / "benchmarks")):
-    if p not in sys.path:
-        sys.path.insert(0, p)
+ROOT = Path(__file__).resolve().parents[2]
 
-import fuzz_campaign as fc  # noqa: E402
+from tests.fuzz import campaign as fc  # noqa: E402
 
-from refimpl.atomic import atomic_write_text  # noqa: E402
 
 SAMPLE = ROOT / "refimpl" / "data" / "sample"
 WALK_TXT = SAMPLE / "expmap" / "test" / "walking" / "walking_1.txt"
@@ -518,22 +513,30 @@ def _option_case(rng, seeds, tmp):
     return argv, f"{kind} {' '.join(map(str, argv[-2:]))[-60:]}", (0, 2)
 
 
-def fam_cli_options(stats, n, seed, seeds, tmp, log):
+def _cli_family(stats, name: str, n: int, seed: int, make_case, log) -> None:
+    """``n`` command-line cases ``make_case(rng) -> (argv, description, allowed exit codes, names)`` run in-process
+    under a 60 s limit and checked by :func:`_check_cli`."""
     rng = random.Random(seed)
     for i in range(n):
-        argv, what, codes = _option_case(rng, seeds, tmp)
-        shutil.rmtree(tmp / "opt_out", ignore_errors=True)
-        (tmp / "opt_out").mkdir()
+        argv, what, codes, names = make_case(rng)
 
         def case():
             code, err = _main(argv)
-            return _check_cli(code, err, argv[0], codes)
+            return _check_cli(code, err, argv[0], codes, names)
         kind, failure, detail, sec, peak = fc._classify(case, (), 60.0, check_memory=False)
         if failure == "AcceptedMalformed":
             failure = "CliContract"
-        stats.add("cli-options", kind, failure, detail, sec, peak, what)
+        stats.add(name, kind, failure, detail, sec, peak, what)
         if log and (i + 1) % 100 == 0:
-            log(f"  cli-options {i + 1}/{n}")
+            log(f"  {name} {i + 1}/{n}")
+
+
+def fam_cli_options(stats, n, seed, seeds, tmp, log):
+    def make(rng):
+        shutil.rmtree(tmp / "opt_out", ignore_errors=True)
+        (tmp / "opt_out").mkdir()
+        return (*_option_case(rng, seeds, tmp), None)
+    _cli_family(stats, "cli-options", n, seed, make, log)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -546,33 +549,13 @@ CSV_GOOD = "x,z\n0,0\n1,0\n2,0.5\n3,1.5\n3.5,3\n"
 def _csv_case(rng, path: Path) -> str:
     kind = rng.choice(["nan", "missing", "semicolon", "utf16", "one-column", "huge", "junk", "empty", "header",
                        "inf", "text", "dup", "good", "nul", "1e400"])
-    text = CSV_GOOD
-    if kind == "nan":
-        text = CSV_GOOD.replace("2,0.5", "2,nan")
-    elif kind == "missing":
-        text = CSV_GOOD.replace("2,0.5", "2,")
-    elif kind == "semicolon":
-        text = CSV_GOOD.replace(",", ";")
-    elif kind == "one-column":
-        text = "\n".join(ln.split(",")[0] for ln in CSV_GOOD.splitlines())
-    elif kind == "huge":
-        text = CSV_GOOD.replace("3.5,3", rng.choice(["1e30,3", "3.5,1e300", "1e6,1e6", "-1e12,0"]))
-    elif kind == "junk":
-        text = "".join(chr(rng.randrange(1, 256)) for _ in range(200))
-    elif kind == "empty":
-        text = ""
-    elif kind == "header":
-        text = "x,z\n"
-    elif kind == "inf":
-        text = CSV_GOOD.replace("1,0", "inf,0")
-    elif kind == "text":
-        text = CSV_GOOD.replace("1,0", "one,zero")
-    elif kind == "dup":
-        text = CSV_GOOD.replace("1,0\n", "1,0\n1,0\n")
-    elif kind == "nul":
-        text = CSV_GOOD.replace("1,0", "1\x00,0")
-    elif kind == "1e400":
-        text = CSV_GOOD.replace("1,0", "1e400,0")
+    edits = {"nan": ("2,0.5", "2,nan"), "missing": ("2,0.5", "2,"), "semicolon": (",", ";"),
+             "huge": ("3.5,3", rng.choice(["1e30,3", "3.5,1e300", "1e6,1e6", "-1e12,0"])), "inf": ("1,0", "inf,0"),
+             "text": ("1,0", "one,zero"), "dup": ("1,0\n", "1,0\n1,0\n"), "nul": ("1,0", "1\x00,0"),
+             "1e400": ("1,0", "1e400,0")}
+    whole = {"one-column": "\n".join(ln.split(",")[0] for ln in CSV_GOOD.splitlines()), "empty": "", "header": "x,z\n",
+             "junk": "".join(chr(rng.randrange(1, 256)) for _ in range(200))}
+    text = CSV_GOOD.replace(*edits[kind]) if kind in edits else whole.get(kind, CSV_GOOD)
     if kind == "utf16":
         path.write_bytes(CSV_GOOD.encode("utf-16"))
     else:
@@ -585,18 +568,13 @@ def _damaged_onnx_dir(src: Path, dst: Path, rng) -> str:
     shutil.copytree(src, dst)
     f = rng.choice(sorted(dst.glob("*.onnx")))
     data = f.read_bytes()
-    kind = rng.choice(["truncate", "bitflip", "junk", "empty"])
-    if kind == "truncate":
-        f.write_bytes(data[:rng.randrange(1, len(data))])
-    elif kind == "bitflip":
-        b = bytearray(data)
-        for _ in range(rng.randint(1, 8)):
-            b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
-        f.write_bytes(bytes(b))
-    elif kind == "junk":
-        f.write_bytes(bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 500))))
-    else:
-        f.write_bytes(b"")
+    flipped = np.frombuffer(data, np.uint8).copy()
+    for _ in range(rng.randint(1, 8)):
+        flipped[rng.randrange(flipped.size)] ^= np.uint8(1 << rng.randrange(8))
+    damage = {"truncate": lambda: data[:rng.randrange(1, len(data))], "bitflip": flipped.tobytes,
+              "junk": lambda: bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 500))), "empty": lambda: b""}
+    kind = rng.choice(sorted(damage))
+    f.write_bytes(damage[kind]())
     return f"{kind} {f.name}"
 
 
@@ -673,19 +651,7 @@ def _file_case(rng, seeds, tmp):
 
 
 def fam_cli_files(stats, n, seed, seeds, tmp, log):
-    rng = random.Random(seed)
-    for i in range(n):
-        argv, what, codes, names = _file_case(rng, seeds, tmp)
-
-        def case():
-            code, err = _main(argv)
-            return _check_cli(code, err, argv[0], codes, names)
-        kind, failure, detail, sec, peak = fc._classify(case, (), 60.0, check_memory=False)
-        if failure == "AcceptedMalformed":
-            failure = "CliContract"
-        stats.add("cli-files", kind, failure, detail, sec, peak, what)
-        if log and (i + 1) % 100 == 0:
-            log(f"  cli-files {i + 1}/{n}")
+    _cli_family(stats, "cli-files", n, seed, lambda rng: _file_case(rng, seeds, tmp), log)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -757,26 +723,11 @@ def campaign(scale: float = 1.0, seed: int = 0, only: set | None = None, log=pri
             runners[fam](n)
             if fam in stats.families:
                 stats.families[fam]["seconds"] = round(time.perf_counter() - t0, 1)
-    total = sum(s["cases"] for s in stats.families.values())
-    failures = sum(sum(s["failures"].values()) for s in stats.families.values())
-    return {"seed": seed, "scale": scale, "cases": total, "failures": failures,
-            "seconds": round(time.perf_counter() - t_all, 1), "families": stats.families,
-            "examples": stats.examples, "requested": counts}
+    return fc.summary(stats, seed, scale, counts, t_all)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scale", type=float, default=1.0, help="multiplies every family's number of cases")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--only", default="", help=f"comma-separated families ({','.join(FAMILIES)})")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fuzz_surfaces.json"))
-    args = ap.parse_args(argv)
-    only = {s.strip() for s in args.only.split(",") if s.strip()} or None
-    res = campaign(args.scale, args.seed, only)
-    fc.print_table(res)
-    atomic_write_text(Path(args.out), json.dumps(res, indent=1, sort_keys=True, default=str), make_parents=True)
-    print(f"wrote {args.out}")
-    return 1 if res["failures"] else 0
+    return fc.run_main(argv, __doc__, FAMILIES, campaign, "fuzz_surfaces.json")
 
 
 if __name__ == "__main__":
