@@ -447,7 +447,10 @@ def _generate_prediction(args, model) -> int:
         if isinstance(P, bool) or not isinstance(P, int) or not 1 <= P <= 100_000:
             raise BadInputError(f"{args.onnx}: metadata prefix_length: expected an integer in [1, 100000], "
                                 f"got {P!r}"[:300])
-        dataset, frame_time, name = meta.get("dataset"), 1.0 / fps, f"{meta['model']['name']}_onnx"
+        model_name = (meta.get("model") or {}).get("name")
+        if not isinstance(model_name, str):
+            raise BadInputError(f"{args.onnx}: the models' metadata names no model (model.name)")
+        dataset, frame_time, name = meta.get("dataset"), 1.0 / fps, f"{model_name}_onnx"
         if dataset not in ("cmu", "h36m"):
             raise BadInputError(f"{args.onnx}: the models' metadata names no prediction dataset")
     else:

@@ -124,25 +124,38 @@ def test_every_seed_checkpoint_passes_its_task_schema(seeds):
 # unbounded sizes: exit 2 when the options are parsed
 # ---------------------------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("argv", [
-    ["generate", "--model", "quaternet-long", "--seconds", "1e20"],
-    ["generate", "--length", "10000000"],
-    ["eval", "--model", "quaternet", "--samples-per-sequence", "999999999999"],
-    ["export", "--checkpoint", "x.npz", "--transition-length", "100000"],
-    ["train", "--model", "quaternet", "--downsample", "99999999999"],
-    ["train", "--model", "quaternet-long", "--locomotion-prefix", "-5"],
-    ["train", "--model", "pace", "--pace-chunk-length", "10000000000"],
-    ["train", "--model", "acrnn", "--window-length", "100000000"],
-    ["train", "--betas", "1.5", "0.9"],
-    ["train", "--betas", "0.9", "1"],
-    ["generate", "--context", "99999999"],
-    ["--blas-threads", "99999999", "info", "x.bvh"],
-])
-def test_sizes_beyond_the_bounds_are_usage_errors_at_parse_time(argv, capsys):
-    from refimpl.cli import main
+SIZE_CASES = {  # each otherwise valid: only the size is wrong (at 36aec31: hang, memory, or exit 1)
+    "seconds": lambda s, o: ["generate", "--model", "quaternet-long", "--checkpoint", s["quaternet-long"], "--pace",
+                             s["pace"], "--out", o / "w.bvh", "--seconds", "1e20"],
+    "length-quaternet": lambda s, o: ["generate", "--checkpoint", s["quaternet"], "--source", fs.WALK_TXT,
+                                      "--source-frame", "20", "--out", o / "p.bvh", "--length", "10000000"],
+    "length-acrnn": lambda s, o: ["generate", "--checkpoint", s["acrnn"], "--source", fs.SALSA, "--out", o / "a.bvh",
+                                  "--length", "10000000"],
+    "samples": lambda s, o: ["eval", "--checkpoint", s["quaternet"], "--samples-per-sequence", "999999999999"],
+    "export-T": lambda s, o: ["export", "--checkpoint", s["qtg"], "--out", o / "onnx", "--no-verify",
+                              "--transition-length", "100000"],
+    "downsample": lambda s, o: ["train", *fs.TINY["quaternet"], "--out", o / "r", "--steps", "1", "--downsample",
+                                "99999999999"],
+    "loco-prefix": lambda s, o: ["train", *fs.TINY["quaternet-long"], "--out", o / "r", "--steps", "1",
+                                 "--locomotion-prefix", "-5"],
+    "pace-chunk": lambda s, o: ["train", *fs.TINY["pace"], "--out", o / "r", "--steps", "1", "--pace-chunk-length",
+                                "10000000000"],
+    "betas": lambda s, o: ["train", *fs.TINY["pace"], "--out", o / "r", "--steps", "1", "--betas", "1.5", "0.9"],
+    "context": lambda s, o: ["generate", "--checkpoint", s["qtg"], "--source", fs.WALK_BVH, "--source-frame", "20",
+                             "--length", "3", "--out", o / "t.bvh", "--context", "99999999"],
+}
 
-    assert main([str(a) for a in argv]) == 2
-    _one_error_line(capsys.readouterr().err, argv[0] if not argv[0].startswith("-") else "")
+
+@pytest.mark.parametrize("case", sorted(SIZE_CASES))
+def test_sizes_beyond_the_bounds_are_usage_errors_at_parse_time(seeds, tmp_path, case):
+    """``generate --seconds 1e20`` on a closed path, ``--length 10000000`` (QuaterNet, acRNN), ``eval
+    --samples-per-sequence 999999999999``, ``export --transition-length 100000`` hung or exhausted memory; out-of-
+    range ``--betas`` was exit 1. Now exit 2 when the options are parsed, before any file is read."""
+    argv = SIZE_CASES[case](seeds, tmp_path)
+    code, err = _run(argv)
+    assert code == 2, err
+    assert "argument --" in _one_error_line(err, argv[0])
+    assert not any(tmp_path.iterdir())  # nothing written
 
 
 def test_locomotion_values_are_checked_before_any_work(seeds, tmp_path):
