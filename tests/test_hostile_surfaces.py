@@ -285,7 +285,8 @@ def test_qtg_runtime_with_a_list_as_config(seeds, tmp_path):
 
 @pytest.mark.parametrize("text, where", [
     ("x,z\n0,0\n1,nan\n2,2\n", ":3:"), ("x,z\n0,0\n1,\n2,2\n", ":3:"), ("x;z\n0;0\n1;1\n", ""),
-    ("0\n1\n2\n", ""), ("x,z\n0,0\n1e30,0\n2,2\n", "point 2"), (None, ""),
+    ("0\n1\n2\n", ""), ("x,z\n0,0\n1e30,0\n2,2\n", "point 2"), ("x,z\n0,0\n3.5,1e300\n2,2\n", "too large"),
+    (None, ""),
 ])
 def test_bad_path_csv_is_exit_3_naming_the_file(seeds, tmp_path, text, where):
     """A bad path CSV (NaN, missing, ``;``, UTF-16, one column) exited 2, huge coordinates lost the file name."""

@@ -385,7 +385,9 @@ def _check_cli(code, err, command, codes=(0, 2, 3), names=None) -> str | None:
         return f"exit {code} (expected one of {codes}): {err.strip()[-200:]}"
     if code == 2 and err.lstrip().startswith("usage:"):  # argparse: the usage text, then its one error line
         err = "\n".join(ln for ln in err.splitlines() if ln.strip() and not ln.startswith(("usage:", " ")))
-    bad = fc._check_cli(0 if code == 0 else 2, err, command)
+    if code == 0:  # success: progress lines on stderr are fine (eval, train), a traceback or warning is not
+        return "traceback or warning on stderr" if ("Traceback" in err or "Warning" in err) else None
+    bad = fc._check_cli(2, err, command)
     if bad is not None:
         return f"{bad}: {err.strip()[-200:]}"
     if code not in (0, 1) and names and not any(str(nm) in err for nm in names):
