@@ -176,9 +176,8 @@ def test_locomotion_values_are_checked_before_any_work(seeds, tmp_path):
 
 @pytest.mark.parametrize("item, field", [
     ("gru_hidden=1" + "0" * 22, "gru_hidden"), ("gru_layers=99999", "gru_layers"),
-    ("encoder_sizes=" + ",".join(["8"] * 1500), "encoder_sizes"), ("negative_slope=nan", "negative_slope"),
-    ("gru_hidden=20000", "parameters"),
-], ids=["huge-int", "layers", "1500-sizes", "nan", "parameters"])
+    ("encoder_sizes=" + ",".join(["8"] * 1500), "encoder_sizes"), ("gru_hidden=20000", "parameters"),
+], ids=["huge-int", "layers", "1500-sizes", "parameters"])
 def test_set_overrides_are_bounded(item, field, capsys, tmp_path):
     """``--set gru_hidden=10**22`` / ``gru_layers=9999...`` exhausted memory or hung; 1,500 encoder sizes
     trained a checkpoint the loader refuses (exit 0). Now exit 2 before anything is trained."""
