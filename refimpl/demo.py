@@ -35,11 +35,13 @@ from typing import Callable
 
 import numpy as np
 
-from refimpl.registry import MODELS
-from refimpl.services import (SAMPLE_DIR, blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
-                              train_model, verify_onnx)
-from refimpl.tasks.transition import make_transition, print_results, render_transition, with_end_sites, write_results
+from refimpl.protocols.transition import SAMPLE_DIR
 from refimpl.protocols.transition_join import with_join
+from refimpl.registry import MODELS
+from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods, train_model,
+                              verify_onnx)
+from refimpl.tasks.transition import print_results, write_results
+from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
 
 __all__ = ["run_demo", "DemoResult", "DEMO_CONFIG", "DEMO_STEPS", "DEMO_BATCH", "DEMO_LR", "QUICK_CONFIG",
            "QUICK_STEPS"]

@@ -5,7 +5,7 @@ Both :mod:`refimpl.cli` and :mod:`refimpl.demo` call these; they know models onl
 the task module the spec names. ``deploy`` (onnx, onnxruntime) is imported lazily, inside the functions that need
 it, and its absence is a :class:`~refimpl.errors.MissingDependency` with the install hint.
 
-Shape legend: B batch, T transition frames, P pose size.
+Shape legend: none (arrays are the tasks' and the recipes', see their modules).
 """
 from __future__ import annotations
 
@@ -18,10 +18,9 @@ import numpy as np
 
 from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
-from refimpl.protocols.transition import SAMPLE_DIR
 
-__all__ = ["SAMPLE_DIR", "blas_threads", "read_motion", "load_trained", "train_model", "network_methods",
-           "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata"]
+__all__ = ["blas_threads", "read_motion", "load_trained", "checkpoint_for", "train_model", "network_methods",
+           "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata", "onnx_frame_rate"]
 
 
 @contextlib.contextmanager
@@ -70,8 +69,8 @@ def load_trained(path) -> TrainedModel:
     Raises
     ------
     BadInputError
-        Missing or damaged file, not a training checkpoint, unknown model, missing task statistics
-        (transition: no normalisation statistics), or content that fails the checkpoint schema
+        Missing or damaged file, not a training checkpoint, unknown model, missing task fields (the task's
+        ``check_checkpoint``), or content that fails the checkpoint schema
         (:mod:`refimpl.checkpoint_schema`: a config field of the wrong type or range, ``fps`` or ``root_std``
         not > 0, a parameter missing, unexpected, mis-shaped, of another dtype or not finite); the message
         names the file and the field.
@@ -88,8 +87,24 @@ def load_trained(path) -> TrainedModel:
     task = task_of(spec)
     task.check_checkpoint(cfg, p)
     params = {k: np.asarray(v) for k, v in params.items()}
-    fields = task.trained_fields(cfg, config) if hasattr(task, "trained_fields") else {}
-    return TrainedModel(spec=spec, config=config, params=params, meta=meta, path=str(p), extra=cfg, **fields)
+    return TrainedModel(spec=spec, config=config, params=params, meta=meta, path=str(p), extra=cfg,
+                        **task.trained_fields(cfg, config))
+
+
+def checkpoint_for(task: str, model: TrainedModel | None, path) -> TrainedModel | None:
+    """``model``, else the checkpoint at ``path`` (None when there is none), checked to be a model of ``task``.
+
+    Raises
+    ------
+    UsageError
+        The checkpoint's model is registered for another task.
+    """
+    if model is None and path:
+        model = load_trained(path)
+    if model is not None and model.spec.task != task:
+        raise UsageError(f"{model.path}: a {model.spec.name} model (task {model.spec.task}), not a model of the "
+                         f"{task} task (--model and --checkpoint disagree)")
+    return model
 
 
 def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: int, batch_size: int = 32,
@@ -99,9 +114,9 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
                 progress: Callable[[str], None] | None = None):
     """Train ``spec``'s network into ``out_dir`` (``checkpoint.npz``, ``loss.csv``, ``loss_val.csv``).
 
-    ``lr`` and ``betas`` default to the recipe's paper values (``spec.optim``; QTG: 1e-4, (0.5, 0.9)). The
-    checkpoint's model config also holds what the task needs later (transition: the training windows' root
-    statistics, frame rate and T), so that ``eval``, ``export`` and ``generate`` need nothing else.
+    ``lr`` and ``betas`` default to the recipe's paper values (``spec.optim``). The checkpoint's model config also
+    holds what the task needs later (its ``checkpoint_extra``: statistics, frame rate, skeleton, ...), so that
+    ``eval``, ``export`` and ``generate`` need nothing else.
 
     Returns
     -------
@@ -143,8 +158,8 @@ def _check_writable_checkpoint(spec: ModelSpec, adapter) -> None:
 
 
 def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect: TrainedModel | None = None) -> dict:
-    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``;
-    ``<name>_onnx+join`` when the files were exported with the join option, spec/qtg.md §7.4).
+    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``,
+    in the task's method interface: its ``onnx_method``).
 
     ``onnx_dir`` must hold the exported models of ``model`` (or of ``expect``, the checkpoint the command runs
     when only the exported models are run): another model's folder is a ``BadInputError`` naming the folder."""
@@ -157,16 +172,16 @@ def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect:
         if want is not None and name != want.spec.name:  # the folder must hold this command's model
             raise BadInputError(f"{onnx_dir}: holds exported {name!r} models, not the {want.spec.name!r} model of "
                                 f"{want.path}")
-        joined = (onnx_metadata(onnx_dir).get("join") or {}).get("mode", "none") != "none"
-        methods[f"{name}_onnx" + ("+join" if joined else "")] = onnx_method(onnx_dir)
+        methods[f"{name}_onnx"] = onnx_method(onnx_dir)
     return methods
 
 
-def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition",
-                   **options) -> dict:
-    """The task's protocol on ``test_ds`` for the network (NumPy, and onnxruntime from ``onnx_dir``) and the
-    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`); ``options`` go to the task's
-    ``methods`` (transition: ``join``)."""
+def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str | None = None, **options):
+    """The task's protocol on ``test_ds`` (its ``evaluate``) for the network (NumPy, and onnxruntime from
+    ``onnx_dir``) and the task's baselines; ``task`` names the task when there is no ``model``; ``options`` go to
+    the task's ``methods``."""
+    if model is None and task is None:
+        raise ValueError("evaluate_model: pass a model or a task name")
     mod = task_of(model.spec if model is not None else task)
     return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps, **options))
 
@@ -199,7 +214,7 @@ def _open_runtime(onnx_dir, intra_op_threads: int = 1):
 
 def onnx_method(onnx_dir, intra_op_threads: int = 1) -> Callable:
     """The network of the exported models in ``onnx_dir``, run in onnxruntime, in its task's method interface
-    (transition: ``f(past, target, T) -> poses``; :func:`refimpl.tasks.transition.onnx_method`).
+    (the task's ``onnx_method``).
 
     The runtime is the one of the model named in the files' metadata (``deploy.models.runtime_for_dir``); the
     task is the one that model is registered for.
@@ -213,11 +228,10 @@ def onnx_method(onnx_dir, intra_op_threads: int = 1) -> Callable:
 
 def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     """Export ``model`` with its exporter (``deploy.models.EXPORTERS[spec.exporter]``) to validated ONNX files
-    ``<name>_<role>.onnx`` in ``out_dir`` (QTG: ``init``, ``step``, ``rollout``; standardisation inside the graphs,
-    so they take and return raw poses).
+    ``<name>_<role>.onnx`` in ``out_dir`` (the roles are the exporter's; standardisation inside the graphs).
 
     ``options``: ``mode`` (rollout graph: ``unrolled``, ``loop``, ``scan``; default ``unrolled``), ``dtype``
-    (default float32), ``T`` (default: the model's).
+    (default float32), and the task's ``export_options`` (e.g. ``T``, default: the model's).
 
     Returns
     -------
@@ -234,18 +248,16 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
 
 
 def verify_onnx(model: TrainedModel, onnx_dir, *inputs, **options) -> dict:
-    """Compare onnxruntime with the NumPy model on the recipe's inputs (``recipe.verify_onnx(model, runtime,
-    *inputs, **options)``; QTG: raw context poses ``past, target (B, 2, P)`` and ``T``,
-    :func:`refimpl.recipes.qtg.verify_onnx`).
+    """Compare onnxruntime with the NumPy model on the task's check inputs (``recipe.verify_onnx(model, runtime,
+    *inputs, **options)``, ``ModelSpec.verify_onnx``; the inputs from the task's ``verify_inputs``).
 
     Returns
     -------
     dict ``{<graph>: max |Δ|, ..., "ok": bool}``
     """
-    verify = getattr(model.spec.recipe, "verify_onnx", None)
-    if verify is None:
+    if model.spec.verify_onnx is None:
         raise UsageError(f"model {model.spec.name!r} has no ONNX check")
-    return verify(model, _open_runtime(onnx_dir), *inputs, **options)
+    return model.spec.verify_onnx(model, _open_runtime(onnx_dir), *inputs, **options)
 
 
 def onnx_metadata(onnx_dir) -> dict:
@@ -262,3 +274,27 @@ def onnx_metadata(onnx_dir) -> dict:
         raise MissingDependency(f"the ONNX backend {DEPLOY_HINT}") from exc
     with reading(files[0]):
         return read_metadata(str(files[0]))
+
+
+def onnx_frame_rate(onnx_dir) -> tuple[float, dict]:
+    """``(frame rate, metadata["model"])`` of the exported models in ``onnx_dir``, checked: a rate that is not a
+    finite number > 0, or a model entry that is not a JSON object, is a bad input file (exit 3), not a
+    ZeroDivisionError later.
+
+    Raises
+    ------
+    BadInputError
+    """
+    meta = onnx_metadata(onnx_dir)
+    where = f"{onnx_dir}: metadata"
+    fps = meta.get("frame_rate", 30.0)
+    try:
+        ok = not isinstance(fps, bool) and isinstance(fps, (int, float)) and 0 < float(fps) < float("inf")
+    except OverflowError:  # an integer beyond the float range
+        ok = False
+    if not ok:
+        raise BadInputError(f"{where} frame_rate: expected a finite number > 0, got {fps!r}"[:300])
+    model_meta = meta.get("model", {})
+    if not isinstance(model_meta, dict):
+        raise BadInputError(f"{where} model: expected a JSON object, got {type(model_meta).__name__}")
+    return float(fps), model_meta

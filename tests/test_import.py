@@ -14,6 +14,7 @@ import json
 import numpy as np
 import pytest
 
+from refimpl.protocols.prediction import canonical_prefix
 from refimpl.cli import build_parser, main
 from refimpl.registry import MODELS, task_of
 from refimpl.safetensors import write_safetensors
@@ -298,7 +299,9 @@ def test_export_of_imported_quaternet_reproduces_the_published_outputs(tmp_path)
     model = load_trained(tmp_path / "ckpt.npz")
     J = model.config.num_joints
     q = np.random.default_rng(6).standard_normal((2, 6, J, 4))
-    prefix = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    # the published predict canonicalises its prefix first (spec/deploy.md §11.1); the exported graph does too, so
+    # the published network is fed the canonical prefix and the graph any signs of it
+    prefix = canonical_prefix(q / np.linalg.norm(q, axis=-1, keepdims=True))
     got = runtime_for_dir(tmp_path / "onnx").predict(prefix.astype(np.float32), 5)
     np.testing.assert_allclose(np.asarray(got, np.float64), _published_quaternet(sd, prefix, 5), atol=1e-4)
 

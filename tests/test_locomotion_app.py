@@ -140,6 +140,14 @@ def test_generation_on_a_circle_stays_on_it():
     radius = np.hypot(root[:, 0], root[:, 2])
     assert np.max(np.abs(radius - r)) < 0.2 ** 2 / (8 * r) + 1e-3
     assert np.all(np.isfinite(root)) and np.ptp(root[:, 1]) > 0  # height from the network: finite, not constant
+    # the height is the network's second translation output: make it the constant 0.37 (its row of the output
+    # layer zero, its bias 0.37) and every root is at y = 0.37, on the same path
+    R = 4 * 4  # 4 joints x 4 rotation outputs, then offset and height
+    fixed = dict(params, **{k: params[k].copy() for k in ("fc.weight", "fc.bias")})
+    fixed["fc.weight"][R + 1], fixed["fc.bias"][R + 1] = 0.0, 0.37
+    flat = G.generate_walk(fixed, net, pp, pc, sk, seed_rot, feats, circle_path(r), 0.5, 30)
+    np.testing.assert_allclose(flat.motion.root_positions[:, 1], 0.37, rtol=1e-6)
+    assert np.max(np.abs(np.hypot(flat.motion.root_positions[:, 0], flat.motion.root_positions[:, 2]) - r)) < 0.01
     assert G.bone_length_drift(walk.motion) < 1e-9
 
 

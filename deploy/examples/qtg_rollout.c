@@ -11,7 +11,7 @@
  * skeleton). Nothing is hard-coded here: C, P and T are read from the model's declared input and output shapes
  * (the batch axis is symbolic; this program runs B = 1). With in-graph normalisation (metadata "normalization":
  * {"in_graph": true}) poses are raw: root translation in centimetres, relative to the window's first pose (see
- * refimpl/transitions.py).
+ * refimpl/protocols/transition.py).
  *
  * A model exported with the join option (`refimpl export --join inertialize`, metadata "join") has the joins
  * inertialised inside the graph (spec/qtg.md 7.4): nothing to do here, the poses it returns are already joined;

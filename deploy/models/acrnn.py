@@ -116,6 +116,7 @@ _JOINT_LAYOUT = {
                         "translation t = 2 (q_d ⊗ conj(q_r)) in metres",
     "quaternions+positions": "local quaternion (w, x, y, z) then current position (x, y, z) in metres",
     "ortho6d+positions": "ortho6D (6) then current position (x, y, z) in metres",
+    "positions_acrnn": "(x, y, z) position in metres relative to the root joint (the published acRNN's frame)",
 }
 
 
@@ -127,12 +128,18 @@ def _metadata(g, config, role, io, mean, std, representation, J, D, frame_rate, 
                       {"name": "joints", "start": 3, "size": J * D, "per_joint": D, "joints": J,
                        "joint_names": "skeleton.names (slot j = joint j)",
                        "layout": _JOINT_LAYOUT.get(representation, representation)}]}
+    root_block = getattr(REPRESENTATIONS.get(representation), "root_block", True)
+    if not root_block:  # the frames leave the root joint out (its position is the root block)
+        rep["fields"][1]["joint_names"] = "skeleton.names[1:] (slot j = joint j + 1; the root joint has no slot)"
+        rep["fields"][0]["meaning"] = "the root joint's position (x, y, z), metres, y up"
     sk = None
     if skeleton is not None:
         sk = skeleton_metadata(skeleton)
         sk.setdefault("units", "m")
-        if len(sk["names"]) != J:
-            raise ValueError(f"skeleton: expected {J} joints (the frames'), got {len(sk['names'])}")
+        expected = J if root_block else J + 1
+        if len(sk["names"]) != expected:
+            raise ValueError(f"skeleton: expected {expected} joints (the frames' {J}"
+                             f"{'' if root_block else ' and the root'}), got {len(sk['names'])}")
     return build_metadata(g, name="acrnn", role=role, config=config.to_dict(), io=io, representation=rep,
                           normalization=(mean, std), in_graph=True, skeleton=sk, frame_rate=frame_rate,
                           source_paper=SOURCE, variant="float", extra=extra)

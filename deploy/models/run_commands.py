@@ -104,7 +104,7 @@ def run_synthesis(runtime, args) -> int:
     continued for ``N`` frames (default 300)."""
     from refimpl.bvh import write_bvh
     from refimpl.tasks import synthesis
-    from refimpl.tasks.transition import with_end_sites
+    from refimpl.tasks.transition_generate import with_end_sites
 
     meta = (runtime.generate_model or runtime.step_model).metadata
     if meta.get("skeleton") is None:

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -41,11 +41,11 @@ from refimpl.skeleton import Skeleton, remove_joints
 
 __all__ = [
     "SALSA_FRAME_TIME", "SALSA_TRAIN", "SALSA_TEST", "SAMPLE_TRAIN", "SAMPLE_TEST", "LENGTH_SCALE", "FPS",
-    "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN",
-    "END_SITE_REPRESENTATIONS",
-    "horizon_frames", "in_source_units", "load_salsa_motion", "motion_to_frames", "frames_to_motion", "SynthesisData",
-    "load_synthesis_data", "sample_windows", "seed_windows", "evaluate_generator", "NPSS_VARIANTS",
-    "root_zeroed_positions", "mean_joint_error", "npss", "mean_acceleration", "acceleration_comparison",
+    "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN", "TABLE1_ROWS",
+    "DEFAULT_ROW", "horizon_frames", "in_source_units", "END_SITE_REPRESENTATIONS", "load_salsa_motion",
+    "motion_to_frames", "frames_to_motion", "SynthesisData", "skeleton_of", "load_synthesis_data", "sample_windows",
+    "seed_windows", "evaluate_generator", "NPSS_VARIANTS", "root_zeroed_positions", "mean_joint_error", "npss",
+    "mean_acceleration", "acceleration_comparison",
 ]
 
 #: Seconds per frame of the salsa files (60 fps, although the headers say 120).
@@ -65,6 +65,22 @@ MAX_SEEDS = 400
 HORIZONS_MS = (100, 400, 1000)
 ACCELERATION_FRAMES = 300
 WINDOW_MARGIN = 10
+
+
+#: ``--representation`` value -> row of Table 1 (a key of :data:`refimpl.models.acrnn.VARIANTS`).
+TABLE1_ROWS = {
+    "dq-all": "dual_quaternions_all",            # dual quaternions (all losses), the paper's proposal
+    "dq-mse": "dual_quaternions",                # dual quaternions (MSE)
+    "quaternions": "quaternions",                # quaternions (MSE)
+    "quaternions-fk": "quaternions_fk",          # quaternions (MSE + L_quat + FK positions)
+    "quaternions+positions": "quaternions+positions",
+    "ortho6d": "ortho6d",
+    "ortho6d+positions": "ortho6d+positions",
+    "positions": "positions",                    # the original acRNN's positions in the paper's 3 + 3J frame
+    "positions-published": "positions_acrnn",    # the published acRNN code's frame: 171 values, End Sites kept
+    "euler": "euler",                            # Table 4 only
+}
+DEFAULT_ROW = "dq-all"
 
 
 def horizon_frames(ms: float, fps: int = FPS) -> int:
@@ -203,6 +219,12 @@ class SynthesisData:
 
     def destandardise(self, frames) -> np.ndarray:
         return np.asarray(frames) * self.std + self.mean
+
+
+def skeleton_of(model_config: Mapping) -> Skeleton:
+    """The skeleton stored in a checkpoint's model config."""
+    s = model_config["skeleton"]
+    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), s["names"])
 
 
 def load_synthesis_data(representation: str, folder, train: Sequence[str] = SALSA_TRAIN,

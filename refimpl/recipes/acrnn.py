@@ -1,7 +1,7 @@
 """Recipe of acRNN (Zhou, Li et al., ICLR 2018) with the dual-quaternion paper's representations (Andreou et al.
 2022) on the ``synthesis`` task (spec/acrnn.md §8, spec/architecture.md).
 
-* ``--representation`` picks a row of Table 1 (:data:`refimpl.tasks.synthesis.TABLE1_ROWS`: ``dq-all`` (default),
+* ``--representation`` picks a row of Table 1 (:data:`refimpl.protocols.synthesis.TABLE1_ROWS`: ``dq-all`` (default),
   ``dq-mse``, ``quaternions``, ``quaternions-fk``, ``quaternions+positions``, ``ortho6d``, ``ortho6d+positions``,
   ``positions``, ``positions-published``, ``euler``); ``--losses mse=1,pos=0.333,...`` overrides its loss weights
   (the ablation);
@@ -33,8 +33,7 @@ from refimpl.models import acrnn
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
 from refimpl.options import config_with_overrides
-from refimpl.protocols.synthesis import WINDOW_MARGIN, motion_to_frames, sample_windows
-from refimpl.tasks.synthesis import TABLE1_ROWS, skeleton_of
+from refimpl.protocols.synthesis import TABLE1_ROWS, WINDOW_MARGIN, motion_to_frames, sample_windows, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 
 __all__ = ["PUBLISHED_SETTINGS", "IMPORT_HINT", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE",
@@ -106,7 +105,7 @@ def make_adapter(train_ds, val_ds, config: ACRNNConfig, dtype, extra: Mapping) -
     length = int(train_ds.window_length)
 
     def get_batch(idx, ctx):
-        if train_ds.augment:  # the published trainer: each window turned to a random heading, then encoded
+        if getattr(train_ds, "augment", False):  # the published trainer: each window at a random heading
             windows, _ = random_heading_windows(ctx.rng, train_ds.motions, len(idx), length + 2, WINDOW_MARGIN)
             return np.stack([data.standardise(motion_to_frames(data.representation, w)) for w in windows]
                             ).astype(dtype)                                                 # (B, T + 1, F)

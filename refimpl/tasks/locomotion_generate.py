@@ -37,15 +37,18 @@ from refimpl.quat import quat_mul
 from refimpl.recipes import quaternet_long_dq
 from refimpl.skeleton import Skeleton
 from refimpl.splines import Spline, circle_path, figure_eight_path, line_with_turn_path, read_path_csv
-from refimpl.tasks.locomotion import SPEEDS
 
-__all__ = ["GeneratedWalk", "parse_path", "read_path_file", "parse_speed", "align_seed", "generate_walk", "foot_skating",
-           "bone_length_drift", "dq_bone_length_drift", "facing_of", "write_outputs", "BUILTIN_PATHS"]
+__all__ = ["GeneratedWalk", "parse_path", "read_path_file", "parse_speed", "align_seed", "generate_walk",
+           "foot_skating", "bone_length_drift", "dq_bone_length_drift", "facing_of", "write_outputs", "BUILTIN_PATHS",
+           "SPEEDS"]
 
 #: Built-in paths of ``--path``, sizes in metres: ``circle[:r=R]`` (default 3 m), ``figure8[:size=S]`` (default
 #: 4 m), ``line-turn[:turn=DEG]`` (6 m straight, a 2 m-radius turn of DEG degrees, default 90, then 6 m); or a CSV
 #: file of x,z points in metres.
 BUILTIN_PATHS = ("circle", "figure8", "line-turn")
+#: Target speeds of ``refimpl generate --speed`` in units per frame at 30 fps (the reference notebook: walk 0.5,
+#: run 1.2; jog between them is ours).
+SPEEDS = {"walk": 0.5, "jog": 0.85, "run": 1.2}
 _M = 100.0 / QUATERNET_UNIT_CM  # units per metre
 
 
@@ -134,7 +137,7 @@ def _no_extra(opts: Mapping, text: str) -> None:
 
 
 def parse_speed(text) -> float:
-    """``walk``, ``jog``, ``run`` (:data:`~refimpl.tasks.locomotion.SPEEDS`) or a number of units per frame."""
+    """``walk``, ``jog``, ``run`` (:data:`SPEEDS`) or a number of units per frame."""
     if text in SPEEDS:
         return SPEEDS[text]
     try:
@@ -309,7 +312,7 @@ def write_outputs(walk: GeneratedWalk, *, bvh=None, gif=None, png=None, controls
     """Write the BVH (centimetres, End Sites added below leaves), the pictures (the path drawn under the
     character) and the per-frame controls JSON."""
     from refimpl.bvh import write_bvh
-    from refimpl.tasks.transition import with_end_sites
+    from refimpl.tasks.transition_generate import with_end_sites
 
     written = []
     cm = _scaled(walk.motion, QUATERNET_UNIT_CM)

@@ -13,19 +13,24 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.errors import UsageError
 from refimpl.models import acrnn
-from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS, SALSA_TEST,
-                                         SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE, SynthesisData,
-                                         evaluate_generator, frames_to_motion, in_source_units, load_salsa_motion,
-                                         load_synthesis_data, motion_to_frames)
+from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS,
+                                         SALSA_TEST, SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE,
+                                         TABLE1_ROWS, SynthesisData, evaluate_generator, frames_to_motion,
+                                         in_source_units, load_salsa_motion, load_synthesis_data, motion_to_frames,
+                                         skeleton_of)
+from refimpl.registry import require_source
 from refimpl.representations import REPRESENTATIONS
-from refimpl.skeleton import Skeleton
+from refimpl.services import checkpoint_for, evaluate_model, network_methods
+from refimpl.tasks.transition_generate import with_end_sites
 
 __all__ = [
-    "NAME", "TABLE1_ROWS", "DEFAULT_ROW", "NPSS_REPORTED", "TrainingSet", "add_train_options", "resolve_data",
-    "train_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields",
-    "skeleton_of", "onnx_method", "methods", "evaluate", "print_results", "write_results", "random_inputs",
-    "continue_seed", "in_source_units",
+    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "NPSS_REPORTED", "SAMPLE_SALSA", "TrainingSet", "add_train_options",
+    "add_eval_options", "add_export_options", "add_generate_options", "resolve_data", "train_datasets",
+    "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
+    "methods", "evaluate", "load_eval_data", "print_results", "write_results", "random_inputs", "continue_seed",
+    "eval_command", "generate_command", "export_options", "verify_inputs",
 ]
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -33,21 +38,10 @@ __all__ = [
 # ----------------------------------------------------------------------------------------------------------------
 
 NAME = "synthesis"
+EVAL_SUMMARY = ("synthesis (acrnn): the dual-quaternion paper's Table 1 on the salsa test takes (Euclidean error, "
+                "NPSS, acceleration), against holding the last seed frame")
+GENERATE_USAGE = "refimpl generate --checkpoint CKPT --source FILE [...]  (synthesis: acrnn continues a seed)"
 
-#: ``--representation`` value -> row of Table 1 (a key of :data:`refimpl.models.acrnn.VARIANTS`).
-TABLE1_ROWS = {
-    "dq-all": "dual_quaternions_all",            # dual quaternions (all losses), the paper's proposal
-    "dq-mse": "dual_quaternions",                # dual quaternions (MSE)
-    "quaternions": "quaternions",                # quaternions (MSE)
-    "quaternions-fk": "quaternions_fk",          # quaternions (MSE + L_quat + FK positions)
-    "quaternions+positions": "quaternions+positions",
-    "ortho6d": "ortho6d",
-    "ortho6d+positions": "ortho6d+positions",
-    "positions": "positions",                    # the original acRNN's positions in the paper's 3 + 3J frame
-    "positions-published": "positions_acrnn",    # the published acRNN code's frame: 171 values, End Sites kept
-    "euler": "euler",                            # Table 4 only
-}
-DEFAULT_ROW = "dq-all"
 #: The NPSS the table shows first: ``"real"`` (``P = (Re X)²``, LaFAN1's fast_npss, which the dual-quaternion
 #: paper's evaluation code used for its Table 1); ``"power"`` (``|X|²``, Gopalakrishnan et al.'s original) is
 #: printed beside it in brackets (spec/acrnn.md §6).
@@ -126,6 +120,19 @@ def add_train_options(parser) -> None:
     parser.add_argument("--raw-frames", action="store_true",
                         help="synthesis: no per-feature standardisation (mean 0, std 1; the published trainer's raw "
                              "metres) instead of the dual-quaternion paper's training mean/std")
+
+
+def add_eval_options(parser) -> None:
+    """The task's options of ``refimpl eval``: none."""
+
+
+def add_export_options(parser) -> None:
+    """The task's options of ``refimpl export``: none."""
+
+
+def add_generate_options(parser) -> None:
+    """The task's options of ``refimpl generate``: none (``--source``, ``--source-frame`` (first seed frame),
+    ``--length`` (default 300) are common)."""
 
 
 def resolve_data(data: str) -> tuple[Path, tuple, tuple]:
@@ -211,12 +218,6 @@ def check_checkpoint(model_config: Mapping, path) -> None:
 def trained_fields(model_config: Mapping, config) -> dict:
     """The :class:`~refimpl.registry.TrainedModel` fields of this task: the frame rate (the rest is in ``extra``)."""
     return {"fps": float(model_config.get("fps", FPS))}
-
-
-def skeleton_of(model_config: Mapping) -> Skeleton:
-    """The skeleton stored in a checkpoint's model config."""
-    s = model_config["skeleton"]
-    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), s["names"])
 
 
 def onnx_method(runtime):
@@ -340,3 +341,70 @@ def continue_seed(method, model_config: Mapping, path, start: int, num_frames: i
     m = frames_to_motion(rep, skeleton_of(model_config), allf, start=(root0[0], root0[2]),
                          name=Path(path).stem)
     return m, SEED_LENGTH
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# commands (spec/cli.md, spec/acrnn.md §8)
+# ----------------------------------------------------------------------------------------------------------------
+
+def eval_command(args, model) -> int:
+    """``refimpl eval`` for a synthesis model (acRNN): Table 1's metrics on the test takes (spec/acrnn.md §8)."""
+    if model is None:
+        raise UsageError("--model acrnn: evaluation needs --checkpoint (the statistics and the representation)")
+    _say(f"reading {args.data} ...")
+    data = load_eval_data(args.data, model.extra)
+    results = evaluate_model(model, data, onnx_dir=args.onnx)
+    print_results(results, data, model)
+    if args.json:
+        write_results(results, args.json)
+        _say(f"results          {args.json}")
+    return 0
+
+
+def generate_command(args, model) -> int:
+    """``refimpl generate --model acrnn``: seed frames of ``--source`` continued for ``--length`` frames, BVH out."""
+    from refimpl.bvh import write_bvh
+
+    require_source(args)
+    if model is None and not args.checkpoint:
+        raise UsageError("--model acrnn needs --checkpoint (with --backend onnx too: skeleton and statistics)")
+    model = checkpoint_for(NAME, model, args.checkpoint)
+    if args.backend == "onnx" and not args.onnx:
+        raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
+    networks = network_methods(None if args.backend == "onnx" else model,
+                               onnx_dir=args.onnx if args.backend == "onnx" else None, expect=model)
+    method = next(iter(networks.values()))
+    n = args.length or 300
+    out = args.out or "synthesis.bvh"
+    motion, seed_frames = continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
+    write_bvh(out, with_end_sites(in_source_units(motion)))   # the take's centimetres
+    _say(f"wrote {out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
+         f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
+         "centimetres (the take's units)")
+    if args.png or args.gif:
+        from refimpl.render import render_gif
+        from refimpl.render_strip import render_strip
+
+        pos = motion.positions()
+        parents = np.asarray(motion.skeleton.parents)
+        labels = (f"acrnn {model.extra.get('row')}", "")
+        if args.png:
+            render_strip(args.png, pos, parents, highlight=(seed_frames, motion.num_frames), labels=labels,
+                         frame_time=motion.frame_time)
+            _say(f"wrote {args.png}")
+        if args.gif:
+            render_gif(args.gif, pos, parents, fps=motion.fps, highlight=(seed_frames, motion.num_frames),
+                       labels=labels)
+            _say(f"wrote {args.gif}")
+    return 0
+
+
+def export_options(args) -> dict:
+    """The exporter's options of ``refimpl export``: none."""
+    return {}
+
+
+def verify_inputs(args, model) -> tuple:
+    """``(random_inputs(...), {})``: random seeds in the data's range (:func:`random_inputs`, ``--seed``) for
+    ``refimpl export``'s check."""
+    return random_inputs(model, np.random.default_rng(args.seed)), {}

@@ -244,8 +244,9 @@ def _sane_trained(model) -> str | None:
             return f"param {k} {a.dtype} {a.shape}"
     if model.fps is not None and not (np.isfinite(model.fps) and model.fps > 0):
         return f"fps {model.fps}"
-    if model.root_std is not None and not (np.isfinite(model.root_std).all() and (model.root_std > 0).all()):
-        return f"root_std {model.root_std}"
+    root_std = model.fields.get("root_std")
+    if root_std is not None and not (np.isfinite(root_std).all() and (root_std > 0).all()):
+        return f"root_std {root_std}"
     return None
 
 
