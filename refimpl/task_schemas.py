@@ -121,9 +121,9 @@ def _skeleton(value, where: str, want_sides: bool = False):
 
 def _synthesis(cfg: Mapping, config, where: str, task_module=None) -> None:
     from refimpl.models import acrnn
+    from refimpl.protocols.synthesis import TABLE1_ROWS as rows  # --representation value -> variant
     from refimpl.representations import REPRESENTATIONS, frame_size
 
-    rows = getattr(task_module, "TABLE1_ROWS", None)  # --representation value -> variant (the task's table)
 
     _require(cfg, ("mean", "std", "data_representation", "skeleton", "variant"), where, "synthesis")
     rep = cfg["data_representation"]
@@ -140,9 +140,9 @@ def _synthesis(cfg: Mapping, config, where: str, task_module=None) -> None:
     for key in ("row", "representation"):
         if key in cfg:
             row = cfg[key]
-            if not isinstance(row, str) or (rows is not None and row not in rows):
-                raise ValueError(f"{where}: model_config.{key}: expected one of {list(rows or ())}, got {_kind(row)}")
-            if rows is not None and rows[row] != variant:
+            if not isinstance(row, str) or row not in rows:
+                raise ValueError(f"{where}: model_config.{key}: expected one of {list(rows)}, got {_kind(row)}")
+            if rows[row] != variant:
                 raise ValueError(f"{where}: model_config.{key} {row!r} is the variant {rows[row]!r}, but "
                                  f"model_config.variant is {variant!r}")
     if isinstance(cfg.get("row"), str) and isinstance(cfg.get("representation"), str) and \
@@ -245,9 +245,9 @@ def validate_task_checkpoint(task: str, model_config: Mapping, config, where: st
     """Check the task fields of a checkpoint's ``model_config`` against ``config`` (the validated network
     config); ``ValueError`` naming ``where`` and the field. Unknown tasks are not checked.
 
-    ``task_module`` (the task's module, when the caller may import it: ``refimpl``'s loaders) supplies the
-    synthesis task's ``TABLE1_ROWS`` for the row/variant agreement; ``deploy``'s loaders check the rest (the
-    locomotion rigs come from :mod:`refimpl.protocols.locomotion_data`)."""
+    ``task_module`` (the task's module, when the caller has it) is passed on to the check; the tables the checks
+    use (Table 1 rows, locomotion rigs) come from :mod:`refimpl.protocols`, so ``deploy``'s loaders check as
+    much as ``refimpl``'s."""
     check = TASK_CHECKS.get(task)
     if check is not None:
         check(model_config, config, where, task_module)

@@ -308,7 +308,7 @@ def _task_values(model: str, cfg: dict) -> dict:
     """field -> hostile values for the task fields of ``model``'s checkpoints."""
     from refimpl.models.acrnn import VARIANTS
     from refimpl.representations import REPRESENTATIONS
-    from refimpl.tasks.synthesis import TABLE1_ROWS
+    from refimpl.protocols.synthesis import TABLE1_ROWS
 
     common = {"fps": [0, -30.0, 1e308, "30", None, True, 1e-300], "dtype": ["float16", 1, None],
               "representation": ["bogus", 3, None, "quaternion", "positions", "euler", "dq-all"]}
@@ -350,7 +350,7 @@ def _acrnn_labels_agree(cfg: dict) -> str | None:
     paper's tables, not with the schema's code)."""
     from refimpl.models.acrnn import VARIANTS
     from refimpl.representations import REPRESENTATIONS
-    from refimpl.tasks.synthesis import TABLE1_ROWS
+    from refimpl.protocols.synthesis import TABLE1_ROWS
 
     rep, variant, row = cfg.get("data_representation"), cfg.get("variant"), cfg.get("row")
     if variant not in VARIANTS or VARIANTS[variant].representation != rep:
