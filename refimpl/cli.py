@@ -15,6 +15,8 @@ export      ONNX models via ``deploy`` (imported lazily: the ``deploy`` extra), 
 generate    motion from a network or a baseline, BVH out (the task's ``generate_command``)
 render      a BVH / exp-map motion (optionally against a second one) to a PNG strip or a GIF
 demo        the whole tour on the embedded sample (:mod:`refimpl.demo`)
+import      a PyTorch state dict (.npz, .safetensors, .pt) as a checkpoint; ``export-weights`` the reverse
+            (:mod:`refimpl.weights_cli`, spec/import.md)
 ==========  ==============================================================================================
 
 Exit codes (scripts may rely on them): 0 success; 1 runtime failure (including a missing optional dependency
@@ -51,7 +53,8 @@ from refimpl import weights_cli
 from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
-from refimpl.options import add_data_options, check_overrides, nonneg_int, positive_float, positive_int
+from refimpl.bounds import bounded_int
+from refimpl.options import add_data_options, beta, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
 from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
 from refimpl.services import (blas_threads, export_onnx, load_trained, onnx_metadata, read_motion, train_model,
@@ -329,7 +332,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
     parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=nonneg_int, default=1,
+    parser.add_argument("--blas-threads", type=bounded_int("threads"), default=1,
                         help="BLAS threads for NumPy (default 1: it cannot collapse; 2 threads took 0.58-0.99x "
                              "the one-thread time per training step on an idle 2-core machine, but 8-31x when other "
                              "jobs shared the cores, benchmarks/bench_thread_default.py; pass 2 on a machine you "
@@ -360,15 +363,15 @@ def build_parser() -> argparse.ArgumentParser:
     add_data_options(p)
     p.add_argument("--out", default=None, help="output folder (default runs/<model>)")
     length = p.add_mutually_exclusive_group()
-    length.add_argument("--steps", type=nonneg_int, default=None, help="optimiser steps")
-    length.add_argument("--epochs", type=nonneg_int, default=10, help="epochs, when --steps is not given (default 10)")
-    p.add_argument("--batch-size", type=positive_int, default=None,
+    length.add_argument("--steps", type=bounded_int("steps"), default=None, help="optimiser steps")
+    length.add_argument("--epochs", type=bounded_int("steps"), default=10, help="epochs, when --steps is not given (default 10)")
+    p.add_argument("--batch-size", type=bounded_int("batch"), default=None,
                    help="batch size (default: the model's paper value; "
                         + ", ".join(f"{n} {s.batch_size}" for n, s in sorted(MODELS.items())) + ")")
     p.add_argument("--lr", type=positive_float, default=None,
                    help="Adam learning rate (default: the model's paper value; "
                         + ", ".join(f"{n} {s.optim.lr:g}" for n, s in sorted(MODELS.items())) + ")")
-    p.add_argument("--betas", type=float, nargs=2, default=None, metavar=("B1", "B2"),
+    p.add_argument("--betas", type=beta, nargs=2, default=None, metavar=("B1", "B2"),
                    help="Adam betas (default: the model's paper values)")
     p.add_argument("--clip-norm", type=positive_float, default=None, help="global gradient-norm clipping")
     _add_task_options(p, lambda task, group: task.add_train_options(group))
@@ -381,10 +384,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="continue from --out/checkpoint.npz with the options stored in it (give only "
                              "--steps/--epochs; a different option is refused, field by field)")
     resume.add_argument("--overwrite", action="store_true", help="start again, replacing --out's checkpoint and logs")
-    p.add_argument("--checkpoint-every", type=positive_int, default=500)
-    p.add_argument("--validate-every", type=positive_int, default=None,
+    p.add_argument("--checkpoint-every", type=bounded_int("every"), default=500)
+    p.add_argument("--validate-every", type=bounded_int("every"), default=None,
                    help="log the held-out MAE every N steps (loss_val.csv)")
-    p.add_argument("--progress-every", type=positive_int, default=50)
+    p.add_argument("--progress-every", type=bounded_int("every"), default=50)
     p.set_defaults(func=cmd_train, option_defaults={a.dest: a.default for a in p._actions})
 
     p = sub.add_parser("eval", help="a network against its task's baselines, under its task's protocol",
@@ -415,7 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="skip the onnxruntime-vs-NumPy check on the task's check inputs")
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random inputs")
-    p.add_argument("--transition-length", type=positive_int, default=None,
+    p.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
                    help="frames of the rollout / predict model (default: the model's)")
     _add_task_options(p, lambda task, group: task.add_export_options(group))
     p.set_defaults(func=cmd_export)
@@ -431,7 +434,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (NumPy backend)")
     p.add_argument("--backend", default="numpy", choices=("numpy", "onnx"))
     p.add_argument("--onnx", default=None, help="folder of exported models (ONNX backend)")
-    p.add_argument("--length", type=positive_int, default=None, help="frames to generate (default: the task's)")
+    p.add_argument("--length", type=bounded_int("frames"), default=None,
+                   help="frames to generate (default: the task's)")
     p.add_argument("--out", default=None, help="output BVH (default: the task's)")
     p.add_argument("--truth", default=None, help="also write the ground truth, when the file has it")
     p.add_argument("--png", default=None, help="also render a PNG strip (matplotlib)")
@@ -450,7 +454,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", action="append", default=None,
                    help=".png and/or .gif output (repeatable; default <file stem>.png)")
     p.add_argument("--frames", default=None, help="START:STOP[:STEP] frame range (default all)")
-    p.add_argument("--num-frames", type=positive_int, default=8, help="panels in a PNG strip (default 8)")
+    p.add_argument("--num-frames", type=bounded_int("panels"), default=8, help="panels in a PNG strip (default 8)")
     p.add_argument("--stride", type=positive_int, default=1, help="draw every k-th frame in a GIF")
     p.add_argument("--up", default="y", choices=("y", "z"), help="the data's up axis (BVH: y)")
     p.add_argument("--title", default=None)
@@ -472,6 +476,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
     return parser
+
+
+def _one_line(exc: BaseException, limit: int = 1000) -> str:
+    """An exception's message as one line (a checker's report may span several), at most ``limit`` characters."""
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _prog(args) -> str:
@@ -497,17 +507,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BadInputError as exc:
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except UsageError as exc:
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except (MissingDependency, ImportError) as exc:  # an optional dependency (matplotlib, onnx) is missing
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
@@ -520,7 +530,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.traceback:
             raise
         kind = "" if isinstance(exc, (RuntimeError, ValueError, OSError)) else f"{type(exc).__name__}: "
-        print(f"{prog}: error: {kind}{exc} (run with --traceback for details)", file=sys.stderr)
+        print(f"{prog}: error: {kind}{_one_line(exc)} (run with --traceback for details)", file=sys.stderr)
         return EXIT_FAILURE
 
 

@@ -55,10 +55,11 @@ def _info_bvh(p: Path, args) -> None:
     kept = motion.translated_joint_names
     if in_file:
         _say(f"            after reading: {', '.join(kept) if kept else 'none varying (folded into the offsets)'}")
-    pos = motion.positions()  # (T, J, 3)
-    ext = pos.max(axis=(0, 1)) - pos.min(axis=(0, 1))
-    _say(f"extent      x {ext[0]:.2f}  y {ext[1]:.2f}  z {ext[2]:.2f} (file units; root travel "
-         f"{np.linalg.norm(motion.root_positions[-1] - motion.root_positions[0]):.2f})")
+    if motion.num_frames:  # a valid file may hold no frame at all
+        pos = motion.positions()  # (T, J, 3)
+        ext = pos.max(axis=(0, 1)) - pos.min(axis=(0, 1))
+        _say(f"extent      x {ext[0]:.2f}  y {ext[1]:.2f}  z {ext[2]:.2f} (file units; root travel "
+             f"{np.linalg.norm(motion.root_positions[-1] - motion.root_positions[0]):.2f})")
     _print_joints(skel, args)
 
 
@@ -210,17 +211,18 @@ def _info_onnx(p: Path, args) -> None:
     for vi in g.output:
         _say(f"output      {dims(vi)}")
     for prop in model.metadata_props:
-        try:
-            value = json.loads(prop.value)
-        except ValueError:
-            value = prop.value
-        if prop.key == "skeleton" and isinstance(value, dict):
-            value = f"{len(value.get('names', []))} joints: " + ", ".join(value.get("names", [])[:6]) + " ..."
-        elif prop.key == "normalization" and isinstance(value, dict):
-            value = f"in graph: {value.get('in_graph')}, root mean {np.round(value.get('mean', [])[:3], 3).tolist()}"
-        elif prop.key == "io":
+        if prop.key == "io":
             continue
-        text = value if isinstance(value, str) else json.dumps(value, sort_keys=True)
+        try:  # metadata is data of unknown shape: a value that does not fit the summary is printed as text
+            value = json.loads(prop.value)
+            if prop.key == "skeleton" and isinstance(value, dict):
+                value = f"{len(value.get('names', []))} joints: " + ", ".join(value.get("names", [])[:6]) + " ..."
+            elif prop.key == "normalization" and isinstance(value, dict):
+                value = (f"in graph: {value.get('in_graph')}, root mean "
+                         f"{np.round(np.asarray(value.get('mean', [])[:3], dtype=float), 3).tolist()}")
+            text = value if isinstance(value, str) else json.dumps(value, sort_keys=True)
+        except (ValueError, TypeError, RecursionError):
+            text = prop.value
         _say(f"meta        {prop.key}: {text[:300]}")
 
 

@@ -129,6 +129,7 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
     out_dir.mkdir(parents=True, exist_ok=True)
     extra = dict(task_of(spec).checkpoint_extra(train_ds), representation=spec.representations[0])
     adapter = spec.make_adapter(train_ds, val_ds, config, dtype, extra)
+    _check_writable_checkpoint(spec, adapter)
     optim = dataclasses.replace(spec.optim, lr=spec.optim.lr if lr is None else lr,
                                 betas=tuple(spec.optim.betas if betas is None else betas),
                                 clip_norm=spec.optim.clip_norm if clip_norm is None else clip_norm)
@@ -139,14 +140,39 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
     return train(adapter, optim, tc, resume=resume, **kw)
 
 
-def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict:
+def _check_writable_checkpoint(spec: ModelSpec, adapter) -> None:
+    """Refuse (``UsageError``, exit 2) a run whose checkpoint the loader would refuse — a config or task field
+    outside the checkpoint schema (:func:`refimpl.checkpoint_schema.validate_checkpoint_config`) — or whose
+    network exceeds :data:`refimpl.bounds.MAX_PARAMETERS`, before any parameter is allocated."""
+    import json
+
+    from refimpl.bounds import check_parameter_count
+    from refimpl.checkpoint_schema import validate_checkpoint_config
+    where = f"the checkpoint of this {spec.name} run"
+    try:  # the model_config exactly as the checkpoint's JSON metadata will hold it
+        model_config = json.loads(json.dumps(adapter.config, allow_nan=False,
+                                             default=lambda v: v.item() if isinstance(v, np.generic) else str(v)))
+        _, shapes = validate_checkpoint_config(spec, model_config, where, task_of)
+        check_parameter_count(shapes, where)
+    except ValueError as exc:
+        raise UsageError(f"{exc} (the loader would refuse it; nothing trained)") from None
+
+
+def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect: TrainedModel | None = None) -> dict:
     """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``,
-    in the task's method interface: its ``onnx_method``)."""
+    in the task's method interface: its ``onnx_method``).
+
+    ``onnx_dir`` must hold the exported models of ``model`` (or of ``expect``, the checkpoint the command runs
+    when only the exported models are run): another model's folder is a ``BadInputError`` naming the folder."""
     methods = {}
     if model is not None:
         methods[model.spec.name] = model.spec.make_method(model)
     if onnx_dir is not None:
-        name = model.spec.name if model is not None else _onnx_model_name(onnx_dir)
+        name = _onnx_model_name(onnx_dir)
+        want = model if model is not None else expect
+        if want is not None and name != want.spec.name:  # the folder must hold this command's model
+            raise BadInputError(f"{onnx_dir}: holds exported {name!r} models, not the {want.spec.name!r} model of "
+                                f"{want.path}")
         methods[f"{name}_onnx"] = onnx_method(onnx_dir)
     return methods
 

@@ -16,8 +16,10 @@ import numpy as np
 from refimpl.models.acrnn import ACRNNConfig
 
 from deploy.graph import OPSET
+from deploy.models.arguments import count, frames_array
 from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
-from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
+from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
+                                    write_models)
 from deploy.runtime import DeployedModel, load_model
 
 __all__ = ["load_acrnn_checkpoint", "export_acrnn_dir", "ACRNNRuntime"]
@@ -27,7 +29,8 @@ def load_acrnn_checkpoint(path):
     """``(params, config, meta)`` of an acRNN training checkpoint (parameters ``param.<name>``, config from
     ``meta["model_config"]``; the statistics, representation and skeleton are in ``meta["model_config"]`` too)."""
     arrays, meta = read_checkpoint(path)
-    return checkpoint_params(arrays), config_from_meta(ACRNNConfig, meta), meta
+    config = config_from_meta(ACRNNConfig, meta, task="synthesis", where=str(path))
+    return checked_params(checkpoint_params(arrays), config, str(path)), config, meta
 
 
 def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, parents=None, opset=None,
@@ -96,28 +99,37 @@ class ACRNNRuntime:
 
     @property
     def config(self) -> dict:
-        return (self.step_model or self.generate_model).metadata["model"]["config"]
+        """The network's config from the metadata (``model.config``); ``ValueError`` when it is not an object."""
+        model = (self.step_model or self.generate_model).metadata.get("model")
+        cfg = model.get("config") if isinstance(model, dict) else None
+        if not isinstance(cfg, dict):
+            raise ValueError(f"metadata['model']['config']: expected a JSON object, got {type(cfg).__name__}")
+        return cfg
 
     def zero_state(self, batch: int) -> tuple[np.ndarray, np.ndarray]:
         """Zero ``(h, c)``, each ``(L, B, H)``."""
+        batch = count(batch, "batch", "batch")
         cfg = self.config
-        z = np.zeros((cfg["num_layers"], int(batch), cfg["hidden_size"]), dtype=np.float32)
+        L = count(cfg.get("num_layers"), "metadata config.num_layers", "layers")
+        H = count(cfg.get("hidden_size"), "metadata config.hidden_size", "frames")
+        z = np.zeros((L, batch, H), dtype=np.float32)
         return z, z.copy()
 
     def step(self, frame, state) -> tuple[dict, tuple]:
         """One step: ``(outputs dict with next_frame (B, F) and the decoded joints, (h, c))``."""
         if self.step_model is None:
             raise ValueError("step: no step model loaded")
+        frame = frames_array(frame, "frame", ranks=(2,))
+        if not isinstance(state, (tuple, list)) or len(state) != 2:
+            raise ValueError(f"state: expected a pair (h, c) of (L, B, H) arrays, got {type(state).__name__}")
         out = self.step_model.run(frame=frame, h=state[0], c=state[1])
         return out, (out["h_next"], out["c_next"])
 
     def generate(self, seed, num_frames: int, *, use_generator: bool = True) -> np.ndarray:
         """Raw frames ``(B, N, F)`` after the raw ``seed (B, S, F)``: one ``generate`` call, or the seed and N − 1
         fed-back frames through ``step`` (host loop)."""
-        seed = np.asarray(seed)
-        n = int(num_frames)
-        if n < 1:
-            raise ValueError(f"num_frames: expected a positive integer, got {num_frames!r}")
+        seed = frames_array(seed, "seed", ranks=(3,))
+        n = count(num_frames, "num_frames")
         if use_generator and self.generate_model is not None:
             return self.generate_model.run(seed=seed, num_frames=np.array(n, dtype=np.int64))["frames"]
         state = self.zero_state(seed.shape[0])

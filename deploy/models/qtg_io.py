@@ -16,6 +16,7 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.bounds import MAX_TRANSITION_FRAMES as _BOUND_T
 from refimpl.models.qtg import QTGConfig
 from refimpl.protocols.transition_join import inertialize_joins, join_blend_frames as default_blend
 
@@ -28,8 +29,9 @@ from deploy.runtime import DeployedModel, load_model
 
 __all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime", "MAX_TRANSITION_FRAMES"]
 
-#: Largest ``T`` :meth:`QTGRuntime.transition` generates (5.5 minutes at 30 fps; a larger T would only hang).
-MAX_TRANSITION_FRAMES = 10_000
+#: Largest ``T`` :meth:`QTGRuntime.transition` generates (5.5 minutes at 30 fps; a larger T would only hang); the
+#: bound of ``refimpl``'s ``--transition-length`` too (``refimpl.bounds``).
+MAX_TRANSITION_FRAMES = _BOUND_T
 _STATE_KEYS = ("pose", "latent_prev", "hidden", "target_latent")
 
 
@@ -173,7 +175,9 @@ class QTGRuntime:
             :meth:`deploy.runtime.DeployedModel.run` (shape, batch mismatch, batch 0, dtype, non-finite values).
         """
         meta = (self.rollout_model or self.step_model or self.init_model).metadata.get("model", {})
-        default_T = meta.get("transition_length") or meta.get("config", {}).get("transition_length")
+        cfg = meta.get("config")
+        default_T = meta.get("transition_length") or (cfg.get("transition_length") if isinstance(cfg, Mapping)
+                                                      else None)
         T = default_T if T is None else T
         if not isinstance(T, (int, np.integer)) or isinstance(T, (bool, np.bool_)) or not 1 <= T <= \
                 MAX_TRANSITION_FRAMES:

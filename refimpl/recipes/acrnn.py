@@ -105,7 +105,7 @@ def make_adapter(train_ds, val_ds, config: ACRNNConfig, dtype, extra: Mapping) -
     length = int(train_ds.window_length)
 
     def get_batch(idx, ctx):
-        if train_ds.augment:  # the published trainer: each window turned to a random heading, then encoded
+        if getattr(train_ds, "augment", False):  # the published trainer: each window at a random heading
             windows, _ = random_heading_windows(ctx.rng, train_ds.motions, len(idx), length + 2, WINDOW_MARGIN)
             return np.stack([data.standardise(motion_to_frames(data.representation, w)) for w in windows]
                             ).astype(dtype)                                                 # (B, T + 1, F)

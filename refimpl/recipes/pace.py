@@ -45,7 +45,8 @@ def published_names(config: pace.PaceConfig) -> dict:
 def make_config(train_ds, overrides: Sequence[str] = ()) -> pace.PaceConfig:
     """The paper's sizes with ``--set`` overrides (``bidirectional``, ``hidden_size``, ``delay``)."""
     base = pace.PaceConfig()
-    return config_with_overrides(base, overrides)
+    return config_with_overrides(base, overrides, ("input_size", "output_size"),
+                                 "the pace network maps 2-D path points to 4 values (amplitude, frequency, facing)")
 
 
 def chunk_length(data, requested: int = 0) -> int:

@@ -17,21 +17,22 @@ from typing import Callable, Mapping
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
-from refimpl.errors import UsageError
-from refimpl.options import positive_float
+from refimpl.bounds import bounded_float, check_number
+from refimpl.errors import UsageError, existing_file, reading
 from refimpl.protocols.locomotion import LocomotionDataset, build_dataset, evaluate, format_results, zero_velocity
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                bandai_namco_split, cmu_split)
 from refimpl.services import load_trained, network_methods
 from refimpl.skeleton import Skeleton
 from refimpl.tasks.locomotion_generate import (SPEEDS, bone_length_drift, dq_bone_length_drift, facing_of,
-                                              foot_skating, generate_walk, parse_path, parse_speed, write_outputs)
+                                              foot_skating, generate_walk, parse_path, parse_speed, read_path_file,
+                                              write_outputs)
 
 __all__ = [
     "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SEED_FRAMES", "add_train_options", "add_eval_options",
     "add_export_options", "add_generate_options", "resolve_files", "train_datasets", "num_examples",
     "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of", "rig_of",
-    "onnx_method", "methods", "evaluate", "load_eval_data", "eval_command", "walk_from_checkpoints",
+    "onnx_method", "methods", "evaluate", "load_eval_data", "eval_command", "walk_options", "walk_from_checkpoints",
     "generate_command", "export_options", "verify_inputs",
 ]
 
@@ -47,13 +48,15 @@ SEED_FRAMES = 30
 def add_train_options(parser) -> None:
     """The locomotion task's options of ``refimpl train`` (its own names: every task adds its options to the
     same parser)."""
-    parser.add_argument("--locomotion-prefix", type=int, default=30, metavar="P",
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--locomotion-prefix", type=bounded_int("window"), default=30, metavar="P",
                         help="locomotion: conditioning frames of a pose window (default 30)")
-    parser.add_argument("--locomotion-target", type=int, default=60, metavar="T",
+    parser.add_argument("--locomotion-target", type=bounded_int("window"), default=60, metavar="T",
                         help="locomotion: predicted frames of a pose window (default 60)")
-    parser.add_argument("--locomotion-max-files", type=int, default=0, metavar="N",
+    parser.add_argument("--locomotion-max-files", type=bounded_int("files"), default=0, metavar="N",
                         help="locomotion: use at most N training and N held-out files (evenly spaced; 0 = all)")
-    parser.add_argument("--pace-chunk-length", type=int, default=0, metavar="N",
+    parser.add_argument("--pace-chunk-length", type=bounded_int("chunk"), default=0, metavar="N",
                         help="locomotion: spline points per pace-network chunk (default: min(1000, median))")
 
 
@@ -72,7 +75,8 @@ def add_generate_options(parser) -> None:
     parser.add_argument("--path", default="circle:r=3",
                         help="circle[:r=M], figure8[:size=M], line-turn[:turn=DEG] or a CSV of x,z points in metres")
     parser.add_argument("--speed", default="walk", help="walk, jog, run or units per frame (default walk)")
-    parser.add_argument("--seconds", type=positive_float, default=10.0, help="length of the motion (default 10)")
+    parser.add_argument("--seconds", type=bounded_float("seconds"), default=10.0,
+                        help="length of the motion (default 10)")
     parser.add_argument("--controls", default=None, help="also write the per-frame controls as JSON")
 
 
@@ -274,6 +278,27 @@ def eval_command(args, model) -> int:
     return 0
 
 
+def walk_options(path_text: str, speed_text: str, seconds) -> tuple:
+    """``(path Spline, speed, frames)`` of ``--path``, ``--speed``, ``--seconds``, checked before any work: a value
+    outside :mod:`refimpl.bounds` is a ``UsageError`` (exit 2), a ``--path`` CSV file that is missing or malformed a
+    ``BadInputError`` naming the file and line (exit 3)."""
+    try:
+        speed = parse_speed(speed_text)
+        seconds = check_number(seconds, "--seconds", "seconds")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if Path(path_text).suffix.lower() == ".csv":
+        p = existing_file(path_text)
+        with reading(p):
+            path = read_path_file(p)
+    else:
+        try:
+            path = parse_path(path_text)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    return path, speed, int(round(seconds * FPS))
+
+
 def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: str, seconds: float):
     """:func:`~refimpl.tasks.locomotion_generate.generate_walk` from two loaded
     :class:`~refimpl.registry.TrainedModel` (``quaternet-long`` and ``pace``)."""
@@ -281,18 +306,14 @@ def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: st
         raise UsageError(f"--checkpoint: expected a quaternet-long checkpoint, got {pose_model.spec.name!r}")
     if pace_model.spec.name != "pace":
         raise UsageError(f"--pace: expected a pace checkpoint, got {pace_model.spec.name!r}")
-    try:
-        path = parse_path(path_text)
-        speed = parse_speed(speed_text)
-    except (OSError, ValueError) as exc:
-        raise UsageError(str(exc)) from exc
+    path, speed, frames = walk_options(path_text, speed_text, seconds)
     if pose_model.config.output not in ("quaternion", "dual_quaternion"):
         raise UsageError(f"--checkpoint: generation needs a quaternion or dual-quaternion model, got output = "
                          f"{pose_model.config.output!r} (an ablation)")
     seed = pose_model.extra["seed_clip"]
     return generate_walk(pose_model.params, pose_model.config.network(), pace_model.params, pace_model.config,
                          skeleton_of(pose_model.extra), np.asarray(seed["rotations"]), np.asarray(seed["features"]),
-                         path, speed, int(round(seconds * FPS)), dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
+                         path, speed, frames, dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
 
 
 def generate_command(args, model) -> int:
@@ -305,6 +326,7 @@ def generate_command(args, model) -> int:
         raise UsageError("--model quaternet-long needs --checkpoint POSE.npz and --pace PACE.npz")
     if args.backend != "numpy":
         raise UsageError("--model quaternet-long runs in NumPy (use `python -m deploy` for the exported models)")
+    walk_options(args.path, args.speed, args.seconds)  # option values and the path file before any work
     pose_model, pace_model = load_trained(args.checkpoint), load_trained(args.pace)
     walk = walk_from_checkpoints(pose_model, pace_model, args.path, args.speed, args.seconds)
     out = args.out or "walk.bvh"

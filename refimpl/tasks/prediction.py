@@ -48,7 +48,9 @@ SAMPLE_EXPMAP_DIR = Path(__file__).resolve().parent.parent / "data" / "sample" /
 
 def add_train_options(parser) -> None:
     """The task's options of ``refimpl train`` (``--downsample``); its data is ``--data`` (:func:`resolve_data`)."""
-    parser.add_argument("--downsample", type=int, default=2,
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--downsample", type=bounded_int("downsample"), default=2,
                         help="prediction task: keep every k-th frame, every phase for training (default 2: "
                              "H3.6M 50 -> 25 Hz, CMU 120 -> 60 fps)")
 
@@ -57,7 +59,9 @@ def add_eval_options(parser) -> None:
     """The task's options of ``refimpl eval`` (``--protocol``, ``--samples-per-sequence``, ``--wrap``)."""
     parser.add_argument("--protocol", default="standard", choices=("standard", "dense"),
                         help="prediction task: 4 (standard, Table 1) or 128 (dense, Table 2) samples per sequence")
-    parser.add_argument("--samples-per-sequence", type=int, default=None,
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--samples-per-sequence", type=bounded_int("samples"), default=None,
                         help="prediction task: override the protocol's samples per sequence")
     parser.add_argument("--horizons", default="default", choices=("default", "table2"),
                         help="prediction task: the dataset's horizons (default) or the dual-quaternion paper's "
@@ -107,9 +111,11 @@ def resolve_data(data: str, *, downsample: int = 2) -> PredictionData:
 def train_datasets(args):
     """``(data, data)``: the :class:`PredictionData` of ``refimpl train``'s ``--data`` (its ``train`` sequences
     are the training examples, its ``test`` sequences the held-out ones)."""
+    from refimpl.errors import BadInputError
+
     data = resolve_data(args.data, downsample=getattr(args, "downsample", 2))
     if not data.train:
-        raise ValueError(f"--data {args.data}: no training sequences")
+        raise BadInputError(f"--data {args.data}: no training sequences")
     return data, data
 
 
@@ -402,14 +408,17 @@ def generate_command(args, model) -> int:
         if isinstance(P, bool) or not isinstance(P, int) or not 1 <= P <= 100_000:
             raise BadInputError(f"{args.onnx}: metadata prefix_length: expected an integer in [1, 100000], "
                                 f"got {P!r}"[:300])
-        dataset, frame_time, name = meta.get("dataset"), 1.0 / fps, f"{meta['model']['name']}_onnx"
+        model_name = (meta.get("model") or {}).get("name")
+        if not isinstance(model_name, str):
+            raise BadInputError(f"{args.onnx}: the models' metadata names no model (model.name)")
+        dataset, frame_time, name = meta.get("dataset"), 1.0 / fps, f"{model_name}_onnx"
         if dataset not in ("cmu", "h36m"):
             raise BadInputError(f"{args.onnx}: the models' metadata names no prediction dataset")
     else:
         dataset, frame_time = model.extra["dataset"], float(model.extra["frame_time"])
         P, name = int(model.config.prefix_length), model.spec.name
     networks = network_methods(None if args.backend == "onnx" else model,
-                               onnx_dir=args.onnx if args.backend == "onnx" else None)
+                               onnx_dir=args.onnx if args.backend == "onnx" else None, expect=model)
     rotations = load_clip(args.source, dataset, frame_time)
     k = args.length or 25
     out = args.out or "prediction.bvh"

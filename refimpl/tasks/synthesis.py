@@ -105,9 +105,9 @@ def _parse_losses(text: str | None) -> dict | None:
 
 def add_train_options(parser) -> None:
     """The task's options of ``refimpl train``: ``--window-length`` and ``--losses`` (loss-weight override)."""
-    from refimpl.options import positive_int
+    from refimpl.bounds import bounded_int
 
-    parser.add_argument("--window-length", type=positive_int, default=100,
+    parser.add_argument("--window-length", type=bounded_int("window"), default=100,
                         help="synthesis: predicted frames per training window (default 100, acRNN)")
     parser.add_argument("--losses", default=None, metavar="NAME=W,...",
                         help="synthesis: override the row's loss weights, e.g. mse=1,reg=0.01,pos=0.333 "
@@ -378,7 +378,7 @@ def generate_command(args, model) -> int:
     if args.backend == "onnx" and not args.onnx:
         raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
     networks = network_methods(None if args.backend == "onnx" else model,
-                               onnx_dir=args.onnx if args.backend == "onnx" else None)
+                               onnx_dir=args.onnx if args.backend == "onnx" else None, expect=model)
     method = next(iter(networks.values()))
     n = args.length or 300
     out = args.out or "synthesis.bvh"

@@ -33,7 +33,8 @@ from refimpl.atomic import atomic_write_text
 from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
-from refimpl.options import nonneg_int, positive_float, positive_int
+from refimpl.bounds import bounded_int
+from refimpl.options import nonneg_int, positive_float
 from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                           build_transition_datasets, declared_rate, join_pose, load_source,
                                           sample_sources, shared_sources, split_pose)
@@ -70,12 +71,14 @@ def _say(*parts) -> None:
 
 def add_train_options(parser) -> None:
     """The task's options of ``refimpl train`` (its data options are the command line's common ones)."""
-    parser.add_argument("--transition-length", type=positive_int, default=30, help="T (default 30 = 1 s)")
+    parser.add_argument("--transition-length", type=bounded_int("transition_length"), default=30,
+                        help="T (default 30 = 1 s)")
 
 
 def add_eval_options(parser) -> None:
     """The task's options of ``refimpl eval``: ``--transition-length``, ``--csv``, ``--join``."""
-    parser.add_argument("--transition-length", type=positive_int, default=None, help="T (default: the model's)")
+    parser.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
+                        help="T (default: the model's)")
     parser.add_argument("--csv", default=None, help="write the per-frame curve as CSV")
     parser.add_argument("--join", default="none", choices=JOIN_MODES,
                         help="inertialize: also evaluate each network with its joins inertialised (spec/qtg.md "
@@ -95,7 +98,8 @@ def add_generate_options(parser) -> None:
     parser.add_argument("--target-frame", type=nonneg_int, default=None,
                         help="g, first target frame (default: s + T + 1 in the same file, else 1)")
     parser.add_argument("--method", default=METHOD_NAMES[0], choices=METHOD_NAMES)
-    parser.add_argument("--context", type=positive_int, default=10, help="frames kept on each side (default 10)")
+    parser.add_argument("--context", type=bounded_int("context"), default=10,
+                        help="frames kept on each side (default 10)")
     parser.add_argument("--join", default="none", choices=JOIN_MODES,
                         help="inertialize: carry the jump at each end of the transition away (spec/qtg.md 7.4)")
     parser.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
@@ -444,7 +448,7 @@ def generate_command(args, model) -> int:
                             "(both clips must come from the same skeleton)")
     if args.method == METHOD_NAMES[0]:
         networks = network_methods(None if args.backend == "onnx" else network,
-                                   onnx_dir=args.onnx if args.backend == "onnx" else None)
+                                   onnx_dir=args.onnx if args.backend == "onnx" else None, expect=network)
         method = next(iter(networks.values()))
     else:
         method = methods(fps=fps)[args.method]
