@@ -1,143 +1,105 @@
 """Command line of the deployment path: ``python -m deploy {export, run, info} ...`` (``spec/deploy.md`` §8).
 
+Every model goes through its entry of the exporter table ``deploy.models.EXPORTERS``; this module names none.
+
 ``export CHECKPOINT OUT_DIR``
-    Read a checkpoint (``refimpl.checkpoint.load_checkpoint``; a plain state-dict ``.npz`` also works) and export
-    it, standardising inside the graphs with the root statistics the checkpoint stores (``--root-mean/--root-std``
-    only for a checkpoint without them), with the exporter of the model it names (``deploy.models.EXPORTERS``;
-    ``--model`` for a state dict, default ``qtg``): for QTG ``qtg_init.onnx``, ``qtg_step.onnx`` and ``qtg_rollout.onnx`` (validated, written
-    atomically).
-``run MODEL_DIR IN.bvh OUT.bvh --start S``
+    Read the checkpoint's model name (``refimpl train`` stores it; a plain state dict: ``--model``, default the
+    first entry of the table, ``qtg``), map it to its exporter (the registry's ``ModelSpec.exporter``: ``pace`` →
+    ``quaternet-long``) and export with that entry's ``export_checkpoint(entry, args)`` — or, for an entry
+    without one, as ``refimpl export`` does (``deploy.models.run_commands.export_trained``). Files are validated
+    and written atomically; their paths and sizes are printed.
+``run MODEL_DIR INPUT OUTPUT``
     Open the folder's models with the runtime of the model named in their metadata
-    (``deploy.models.runtime_for_dir``); read a BVH, keep the 22-joint subset in centimetres at 30 fps
-    (``refimpl.protocols.transition.load_source``, the same clip loading as ``refimpl``), replace frames ``S … S+T−1`` by a
-    transition generated from frames ``S−2, S−1`` and ``S+T, S+T+1`` with the exported models, and write the
-    result as BVH; prints the mean joint-position error against the original frames.
+    (``deploy.models.runtime_for_dir``) and call the entry's ``run_command(runtime, args)``: the model's natural
+    input (a BVH clip, an exp-map prefix, a seed take, ``.npy`` frames) to its natural output (BVH or ``.npy``).
 ``info MODEL.onnx``
     Validate a model and print its inputs, outputs and metadata.
 
-``main(argv)`` returns the exit status (0 success, 2 bad input), so the ``refimpl export`` subcommand can call it.
+Options of one model come from its entry (``add_export_options(group)``, ``add_run_options(group)``) and are
+refused for another model. ``main(argv)`` returns the exit status: 0 success; 2 a bad option value or options
+that do not fit the model (one line on stderr); 3 a missing or malformed input file; 1 a missing dependency.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
-from pathlib import Path
 
 import numpy as np
 
 __all__ = ["main"]
 
 
-def _checkpoint_model(path, override: str | None) -> str:
-    """The model name stored in a ``refimpl train`` checkpoint (``--model`` overrides; a state dict: ``qtg``)."""
+def _entries():
+    """``[(name, entry module)]`` of the exporter table, in its order."""
+    from deploy.models import EXPORTERS, exporter
+
+    return [(name, exporter(name)) for name in EXPORTERS]
+
+
+def _exporter_of_checkpoint(path, override: str | None) -> str:
+    """The exporter key of the checkpoint's model (``--model`` overrides: a model or an exporter name)."""
+    from deploy.models import EXPORTERS
     from refimpl.checkpoint import load_checkpoint
+    from refimpl.registry import MODELS
 
-    if override:
-        return override
-    try:
-        _, meta = load_checkpoint(path)
-    except ValueError as exc:
-        if "not a refimpl checkpoint" not in str(exc):
-            raise
-        return "qtg"
-    return str(meta.get("model") or "qtg")
+    from pathlib import Path
+
+    if not Path(path).is_file():
+        raise _BadInput(f"{path}: no such checkpoint file")
+    name = override
+    if name is None:
+        try:
+            _, meta = load_checkpoint(path)
+        except ValueError as exc:
+            if "not a refimpl checkpoint" not in str(exc):
+                raise _BadInput(str(exc)) from None
+            return next(iter(EXPORTERS))          # a plain state dict: the table's first model (qtg)
+        name = str(meta.get("model") or next(iter(EXPORTERS)))
+    spec = MODELS.get(name)
+    key = spec.exporter if spec is not None and spec.exporter is not None else name
+    if key not in EXPORTERS:
+        raise ValueError(f"model {name!r}: no exporter; known: {sorted(EXPORTERS)}")
+    return key
 
 
-def _skeleton_from_bvh(path, joints: str):
-    from refimpl.bvh import read_bvh
-    from refimpl.rigs import RIGS, scale_skeleton, subset_22
-
-    motion = read_bvh(path)
-    keep, unit = RIGS[joints]
-    skel, _ = subset_22(motion.skeleton, np.asarray(motion.rotations)[:1], keep)
-    return scale_skeleton(skel, unit)
+class _BadInput(Exception):
+    """A named input file is missing or malformed (exit 3)."""
 
 
-def _root_statistics(args, meta):
-    """Root mean / std for the export: the checkpoint's (``refimpl train`` stores the training windows'
-    ``root_mean``/``root_std`` in ``meta["model_config"]``), or ``--root-mean/--root-std`` for a checkpoint
-    without them; ``None`` when neither (the models then take normalised poses)."""
-    cfg = meta.get("model_config") if isinstance(meta.get("model_config"), dict) else {}
-    stored = (cfg.get("root_mean"), cfg.get("root_std"))
-    given = (args.root_mean, args.root_std)
-    if (given[0] is None) != (given[1] is None):
-        raise ValueError("--root-mean and --root-std: give both or neither")
-    if stored[0] is not None and stored[1] is not None:
-        if given[0] is not None and not (np.allclose(given[0], stored[0]) and np.allclose(given[1], stored[1])):
-            raise ValueError(f"--root-mean/--root-std {given[0]} / {given[1]} differ from the statistics the "
-                             f"network was trained with (stored in the checkpoint: {stored[0]} / {stored[1]}); "
-                             "leave them out")
-        return np.asarray(stored[0], dtype=np.float64), np.asarray(stored[1], dtype=np.float64)
-    if given[0] is not None:
-        return np.asarray(given[0], dtype=np.float64), np.asarray(given[1], dtype=np.float64)
-    return None
+def _check_foreign_options(args, chosen: str, owners: dict) -> None:
+    """Options that only other models' entries take must be left at their defaults (``None``)."""
+    for dest, (flag, models) in owners.items():
+        if chosen not in models and getattr(args, dest, None) is not None:
+            raise ValueError(f"{flag}: an option of {', '.join(sorted(models))}, not of {chosen}")
 
 
 def _cmd_export(args) -> int:
     from deploy.models import exporter
+    from deploy.models.run_commands import export_trained
 
-    entry = exporter(_checkpoint_model(args.checkpoint, args.model))
-    params, config, meta = entry.load_checkpoint(args.checkpoint)
-    normalization = _root_statistics(args, meta)
-    if normalization is None:
-        print("note: no root statistics in the checkpoint and no --root-mean/--root-std; the models take and "
-              "return normalised poses (metadata normalization: null)", file=sys.stderr)
-    skeleton = _skeleton_from_bvh(args.skeleton_bvh, args.joints) if args.skeleton_bvh else None
-    dtype = {"float32": np.float32, "float64": np.float64}[args.dtype]
-    extra = {"checkpoint": {"path": str(args.checkpoint), "step": meta.get("step")}}
-    cfg = meta.get("model_config") if isinstance(meta.get("model_config"), dict) else {}
-    if isinstance(cfg.get("fps"), (int, float)) and not isinstance(cfg.get("fps"), bool):
-        extra["frame_rate"] = float(cfg["fps"])
-    paths = entry.export_dir(params, config, args.out_dir, normalization=normalization, skeleton=skeleton,
-                             opset=args.opset, dtype=dtype, mode=args.mode, T=args.frames, compact=args.compact,
-                             metadata=extra)
+    key = _exporter_of_checkpoint(args.checkpoint, args.model)
+    _check_foreign_options(args, key, args._owners)
+    entry = exporter(key)
+    export = getattr(entry, "export_checkpoint", None)
+    paths = export(entry, args) if export is not None else export_trained(entry, args)
     for role, p in paths.items():
         print(f"{role}: {p} ({p.stat().st_size / 1e6:.2f} MB)")
     return 0
 
 
 def _cmd_run(args) -> int:
-    from deploy.models import runtime_for_dir
-    from refimpl.bvh import read_bvh_header, write_bvh
-    from refimpl.motion import Motion
-    from refimpl.protocols.transition import (TransitionSource, declared_rate, denormalize_poses, heading_from_root,
-                                     load_source, make_windows, normalize_poses, window_to_world)
+    from deploy.models import exporter, model_name_of_dir, runtime_for_dir
 
-    rt = runtime_for_dir(args.model_dir, intra_op_threads=args.threads)
-    some = rt.rollout_model or rt.step_model
-    meta = some.metadata
-    T = int(args.frames or meta["model"].get("transition_length") or meta["model"]["config"]["transition_length"])
-    rate = args.source_fps or declared_rate(read_bvh_header(args.input).frame_time)
-    source = TransitionSource(str(args.input), f"{args.joints}_bvh", float(rate), Path(args.input).stem)
-    skel, clips = load_source(source, fps=args.fps, skip_start=0)  # 22 joints, cm, phase 0 at --fps
-    rot, pos = clips[0]
-    s = args.start
-    if s < 2 or s + T + 2 > len(rot):
-        raise ValueError(f"--start: expected 2 <= S <= {len(rot) - T - 2} for T = {T} at {args.fps:g} fps "
-                         f"({len(rot)} frames), got {s}")
-    context = [s - 2, s - 1, s + T, s + T + 1]               # p_-1, p_0, g1, g2: never the frames to replace
-    window = make_windows(rot[context], pos[context], length=4)[0]   # (4, P), the metadata's input_transform
-    norm = meta.get("normalization")
-    past, target = window[None, :2], window[None, 2:]
-    if norm is not None and not norm["in_graph"]:
-        m, sd = np.asarray(norm["mean"][:3]), np.asarray(norm["std"][:3])
-        gen = denormalize_poses(rt.transition(normalize_poses(past, m, sd), normalize_poses(target, m, sd), T),
-                                m, sd)[0]
-    else:
-        gen = rt.transition(past, target, T)[0]                          # (T, P)
-    h = heading_from_root(rot[s - 2, 0])
-    new_pos, new_rot = window_to_world(gen.astype(np.float64), h, pos[s - 2])
-    truth = skel.forward_kinematics(rot[s:s + T], pos[s:s + T])
-    out_rot, out_pos = rot.copy(), pos.copy()
-    out_rot[s:s + T], out_pos[s:s + T] = new_rot, new_pos
-    name = meta["model"]["name"]
-    result = Motion(skel, out_rot, out_pos, frame_time=1.0 / args.fps, name=f"{Path(args.input).stem}_{name}")
-    err = np.linalg.norm(skel.forward_kinematics(new_rot, new_pos) - truth, axis=-1).mean()
-    write_bvh(args.output, result)
-    print(f"generated frames {s}..{s + T - 1} of {len(rot)} at {args.fps:g} fps; mean joint position error vs "
-          f"the original: {err:.3f} cm; wrote {args.output}")
-    return 0
+    from pathlib import Path
+
+    if not Path(args.model_dir).is_dir():
+        raise _BadInput(f"{args.model_dir}: no such folder of exported models")
+    name = model_name_of_dir(args.model_dir)
+    _check_foreign_options(args, name, args._owners)
+    entry = exporter(name)
+    return int(entry.run_command(runtime_for_dir(args.model_dir, intra_op_threads=args.threads), args))
 
 
 def _cmd_info(args) -> int:
@@ -151,10 +113,10 @@ def _cmd_info(args) -> int:
     print("metadata:")
     for key, value in sorted(m.metadata.items()):
         if key == "skeleton" and value is not None:
-            value = {"joints": len(value["names"]), "names": value["names"]}
+            value = {"joints": len(value["names"]), "names": value["names"], "units": value.get("units")}
         elif key == "normalization" and value is not None:
             value = {"in_graph": value["in_graph"], "model_io": value.get("model_io"),
-                     "root_mean": value["mean"][:3], "root_std": value["std"][:3]}
+                     "mean[:3]": value["mean"][:3], "std[:3]": value["std"][:3]}
         elif key in ("input_transform", "output_transform") and isinstance(value, dict):
             print(f"  {key}: {value.get('summary', '')}")
             for step in value.get("steps", []):
@@ -166,55 +128,89 @@ def _cmd_info(args) -> int:
     return 0
 
 
-def _parser() -> argparse.ArgumentParser:
+def _add_model_options(sub, hook: str, owners: dict) -> None:
+    """Each entry's ``hook(group)`` options (a function shared by several entries is called once), recorded in
+    ``owners``: dest -> (flag, set of the models that take it)."""
+    users: dict = {}
+    for name, entry in _entries():
+        add = getattr(entry, hook, None)
+        if add is not None:
+            users.setdefault(add, []).append(name)
+    for add, names in users.items():
+        group = sub.add_argument_group(f"{', '.join(names)} options")
+        before = len(group._group_actions)
+        add(group)
+        for action in group._group_actions[before:]:
+            flag, models = owners.get(action.dest, (action.option_strings[0], set()))
+            owners[action.dest] = (flag, models | set(names))
+
+
+def _parser():
     p = argparse.ArgumentParser(prog="python -m deploy",
-                                description="Export trained networks to ONNX and run exported models (the runtime "
-                                            "is chosen by the model name in the files' metadata).")
+                                description="Export trained networks to ONNX and run exported models (the exporter "
+                                            "and the runtime are chosen by the model named in the checkpoint or in "
+                                            "the files' metadata: deploy.models.EXPORTERS).")
     sub = p.add_subparsers(dest="command", required=True)
-    e = sub.add_parser("export", help="export a checkpoint to ONNX with its model's exporter (qtg: init, step, "
-                                      "rollout)")
+    e = sub.add_parser("export", help="export a checkpoint to ONNX with its model's exporter")
     e.add_argument("checkpoint")
     e.add_argument("out_dir")
-    e.add_argument("--model", default=None, help="exporter (default: the model named in the checkpoint; a plain "
-                                                  "state dict: qtg)")
-    e.add_argument("--root-mean", type=float, nargs=3, default=None,
-                   help="root translation mean (x y z, cm) of the training windows, only for a checkpoint that "
-                        "does not store it (a `refimpl train` checkpoint does, and it is used)")
-    e.add_argument("--root-std", type=float, nargs=3, default=None, help="root translation std (x y z, cm); as "
-                                                                          "--root-mean")
-    e.add_argument("--skeleton-bvh", default=None, help="BVH whose 22-joint subset goes into the metadata "
-                                                        "(default: the CMU 22-joint rig of the embedded sample)")
-    e.add_argument("--joints", choices=("cmu", "salsa"), default="cmu")
+    e.add_argument("--model", default=None, help="model or exporter name (default: the model named in the "
+                                                  "checkpoint; a plain state dict: qtg)")
     e.add_argument("--opset", type=int, default=None)
     e.add_argument("--dtype", choices=("float32", "float64"), default="float32")
-    e.add_argument("--mode", choices=("scan", "loop", "unrolled"), default="scan")
-    e.add_argument("--compact", choices=("float32", "int8", "int4"), default=None,
-                   help="write the rollout model as the compact deployment variant with these weights "
-                        "(onnxruntime only for int8/int4; spec/deploy.md §5.4)")
-    e.add_argument("--frames", type=int, default=None, help="T of the rollout model (default: the config's)")
-    e.set_defaults(func=_cmd_export)
-    r = sub.add_parser("run", help="generate a transition inside a BVH clip with exported models")
+    e.add_argument("--mode", choices=("scan", "loop", "unrolled"), default=None,
+                   help="form of a whole-sequence graph (qtg's rollout; default: the model's)")
+    e.add_argument("--frames", type=int, default=None, help="frames of a fixed-length graph (qtg: T of the "
+                                                             "rollout, quaternet: k of the predictor)")
+    export_owners: dict = {}
+    _add_model_options(e, "add_export_options", export_owners)
+    e.set_defaults(func=_cmd_export, _owners=export_owners)
+    r = sub.add_parser("run", help="run exported models on the model's natural input (BVH, exp-map, .npy)")
     r.add_argument("model_dir")
     r.add_argument("input")
     r.add_argument("output")
-    r.add_argument("--start", type=int, required=True, help="first generated frame (at --fps)")
-    r.add_argument("--frames", type=int, default=None, help="T (default: the models')")
-    r.add_argument("--joints", choices=("cmu", "salsa"), default="cmu")
-    r.add_argument("--fps", type=float, default=30.0)
-    r.add_argument("--source-fps", type=float, default=None, help="override the BVH frame rate")
+    r.add_argument("--start", type=int, default=None,
+                   help="qtg: first generated frame (required); quaternet: last prefix frame (default: the "
+                        "clip's last); acrnn: first seed frame (default 0); quaternet-long: prefix length P")
+    r.add_argument("--frames", type=int, default=None, help="frames to generate (default: the model's)")
+    r.add_argument("--fps", type=float, default=None, help="qtg: frame rate of the transition (default 30)")
     r.add_argument("--threads", type=int, default=1)
-    r.set_defaults(func=_cmd_run)
+    run_owners: dict = {}
+    _add_model_options(r, "add_run_options", run_owners)
+    r.set_defaults(func=_cmd_run, _owners=run_owners)
     i = sub.add_parser("info", help="validate a model and print its contract")
     i.add_argument("model")
-    i.set_defaults(func=_cmd_info)
+    i.set_defaults(func=_cmd_info, _owners={})
     return p
 
 
 def main(argv=None) -> int:
-    """Entry point; returns 0 on success and 2 (with a message on stderr) on bad input or files."""
+    """Entry point; returns 0 on success, 2 on a bad option value, 3 on a bad input file (message on stderr), 1
+    quietly when stdout is closed early (`... | head`)."""
+    from refimpl.errors import BadInputError, MissingDependency, UsageError
+
     args = _parser().parse_args(argv)
     try:
-        return int(args.func(args))
-    except (ValueError, FileNotFoundError, KeyError) as exc:
+        rc = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
+        return rc
+    except BrokenPipeError:  # the reader went away (`python -m deploy info m.onnx | head`): stop quietly
+        _discard_stdout()
+        return 1
+    except (BadInputError, _BadInput, FileNotFoundError, IsADirectoryError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 3
+    except (UsageError, ValueError, KeyError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except MissingDependency as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+
+
+def _discard_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush does not raise again."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass

@@ -99,10 +99,17 @@ def read_metadata(model: onnx.ModelProto | str | bytes) -> dict[str, Any]:
     Raises
     ------
     ValueError
-        When a value is not valid JSON (the message names the key).
+        When a value is not valid JSON (the message names the key), or the file is not a readable ONNX model
+        (protobuf's ``DecodeError`` is not let through).
     """
     if isinstance(model, (str, bytes)) and not isinstance(model, onnx.ModelProto):
-        model = onnx.load_model_from_string(model) if isinstance(model, bytes) else onnx.load(model)
+        try:
+            model = onnx.load_model_from_string(model) if isinstance(model, bytes) else onnx.load(model)
+        except OSError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - protobuf's DecodeError and friends on a damaged file
+            where = "model" if isinstance(model, bytes) else repr(str(model))
+            raise ValueError(f"{where}: not a readable ONNX model ({type(exc).__name__})") from None
     out = {}
     for prop in model.metadata_props:
         try:

@@ -37,7 +37,7 @@ from refimpl.recipes import quaternet_long_dq as dqr
 from refimpl.services import load_trained
 from refimpl.tasks import locomotion as L
 from refimpl.tasks import locomotion_generate as G
-from refimpl.tasks.locomotion_cli import walk_from_checkpoints
+from refimpl.tasks.locomotion import walk_from_checkpoints
 
 DATA = str(Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "bandai_namco_locomotion")
 CM = LD.QUATERNET_UNIT_CM

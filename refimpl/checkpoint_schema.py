@@ -11,7 +11,8 @@ the *content* of a ``refimpl train`` checkpoint, generically for every registere
   :data:`MAX_CONFIG_LIST` entries, then the dataclass itself checks the ranges;
 * the task's stored fields (:data:`TASK_FIELDS`, extended by a task module's ``CHECKPOINT_FIELDS``):
   ``fps`` > 0 and finite, ``root_mean`` 3 finite numbers, ``root_std`` 3 finite numbers > 0, ``transition_length``
-  a positive int, ``dtype`` ``"float32"``/``"float64"``, ``representation`` a string;
+  a positive int, ``dtype`` ``"float32"``/``"float64"``, ``representation`` a string; then each task's own schema
+  (:mod:`refimpl.task_schemas`: types, ranges, shapes, and that the labels agree with the frame size);
 * the parameters: exactly the names and shapes the config implies (the recipe's ``param_shapes(config)``, else
   the config module's ``param_shapes``, else its ``init_params`` on a tiny generator), one floating dtype
   (float32 or float64, the stored ``dtype`` when there is one), all finite and of magnitude at most
@@ -32,8 +33,11 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["TASK_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "MAX_PARAM_ABS", "validate_model_config", "expected_param_shapes", "validate_params",
-           "validate_task_fields", "validate_trained", "validate_training_state"]
+from refimpl.task_schemas import validate_task_checkpoint
+
+__all__ = ["TASK_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "MAX_PARAM_ABS", "validate_model_config",
+           "expected_param_shapes", "validate_params", "validate_task_fields", "validate_checkpoint_config",
+           "validate_trained", "validate_training_state"]
 
 #: Largest integer any config field (or entry of a size list) may hold, and the longest size list: bounds the
 #: work of computing the parameter shapes (``gru_layers = 10**30`` would loop for ever) before the parameters
@@ -263,6 +267,30 @@ def validate_task_fields(model_config: Mapping, task_module=None, where: str = "
             check(model_config[key], f"{where}: model_config.{key}")
 
 
+def validate_checkpoint_config(spec, model_config, where: str = "checkpoint", task_of: Callable | None = None):
+    """Everything of a checkpoint but its arrays: ``model_config``'s task fields (:data:`TASK_FIELDS`, the task's
+    schema in :mod:`refimpl.task_schemas`) and network config, and the parameter shapes it implies.
+
+    Used by :func:`validate_trained` on a file and by ``refimpl train`` on the checkpoint it is about to write
+    (so that training never writes a file its loader refuses).
+
+    Returns
+    -------
+    config, shapes (name -> shape)
+    """
+    if not isinstance(model_config, Mapping):
+        raise ValueError(f"{where}: model_config: expected a JSON object, got {_kind(model_config)}")
+    task = task_of(spec) if task_of is not None else None
+    validate_task_fields(model_config, task, where)
+    config = validate_model_config(spec.config_type, model_config, where)
+    validate_task_checkpoint(getattr(spec, "task", None), model_config, config, where, task)
+    try:
+        shapes = expected_param_shapes(spec.recipe, spec.config_type, config)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    return config, shapes
+
+
 def validate_trained(arrays: Mapping[str, np.ndarray], meta, models: Mapping, where: str = "checkpoint",
                      task_of: Callable | None = None, expected_format: str = "refimpl.train/1"):
     """The whole schema of a training checkpoint (see the module docstring), for inference.
@@ -288,15 +316,7 @@ def validate_trained(arrays: Mapping[str, np.ndarray], meta, models: Mapping, wh
     if spec is None:
         raise ValueError(f"{where}: unknown model {name!r}; known: {sorted(models)}")
     cfg = meta.get("model_config")
-    if not isinstance(cfg, Mapping):
-        raise ValueError(f"{where}: model_config: expected a JSON object, got {_kind(cfg)}")
-    task = task_of(spec) if task_of is not None else None
-    validate_task_fields(cfg, task, where)
-    config = validate_model_config(spec.config_type, cfg, where)
-    try:
-        shapes = expected_param_shapes(spec.recipe, spec.config_type, config)
-    except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from None
+    config, shapes = validate_checkpoint_config(spec, cfg, where, task_of)
     params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
     validate_params(params, shapes, where, dtype=cfg.get("dtype"))
     return spec, config, params, dict(cfg)

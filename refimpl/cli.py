@@ -5,16 +5,18 @@ Run ``refimpl <command> --help`` (or ``python -m refimpl``). Every command is a 
 ==========  ==============================================================================================
 command     what it does (library functions it calls)
 ==========  ==============================================================================================
-info        what a BVH, exp-map text file, checkpoint ``.npz`` or ``.onnx`` model holds
-train       train a network by name (today ``qtg``) on the sample, ``../shared/data`` or a folder of BVH /
-            exp-map files; resumable, progress with rate and ETA, CSV loss log
-            (:func:`refimpl.train.train`)
-eval        the QTG paper's protocol: QTG vs inertialisation vs interpolation on held-out windows, mean
-            joint-position error per joint per frame in cm, per-frame curve (:mod:`refimpl.protocols.transition_metrics`)
-export      ONNX models ``qtg_init/step/rollout.onnx`` via ``deploy`` (imported lazily: the ``deploy`` extra)
-generate    a transition between two clips with QTG (NumPy or onnxruntime) or a baseline; BVH out
+info        what a BVH, exp-map text file, checkpoint ``.npz`` or ``.onnx`` model holds (:mod:`refimpl.cli_info`)
+train       train a network by name (``--model``, :data:`refimpl.registry.MODELS`) on the sample,
+            ``../shared/data`` or a folder of BVH / exp-map files; resumable, progress with rate and ETA, CSV
+            loss log (:func:`refimpl.services.train_model`)
+eval        a network against its task's baselines under the task's protocol (the task's ``eval_command``)
+export      ONNX models via ``deploy`` (imported lazily: the ``deploy`` extra), checked against NumPy on the
+            task's check inputs (its ``verify_inputs``)
+generate    motion from a network or a baseline, BVH out (the task's ``generate_command``)
 render      a BVH / exp-map motion (optionally against a second one) to a PNG strip or a GIF
 demo        the whole tour on the embedded sample (:mod:`refimpl.demo`)
+import      a PyTorch state dict (.npz, .safetensors, .pt) as a checkpoint; ``export-weights`` the reverse
+            (:mod:`refimpl.weights_cli`, spec/import.md)
 ==========  ==============================================================================================
 
 Exit codes (scripts may rely on them): 0 success; 1 runtime failure (including a missing optional dependency
@@ -23,14 +25,15 @@ unreadable or malformed BVH / exp-map / checkpoint / ONNX file). Errors are one 
 ``refimpl <command>: error: <message>``, without a traceback unless ``--traceback`` is given. Ctrl-C gives 130
 (``train`` first saves a checkpoint at the step boundary).
 
-This module is the argument parser, the ``cmd_*`` functions and what they print. The work is done by
-:mod:`refimpl.services` (train, load, evaluate, export, verify), the models come from :mod:`refimpl.registry`
-(``--model NAME``: a recipe in ``refimpl/recipes/``) and the data, protocol and generation from the model's task
-(``refimpl/tasks/``), which also adds its own ``train`` options (spec/architecture.md).
+This module is the argument parser, the ``cmd_*`` functions and what they print. It names no model and no task:
+the work is done by :mod:`refimpl.services` (train, load, evaluate, export, verify), the models come from
+:mod:`refimpl.registry` (``--model NAME``: a recipe in ``refimpl/recipes/``) and everything task-specific from the
+model's task module (``refimpl/tasks/``, the interface :class:`refimpl.task_api.Task`): its options of every
+command, ``eval_command``, ``generate_command``, ``export_options``, ``verify_inputs`` (spec/architecture.md).
 
 Nothing here imports ``deploy``, onnx, onnxruntime or matplotlib at import time.
 
-Shape legend: N windows, T transition frames, F frames of a clip, J joints, P pose size (3 + 4 J).
+Shape legend: none (the commands pass files and options; arrays live in the tasks).
 """
 from __future__ import annotations
 
@@ -42,17 +45,20 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Sequence
 
 import numpy as np
 
+from refimpl import weights_cli
 from refimpl.allocator import retain_freed_memory
-from refimpl.errors import DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading
-from refimpl.options import add_data_options, nonneg_int, positive_float, positive_int
-from refimpl.registry import MODELS, TASKS, task_of
-from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
-                              onnx_metadata, read_motion, train_model, verify_onnx)
-from refimpl.tasks import transition
+from refimpl.cli_info import cmd_info
+from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
+from refimpl.bounds import bounded_int
+from refimpl.options import add_data_options, beta, check_overrides, nonneg_int, positive_float, positive_int
+from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
+from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
+from refimpl.services import (blas_threads, export_onnx, load_trained, onnx_metadata, read_motion, train_model,
+                              verify_onnx)
 from refimpl.train import check_resumable, output_lock
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
@@ -76,201 +82,42 @@ def _progress_line(line: str) -> None:
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def _info_bvh(p: Path, args) -> None:
-    from collections import Counter
+def _reuse_run_options(args, ckpt: Path) -> None:
+    """``--resume``: the options stored in the checkpoint fill those not given; a given option that differs is a
+    usage error listing only the differing fields, before any data is read (spec/cli.md §4)."""
+    from refimpl.checkpoint import load_checkpoint
 
-    from refimpl.bvh import read_bvh, read_bvh_header
-
-    with reading(p):
-        header = read_bvh_header(p)
-        motion = read_bvh(p, frame_time=None if args.fps is None else 1.0 / args.fps)
-    skel = header.skeleton
-    n_end = len(skel.end_sites)
-    fps = motion.fps
-    _say(f"file        {p}")
-    _say("format      BVH")
-    _say(f"joints      {skel.num_joints} ({skel.num_joints - n_end} joints + {n_end} End Sites), "
-         f"root {skel.names[0]!r}")
-    _say(f"frames      {motion.num_frames}")
-    _say(f"frame time  {motion.frame_time:.7g} s ({fps:.6g} fps"
-         + (", overridden by --fps" if args.fps else "") + f"), duration {motion.duration:.2f} s")
-    _say(f"channels    {header.num_channels} per frame")
-    groups = Counter(ch for ch in header.channels if ch)  # insertion order: the root's layout first
-    for ch, count in groups.items():
-        who = skel.names[header.channels.index(ch)] if count == 1 else f"{count} joints"
-        _say(f"            {who}: {' '.join(ch)}")
-    in_file = header.translated_joint_names
-    _say(f"translations {len(in_file)} non-root joint(s) with position channels in the file"
-         + (f": {', '.join(in_file[:8])}{' ...' if len(in_file) > 8 else ''}" if in_file else ""))
-    if motion.skeleton.names[0] != skel.names[0]:
-        _say(f"            re-rooted at {motion.skeleton.names[0]!r} (the motion is on a child of the static root "
-             f"{skel.names[0]!r}; spec/data.md §2.1)")
-    kept = motion.translated_joint_names
-    if in_file:
-        _say(f"            after reading: {', '.join(kept) if kept else 'none varying (folded into the offsets)'}")
-    pos = motion.positions()  # (T, J, 3)
-    ext = pos.max(axis=(0, 1)) - pos.min(axis=(0, 1))
-    _say(f"extent      x {ext[0]:.2f}  y {ext[1]:.2f}  z {ext[2]:.2f} (file units; root travel "
-         f"{np.linalg.norm(motion.root_positions[-1] - motion.root_positions[0]):.2f})")
-    _print_joints(skel, args)
-
-
-def _print_joints(skel, args) -> None:
-    if not args.joints:
+    with reading(ckpt):
+        _, meta = load_checkpoint(ckpt)
+    stored = (meta.get("train_config") or {}).get("run_options") if isinstance(meta, dict) else None
+    if not isinstance(stored, dict):  # a checkpoint written before the options were stored: the flags as given
         return
-    depth = [0] * skel.num_joints
-    for j in range(1, skel.num_joints):
-        depth[j] = depth[int(skel.parents[j])] + 1
-    ends = set(skel.end_sites)
-    for j, name in enumerate(skel.names):
-        off = np.asarray(skel.offsets[j])
-        _say(f"  {j:3d} {'  ' * depth[j]}{name}{' (End Site)' if j in ends else ''}  "
-             f"offset ({off[0]:.3f}, {off[1]:.3f}, {off[2]:.3f})")
+    if stored.get("model") not in MODELS:
+        raise BadInputError(f"{ckpt}: run option model {stored.get('model')!r} is not one of {sorted(MODELS)}")
+    conflicts = reconcile(args, stored, args.option_defaults)
+    if conflicts:
+        raise UsageError(f"--resume: {ckpt} was trained with other options:\n  " + "\n  ".join(conflicts)
+                         + "\n(leave them out to continue with the checkpoint's, or start again with --overwrite)")
 
 
-def _info_expmap(p: Path, args) -> None:
-    from refimpl.expmap import EXPMAP_LAYOUTS
-
-    motion = read_motion(p, fps=args.fps, layout=args.layout)
-    width = EXPMAP_LAYOUTS[args.layout][0]
-    _say(f"file        {p}")
-    _say(f"format      exp-map text, layout {args.layout!r} ({width} values per row = {width // 3} triplets)")
-    _say(f"joints      {motion.num_joints} (built-in skeleton, {len(motion.skeleton.end_sites)} End Sites)")
-    _say(f"frames      {motion.num_frames}")
-    _say(f"frame time  {motion.frame_time:.7g} s ({motion.fps:.6g} fps, "
-         + ("from --fps" if args.fps else "the layout's default; not stored in the file") + "), "
-         f"duration {motion.duration:.2f} s")
-    _print_joints(motion.skeleton, args)
-
-
-def _shape_rows(arrays: Mapping[str, np.ndarray]) -> list[str]:
-    width = max((len(k) for k in arrays), default=0)
-    return [f"  {k.ljust(width)}  {str(tuple(v.shape)):>14}  {v.dtype}" for k, v in arrays.items()]
-
-
-def _seconds(x) -> str:
-    """``12.3 s`` for a number, else the stored value as text (metadata is data: never trusted to be a number)."""
-    if isinstance(x, (int, float)) and not isinstance(x, bool):
-        return f"{float(x):.1f} s"
-    return f"{x!r:.40}"
-
-
-def _info_npz(p: Path, args) -> None:
-    from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
-
-    with reading(p):
-        try:
-            arrays, meta = load_checkpoint(p)
-        except ValueError as exc:
-            if "not a refimpl checkpoint" not in str(exc):
-                raise
-            arrays, meta = load_state_dict_npz(p), None
-    training = meta is not None and meta.get("format") == "refimpl.train/1"
-    if training:
-        from refimpl.checkpoint_schema import validate_trained
-
-        with reading(p):  # a training checkpoint must pass its schema (spec/robustness.md §9): exit 3 otherwise
-            validate_trained(arrays, meta, MODELS, str(p), task_of=task_of)
-    _say(f"file        {p}")
-    if meta is None:
-        n = sum(int(v.size) for v in arrays.values())
-        _say(f"format      plain .npz state dict ({len(arrays)} arrays, {n:,} values)")
-        for row in _shape_rows(arrays):
-            _say(row)
-        return
-    params = {k[len("param."):]: v for k, v in arrays.items() if k.startswith("param.")}
-    other = {k: v for k, v in arrays.items() if not k.startswith("param.")}
-    _say(f"format      refimpl checkpoint ({meta.get('format', 'no format tag')}), checksum OK")
-    if training:  # other metadata (any JSON object) is printed as it is, below
-        cfg = dict(meta["model_config"])
-        stats = {k: cfg.pop(k) for k in ("root_mean", "root_std") if k in cfg}
-        _say(f"model       {meta['model']}")
-        _say(f"progress    step {meta.get('step')} of {meta.get('steps_target')}, epoch {meta.get('epoch')}, "
-             f"trained for {_seconds(meta.get('elapsed_s', 0.0))}")
-        _say(f"config      {json.dumps(cfg, sort_keys=True)}")
-        if stats:
-            _say(f"normalise   root mean {np.round(stats.get('root_mean', []), 3).tolist()} "
-                 f"std {np.round(stats.get('root_std', []), 3).tolist()}")
-        if meta.get("optim"):
-            _say(f"optimiser   {json.dumps(meta['optim'], sort_keys=True)}, batch {meta.get('batch_size')}")
-    else:
-        _say(f"metadata    {json.dumps(meta, sort_keys=True)[:400]}")
-    n = sum(int(v.size) for v in params.values())
-    _say(f"parameters  {len(params)} arrays, {n:,} values")
-    for row in _shape_rows(params):
-        _say(row)
-    if other:
-        _say(f"other       {len(other)} arrays (optimiser state, sampler): "
-             + ", ".join(sorted(other)[:6]) + (" ..." if len(other) > 6 else ""))
-
-
-def _info_onnx(p: Path, args) -> None:
-    try:
-        import onnx
-    except ImportError as exc:
-        raise MissingDependency(f"reading .onnx files {DEPLOY_HINT}") from exc
-    from collections import Counter
-
-    with reading(p):
-        try:
-            model = onnx.load(str(p))
-        except Exception as exc:  # onnx raises DecodeError and others on garbage
-            raise ValueError(f"not a readable ONNX model ({type(exc).__name__}: {exc})") from exc
-    g = model.graph
-
-    def dims(vi):
-        t = vi.type.tensor_type
-        shape = [d.dim_param or d.dim_value for d in t.shape.dim]
-        return f"{vi.name} {shape} {onnx.TensorProto.DataType.Name(t.elem_type).lower()}"
-
-    inits = {i.name for i in g.initializer}
-    n_values = sum(int(np.prod(i.dims)) for i in g.initializer)
-    ops = Counter(n.op_type for n in g.node)
-    _say(f"file        {p}")
-    _say(f"format      ONNX, IR version {model.ir_version}, opsets "
-         + ", ".join(f"{o.domain or 'ai.onnx'} {o.version}" for o in model.opset_import)
-         + (f", producer {model.producer_name} {model.producer_version}".rstrip() if model.producer_name else ""))
-    _say(f"graph       {g.name!r}: {len(g.node)} nodes ({', '.join(f'{k} {v}' for k, v in ops.most_common(6))}"
-         + (" ..." if len(ops) > 6 else "") + f"), {len(inits)} initializers, {n_values:,} values")
-    for vi in g.input:
-        if vi.name not in inits:
-            _say(f"input       {dims(vi)}")
-    for vi in g.output:
-        _say(f"output      {dims(vi)}")
-    for prop in model.metadata_props:
-        try:
-            value = json.loads(prop.value)
-        except ValueError:
-            value = prop.value
-        if prop.key == "skeleton" and isinstance(value, dict):
-            value = f"{len(value.get('names', []))} joints: " + ", ".join(value.get("names", [])[:6]) + " ..."
-        elif prop.key == "normalization" and isinstance(value, dict):
-            value = f"in graph: {value.get('in_graph')}, root mean {np.round(value.get('mean', [])[:3], 3).tolist()}"
-        elif prop.key == "io":
-            continue
-        text = value if isinstance(value, str) else json.dumps(value, sort_keys=True)
-        _say(f"meta        {prop.key}: {text[:300]}")
-
-
-def cmd_info(args) -> int:
-    """``refimpl info FILE``."""
-    p = existing_file(args.file)
-    kind = p.suffix.lower()
-    handlers = {".bvh": _info_bvh, ".txt": _info_expmap, ".npz": _info_npz, ".onnx": _info_onnx}
-    if kind not in handlers:
-        raise BadInputError(f"{p}: unknown file type {p.suffix!r} (expected .bvh, .txt, .npz or .onnx)")
-    handlers[kind](p, args)
-    return EXIT_OK
+def _resumable(args) -> tuple:
+    """The options that decide a run: :data:`refimpl.run_options.RUN_OPTIONS` and every task's train options."""
+    return RUN_OPTIONS + tuple(dest for options in args.task_options.values() for dest, _, _ in options)
 
 
 def cmd_train(args) -> int:
     """``refimpl train``."""
+    if args.steps == 0 or (args.steps is None and args.epochs == 0):
+        raise UsageError("--steps 0 / --epochs 0: nothing to train (a checkpoint would hold an untrained network)")
+    out = Path(args.out or f"runs/{args.model}")
+    if args.resume and (out / "checkpoint.npz").is_file():
+        _reuse_run_options(args, out / "checkpoint.npz")
     spec = MODELS[args.model]
     task = task_of(spec)
     rep = args.representation or spec.representations[0]
     if rep not in spec.representations:
         raise UsageError(f"--representation {rep!r}: model {spec.name!r} trains on {list(spec.representations)}")
-    out = Path(args.out)
+    check_overrides(spec.config_type, args.set)  # a --set typo is exit 2 before any data is read
     ckpt = out / "checkpoint.npz"
     if args.resume and not ckpt.is_file():
         raise BadInputError(f"{ckpt}: no checkpoint to resume (train without --resume first)")
@@ -290,13 +137,13 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
             if (out / f).is_file():
                 (out / f).unlink()
     if args.batch_size is None:
-        args.batch_size = int(getattr(spec.recipe, "PAPER_BATCH", 32))
+        args.batch_size = spec.batch_size
     t0 = time.perf_counter()
     _say(f"reading {args.data} ...")
     train_ds, test_ds = task.train_datasets(args)
     config = spec.make_config(train_ds, args.set)
     if args.batch_size is None:
-        args.batch_size = int(getattr(spec.recipe, "PAPER_BATCH", 32))
+        args.batch_size = spec.batch_size
     n = task.num_examples(train_ds)
     per_epoch = max(1, n // min(args.batch_size, n))
     steps = args.steps if args.steps is not None else args.epochs * per_epoch
@@ -311,7 +158,8 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
                          lr=lr, betas=betas, clip_norm=args.clip_norm, seed=args.seed,
                          dtype=np.dtype(args.dtype).type, resume=args.resume,
                          checkpoint_every=args.checkpoint_every, validate_every=args.validate_every,
-                         progress_every=args.progress_every, progress=_progress_line)
+                         progress_every=args.progress_every, progress=_progress_line,
+                         run_options=run_options(args, _resumable(args)))
     last = float(np.mean(result.losses[-20:])) if result.losses else float("nan")
     _say(f"{'interrupted' if result.interrupted else 'done'}: step {result.step}, epoch {result.epoch}, "
          f"recent loss {last:.5g}, {result.elapsed_s:.1f} s")
@@ -322,94 +170,34 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
     return EXIT_OK
 
 
-def _eval_prediction(args, model) -> int:
-    """``refimpl eval`` on the prediction task: the network(s) and the baselines, the paper's table, JSON."""
-    from refimpl.protocols import prediction as PP
-    from refimpl.protocols import prediction_data as PD
-    from refimpl.tasks import prediction
-
-    _say(f"reading {args.data} ...")
-    stride = PD.stride_of(model.extra["dataset"], model.extra["frame_time"]) if model else 2
-    data = prediction.resolve_data(args.data, downsample=stride)
-    if model is not None and model.extra.get("dataset") != data.dataset:
-        raise UsageError(f"--data {args.data} is {data.dataset}, the model was trained on {model.extra.get('dataset')}")
-    try:
-        actions = prediction.eval_actions(args)
-        protocol = prediction.eval_protocol(data.dataset, args.protocol, args.samples_per_sequence,
-                                            horizons=getattr(args, "horizons", "default"), data=data, actions=actions)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    networks = network_methods(model, onnx_dir=args.onnx) if (model is not None or args.onnx) else {}
-    try:
-        results = PP.evaluate_all(data, prediction.methods(networks), protocol, progress=_progress_line,
-                                  actions=actions)
-    except ValueError as exc:
-        raise BadInputError(f"--data {args.data}: {exc}") from exc
-    if model is not None:
-        _say(f"network {model.spec.name} from {model.path} (step {model.meta.get('step')})")
-    _say("Mean Euler-angle error (radians, zyx, joint 0 excluded) per action and horizon:")
-    _say(PP.format_table(results))
-    if args.json:
-        PP.write_results_json(args.json, results[0] if len(results) == 1 else results)
-        _say(f"results          {args.json}")
-    if args.plot:
-        from refimpl.render import render_error_curves
-
-        render_error_curves(args.plot, PP.average_curves(results), frame_time=protocol.frame_ms / 1000.0)
-        _say(f"plot             {args.plot}")
-    return EXIT_OK
+def _check_model_option(args, model) -> None:
+    """``--model`` and ``--checkpoint`` must name the same network (the checkpoint would silently win)."""
+    if model is not None and getattr(args, "model", None) and args.model != model.spec.name:
+        raise UsageError(f"--model {args.model}, but {args.checkpoint} holds a {model.spec.name} model "
+                         f"(leave --model out, or pass a {args.model} checkpoint)")
 
 
 def cmd_eval(args) -> int:
-    """``refimpl eval``."""
+    """``refimpl eval``: the task of ``--checkpoint``'s model (else of ``--model``, else of the default model)."""
     model = load_trained(args.checkpoint) if args.checkpoint else None
-    task_name = model.spec.task if model is not None else (MODELS[args.model].task if args.model else "transition")
-    if task_name == "prediction":
-        return _eval_prediction(args, model)
-    if task_name == "synthesis":
-        return _eval_synthesis(args, model)
-    if task_name == "locomotion":
-        return _eval_locomotion(args, model)
-    T = args.transition_length or (model.transition_length if model else 30)
-    _say(f"reading {args.data} ...")
-    _, test_ds = transition.build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
-    if test_ds.num_windows == 0:
-        raise BadInputError(f"--data {args.data}: no held-out window of {T + 4} frames")
-    results = evaluate_model(model, test_ds, onnx_dir=args.onnx)
-    transition.print_results(results, test_ds, model)
-    frame_time = 1.0 / test_ds.fps
-    transition.write_results(results, frame_time, json_path=args.json, csv_path=args.csv)
-    if args.csv:
-        _say(f"per-frame curve  {args.csv}")
-    if args.json:
-        _say(f"results          {args.json}")
-    if args.plot:
-        from refimpl.render import render_error_curves
-
-        render_error_curves(args.plot, {k: v["per_frame_cm"] for k, v in results.items()}, frame_time=frame_time)
-        _say(f"plot             {args.plot}")
-    return EXIT_OK
+    _check_model_option(args, model)
+    spec = model.spec if model is not None else MODELS[args.model or DEFAULT_MODEL]
+    return task_of(spec).eval_command(args, model)
 
 
 def cmd_export(args) -> int:
     """``refimpl export``."""
     model = load_trained(args.checkpoint)
     out = Path(args.out) if args.out else Path(model.path).parent / "onnx"
-    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length)
+    task = task_of(model.spec)
+    _refuse_other_tasks_options(args, model.spec.task, model.spec.name)
+    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length,
+                          **task.export_options(args))
     for role, path in written.items():
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
-        rng = np.random.default_rng(args.seed)
-        task = task_of(model.spec)
-        if model.spec.task == "transition":
-            past, target = transition.random_context(model, rng, 8)
-            check = verify_onnx(model, out, past, target, T=args.transition_length)
-        elif hasattr(task, "verify_inputs"):  # the task's own check inputs (prediction: real CMU windows)
-            check = verify_onnx(model, out, *task.verify_inputs(model, rng, 8))
-        elif hasattr(task, "random_inputs"):  # synthesis: random seeds in the data's range
-            check = verify_onnx(model, out, *task.random_inputs(model, rng))
-        else:  # locomotion: the recipe draws its own random inputs
-            check = verify_onnx(model, out, seed=args.seed)
+        inputs, options = task.verify_inputs(args, model)
+        check = verify_onnx(model, out, *inputs, **options)
         for k, v in check.items():
             if k != "ok":
                 _say(f"verify   onnxruntime vs NumPy ({k}): max |diff| = {v:.3g}")
@@ -419,173 +207,53 @@ def cmd_export(args) -> int:
     return EXIT_OK
 
 
-def _generate_prediction(args, model) -> int:
-    """``refimpl generate`` on the prediction task: a prefix of ``--source`` -> ``--length`` frames, BVH out."""
-    from refimpl.bvh import write_bvh
-    from refimpl.protocols import prediction_data as PD
-    from refimpl.tasks import prediction
-
-    if args.backend == "onnx":
-        if not args.onnx:
-            raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
-        meta = onnx_metadata(args.onnx)
-        fps, _ = _onnx_rate_and_length(args.onnx, 1)  # frame rate and model entry checked (exit 3 when wrong)
-        P = meta.get("prefix_length", 50)
-        if isinstance(P, bool) or not isinstance(P, int) or not 1 <= P <= 100_000:
-            raise BadInputError(f"{args.onnx}: metadata prefix_length: expected an integer in [1, 100000], "
-                                f"got {P!r}"[:300])
-        dataset, frame_time, name = meta.get("dataset"), 1.0 / fps, f"{meta['model']['name']}_onnx"
-        if dataset not in ("cmu", "h36m"):
-            raise BadInputError(f"{args.onnx}: the models' metadata names no prediction dataset")
-    else:
-        dataset, frame_time = model.extra["dataset"], float(model.extra["frame_time"])
-        P, name = int(model.config.prefix_length), model.spec.name
-    networks = network_methods(None if args.backend == "onnx" else model,
-                               onnx_dir=args.onnx if args.backend == "onnx" else None)
-    rotations = prediction.load_clip(args.source, dataset, frame_time)
-    k = args.length or 25
-    pr = prediction.make_prediction(next(iter(networks.values())), rotations, args.source_frame, P, k,
-                                    skeleton=PD.skeleton_of(dataset), frame_time=frame_time,
-                                    method_name=name, name=Path(args.out).stem)
-    write_bvh(args.out, pr.motion)
-    _say(f"wrote {args.out}: {pr.motion.num_frames} frames at {1.0 / frame_time:g} fps ({dataset} skeleton, root "
-         f"at the origin): prefix frames 0..{pr.start - 1}, predicted {pr.start}..{pr.stop - 1} ({name}, "
-         f"{args.backend})")
-    err = pr.euler_error()
-    if err is not None:
-        _say("ground truth available: Euler-angle error (rad) at predicted frames 2, 4, 8, 10: "
-             + ", ".join(f"{err[i]:.3f}" for i in (1, 3, 7, 9) if i < len(err)))
-        if args.truth:
-            write_bvh(args.truth, pr.truth)
-            _say(f"wrote {args.truth} (ground truth)")
-    elif args.truth:
-        raise UsageError(f"--truth: {args.source} ends before the {k} predicted frames")
-    if args.png or args.gif:
-        for f in prediction.render_prediction(pr, png=args.png, gif=args.gif):
-            _say(f"wrote {f}")
-    return EXIT_OK
+def _refuse_other_tasks_options(args, task: str, who: str) -> None:
+    """UsageError for an option of another task's group given a value (``export --join`` of a model whose task
+    has no such option; ``generate --target`` of a model whose task has no target clip)."""
+    for task_name, options in args.task_options.items():
+        for dest, default, flag in options:
+            if task_name != task and getattr(args, dest) != default:
+                raise UsageError(f"{flag} applies to {task_name} models, not {who}")
 
 
-def _model_task(args, model) -> str:
-    """The task of ``--checkpoint``'s model, else of ``--model``, else of the exported models in ``--onnx``, else
-    ``transition``."""
+def _add_task_options(p, add) -> None:
+    """Every task's options of a command, each in its own group (``add(task, group)``: the task's hook);
+    ``args.task_options`` records them: task -> [(dest, default, flag)]."""
+    owned = {}
+    for task_name in TASKS:
+        group = p.add_argument_group(f"{task_name} task")
+        add(task_of(task_name), group)
+        owned[task_name] = [(a.dest, a.default, a.option_strings[0]) for a in group._group_actions]
+    p.set_defaults(task_options=owned)
+
+
+def _generate_task(args):
+    """``(task module, loaded --checkpoint or None)`` of ``refimpl generate``: the task of ``--model`` (the task
+    then reads its checkpoints itself), else of ``--checkpoint``'s model, else of the exported models in
+    ``--onnx``, else of the default model."""
+    if args.model is not None:
+        return task_of(MODELS[args.model]), None
+    model = load_trained(args.checkpoint) if args.checkpoint else None
     if model is not None:
-        return model.spec.task
-    if getattr(args, "model", None):
-        return MODELS[args.model].task
-    if getattr(args, "backend", None) == "onnx" and args.onnx:
+        return task_of(model.spec), model
+    if args.backend == "onnx" and args.onnx:
         model_meta = onnx_metadata(args.onnx).get("model") or {}
         if not isinstance(model_meta, dict):
             raise BadInputError(f"{args.onnx}: metadata model: expected a JSON object, got "
                                 f"{type(model_meta).__name__}")
         name = model_meta.get("name")
         if isinstance(name, str) and name in MODELS:
-            return MODELS[name].task
-    return "transition"
-
-
-_GENERATE_USAGE = ("usage: refimpl generate --source FILE --source-frame S [...]  (a transition)\n"
-                   "       refimpl generate --checkpoint CKPT --source FILE [...]  (prediction, acrnn)\n"
-                   "       refimpl generate --model quaternet-long --checkpoint POSE.npz --pace PACE.npz "
-                   "[--path ...]  (locomotion)")
+            return task_of(MODELS[name]), None
+    return task_of(MODELS[DEFAULT_MODEL]), None
 
 
 def cmd_generate(args) -> int:
-    """``refimpl generate``."""
-    from refimpl.bvh import write_bvh
-
-    if args.model is not None and MODELS[args.model].task == "locomotion":
-        from refimpl.tasks.locomotion_cli import generate_command
-
-        return generate_command(args, load_trained, _say)
-    first = load_trained(args.checkpoint) if args.checkpoint else None
-    task_name = _model_task(args, first)
-    if task_name == "locomotion":
-        raise UsageError("a quaternet-long / pace checkpoint: pass --model quaternet-long --checkpoint POSE.npz "
-                         "--pace PACE.npz [--path ...]")
-    if args.source is None:
-        raise UsageError("the following argument is required: --source (the prefix, seed or source clip)\n"
-                         + _GENERATE_USAGE)
-    if task_name == "prediction":
-        if args.backend == "numpy" and first is None:
-            raise UsageError("--backend numpy needs --checkpoint")
-        return _generate_prediction(args, first)
-    model = None
-    if task_name == "synthesis":
-        return _generate_synthesis(args)
-    if args.source_frame is None:
-        raise UsageError("the following arguments are required for a transition: --source, --source-frame\n"
-                         + _GENERATE_USAGE)
-    if args.method == "qtg":
-        if args.backend == "numpy" and not args.checkpoint:
-            raise UsageError("--method qtg with --backend numpy needs --checkpoint")
-        if args.backend == "onnx" and not args.onnx:
-            raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
-        if args.checkpoint:
-            model = load_trained(args.checkpoint)
-            if model.spec.task != "transition":
-                return _generate_synthesis(args, model)
-    elif args.backend == "onnx":
-        raise UsageError(f"--backend onnx runs the network; --method {args.method} is a NumPy baseline")
-    fps, T_model = (model.fps, model.transition_length) if model else (30.0, 30)
-    if args.backend == "onnx" and model is None:
-        fps, T_model = _onnx_rate_and_length(args.onnx, T_model)
-    T = args.length or T_model
-    target_path = args.target or args.source
-    skel, src_clip, src = transition.clip_for(args.source, fps, args.fps)
-    skel2, tgt_clip, tgt = transition.clip_for(target_path, fps, args.fps)
-    if skel != skel2:
-        raise BadInputError(f"{target_path}: its 22-joint skeleton differs from {args.source}'s "
-                            "(both clips must come from the same skeleton)")
-    if args.method == "qtg":
-        networks = network_methods(None if args.backend == "onnx" else model,
-                                   onnx_dir=args.onnx if args.backend == "onnx" else None)
-        method = next(iter(networks.values()))
-    else:
-        method = transition.methods(fps=fps)[args.method]
-    same = Path(args.source).resolve() == Path(target_path).resolve()
-    target_frame = args.target_frame if args.target_frame is not None else (
-        args.source_frame + T + 1 if same else 1)
-    tr = transition.make_transition(method, skel, src_clip, args.source_frame, tgt_clip, target_frame, T,
-                         frame_time=1.0 / fps, context=args.context, align=args.align, same_clip=same,
-                         method_name=args.method, name=Path(args.out).stem)
-    write_bvh(args.out, transition.with_end_sites(tr.motion))
-    _say(f"wrote {args.out}: {tr.motion.num_frames} frames at {fps:g} fps, 22 joints (centimetres); "
-         f"generated frames {tr.start}..{tr.stop - 1} ({args.method}, {args.backend})")
-    err = tr.error_cm()
-    if err is not None:
-        _say(f"ground truth available (same clip, target = source + T + 1): mean joint error {err:.2f} cm")
-        if args.truth:
-            write_bvh(args.truth, transition.with_end_sites(tr.truth))
-            _say(f"wrote {args.truth} (ground truth)")
-    elif args.truth:
-        raise UsageError("--truth needs --target-frame = --source-frame + T + 1 in the same file (and --align none)")
-    if args.png or args.gif:
-        transition.render_transition(tr, png=args.png, gif=args.gif)
-    return EXIT_OK
-
-
-def _onnx_rate_and_length(onnx_dir, default_T: int) -> tuple[float, int]:
-    """Frame rate and T from the exported models' metadata, checked: a rate that is not a finite number > 0, or
-    a model entry / T of the wrong type, is a bad input file (exit 3), not a ZeroDivisionError later."""
-    meta = onnx_metadata(onnx_dir)
-    where = f"{onnx_dir}: metadata"
-    fps = meta.get("frame_rate", 30.0)
-    try:
-        ok = not isinstance(fps, bool) and isinstance(fps, (int, float)) and 0 < float(fps) < float("inf")
-    except OverflowError:  # an integer beyond the float range
-        ok = False
-    if not ok:
-        raise BadInputError(f"{where} frame_rate: expected a finite number > 0, got {fps!r}"[:300])
-    model_meta = meta.get("model", {})
-    if not isinstance(model_meta, dict):
-        raise BadInputError(f"{where} model: expected a JSON object, got {type(model_meta).__name__}")
-    T = model_meta.get("transition_length")
-    if T is None:
-        T = default_T
-    elif isinstance(T, bool) or not isinstance(T, int) or not 1 <= T <= 100_000:
-        raise BadInputError(f"{where} model.transition_length: expected an integer in [1, 100000], got {T!r}"[:300])
-    return float(fps), int(T)
+    """``refimpl generate``: the task's ``generate_command`` (options of another task's group are refused)."""
+    if args.model is not None and args.checkpoint:
+        _check_model_option(args, load_trained(args.checkpoint))
+    task, model = _generate_task(args)
+    _refuse_other_tasks_options(args, task.NAME, model.spec.name if model is not None else f"a {task.NAME} run")
+    return task.generate_command(args, model)
 
 
 def _parse_slice(text: str | None, n: int) -> slice:
@@ -605,7 +273,8 @@ def _parse_slice(text: str | None, n: int) -> slice:
 
 def cmd_render(args) -> int:
     """``refimpl render``."""
-    from refimpl.render import render_gif, render_strip
+    from refimpl.render import render_gif
+    from refimpl.render_strip import limb_sides, render_strip
 
     motion = read_motion(args.file, fps=args.fps, layout=args.layout)
     other = read_motion(args.compare, fps=args.fps, layout=args.layout) if args.compare else None
@@ -620,16 +289,17 @@ def cmd_render(args) -> int:
     pred = None if other is None else other.positions()[idx]
     parents = np.asarray(motion.skeleton.parents)
     outs = args.out or [Path(args.file).stem + ".png"]
+    sides = limb_sides(motion.skeleton)  # left limbs dark, right limbs light (the skeleton's mirror map)
     labels = (Path(args.file).stem, Path(args.compare).stem if args.compare else "")
     step = sel.step or 1
     for out in outs:
         suffix = Path(out).suffix.lower()
         if suffix == ".png":
             render_strip(out, pos, parents, prediction=pred, num_frames=args.num_frames, labels=labels,
-                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title)
+                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title, sides=sides)
         elif suffix == ".gif":
             render_gif(out, pos, parents, prediction=pred, fps=motion.fps / step, stride=args.stride, labels=labels,
-                       up=args.up, frame_numbers=idx, title=args.title)
+                       up=args.up, frame_numbers=idx, title=args.title, sides=sides)
         else:
             raise UsageError(f"--out {out}: expected a .png or .gif file name")
         _say(f"wrote {out} ({len(idx)} frames of {args.file})")
@@ -641,86 +311,7 @@ def cmd_demo(args) -> int:
     from refimpl.demo import run_demo
 
     run_demo(args.out, seed=args.seed, quick=args.quick, steps=args.steps, onnx=not args.no_onnx,
-             render=not args.no_render)
-    return EXIT_OK
-
-
-def _eval_synthesis(args, model) -> int:
-    """``refimpl eval`` for a synthesis model (acRNN): Table 1's metrics on the test takes (spec/acrnn.md §8)."""
-    task = task_of(model.spec if model is not None else MODELS[args.model])
-    if model is None:
-        raise UsageError("--model acrnn: evaluation needs --checkpoint (the statistics and the representation)")
-    _say(f"reading {args.data} ...")
-    data = task.load_eval_data(args.data, model.extra)
-    results = evaluate_model(model, data, onnx_dir=args.onnx)
-    task.print_results(results, data, model)
-    if args.json:
-        task.write_results(results, args.json)
-        _say(f"results          {args.json}")
-    return EXIT_OK
-
-
-def _eval_locomotion(args, model) -> int:
-    """``refimpl eval`` for the long-term pose network: free-running position and velocity error over the held-out
-    windows (QN §4.4.2; spec/locomotion.md §8), against zero-velocity."""
-    task = task_of("locomotion")
-    if model is None or model.spec.name != "quaternet-long":
-        raise UsageError("locomotion: evaluation needs --checkpoint of a quaternet-long model (the pace network's "
-                         "held-out L1 is its loss_val.csv)")
-    _say(f"reading {args.data} ...")
-    data = task.load_eval_data(args.data, model.extra)
-    extra = getattr(model.spec.recipe, "extra_methods", None)  # e.g. a DQ model's positions read from the DQs
-    nets = {**network_methods(model), **(extra(model) if extra else {})}
-    results = task.evaluate(data, task.methods(nets))
-    _say(f"held-out windows: {next(iter(results.values()))['windows']} of {data.prefix} + {data.target} frames "
-         f"({len(data.files)} files); error in QuaterNet units (1 unit = 5.6444 cm)")
-    from refimpl.protocols.locomotion import format_results
-
-    _say(format_results(results))
-    if args.json:
-        from refimpl.atomic import atomic_write_text
-
-        serial = {n: {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()}
-                  for n, r in results.items()}
-        atomic_write_text(args.json, json.dumps(serial, indent=1) + "\n")
-        _say(f"results          {args.json}")
-    return EXIT_OK
-
-
-def _generate_synthesis(args, model=None) -> int:
-    """``refimpl generate --model acrnn``: seed frames of --source continued for --length frames, BVH out."""
-    from refimpl.bvh import write_bvh
-
-    if model is None:
-        if not args.checkpoint:
-            raise UsageError("--model acrnn needs --checkpoint (with --backend onnx too: skeleton and statistics)")
-        model = load_trained(args.checkpoint)
-    task = task_of(model.spec)
-    if args.backend == "onnx" and not args.onnx:
-        raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
-    networks = network_methods(None if args.backend == "onnx" else model,
-                               onnx_dir=args.onnx if args.backend == "onnx" else None)
-    method = next(iter(networks.values()))
-    n = args.length or 300
-    motion, seed_frames = task.continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
-    write_bvh(args.out, transition.with_end_sites(motion))
-    _say(f"wrote {args.out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
-         f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
-         "metres")
-    if args.png or args.gif:
-        from refimpl.render import render_gif, render_strip
-
-        pos = motion.positions()
-        parents = np.asarray(motion.skeleton.parents)
-        labels = (f"acrnn {model.extra.get('row')}", "")
-        if args.png:
-            render_strip(args.png, pos, parents, highlight=(seed_frames, motion.num_frames), labels=labels,
-                         frame_time=motion.frame_time)
-            _say(f"wrote {args.png}")
-        if args.gif:
-            render_gif(args.gif, pos, parents, fps=motion.fps, highlight=(seed_frames, motion.num_frames),
-                       labels=labels)
-            _say(f"wrote {args.gif}")
+             render=not args.no_render, overwrite=args.overwrite)
     return EXIT_OK
 
 
@@ -731,25 +322,24 @@ def _generate_synthesis(args, model=None) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``refimpl`` (see spec/cli.md)."""
-    from refimpl import __version__
+    import refimpl
 
+    what = refimpl.__doc__.splitlines()[0].partition(": ")[2].rstrip(".")  # the package's one-line summary
     parser = argparse.ArgumentParser(
         prog="refimpl",
-        description="Reference NumPy implementation of QuaterNet, the dual-quaternion representation and QTG: "
-                    "inspect files, train, evaluate, export to ONNX, generate transitions, render. "
-                    "Start with `refimpl demo`.",
+        description=f"{what[0].upper()}{what[1:]}: inspect files, train, evaluate, export to ONNX, generate "
+                    "motion, render. Start with `refimpl demo`.",
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
-    parser.add_argument("--version", action="version", version=f"refimpl {__version__}")
+    parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=nonneg_int, default=2,
-                        help="BLAS threads for NumPy (default 2: measured fastest on an idle 2-core machine, "
-                             "0.58-0.74x the one-thread time per training step of every network and equal or "
-                             "faster at batch 1, benchmarks/bench_threads.py; pass 1 when other jobs share the "
-                             "cores, where two threads were 1.2-20x slower; 0 = library default; needs "
-                             "threadpoolctl)")
+    parser.add_argument("--blas-threads", type=bounded_int("threads"), default=1,
+                        help="BLAS threads for NumPy (default 1: it cannot collapse; 2 threads took 0.58-0.99x "
+                             "the one-thread time per training step on an idle 2-core machine, but 8-31x when other "
+                             "jobs shared the cores, benchmarks/bench_thread_default.py; pass 2 on a machine you "
+                             "have to yourself; 0 = library default; needs threadpoolctl)")
     parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
                         help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
-                             "training step instead of faulting it in again (QTG step time 0.76-0.99x, pace 0.80-0.83x, "
+                             "training step instead of faulting it in again (step time 0.76-0.99x of glibc's defaults, "
                              "benchmarks/bench_allocator.py); 'system' leaves glibc's defaults")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
@@ -762,110 +352,98 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("train", help="train a network (qtg, quaternet, quaternet-cnn, acrnn) on motion files",
+    p = sub.add_parser("train", help=f"train a network ({', '.join(sorted(MODELS))}) on motion files",
                        description="Train a network with Adam; checkpoint.npz (resumable), loss.csv and "
                                    "loss_val.csv go to --out. Progress lines (rate, ETA) go to stderr. "
                                    "Models: " + "; ".join(f"{n}: {s.summary}" for n, s in sorted(MODELS.items())))
-    p.add_argument("--model", default="qtg", choices=sorted(MODELS), help="network (default qtg)")
-    p.add_argument("--representation", default=None, help="pose representation (qtg: quat)")
+    p.add_argument("--model", default=DEFAULT_MODEL, choices=sorted(MODELS), help=f"network (default {DEFAULT_MODEL})")
+    p.add_argument("--representation", default=None,
+                   help="pose representation (default: the model's first; "
+                        + "; ".join(f"{n}: {', '.join(s.representations)}" for n, s in sorted(MODELS.items())) + ")")
     add_data_options(p)
-    p.add_argument("--out", default="runs/qtg", help="output folder (default runs/qtg)")
+    p.add_argument("--out", default=None, help="output folder (default runs/<model>)")
     length = p.add_mutually_exclusive_group()
-    length.add_argument("--steps", type=nonneg_int, default=None, help="optimiser steps")
-    length.add_argument("--epochs", type=nonneg_int, default=10, help="epochs, when --steps is not given (default 10)")
-    p.add_argument("--batch-size", type=positive_int, default=None,
-                   help="batch size (default: the model's paper value; qtg 32, quaternet 60, quaternet-long and "
-                        "pace 40)")
+    length.add_argument("--steps", type=bounded_int("steps"), default=None, help="optimiser steps")
+    length.add_argument("--epochs", type=bounded_int("steps"), default=10, help="epochs, when --steps is not given (default 10)")
+    p.add_argument("--batch-size", type=bounded_int("batch"), default=None,
+                   help="batch size (default: the model's paper value; "
+                        + ", ".join(f"{n} {s.batch_size}" for n, s in sorted(MODELS.items())) + ")")
     p.add_argument("--lr", type=positive_float, default=None,
-                   help="Adam learning rate (default: the model's paper value; qtg 1e-4)")
-    p.add_argument("--betas", type=float, nargs=2, default=None, metavar=("B1", "B2"),
-                   help="Adam betas (default: the model's paper values; qtg 0.5 0.9)")
+                   help="Adam learning rate (default: the model's paper value; "
+                        + ", ".join(f"{n} {s.optim.lr:g}" for n, s in sorted(MODELS.items())) + ")")
+    p.add_argument("--betas", type=beta, nargs=2, default=None, metavar=("B1", "B2"),
+                   help="Adam betas (default: the model's paper values)")
     p.add_argument("--clip-norm", type=positive_float, default=None, help="global gradient-norm clipping")
-    for task_name in sorted(TASKS):  # each task adds its own options, in its own group
-        task_of(task_name).add_train_options(p.add_argument_group(f"{task_name} task"))
+    _add_task_options(p, lambda task, group: task.add_train_options(group))
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a config field, e.g. --set gru_hidden=128 --set encoder_sizes=128,64")
     p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
     p.add_argument("--seed", type=int, default=0)
     resume = p.add_mutually_exclusive_group()
-    resume.add_argument("--resume", action="store_true", help="continue from --out/checkpoint.npz")
+    resume.add_argument("--resume", action="store_true",
+                        help="continue from --out/checkpoint.npz with the options stored in it (give only "
+                             "--steps/--epochs; a different option is refused, field by field)")
     resume.add_argument("--overwrite", action="store_true", help="start again, replacing --out's checkpoint and logs")
-    p.add_argument("--checkpoint-every", type=positive_int, default=500)
-    p.add_argument("--validate-every", type=positive_int, default=None,
+    p.add_argument("--checkpoint-every", type=bounded_int("every"), default=500)
+    p.add_argument("--validate-every", type=bounded_int("every"), default=None,
                    help="log the held-out MAE every N steps (loss_val.csv)")
-    p.add_argument("--progress-every", type=positive_int, default=50)
-    p.set_defaults(func=cmd_train)
+    p.add_argument("--progress-every", type=bounded_int("every"), default=50)
+    p.set_defaults(func=cmd_train, option_defaults={a.dest: a.default for a in p._actions})
 
-    p = sub.add_parser("eval", help="a network against its task's baselines (QTG: transitions; QuaterNet: "
-                                    "short-term prediction)",
-                       description="Transition task (qtg): the QTG paper's protocol, mean joint-position error per "
-                                   "joint per frame (cm) on held-out transition windows, with the per-frame curve. "
-                                   "Prediction task (quaternet, quaternet-cnn): the published short-term protocol, "
-                                   "Euler-angle error per action and horizon, with zero-velocity and running "
-                                   "averages.")
+    p = sub.add_parser("eval", help="a network against its task's baselines, under its task's protocol",
+                       description="Evaluate a network (--checkpoint, --onnx) or, without one, the baselines of "
+                                   "--model's task, under the task's protocol. "
+                                   + " ".join(f"{task_of(t).EVAL_SUMMARY[0].upper()}{task_of(t).EVAL_SUMMARY[1:]}."
+                                              for t in TASKS))
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (omit: baselines only)")
     p.add_argument("--onnx", default=None, help="also evaluate the exported models of this folder (onnxruntime)")
     add_data_options(p)
-    p.add_argument("--transition-length", type=positive_int, default=None, help="T (default: the model's)")
-    p.add_argument("--csv", default=None, help="write the per-frame curve as CSV")
     p.add_argument("--json", default=None, help="write all results as JSON")
     p.add_argument("--plot", default=None, help="write the per-frame curves as PNG (matplotlib)")
     p.add_argument("--model", default=None, choices=sorted(MODELS),
-                   help="without --checkpoint: evaluate the baselines of this model's task (default qtg's); the "
-                        "checkpoint's model decides otherwise (acrnn: Table 1 metrics on the salsa test takes)")
-    for task_name in sorted(TASKS):
-        if hasattr(task_of(task_name), "add_eval_options"):
-            task_of(task_name).add_eval_options(p.add_argument_group(f"{task_name} task"))
+                   help=f"without --checkpoint: evaluate the baselines of this model's task (default "
+                        f"{DEFAULT_MODEL}'s); the checkpoint's model decides otherwise")
+    _add_task_options(p, lambda task, group: task.add_eval_options(group))
     p.set_defaults(func=cmd_eval)
 
-    p = sub.add_parser("export", help="export a checkpoint to ONNX (needs the deploy extra)",
-                       description="Write <model>_init.onnx, <model>_step.onnx, <model>_rollout.onnx (validated); "
-                                   "the graphs standardise inside (raw poses in and out) and carry their metadata.")
+    p = sub.add_parser("export", help="export a checkpoint of any model to ONNX, verified (needs the deploy extra)",
+                       description="Write the model's ONNX files <model>_<role>.onnx (validated; the exporter's "
+                                   "roles); the graphs standardise inside (raw poses in and out) and carry their "
+                                   "metadata. A folder holding another network's graphs is refused before anything "
+                                   "is written.")
     p.add_argument("--checkpoint", required=True)
     p.add_argument("--out", default=None, help="output folder (default: onnx/ beside the checkpoint)")
     p.add_argument("--mode", default="unrolled", choices=("unrolled", "loop", "scan"), help="rollout graph form")
     p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
-    p.add_argument("--transition-length", type=positive_int, default=None, help="T of the rollout model")
     p.add_argument("--no-verify", dest="verify", action="store_false",
-                   help="skip the onnxruntime-vs-NumPy check on random context poses")
-    p.add_argument("--seed", type=int, default=0, help="seed of the check's random poses")
+                   help="skip the onnxruntime-vs-NumPy check on the task's check inputs")
+    p.add_argument("--seed", type=int, default=0, help="seed of the check's random inputs")
+    p.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
+                   help="frames of the rollout / predict model (default: the model's)")
+    _add_task_options(p, lambda task, group: task.add_export_options(group))
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("generate", help="generate a transition between two clips, BVH out",
-                       description="Take frames s-1, s of --source and g, g+1 of --target (frame numbers at the "
-                                   "model's rate, 30 fps, after the files' first reference frame), generate the T "
-                                   "frames between them and write a BVH with --context frames on both sides.")
-    p.add_argument("--source", default=None, help=".bvh or exp-map .txt (every task but locomotion)")
+    p = sub.add_parser("generate", help="generate motion with a network or a baseline, BVH out (every model: "
+                                        "`refimpl generate --help` lists each task's form)",
+                       description="Generate motion with the task of --model (else of --checkpoint's model, else "
+                                   f"of the exported models in --onnx, else {DEFAULT_MODEL}'s) and write a BVH.",
+                       usage=generate_usage().replace("usage: ", "", 1))
+    p.add_argument("--source", default=None, help=".bvh or exp-map .txt: the source clip, prefix or seed")
     p.add_argument("--source-frame", type=nonneg_int, default=None,
-                   help="s, last frame of the source kept (transitions, required); acrnn: first seed frame (default 0)")
-    p.add_argument("--target", default=None, help=".bvh or exp-map .txt (default: --source)")
-    p.add_argument("--target-frame", type=nonneg_int, default=None,
-                   help="g, first target frame (default: s + T + 1 in the same file, else 1)")
-    p.add_argument("--method", default="qtg", choices=("qtg", "inertialization", "interpolation"))
+                   help="frame of --source where the task starts (see the usage lines above)")
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (NumPy backend)")
     p.add_argument("--backend", default="numpy", choices=("numpy", "onnx"))
     p.add_argument("--onnx", default=None, help="folder of exported models (ONNX backend)")
-    p.add_argument("--length", type=positive_int, default=None, help="T (default: the model's)")
-    p.add_argument("--context", type=positive_int, default=10, help="frames kept on each side (default 10)")
-    p.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
-                   help="place the target clip: none = as in its file, continue = after the source (default: "
-                        "none for one file, continue for two)")
-    p.add_argument("--fps", type=positive_float, default=None, help="true frame rate of the input files")
-    p.add_argument("--out", default="transition.bvh")
-    p.add_argument("--truth", default=None, help="also write the ground truth (same file, g = s + T + 1)")
+    p.add_argument("--length", type=bounded_int("frames"), default=None,
+                   help="frames to generate (default: the task's)")
+    p.add_argument("--out", default=None, help="output BVH (default: the task's)")
+    p.add_argument("--truth", default=None, help="also write the ground truth, when the file has it")
     p.add_argument("--png", default=None, help="also render a PNG strip (matplotlib)")
     p.add_argument("--gif", default=None, help="also render a GIF (matplotlib)")
-    loco = p.add_argument_group("locomotion (--model quaternet-long)")
-    loco.add_argument("--model", default=None, choices=sorted(MODELS),
-                      help="the network when the checkpoint does not say it: quaternet-long walks a path (needs "
-                           "--checkpoint, --pace); acrnn continues 10 seed frames of --source for --length frames "
-                           "(default 300); default: the checkpoint's model, else a transition")
-    loco.add_argument("--pace", default=None, help="pace-network checkpoint (`refimpl train --model pace`)")
-    loco.add_argument("--path", default="circle:r=3",
-                      help="circle[:r=M], figure8[:size=M], line-turn[:turn=DEG] or a CSV of x,z points in metres")
-    loco.add_argument("--speed", default="walk", help="walk, jog, run or units per frame (default walk)")
-    loco.add_argument("--seconds", type=positive_float, default=10.0, help="length of the motion (default 10)")
-    loco.add_argument("--controls", default=None, help="also write the per-frame controls as JSON")
+    p.add_argument("--model", default=None, choices=sorted(MODELS),
+                   help="the network, and so the task, when the checkpoint does not say it (default: the "
+                        "checkpoint's model)")
+    _add_task_options(p, lambda task, group: task.add_generate_options(group))
     p.set_defaults(func=cmd_generate)
 
     p = sub.add_parser("render", help="draw a motion as a PNG strip or GIF (matplotlib)",
@@ -876,7 +454,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", action="append", default=None,
                    help=".png and/or .gif output (repeatable; default <file stem>.png)")
     p.add_argument("--frames", default=None, help="START:STOP[:STEP] frame range (default all)")
-    p.add_argument("--num-frames", type=positive_int, default=8, help="panels in a PNG strip (default 8)")
+    p.add_argument("--num-frames", type=bounded_int("panels"), default=8, help="panels in a PNG strip (default 8)")
     p.add_argument("--stride", type=positive_int, default=1, help="draw every k-th frame in a GIF")
     p.add_argument("--up", default="y", choices=("y", "z"), help="the data's up axis (BVH: y)")
     p.add_argument("--title", default=None)
@@ -887,13 +465,23 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="train, evaluate, export, verify, generate and render on the sample",
                        description="The whole tour on the embedded CMU sample in a few minutes on 2 cores.")
     p.add_argument("--out", default="demo_out", help="output folder (default ./demo_out)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the results of a longer demo in --out (a --quick run refuses otherwise)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quick", action="store_true", help="a tiny network and a few steps (a smoke test, ~30 s)")
     p.add_argument("--steps", type=positive_int, default=None, help="override the number of training steps")
     p.add_argument("--no-onnx", action="store_true", help="skip export and verification")
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
     p.set_defaults(func=cmd_demo)
+
+    weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
     return parser
+
+
+def _one_line(exc: BaseException, limit: int = 1000) -> str:
+    """An exception's message as one line (a checker's report may span several), at most ``limit`` characters."""
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _prog(args) -> str:
@@ -919,17 +507,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BadInputError as exc:
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except UsageError as exc:
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except (MissingDependency, ImportError) as exc:  # an optional dependency (matplotlib, onnx) is missing
         if args.traceback:
             raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
@@ -942,7 +530,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.traceback:
             raise
         kind = "" if isinstance(exc, (RuntimeError, ValueError, OSError)) else f"{type(exc).__name__}: "
-        print(f"{prog}: error: {kind}{exc} (run with --traceback for details)", file=sys.stderr)
+        print(f"{prog}: error: {kind}{_one_line(exc)} (run with --traceback for details)", file=sys.stderr)
         return EXIT_FAILURE
 
 

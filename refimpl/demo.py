@@ -6,13 +6,17 @@ Steps (each prints what it did and where the files are):
                ``refimpl/data/sample``, split by file / by time into training and held-out windows;
 2. train     — QTG with the paper's loss and optimiser (MAE, Adam β = (0.5, 0.9)) but a smaller network
                and a larger learning rate, so that it trains in minutes (:data:`DEMO_CONFIG`);
-3. evaluate  — QTG vs inertialisation vs interpolation on the held-out windows, the paper's metric
-               (mean joint-position error per joint per frame, cm) as a table and a per-frame curve;
+3. evaluate  — QTG (and QTG with ``--join inertialize``, spec/qtg.md §7.4) vs inertialisation vs interpolation on
+               the held-out windows, the paper's metric (mean joint-position error per joint per frame, cm) as a
+               table and a per-frame curve, and the animator's measures (joins, foot skating, first and last
+               frame; spec/qtg.md §9.1);
 4. export    — ONNX ``init``/``step``/``rollout`` models (``deploy``; skipped with a message without it);
 5. verify    — onnxruntime against NumPy on held-out context poses (max abs difference);
 6. generate  — a held-out transition (with its ground truth) and a walk-to-run transition between two
-               held-out clips, with NumPy and with onnxruntime, written as BVH;
-7. render    — PNG strip (ground truth vs QTG), GIFs, the loss curve and the per-frame error curve
+               held-out clips, with NumPy and with onnxruntime, with and without the join option, written as BVH;
+7. render    — PNG strips (ground truth vs QTG, without and with the join option: the frames on both sides of
+               each join, left / right limbs in two shades, foot tracks, a floor fixed in the world), GIFs, the
+               loss curve and the per-frame error curve
                (matplotlib; skipped with a message without it).
 
 Deterministic for a given ``seed`` (one BLAS thread; the trainer's Generator drives initialisation and
@@ -31,10 +35,13 @@ from typing import Callable
 
 import numpy as np
 
+from refimpl.protocols.transition import SAMPLE_DIR
+from refimpl.protocols.transition_join import with_join
 from refimpl.registry import MODELS
-from refimpl.services import (SAMPLE_DIR, blas_threads, evaluate_model, export_onnx, load_trained, network_methods,
-                              train_model, verify_onnx)
-from refimpl.tasks.transition import make_transition, print_results, render_transition, with_end_sites, write_results
+from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods, train_model,
+                              verify_onnx)
+from refimpl.tasks.transition import print_results, write_results
+from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
 
 __all__ = ["run_demo", "DemoResult", "DEMO_CONFIG", "DEMO_STEPS", "DEMO_BATCH", "DEMO_LR", "QUICK_CONFIG",
            "QUICK_STEPS"]
@@ -87,15 +94,35 @@ def _missing(module: str) -> str | None:
     return None
 
 
+def _refuse_to_replace_a_fuller_run(out: Path, n_steps: int) -> None:
+    """A demo of fewer steps (``--quick``) does not silently replace the results of a longer one in the same
+    folder (as ``refimpl train`` refuses to replace a checkpoint): ``UsageError`` unless ``overwrite``."""
+    from refimpl.checkpoint import load_checkpoint
+    from refimpl.errors import UsageError
+
+    ckpt = out / "train" / "checkpoint.npz"
+    if not ckpt.is_file():
+        return
+    try:
+        _, meta = load_checkpoint(ckpt)
+        done = int(meta.get("steps_target") or 0)
+    except (OSError, ValueError, TypeError):  # a damaged checkpoint is not results worth keeping
+        return
+    if done > n_steps:
+        raise UsageError(f"{out} holds the results of a {done}-step demo; this {n_steps}-step run would replace "
+                         "them: pass --out another folder, or --overwrite")
+
+
 def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: int | None = None,
-             onnx: bool = True, render: bool = True, threads: int = 1,
+             onnx: bool = True, render: bool = True, threads: int = 1, overwrite: bool = False,
              say: Callable[[str], None] | None = None) -> DemoResult:
     """Run the demo into ``out_dir`` (see the module docstring) and return what it wrote.
 
     Parameters
     ----------
     out_dir : str or Path
-        Output folder (created; files of an earlier run are replaced, the training starts again).
+        Output folder (created; files of an earlier run are replaced, the training starts again; those of a
+        longer run only with ``overwrite``).
     seed : int
         Seed of the training run.
     quick : bool
@@ -106,10 +133,15 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
         Do the ONNX steps (export, verify, ONNX generation) / the pictures, when their dependencies are installed.
     threads : int
         BLAS threads (1: fastest for this network size, and deterministic).
+    overwrite : bool
+        Replace the results of a longer demo in ``out_dir`` (otherwise ``UsageError``).
     say : callable, optional
         Receives each report line (default: print to stdout).
     """
     say = say or (lambda line: print(line, flush=True))
+    if not overwrite:
+        _refuse_to_replace_a_fuller_run(Path(out_dir), steps if steps is not None else
+                                        (QUICK_STEPS if quick else DEMO_STEPS))
     with blas_threads(threads):
         return _run(Path(out_dir), seed, quick, steps, onnx, render, say)
 
@@ -167,17 +199,22 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
     # 3. evaluate ----------------------------------------------------------------------------------------
     t0 = time.perf_counter()
     say("[3/7] evaluate: QTG vs inertialisation vs interpolation on the held-out windows")
-    results = evaluate_model(model, test_ds)
+    results = evaluate_model(model, test_ds, join="inertialize")  # qtg, qtg+join (spec/qtg.md 7.4), baselines
     print_results(results, test_ds, model, curve=False)
     files["eval_json"] = out / "eval.json"
     files["eval_curve_csv"] = out / "eval_per_frame.csv"
     write_results(results, 1.0 / test_ds.fps, json_path=files["eval_json"], csv_path=files["eval_curve_csv"])
     q = results["qtg"]["mean_cm"]
-    best = min((k for k in results if k != "qtg"), key=lambda k: results[k]["mean_cm"])
+    best = min((k for k in results if not k.startswith("qtg")), key=lambda k: results[k]["mean_cm"])
     b = results[best]["mean_cm"]
     verdict = (f"QTG {q:.2f} cm vs best baseline ({best}) {b:.2f} cm: "
                + (f"{100 * (1 - q / b):.0f} % lower" if q < b else f"NOT better ({100 * (q / b - 1):.0f} % higher)"))
     say(f"      {verdict}" + ("  [quick mode: a smoke test, not a trained model]" if quick else ""))
+    qa, qj, gt = results["qtg"]["quality"], results["qtg+join"]["quality"], results["qtg"]["quality"]["ground_truth"]
+    say(f"      joins in/out: QTG {qa['join_in_cm']:.1f}/{qa['join_out_cm']:.1f} cm, with --join inertialize "
+        f"{qj['join_in_cm']:.1f}/{qj['join_out_cm']:.1f} cm, ground truth {gt['join_in_cm']:.1f}/"
+        f"{gt['join_out_cm']:.1f} cm; foot skating {qa['skate_cm_s']:.0f} / {qj['skate_cm_s']:.0f} / "
+        f"{gt['skate_cm_s']:.0f} cm/s")
     say(f"      tables {files['eval_json']}, {files['eval_curve_csv']} ({time.perf_counter() - t0:.1f} s)")
 
     # 4. export / 5. verify ------------------------------------------------------------------------------
@@ -208,6 +245,7 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
 
     say("[6/7] generate: transitions written as BVH (22 joints, centimetres, 30 fps)")
     methods = network_methods(model, onnx_dir=onnx_dir if onnx else None)  # qtg (NumPy), qtg_onnx
+    methods["qtg+join"] = with_join(methods["qtg"], "inertialize", dt=1.0 / 30)
     walk = next(s for s in test_src if s.label == "walk")
     run = next(s for s in test_src if s.label == "run")
     skel, walk_clips = load_source(walk)
@@ -217,10 +255,11 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
     transitions = {}
     for name, f in methods.items():
         tr = make_transition(f, skel, walk_clip, s, walk_clip, s + _T + 1, _T, frame_time=1 / 30, context=10,
-                             same_clip=True, method_name=name, name=f"heldout_{name}")
+                             same_clip=True, method_name=name, name=f"heldout_{name.replace('+', '_')}")
         transitions[name] = tr
-        files[f"heldout_{name}_bvh"] = out / f"heldout_{name}.bvh"
-        write_bvh(files[f"heldout_{name}_bvh"], with_end_sites(tr.motion))
+        key = name.replace("+", "_")
+        files[f"heldout_{key}_bvh"] = out / f"heldout_{key}.bvh"
+        write_bvh(files[f"heldout_{key}_bvh"], with_end_sites(tr.motion))
     files["heldout_truth_bvh"] = out / "heldout_truth.bvh"
     write_bvh(files["heldout_truth_bvh"], with_end_sites(transitions["qtg"].truth))
     say(f"      held-out window of {Path(walk.path).name} (frames {s - 1}..{s + _T + 2}): mean joint error "
@@ -230,12 +269,16 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
     if onnx:
         d = np.abs(transitions["qtg"].motion.positions() - transitions["qtg_onnx"].motion.positions()).max()
         say(f"      NumPy vs onnxruntime transition: max joint-position difference {d:.2e} cm")
-    cross = make_transition(methods["qtg"], skel, walk_clip, s, run_clips[0], len(run_clips[0][0]) // 2, _T,
-                            frame_time=1 / 30, context=15, align="continue", method_name="qtg", name="walk_to_run")
-    files["walk_to_run_bvh"] = out / "walk_to_run.bvh"
-    write_bvh(files["walk_to_run_bvh"], with_end_sites(cross.motion))
+    crosses = {}
+    for name, key in (("qtg", "walk_to_run"), ("qtg+join", "walk_to_run_join")):
+        crosses[name] = make_transition(methods[name], skel, walk_clip, s, run_clips[0], len(run_clips[0][0]) // 2,
+                                        _T, frame_time=1 / 30, context=15, align="continue", method_name=name,
+                                        name=key)
+        files[f"{key}_bvh"] = out / f"{key}.bvh"
+        write_bvh(files[f"{key}_bvh"], with_end_sites(crosses[name].motion))
     say(f"      walk -> run between two held-out clips ({Path(walk.path).name} -> {Path(run.path).name}, target "
-        f"placed to continue the walk): {files['walk_to_run_bvh']}")
+        f"placed to continue the walk): {files['walk_to_run_bvh']}, {files['walk_to_run_join_bvh'].name} (--join "
+        "inertialize)")
 
     # 7. render ------------------------------------------------------------------------------------------
     if render:
@@ -243,17 +286,22 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
 
         t0 = time.perf_counter()
         files["strip_png"] = out / "heldout_strip.png"
+        files["strip_join_png"] = out / "heldout_join_strip.png"
         files["heldout_gif"] = out / "heldout.gif"
         files["walk_to_run_gif"] = out / "walk_to_run.gif"
         files["walk_to_run_png"] = out / "walk_to_run.png"
+        files["walk_to_run_join_png"] = out / "walk_to_run_join.png"
         files["loss_png"] = out / "loss.png"
         files["error_curve_png"] = out / "error_curve.png"
         say("[7/7] render:")
-        tr = transitions["qtg"]
-        render_transition(tr, png=files["strip_png"], gif=files["heldout_gif"],
-                           title="held-out transition: ground truth (top/left) vs QTG; green = context")
-        render_transition(cross, png=files["walk_to_run_png"], gif=files["walk_to_run_gif"],
-                           title="QTG transition walk -> run; green = context")
+        render_transition(transitions["qtg"], png=files["strip_png"], gif=files["heldout_gif"],
+                          title="held-out transition: ground truth (top/left) vs QTG; green = context")
+        render_transition(transitions["qtg+join"], png=files["strip_join_png"],
+                          title="the same with --join inertialize; green = context")
+        render_transition(crosses["qtg"], png=files["walk_to_run_png"], gif=files["walk_to_run_gif"],
+                          title="QTG transition walk -> run; green = context")
+        render_transition(crosses["qtg+join"], png=files["walk_to_run_join_png"],
+                          title="QTG walk -> run with --join inertialize; green = context")
         render_loss_curve(files["loss_png"], _merged_log(train_dir), title="QTG training loss (MAE, normalised)")
         say(f"wrote {files['loss_png']}")
         render_error_curves(files["error_curve_png"], {k: v["per_frame_cm"] for k, v in results.items()},

@@ -10,10 +10,11 @@ import dataclasses
 import math
 from typing import Mapping, Sequence
 
+from refimpl.bounds import bounded_int, check_config_sizes
 from refimpl.errors import UsageError
 
-__all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "add_data_options", "parse_overrides",
-           "config_with_overrides"]
+__all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "beta", "add_data_options",
+           "parse_overrides", "check_overrides", "config_with_overrides"]
 
 
 def number_parser(convert, accept, expected: str):
@@ -32,6 +33,8 @@ def number_parser(convert, accept, expected: str):
 positive_int = number_parser(int, lambda v: v >= 1, "a positive integer")
 nonneg_int = number_parser(int, lambda v: v >= 0, "an integer >= 0")
 positive_float = number_parser(float, lambda v: math.isfinite(v) and v > 0, "a positive number")
+#: Adam's β₁, β₂ (``--betas``): outside [0, 1) the bias correction divides by zero or changes sign.
+beta = number_parser(float, lambda v: math.isfinite(v) and 0 <= v < 1, "a number in [0, 1)")
 
 
 def add_data_options(p, default="sample") -> None:
@@ -43,7 +46,7 @@ def add_data_options(p, default="sample") -> None:
     p.add_argument("--fps", type=positive_float, default=None,
                    help="true frame rate of the files when the header is wrong (CMU salsa: 60)")
     p.add_argument("--test-fraction", type=float, default=0.2, help="held-out share when splitting (default 0.2)")
-    p.add_argument("--stride", type=positive_int, default=4, help="frames between window starts (default 4)")
+    p.add_argument("--stride", type=bounded_int("stride"), default=4, help="frames between window starts (default 4)")
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -58,7 +61,7 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
     """``["gru_hidden=128", "encoder_sizes=128,64"]`` -> typed values, by the type of the default.
 
     Tuples are comma-separated integers; booleans one of ``1/0, true/false, yes/no, on/off`` (any case); ints,
-    floats and strings as written. Raises ``UsageError`` naming the item for an unknown field, a missing ``=`` or
+    finite floats and strings as written. Raises ``UsageError`` naming the item for an unknown field, a missing ``=`` or
     a value of the wrong type."""
     fields = {f.name for f in dataclasses.fields(config_type)}
     out = {}
@@ -80,6 +83,8 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
                 out[key] = int(value)
             elif isinstance(default, float):
                 out[key] = float(value)
+                if not math.isfinite(out[key]):
+                    raise ValueError(value)
             else:
                 out[key] = value
         except ValueError:
@@ -87,13 +92,38 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
     return out
 
 
-def config_with_overrides(base, overrides: Sequence[str], fixed: str | None = None, fixed_note: str = ""):
+def check_overrides(config_type, overrides: Sequence[str]) -> dict:
+    """Validate ``--set`` items against ``config_type`` alone, before any data is read: the field exists and the
+    value parses as the type of the field's default (fields the data fills in, without a default, are checked
+    by name only; :func:`config_with_overrides` checks them against the data). Returns the parsed values of the
+    fields that have defaults. Raises ``UsageError`` as :func:`parse_overrides` does."""
+    defaults = {}
+    for f in dataclasses.fields(config_type):
+        if f.default is not dataclasses.MISSING:
+            defaults[f.name] = f.default
+        elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+            defaults[f.name] = f.default_factory()  # type: ignore[misc]
+    known = [item for item in overrides or () if item.partition("=")[0].strip().replace("-", "_") in defaults]
+    unknown_default = [item for item in overrides or () if item not in known]
+    parse_overrides(config_type, {**{f.name: "" for f in dataclasses.fields(config_type)}, **defaults},
+                    unknown_default)  # names (and the FIELD=VALUE form) of the rest
+    return parse_overrides(config_type, defaults, known)
+
+
+def config_with_overrides(base, overrides: Sequence[str], fixed: str | Sequence[str] | None = None,
+                          fixed_note: str = ""):
     """``base`` (a config dataclass) with the ``--set`` ``overrides`` (:func:`parse_overrides`). ``fixed`` names a
-    field the data determines: overriding it with another value than ``base``'s raises
-    ``UsageError("--set <fixed>=<value>: <fixed_note>")``; a value the config refuses raises ``UsageError``."""
+    field (or a sequence of fields) the data or the model determines: overriding it with another value than ``base``'s raises
+    ``UsageError("--set <fixed>=<value>: <fixed_note>")``; a value the config refuses, or a size beyond
+    :mod:`refimpl.bounds` (:func:`~refimpl.bounds.check_config_sizes`), raises ``UsageError``."""
     values = parse_overrides(type(base), dataclasses.asdict(base), overrides)
-    if fixed is not None and fixed in values and values[fixed] != getattr(base, fixed):
-        raise UsageError(f"--set {fixed}={values[fixed]}: {fixed_note}")
+    try:
+        check_config_sizes(values)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    for name in ((fixed,) if isinstance(fixed, str) else tuple(fixed or ())):
+        if name in values and values[name] != getattr(base, name):
+            raise UsageError(f"--set {name}={values[name]}: {fixed_note}")
     try:
         return dataclasses.replace(base, **values)
     except ValueError as exc:

@@ -1,8 +1,9 @@
 """The networks the application knows: model name -> recipe and task (spec/architecture.md §adding a model).
 
 Adding a model is one line in :data:`RECIPES` (its recipe module and its task); the recipe module
-(``refimpl/recipes/<name>.py``) provides the names :meth:`ModelSpec.from_recipe` reads. Recipes and tasks are
-imported when this module is.
+(``refimpl/recipes/<name>.py``) provides the names :meth:`ModelSpec.from_recipe` reads. Recipes are imported when
+this module is; a task module (:data:`TASKS`) when :func:`task_of` first hands it out, checked against the task
+interface (:class:`refimpl.task_api.Task`).
 """
 from __future__ import annotations
 
@@ -11,9 +12,10 @@ import importlib
 from types import ModuleType
 from typing import Any, Callable
 
-import numpy as np
+from refimpl.task_api import check_task
 
-__all__ = ["RECIPES", "TASKS", "ModelSpec", "TrainedModel", "MODELS", "task_of"]
+__all__ = ["RECIPES", "TASKS", "DEFAULT_MODEL", "ModelSpec", "TrainedModel", "MODELS", "task_of", "generate_usage",
+           "require_source"]
 
 #: Model name -> (recipe module, task). One line per model.
 RECIPES = {
@@ -32,6 +34,9 @@ TASKS = {
     "synthesis": "refimpl.tasks.synthesis",
     "locomotion": "refimpl.tasks.locomotion",
 }
+
+#: The model of ``refimpl train`` / ``eval`` / ``generate`` when neither ``--model`` nor a checkpoint names one.
+DEFAULT_MODEL = "qtg"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,10 +62,16 @@ class ModelSpec:
         NumPy inference in the task's interface (transition: ``f(past, target, T) -> poses``, un-normalised).
     optim : OptimConfig
         The paper's optimiser settings (``refimpl train``'s defaults for this model).
+    batch_size : int
+        The paper's batch size (``refimpl train``'s default; the recipe's ``PAPER_BATCH``).
     exporter : str or None
         Key of its exporter in ``deploy.models.EXPORTERS``; None when it has none.
     export_inputs : callable ``TrainedModel -> dict`` or None
         The exporter's keyword arguments for a trained model (normalisation, metadata, T).
+    verify_onnx : callable ``(TrainedModel, runtime, *inputs, **options) -> dict`` or None
+        onnxruntime against the NumPy model (``refimpl export``'s check).
+    extra_methods : callable ``TrainedModel -> dict`` or None
+        More methods of the network for its task's evaluation (a DQ model's positions read from the DQs).
     recipe : module
     """
 
@@ -73,21 +84,26 @@ class ModelSpec:
     make_adapter: Callable
     make_method: Callable
     optim: Any = None
+    batch_size: int = 32
     exporter: str | None = None
     export_inputs: Callable | None = None
+    verify_onnx: Callable | None = None
+    extra_methods: Callable | None = None
     recipe: ModuleType | None = None
 
     @classmethod
     def from_recipe(cls, recipe: ModuleType, task: str) -> "ModelSpec":
-        """The spec of ``recipe`` (``NAME``, ``SUMMARY``, ``TASK``, ``REPRESENTATIONS``, ``CONFIG_TYPE``,
-        ``PAPER_OPTIM``, ``EXPORTER``, ``make_config``, ``make_adapter``, ``make_method``, ``export_inputs``)."""
+        """The spec of ``recipe``: ``NAME``, ``SUMMARY``, ``TASK``, ``REPRESENTATIONS``, ``CONFIG_TYPE``,
+        ``PAPER_OPTIM``, ``PAPER_BATCH``, ``make_config``, ``make_adapter``, ``make_method``, and when the model
+        has them ``EXPORTER``, ``export_inputs``, ``verify_onnx``, ``extra_methods``."""
         if recipe.TASK != task:
             raise ValueError(f"registry: recipe {recipe.__name__} is for task {recipe.TASK!r}, registered as {task!r}")
+        optional = {"exporter": getattr(recipe, "EXPORTER", None)}
+        optional.update({n: getattr(recipe, n, None) for n in ("export_inputs", "verify_onnx", "extra_methods")})
         return cls(name=recipe.NAME, summary=recipe.SUMMARY, task=task, representations=tuple(recipe.REPRESENTATIONS),
                    config_type=recipe.CONFIG_TYPE, make_config=recipe.make_config, make_adapter=recipe.make_adapter,
-                   make_method=recipe.make_method, optim=recipe.PAPER_OPTIM,
-                   exporter=getattr(recipe, "EXPORTER", None), export_inputs=getattr(recipe, "export_inputs", None),
-                   recipe=recipe)
+                   make_method=recipe.make_method, optim=recipe.PAPER_OPTIM, batch_size=int(recipe.PAPER_BATCH),
+                   recipe=recipe, **optional)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,15 +121,12 @@ class TrainedModel:
     extra : dict
         The checkpoint's whole model config (the network's fields and what its task stored beside them:
         statistics, representation, frame rate), for tasks and recipes that need more than the fields below.
-    root_mean, root_std : ndarray (3,) or None
-        Transition task: root-translation statistics of the training windows (the network's input
-        normalisation). None for other tasks.
     fps : float or None
         Frame rate of the training data, when the task stores it.
-    transition_length : int or None
-        Transition task: T the network was trained for.
+    fields : dict
+        The task's own fields (transition: ``root_mean``, ``root_std`` (3,) and ``transition_length``).
 
-    The task module fills the optional fields (``trained_fields(model_config, config)``).
+    The task module fills ``fps`` and ``fields`` (``trained_fields(model_config, config)``).
     """
 
     spec: ModelSpec
@@ -122,26 +135,30 @@ class TrainedModel:
     meta: dict = dataclasses.field(default_factory=dict)
     path: str = ""
     extra: dict = dataclasses.field(default_factory=dict)
-    root_mean: np.ndarray | None = None
-    root_std: np.ndarray | None = None
     fps: float | None = None
-    transition_length: int | None = None
-
-    @property
-    def pose_normalization(self) -> tuple[np.ndarray, np.ndarray]:
-        """Transition task: ``(mean (P,), std (P,))`` over the whole pose vector: root statistics, then 0 / 1 for
-        quaternions."""
-        from refimpl.protocols.transition import pose_statistics
-
-        if self.root_mean is None:
-            raise ValueError(f"model {self.spec.name!r} has no pose normalisation (not a transition model)")
-        return pose_statistics(self.root_mean, self.root_std, self.config.pose_size)
+    fields: dict = dataclasses.field(default_factory=dict)
 
 
 def task_of(spec_or_name) -> ModuleType:
-    """The task module of a :class:`ModelSpec` or of a task name."""
+    """The task module of a :class:`ModelSpec` or of a task name, checked against the task interface
+    (:func:`refimpl.task_api.check_task`)."""
     name = spec_or_name.task if isinstance(spec_or_name, ModelSpec) else spec_or_name
-    return importlib.import_module(TASKS[name])
+    return check_task(importlib.import_module(TASKS[name]))
+
+
+def generate_usage() -> str:
+    """The usage lines of ``refimpl generate``, one per task (``GENERATE_USAGE``)."""
+    lines = [task_of(name).GENERATE_USAGE for name in TASKS]
+    return "usage: " + "\n       ".join(lines)
+
+
+def require_source(args) -> None:
+    """``refimpl generate``'s ``--source`` check for the tasks that read one (UsageError with the usage lines)."""
+    if args.source is None:
+        from refimpl.errors import UsageError
+
+        raise UsageError("the following argument is required: --source (the prefix, seed or source clip)\n"
+                         + generate_usage())
 
 
 #: Networks the application knows, by ``--model`` name.

@@ -18,7 +18,12 @@ name                              D   per joint                                 
 ``"dual_quaternions"``            8   current dual quaternion (q_r | q_d) (paper Eq. 9-11)          yes
 ``"quaternions+positions"``       7   local quaternion (4) then current position (3)              yes
 ``"ortho6d+positions"``           9   ortho6D (6) then current position (3)                        yes
+``"positions_acrnn"``             3   as ``"positions"``, without the root's own (zero) block       no (IK)
 ================================  ==  ==========================================================  =========
+
+``"positions_acrnn"`` is the published acRNN code's frame (spec/acrnn.md §1.1): the root position, then every
+other joint relative to the root, size ``3 + 3·(J − 1)`` (171 on the salsa skeleton with its End Sites, 57
+nodes); the representation with ``root_block=False``.
 
 "Current position" is the joint position minus the root position (the translation of the current dual
 quaternion, Eq. 8). The root's own entry is included in every block (its position entry is 0, its rotation
@@ -52,6 +57,12 @@ class Representation:
     dim: int
     invertible: bool
     description: str
+    #: False: joint 0's block (zero for positions) is left out of the frame, ``F = 3 + D·(J − 1)``.
+    root_block: bool = True
+
+    def joints_stored(self, num_joints: int) -> int:
+        """Joint blocks in a frame of a ``num_joints`` skeleton (J, or J − 1 without the root's block)."""
+        return int(num_joints) - (0 if self.root_block else 1)
 
 
 REPRESENTATIONS = {r.name: r for r in (
@@ -63,6 +74,8 @@ REPRESENTATIONS = {r.name: r for r in (
     Representation("dual_quaternions", 8, True, "current dual quaternions (q_r | q_d)"),
     Representation("quaternions+positions", 7, True, "local quaternion then current position"),
     Representation("ortho6d+positions", 9, True, "ortho6D then current position"),
+    Representation("positions_acrnn", 3, False, "the published acRNN's frame: root position, then every other "
+                   "joint relative to the root", root_block=False),
 )}
 
 
@@ -74,11 +87,12 @@ def _lookup(name: str) -> Representation:
 
 
 def frame_size(name: str, num_joints: int) -> int:
-    """Values per frame, ``3 + D·J`` (e.g. 251 for ``"dual_quaternions"`` with J = 31)."""
+    """Values per frame, ``3 + D·J`` (e.g. 251 for ``"dual_quaternions"`` with J = 31; ``3 + D·(J − 1)`` for a
+    representation without the root's block)."""
     rep = _lookup(name)
     if isinstance(num_joints, bool) or not isinstance(num_joints, (int, np.integer)) or num_joints < 1:
         raise ValueError(f"num_joints: expected a positive int, got {num_joints!r}")
-    return 3 + rep.dim * int(num_joints)
+    return 3 + rep.dim * rep.joints_stored(num_joints)
 
 
 def _check_skeleton(skeleton) -> Skeleton:
@@ -109,6 +123,8 @@ def encode(name: str, skeleton: Skeleton, rotations, root_positions, order: str 
     skel = _check_skeleton(skeleton)
     rot, pos = skel._check_motion(rotations, root_positions, unit=True)
     per_joint = _encode_joints(rep.name, skel, rot, order)                 # (..., J, D)
+    if not rep.root_block:
+        per_joint = per_joint[..., 1:, :]                                  # (..., J − 1, D)
     return np.concatenate([pos, per_joint.reshape(per_joint.shape[:-2] + (-1,))], axis=-1)
 
 
@@ -121,7 +137,7 @@ def _ortho6d(rot: np.ndarray) -> np.ndarray:
 
 
 def _encode_joints(name: str, skel: Skeleton, rot: np.ndarray, order: str) -> np.ndarray:
-    if name == "positions":
+    if name in ("positions", "positions_acrnn"):
         return _current_positions(skel, rot)
     if name == "euler":
         return euler_from_quat(rot, order)
@@ -142,11 +158,15 @@ def _encode_joints(name: str, skel: Skeleton, rot: np.ndarray, order: str) -> np
 
 def _split_frames(rep: Representation, skel: Skeleton, frames) -> tuple[np.ndarray, np.ndarray]:
     x = as_float_array(frames, "frames")
-    size = 3 + rep.dim * skel.num_joints
+    stored = rep.joints_stored(skel.num_joints)
+    size = 3 + rep.dim * stored
     if x.ndim < 1 or x.shape[-1] != size:
         raise ValueError(f"frames: expected shape (..., {size}) for {rep.name!r} with {skel.num_joints} joints "
-                         f"(3 + {rep.dim}·{skel.num_joints}), got {x.shape}")
-    per_joint = x[..., 3:].reshape(x.shape[:-1] + (skel.num_joints, rep.dim))   # (..., J, D)
+                         f"(3 + {rep.dim}·{stored}), got {x.shape}")
+    per_joint = x[..., 3:].reshape(x.shape[:-1] + (stored, rep.dim))   # (..., J, D)
+    if not rep.root_block:  # the root's own block is zero
+        zero = np.zeros(per_joint.shape[:-2] + (1, rep.dim), dtype=per_joint.dtype)
+        per_joint = np.concatenate([zero, per_joint], axis=-2)
     return x[..., :3], per_joint
 
 
@@ -202,7 +222,7 @@ def positions_from_frames(name: str, skeleton: Skeleton, frames, order: str = "z
     rep = _lookup(name)
     skel = _check_skeleton(skeleton)
     root, block = _split_frames(rep, skel, frames)
-    if name == "positions":
+    if name in ("positions", "positions_acrnn"):
         rel = block
     elif name.endswith("+positions"):
         rel = block[..., -3:]

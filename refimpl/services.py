@@ -5,7 +5,7 @@ Both :mod:`refimpl.cli` and :mod:`refimpl.demo` call these; they know models onl
 the task module the spec names. ``deploy`` (onnx, onnxruntime) is imported lazily, inside the functions that need
 it, and its absence is a :class:`~refimpl.errors.MissingDependency` with the install hint.
 
-Shape legend: B batch, T transition frames, P pose size.
+Shape legend: none (arrays are the tasks' and the recipes', see their modules).
 """
 from __future__ import annotations
 
@@ -18,18 +18,17 @@ import numpy as np
 
 from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
-from refimpl.protocols.transition import SAMPLE_DIR
 
-__all__ = ["SAMPLE_DIR", "blas_threads", "read_motion", "load_trained", "train_model", "network_methods",
-           "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata"]
+__all__ = ["blas_threads", "read_motion", "load_trained", "checkpoint_for", "train_model", "network_methods",
+           "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata", "onnx_frame_rate"]
 
 
 @contextlib.contextmanager
 def blas_threads(n: int | None):
     """Limit the BLAS thread pool to ``n`` threads inside the block (threadpoolctl, when installed).
 
-    The command line passes 2 by default (fastest on an idle 2-core machine, spec/cli.md); one thread is much
-    faster than two when other jobs share the cores. ``None`` or 0 leaves the library default.
+    The command line passes 1 by default (spec/cli.md): two threads are somewhat faster on an idle 2-core
+    machine but many times slower when other jobs share the cores. ``None`` or 0 leaves the library default.
     """
     if not n:
         yield
@@ -70,8 +69,8 @@ def load_trained(path) -> TrainedModel:
     Raises
     ------
     BadInputError
-        Missing or damaged file, not a training checkpoint, unknown model, missing task statistics
-        (transition: no normalisation statistics), or content that fails the checkpoint schema
+        Missing or damaged file, not a training checkpoint, unknown model, missing task fields (the task's
+        ``check_checkpoint``), or content that fails the checkpoint schema
         (:mod:`refimpl.checkpoint_schema`: a config field of the wrong type or range, ``fps`` or ``root_std``
         not > 0, a parameter missing, unexpected, mis-shaped, of another dtype or not finite); the message
         names the file and the field.
@@ -88,20 +87,37 @@ def load_trained(path) -> TrainedModel:
     task = task_of(spec)
     task.check_checkpoint(cfg, p)
     params = {k: np.asarray(v) for k, v in params.items()}
-    fields = task.trained_fields(cfg, config) if hasattr(task, "trained_fields") else {}
-    return TrainedModel(spec=spec, config=config, params=params, meta=meta, path=str(p), extra=cfg, **fields)
+    return TrainedModel(spec=spec, config=config, params=params, meta=meta, path=str(p), extra=cfg,
+                        **task.trained_fields(cfg, config))
+
+
+def checkpoint_for(task: str, model: TrainedModel | None, path) -> TrainedModel | None:
+    """``model``, else the checkpoint at ``path`` (None when there is none), checked to be a model of ``task``.
+
+    Raises
+    ------
+    UsageError
+        The checkpoint's model is registered for another task.
+    """
+    if model is None and path:
+        model = load_trained(path)
+    if model is not None and model.spec.task != task:
+        raise UsageError(f"{model.path}: a {model.spec.name} model (task {model.spec.task}), not a model of the "
+                         f"{task} task (--model and --checkpoint disagree)")
+    return model
 
 
 def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: int, batch_size: int = 32,
                 lr: float | None = None, betas=None, clip_norm: float | None = None, seed: int = 0,
                 dtype=np.float32, resume: bool = False, checkpoint_every: int = 500,
                 validate_every: int | None = None, progress_every: int = 100,
-                progress: Callable[[str], None] | None = None):
+                progress: Callable[[str], None] | None = None, run_options: dict | None = None):
     """Train ``spec``'s network into ``out_dir`` (``checkpoint.npz``, ``loss.csv``, ``loss_val.csv``).
 
-    ``lr`` and ``betas`` default to the recipe's paper values (``spec.optim``; QTG: 1e-4, (0.5, 0.9)). The
-    checkpoint's model config also holds what the task needs later (transition: the training windows' root
-    statistics, frame rate and T), so that ``eval``, ``export`` and ``generate`` need nothing else.
+    ``lr`` and ``betas`` default to the recipe's paper values (``spec.optim``). The checkpoint's model config also
+    holds what the task needs later (its ``checkpoint_extra``: statistics, frame rate, skeleton, ...), so that
+    ``eval``, ``export`` and ``generate`` need nothing else; ``run_options`` (the command line's,
+    :mod:`refimpl.run_options`) go into its ``train_config`` for ``--resume``.
 
     Returns
     -------
@@ -113,32 +129,62 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
     out_dir.mkdir(parents=True, exist_ok=True)
     extra = dict(task_of(spec).checkpoint_extra(train_ds), representation=spec.representations[0])
     adapter = spec.make_adapter(train_ds, val_ds, config, dtype, extra)
+    _check_writable_checkpoint(spec, adapter)
     optim = dataclasses.replace(spec.optim, lr=spec.optim.lr if lr is None else lr,
                                 betas=tuple(spec.optim.betas if betas is None else betas),
                                 clip_norm=spec.optim.clip_norm if clip_norm is None else clip_norm)
     tc = TrainConfig(steps=steps, batch_size=batch_size, seed=seed, checkpoint_path=str(out_dir / "checkpoint.npz"),
                      checkpoint_every=checkpoint_every, log_path=str(out_dir / "loss.csv"),
-                     progress_every=progress_every, validate_every=validate_every)
+                     progress_every=progress_every, validate_every=validate_every, run_options=run_options)
     kw = {} if progress is None else {"progress": progress}
     return train(adapter, optim, tc, resume=resume, **kw)
 
 
-def network_methods(model: TrainedModel | None = None, *, onnx_dir=None) -> dict:
-    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``)."""
+def _check_writable_checkpoint(spec: ModelSpec, adapter) -> None:
+    """Refuse (``UsageError``, exit 2) a run whose checkpoint the loader would refuse — a config or task field
+    outside the checkpoint schema (:func:`refimpl.checkpoint_schema.validate_checkpoint_config`) — or whose
+    network exceeds :data:`refimpl.bounds.MAX_PARAMETERS`, before any parameter is allocated."""
+    import json
+
+    from refimpl.bounds import check_parameter_count
+    from refimpl.checkpoint_schema import validate_checkpoint_config
+    where = f"the checkpoint of this {spec.name} run"
+    try:  # the model_config exactly as the checkpoint's JSON metadata will hold it
+        model_config = json.loads(json.dumps(adapter.config, allow_nan=False,
+                                             default=lambda v: v.item() if isinstance(v, np.generic) else str(v)))
+        _, shapes = validate_checkpoint_config(spec, model_config, where, task_of)
+        check_parameter_count(shapes, where)
+    except ValueError as exc:
+        raise UsageError(f"{exc} (the loader would refuse it; nothing trained)") from None
+
+
+def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect: TrainedModel | None = None) -> dict:
+    """``name -> method`` of the network: NumPy (``<name>``) and, from ``onnx_dir``, onnxruntime (``<name>_onnx``,
+    in the task's method interface: its ``onnx_method``).
+
+    ``onnx_dir`` must hold the exported models of ``model`` (or of ``expect``, the checkpoint the command runs
+    when only the exported models are run): another model's folder is a ``BadInputError`` naming the folder."""
     methods = {}
     if model is not None:
         methods[model.spec.name] = model.spec.make_method(model)
     if onnx_dir is not None:
-        name = model.spec.name if model is not None else _onnx_model_name(onnx_dir)
+        name = _onnx_model_name(onnx_dir)
+        want = model if model is not None else expect
+        if want is not None and name != want.spec.name:  # the folder must hold this command's model
+            raise BadInputError(f"{onnx_dir}: holds exported {name!r} models, not the {want.spec.name!r} model of "
+                                f"{want.path}")
         methods[f"{name}_onnx"] = onnx_method(onnx_dir)
     return methods
 
 
-def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str = "transition") -> dict:
-    """The task's protocol on ``test_ds`` for the network (NumPy, and onnxruntime from ``onnx_dir``) and the
-    task's baselines (transition: :func:`refimpl.tasks.transition.evaluate`)."""
+def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str | None = None, **options):
+    """The task's protocol on ``test_ds`` (its ``evaluate``) for the network (NumPy, and onnxruntime from
+    ``onnx_dir``) and the task's baselines; ``task`` names the task when there is no ``model``; ``options`` go to
+    the task's ``methods``."""
+    if model is None and task is None:
+        raise ValueError("evaluate_model: pass a model or a task name")
     mod = task_of(model.spec if model is not None else task)
-    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps))
+    return mod.evaluate(test_ds, mod.methods(network_methods(model, onnx_dir=onnx_dir), fps=test_ds.fps, **options))
 
 
 def _deploy_models(what: str):
@@ -169,7 +215,7 @@ def _open_runtime(onnx_dir, intra_op_threads: int = 1):
 
 def onnx_method(onnx_dir, intra_op_threads: int = 1) -> Callable:
     """The network of the exported models in ``onnx_dir``, run in onnxruntime, in its task's method interface
-    (transition: ``f(past, target, T) -> poses``; :func:`refimpl.tasks.transition.onnx_method`).
+    (the task's ``onnx_method``).
 
     The runtime is the one of the model named in the files' metadata (``deploy.models.runtime_for_dir``); the
     task is the one that model is registered for.
@@ -183,11 +229,10 @@ def onnx_method(onnx_dir, intra_op_threads: int = 1) -> Callable:
 
 def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     """Export ``model`` with its exporter (``deploy.models.EXPORTERS[spec.exporter]``) to validated ONNX files
-    ``<name>_<role>.onnx`` in ``out_dir`` (QTG: ``init``, ``step``, ``rollout``; standardisation inside the graphs,
-    so they take and return raw poses).
+    ``<name>_<role>.onnx`` in ``out_dir`` (the roles are the exporter's; standardisation inside the graphs).
 
     ``options``: ``mode`` (rollout graph: ``unrolled``, ``loop``, ``scan``; default ``unrolled``), ``dtype``
-    (default float32), ``T`` (default: the model's).
+    (default float32), and the task's ``export_options`` (e.g. ``T``, default: the model's).
 
     Returns
     -------
@@ -196,6 +241,7 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     if model.spec.exporter is None:
         raise UsageError(f"model {model.spec.name!r} has no ONNX exporter")
     entry = _deploy_models("ONNX export").exporter(model.spec.exporter)
+    _check_export_dir(Path(out_dir), model.spec.exporter)
     kw = dict(model.spec.export_inputs(model)) if model.spec.export_inputs is not None else {}
     mode, dtype, T = options.pop("mode", "unrolled"), options.pop("dtype", np.float32), options.pop("T", None)
     if T:
@@ -203,19 +249,39 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     return entry.export_dir(model.params, model.config, Path(out_dir), dtype=dtype, mode=mode, **kw, **options)
 
 
+def _check_export_dir(out_dir: Path, name: str) -> None:
+    """Refuse, before anything is written, a folder holding ONNX models of another network than ``name``
+    (exported side by side they would make the folder unusable for both: a runtime opens one network's
+    models)."""
+    if not out_dir.is_dir():
+        return
+    from deploy.metadata import read_metadata
+
+    others = set()
+    for f in sorted(out_dir.glob("*.onnx")):
+        try:
+            model = read_metadata(str(f)).get("model")
+        except Exception:  # noqa: BLE001 - an unreadable .onnx is not ours to overwrite either
+            model = None
+        other = model.get("name") if isinstance(model, dict) else None
+        if other != name:
+            others.add(f"{f.name} ({other or 'no refimpl metadata'})")
+    if others:
+        raise UsageError(f"--out {out_dir}: holds ONNX models of another network: {', '.join(sorted(others)[:4])}"
+                         f"{' ...' if len(others) > 4 else ''}; export {name} into another folder")
+
+
 def verify_onnx(model: TrainedModel, onnx_dir, *inputs, **options) -> dict:
-    """Compare onnxruntime with the NumPy model on the recipe's inputs (``recipe.verify_onnx(model, runtime,
-    *inputs, **options)``; QTG: raw context poses ``past, target (B, 2, P)`` and ``T``,
-    :func:`refimpl.recipes.qtg.verify_onnx`).
+    """Compare onnxruntime with the NumPy model on the task's check inputs (``recipe.verify_onnx(model, runtime,
+    *inputs, **options)``, ``ModelSpec.verify_onnx``; the inputs from the task's ``verify_inputs``).
 
     Returns
     -------
     dict ``{<graph>: max |Δ|, ..., "ok": bool}``
     """
-    verify = getattr(model.spec.recipe, "verify_onnx", None)
-    if verify is None:
+    if model.spec.verify_onnx is None:
         raise UsageError(f"model {model.spec.name!r} has no ONNX check")
-    return verify(model, _open_runtime(onnx_dir), *inputs, **options)
+    return model.spec.verify_onnx(model, _open_runtime(onnx_dir), *inputs, **options)
 
 
 def onnx_metadata(onnx_dir) -> dict:
@@ -232,3 +298,27 @@ def onnx_metadata(onnx_dir) -> dict:
         raise MissingDependency(f"the ONNX backend {DEPLOY_HINT}") from exc
     with reading(files[0]):
         return read_metadata(str(files[0]))
+
+
+def onnx_frame_rate(onnx_dir) -> tuple[float, dict]:
+    """``(frame rate, metadata["model"])`` of the exported models in ``onnx_dir``, checked: a rate that is not a
+    finite number > 0, or a model entry that is not a JSON object, is a bad input file (exit 3), not a
+    ZeroDivisionError later.
+
+    Raises
+    ------
+    BadInputError
+    """
+    meta = onnx_metadata(onnx_dir)
+    where = f"{onnx_dir}: metadata"
+    fps = meta.get("frame_rate", 30.0)
+    try:
+        ok = not isinstance(fps, bool) and isinstance(fps, (int, float)) and 0 < float(fps) < float("inf")
+    except OverflowError:  # an integer beyond the float range
+        ok = False
+    if not ok:
+        raise BadInputError(f"{where} frame_rate: expected a finite number > 0, got {fps!r}"[:300])
+    model_meta = meta.get("model", {})
+    if not isinstance(model_meta, dict):
+        raise BadInputError(f"{where} model: expected a JSON object, got {type(model_meta).__name__}")
+    return float(fps), model_meta

@@ -202,7 +202,11 @@ class Spline:
         closed = bool(closed)
         if closed and p.shape[0] < 3:
             raise ValueError(f"points: a closed curve needs at least 3 points, got {p.shape[0]}")
-        seg_len = np.linalg.norm(_segments(p, closed), axis=-1)            # (S,)
+        with np.errstate(over="ignore", invalid="ignore"):
+            seg_len = np.linalg.norm(_segments(p, closed), axis=-1)        # (S,)
+            total = float(np.sum(seg_len))
+        if not math.isfinite(total):
+            raise ValueError("points: the coordinates are too large (the path's length overflows)")
         if np.any(seg_len <= 0):
             k = int(np.flatnonzero(seg_len <= 0)[0])
             raise ValueError(f"points: segment {k} has zero length (points {k} and {(k + 1) % p.shape[0]} coincide)")

@@ -55,7 +55,7 @@ import numpy as np
 
 from refimpl.atomic import atomic_write_text
 from refimpl.checkpoint import load_checkpoint, rng_from_json, rng_state_to_json, save_checkpoint
-from refimpl.checkpoint_schema import validate_training_state
+from refimpl.checkpoint_schema import MAX_PARAM_ABS, validate_training_state
 from refimpl.optim import adam_init, adam_step, clip_grad_norm, exponential_lr
 
 __all__ = [
@@ -144,6 +144,9 @@ class TrainConfig:
     progress_every : int
         Steps between progress lines (rate and ETA).
     validate_every : int, optional
+    run_options : dict, optional
+        The command line's options of the run (:mod:`refimpl.run_options`), stored in the checkpoint's
+        ``train_config`` so that ``refimpl train --resume`` reuses them; the loop itself ignores them.
     """
 
     steps: int
@@ -155,6 +158,7 @@ class TrainConfig:
     log_every_csv: int = 1
     progress_every: int = 100
     validate_every: int | None = None
+    run_options: dict | None = None
 
     def __post_init__(self):
         for name in ("steps", "batch_size", "checkpoint_every", "log_every_csv", "progress_every"):
@@ -315,6 +319,26 @@ def remove_stale_temp_files(target) -> list[Path]:
                 os.unlink(e.path)
                 removed.append(Path(e.path))
     return removed
+
+
+def _kept(ckpt, step) -> str:
+    if ckpt is None:
+        return "no checkpoint path"
+    return f"last checkpoint {ckpt} (step {step}) kept" if step is not None else "no checkpoint written"
+
+
+def _first_beyond(arrays: Mapping[str, np.ndarray], limit: float):
+    """``(name, magnitude)`` of the first array with an entry beyond ``limit`` in magnitude, else None."""
+    for k, a in arrays.items():
+        if a.size:
+            m = float(np.max(np.abs(a)))
+            if m > limit:
+                return k, m
+    return None
+
+
+#: Messages of the layers' input checks that mean "a non-finite value reached me".
+_NON_FINITE_TEXT = re.compile(r"NaN|nan|inf|non-finite|not finite|finite values")
 
 
 def _first_non_finite(arrays: Mapping[str, np.ndarray]) -> str | None:
@@ -533,14 +557,18 @@ def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, pe
                     steps_target=config.steps, elapsed_s=elapsed0 + (time.perf_counter() - t0),
                     train_config=dataclasses.asdict(config))
 
+    last_saved = [step if ckpt is not None and resume and ckpt.is_file() else None]
+
     def checkpoint():
         if ckpt is not None:
-            bad = _first_non_finite(params) or _first_non_finite(opt_state)
+            bad = _first_non_finite(params) or _first_non_finite(opt_state) or \
+                (_first_beyond(params, MAX_PARAM_ABS) or (None,))[0]
             if bad is not None:  # never reached by the loop's checks; a last line of defence
-                raise TrainingDiverged(f"{adapter.name}: {bad!r} is not finite at step {step}; not saved, "
-                                       f"last checkpoint {ckpt} kept")
+                raise TrainingDiverged(f"{adapter.name}: {bad!r} is not finite or beyond {MAX_PARAM_ABS:g} at step "
+                                       f"{step}; not saved, " + _kept(ckpt, last_saved[0]))
             ckpt.parent.mkdir(parents=True, exist_ok=True)
             _save(ckpt, params, opt_state, perm, meta_now())
+            last_saved[0] = step
 
     losses, validation = [], []
     interrupted = False
@@ -562,6 +590,15 @@ def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, pe
                     rng.bit_generator.state = rng_snapshot  # nothing of this step is kept
                     interrupted = True
                     break
+                except ValueError as exc:
+                    if step == start_step or not _NON_FINITE_TEXT.search(str(exc)):
+                        raise
+                    # a layer refused the non-finite values the updated parameters produced: the run diverged
+                    rng.bit_generator.state = rng_snapshot
+                    raise TrainingDiverged(f"{adapter.name}: training diverged at step {step + 1} (epoch {epoch}): "
+                                           f"the forward pass produced non-finite values ({exc}); parameters left "
+                                           f"at step {step}" + (f", last checkpoint {ckpt} kept" if ckpt is not None
+                                                                else "")) from None
                 loss = float(loss)
                 if not math.isfinite(loss):
                     rng.bit_generator.state = rng_snapshot
@@ -593,6 +630,12 @@ def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, pe
                         f"{adapter.name}: {'parameter' if bad in params else 'Adam state'} {bad!r} became non-finite "
                         f"in the update of step {step + 1} (epoch {epoch}, learning rate {lr:g}); nothing saved"
                         + (f", last checkpoint {ckpt} kept" if ckpt is not None else ""))
+                big = _first_beyond(params, MAX_PARAM_ABS)
+                if big is not None:  # the loader refuses such a checkpoint (checkpoint_schema.MAX_PARAM_ABS)
+                    raise TrainingDiverged(
+                        f"{adapter.name}: training diverged at step {step + 1} (epoch {epoch}, learning rate {lr:g}): "
+                        f"parameter {big[0]!r} reached magnitude {big[1]:.3g}, beyond the checkpoint limit "
+                        f"{MAX_PARAM_ABS:g}; nothing saved, " + _kept(ckpt, last_saved[0]))
                 step += 1
                 pos += 1
                 if pos == per_epoch:

@@ -211,7 +211,7 @@ def test_float32_rollout_stays_float32():
 def test_every_table1_variant_trains_with_one_option():
     rng = np.random.default_rng(8)
     expected = {"positions", "euler", "quaternions", "quaternions_fk", "quaternions+positions", "ortho6d",
-                "ortho6d+positions", "dual_quaternions", "dual_quaternions_all"}
+                "ortho6d+positions", "dual_quaternions", "dual_quaternions_all", "positions_acrnn"}
     assert set(acrnn.VARIANTS) == expected
     for name in expected:
         cfg, params, spec, frames = _setup(name, rng)

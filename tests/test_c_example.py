@@ -43,11 +43,11 @@ def export_rollout(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("c_models")
 
-    def export(T: int, pose_size: int) -> Path:
+    def export(T: int, pose_size: int, join: str = "none") -> Path:
         config = QTGConfig(pose_size=pose_size, encoder_sizes=(9, 6), gru_hidden=5, gru_layers=2,
                            decoder_sizes=(8,), negative_slope=0.05, transition_length=T)
-        path = folder / f"qtg_rollout_T{T}_P{pose_size}.onnx"
-        onnx.save(export_qtg_rollout(init_params(config, np.random.default_rng(0)), config), str(path))
+        path = folder / f"qtg_rollout_T{T}_P{pose_size}_{join}.onnx"
+        onnx.save(export_qtg_rollout(init_params(config, np.random.default_rng(0)), config, join=join), str(path))
         return path
 
     return export
@@ -74,8 +74,9 @@ def _wheel_library():
     return (libs[0], onnxruntime.__version__) if libs else None
 
 
-@pytest.fixture(scope="module")
-def binary(tmp_path_factory):
+def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
+    """Build ``source`` with ``-Wall -Wextra`` (+ ``extra``) against ``$ORT_C_DIR``'s headers and its ``lib/`` (or
+    the wheel's library); ``pytest.skip`` when the compiler, headers or a fitting library are missing."""
     cc = _compiler()
     if cc is None:
         pytest.skip("no C compiler (set CC, or install cc/gcc/clang)")
@@ -89,7 +90,7 @@ def binary(tmp_path_factory):
     api = re.search(r"#define\s+ORT_API_VERSION\s+(\d+)", header.read_text(errors="replace"))
     if api is None:
         pytest.skip(f"{header}: no ORT_API_VERSION")
-    work = tmp_path_factory.mktemp("c_build")
+    work = tmp_path_factory.mktemp(f"c_build_{name}")
     libs = sorted((Path(ort) / "lib").glob("libonnxruntime.so*"))
     if libs:
         lib_dir = Path(ort) / "lib"
@@ -101,19 +102,24 @@ def binary(tmp_path_factory):
             pytest.skip(f"no library in {ort}/lib and no onnxruntime wheel")
         lib_dir = work / "lib"
         lib_dir.mkdir()
-        for name in ("libonnxruntime.so", "libonnxruntime.so.1"):
-            (lib_dir / name).symlink_to(wheel[0])
+        for lib in ("libonnxruntime.so", "libonnxruntime.so.1"):
+            (lib_dir / lib).symlink_to(wheel[0])
         version = wheel[1]
     if version is not None and int(api.group(1)) > int(version.split(".")[1]):
         pytest.skip(f"header ORT_API_VERSION {api.group(1)} is newer than the library {version}: "
                     "use headers of the library's release")
-    exe = work / "qtg_rollout"
-    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", str(SOURCE), f"-I{header.parent}", f"-L{lib_dir}",
-                            "-lonnxruntime", f"-Wl,-rpath,{lib_dir}", "-o", str(exe)],
+    exe = work / name
+    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", *extra, str(source), f"-I{header.parent}", f"-L{lib_dir}",
+                            "-lonnxruntime", "-lm", f"-Wl,-rpath,{lib_dir}", "-o", str(exe)],
                            capture_output=True, text=True, timeout=120)
     assert build.returncode == 0, build.stderr
     assert "warning" not in build.stderr, build.stderr
     return exe
+
+
+@pytest.fixture(scope="module")
+def binary(tmp_path_factory):
+    return build_example(tmp_path_factory, SOURCE, "qtg_rollout")
 
 
 def _python_rollout(model: Path, past: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -126,11 +132,12 @@ def _python_rollout(model: Path, past: np.ndarray, target: np.ndarray) -> np.nda
     return session.run(["poses"], {"past": past, "target": target})[0]
 
 
-@pytest.mark.parametrize("T, P", [(1, 11), (4, 11), (3, 15)])
-def test_c_example_matches_python(binary, export_rollout, tmp_path, T, P):
+@pytest.mark.parametrize("T, P, join", [(1, 11, "none"), (4, 11, "none"), (3, 15, "none"), (6, 15, "inertialize")])
+def test_c_example_matches_python(binary, export_rollout, tmp_path, T, P, join):
     """Sizes come from the model (P = 11 and 15, no 91), T = 1 terminates, the output equals onnxruntime's in
-    Python (same library, same options: to float32 rounding)."""
-    model = export_rollout(T, P)
+    Python (same library, same options: to float32 rounding); a model exported with the join option runs its
+    joins inside the graph (spec/qtg.md §7.4) and the example says so."""
+    model = export_rollout(T, P, join)
     rng = np.random.default_rng(T * 100 + P)
     past = rng.normal(size=(1, 2, P)).astype(np.float32)
     target = rng.normal(size=(1, 2, P)).astype(np.float32)
@@ -140,6 +147,8 @@ def test_c_example_matches_python(binary, export_rollout, tmp_path, T, P):
                          timeout=60)
     assert run.returncode == 0, run.stderr
     assert f"context C = 2, pose P = {P}, T = {T}" in run.stdout
+    assert ("join: none" in run.stdout) == (join == "none")
+    assert ('"mode": "inertialize"' in run.stdout) == (join == "inertialize")
     frames = re.findall(r"^frame (\d+):", run.stdout, flags=re.M)
     assert frames == (["1"] if T == 1 else ["1", str(T)])
     got = np.fromfile(outputs, dtype="<f4").reshape(1, T, P)

@@ -178,7 +178,7 @@ def test_good_checkpoint_loads_everywhere(tmp_path, good):
     """The unmodified content re-signed loads in both loaders with the same parameters."""
     path = _craft(tmp_path, good, lambda a, m: None)
     model = load_trained(path)
-    assert model.config.gru_hidden == 8 and model.fps > 0 and np.all(model.root_std > 0)
+    assert model.config.gru_hidden == 8 and model.fps > 0 and np.all(model.fields["root_std"] > 0)
     pytest.importorskip("onnx")
     from deploy.models.qtg_io import load_qtg_checkpoint
 

@@ -335,7 +335,7 @@ def _oracle(window):
 
 def test_make_transition_round_trip():
     """spec/cli.md §7: window transform and its inverse are exact — an oracle method reproduces the truth."""
-    from refimpl.tasks.transition import make_transition
+    from refimpl.tasks.transition_generate import make_transition
     from refimpl.protocols.transition import load_source, make_windows
 
     skel, clips = load_source(source_for_file(WALK_TXT))
@@ -351,7 +351,7 @@ def test_make_transition_round_trip():
 
 def test_align_target_continues_the_source():
     """spec/cli.md §7: --align continue turns the target to the source's heading and keeps its height."""
-    from refimpl.tasks.transition import _align_target, _heading
+    from refimpl.tasks.transition_generate import _align_target, _heading
     from refimpl.quat import quat_angle
     from refimpl.protocols.transition import load_source
 
@@ -371,7 +371,7 @@ def test_align_target_continues_the_source():
 def test_with_end_sites_keeps_joints_and_round_trips(tmp_path):
     """spec/cli.md §7: End Sites are added below leaves; the original joints do not move; BVH round trip."""
     from refimpl.bvh import read_bvh, write_bvh
-    from refimpl.tasks.transition import with_end_sites
+    from refimpl.tasks.transition_generate import with_end_sites
     from refimpl.motion import Motion
     from refimpl.protocols.transition import load_source
 

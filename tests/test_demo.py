@@ -48,11 +48,15 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
     assert model.meta["step"] == QUICK_STEPS
     assert len((out / "train" / "loss.csv").read_text().splitlines()) == QUICK_STEPS + 1
     results = json.loads((out / "eval.json").read_text())
-    assert set(results) == {"qtg", "inertialization", "interpolation"}
+    assert set(results) == {"qtg", "qtg+join", "inertialization", "interpolation"}
+    q = results["qtg+join"]["quality"]
+    for key in ("join_in_cm", "join_out_cm", "skate_cm_s", "first_frame_cm", "last_frame_cm", "ground_truth"):
+        assert key in q
+    assert "Joins (mean joint displacement" in stdout and "joins in/out" in stdout
     assert len(results["qtg"]["per_frame_cm"]) == 30
     assert len((out / "eval_per_frame.csv").read_text().splitlines()) == 31
 
-    for name in ("heldout_qtg", "heldout_truth", "walk_to_run"):
+    for name in ("heldout_qtg", "heldout_qtg_join", "heldout_truth", "walk_to_run", "walk_to_run_join"):
         motion = read_bvh(out / f"{name}.bvh")
         assert motion.num_joints == 27  # 22 joints + 5 End Sites
         assert motion.fps == pytest.approx(30.0, rel=1e-4)
@@ -70,7 +74,7 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
         assert "skipped" in stdout and "refimpl[deploy]" in stdout
 
     pytest.importorskip("matplotlib")
-    for name in ("heldout_strip", "walk_to_run", "loss", "error_curve"):
+    for name in ("heldout_strip", "heldout_join_strip", "walk_to_run", "walk_to_run_join", "loss", "error_curve"):
         _png_ok(out / f"{name}.png")
     for name in ("heldout", "walk_to_run"):
         assert (out / f"{name}.gif").read_bytes()[:3] == b"GIF"

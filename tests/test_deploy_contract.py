@@ -4,8 +4,8 @@
   poses (both standardise with the root statistics the checkpoint stores);
 * the metadata states the normalisation truthfully and names every quaternion slot (skeleton);
 * a consumer written only from the metadata and deploy/README.md — onnxruntime and NumPy, none of refimpl's window
-  or transition code — reproduces ``refimpl``'s transition (``refimpl.tasks.transition.make_transition``) on a real
-  CMU clip.
+  or transition code — reproduces ``refimpl``'s transition
+  (``refimpl.tasks.transition_generate.make_transition``) on a real CMU clip.
 """
 from __future__ import annotations
 
@@ -177,15 +177,16 @@ def _consumer_transition(model_path, frames_rot, frames_pos):
 def test_consumer_from_metadata_reproduces_refimpl_transition(checkpoint, tmp_path, in_graph):
     """A consumer that knows only the metadata and deploy/README.md reproduces ``refimpl``'s transition
     (``make_transition`` with the NumPy network) on the real CMU clip 02_01.bvh, in world coordinates."""
+    from refimpl.recipes.qtg import pose_normalization
     from refimpl.services import load_trained
-    from refimpl.tasks.transition import make_transition
+    from refimpl.tasks.transition_generate import make_transition
     from refimpl.protocols.transition import TransitionSource, load_source
     from deploy.graph import save_model
     from deploy.models.qtg import export_qtg_rollout
 
     model = load_trained(checkpoint)
     path = tmp_path / "qtg_rollout.onnx"
-    save_model(export_qtg_rollout(model.params, model.config, T=T, normalization=model.pose_normalization,
+    save_model(export_qtg_rollout(model.params, model.config, T=T, normalization=pose_normalization(model),
                                   normalize_in_graph=in_graph, frame_rate=model.fps), path)
     meta = _metadata(_session(path))
     # the data: the clip at the model's frame rate, joints reordered by the metadata's names

@@ -146,7 +146,7 @@ def test_cli_export_run_info(tmp_path, capsys):
     assert "hidden_next" in printed and '"model_io": "raw"' in printed and "input_transform: 4 context" in printed
     assert main(["run", str(out), SAMPLE_BVH, str(bvh), "--start", "1"]) == 2
     assert "--start" in capsys.readouterr().err
-    assert main(["export", str(tmp_path / "absent.npz"), str(out)]) == 2
+    assert main(["export", str(tmp_path / "absent.npz"), str(out)]) == 3   # a missing input file (spec/deploy.md §8)
     assert main(["export", str(ck), str(out), "--root-mean", "0", "0", "0"]) == 2
 
 

@@ -198,19 +198,6 @@ def test_bandai_namco_loader(shared_data):
     assert np.sum(sp_m.track("turning_angle")) > 0.5                     # ... and its mirror image turns right
 
 
-def test_pace_training_runs_and_the_loss_falls():
-    from refimpl.models import pace
-    data = []
-    for k, (spd, d) in enumerate(((0.5, 0.0), (1.0, 0.5), (0.8, -0.3))):
-        seq = LD.build_sequences(_straight_walk(speed=spd, direction=d, frames=80), LD.CMU_RIG, mirror=False)[0]
-        data.append(L.pace_training_data(L.sequence_spline(seq)))
-    cfg = pace.PaceConfig(hidden_size=8)
-    _, hist = L.train_pace_network(data, cfg, epochs=40, batch_size=4, chunk_length=40, lr=1e-2, log=None,
-                                   valid_data=data[:1])
-    assert hist[-1]["train_l1"] < 0.5 * hist[0]["train_l1"]
-    assert np.isfinite(hist[-1]["valid_l1"])
-
-
 _BN_STYLE = """HIERARCHY
 ROOT joint_Root
 {

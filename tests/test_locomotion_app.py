@@ -139,7 +139,15 @@ def test_generation_on_a_circle_stays_on_it():
     root = walk.motion.root_positions
     radius = np.hypot(root[:, 0], root[:, 2])
     assert np.max(np.abs(radius - r)) < 0.2 ** 2 / (8 * r) + 1e-3
-    assert np.allclose(root[:, 1], walk.motion.root_positions[:, 1])  # height from the network, finite
+    assert np.all(np.isfinite(root)) and np.ptp(root[:, 1]) > 0  # height from the network: finite, not constant
+    # the height is the network's second translation output: make it the constant 0.37 (its row of the output
+    # layer zero, its bias 0.37) and every root is at y = 0.37, on the same path
+    R = 4 * 4  # 4 joints x 4 rotation outputs, then offset and height
+    fixed = dict(params, **{k: params[k].copy() for k in ("fc.weight", "fc.bias")})
+    fixed["fc.weight"][R + 1], fixed["fc.bias"][R + 1] = 0.0, 0.37
+    flat = G.generate_walk(fixed, net, pp, pc, sk, seed_rot, feats, circle_path(r), 0.5, 30)
+    np.testing.assert_allclose(flat.motion.root_positions[:, 1], 0.37, rtol=1e-6)
+    assert np.max(np.abs(np.hypot(flat.motion.root_positions[:, 0], flat.motion.root_positions[:, 2]) - r)) < 0.01
     assert G.bone_length_drift(walk.motion) < 1e-9
 
 
@@ -365,3 +373,22 @@ def test_eval_quaternet_long_through_the_command_line(trained, capsys, tmp_path)
     # the pace network has no protocol here: a usage error naming its validation log
     assert main(["eval", "--checkpoint", str(trained / "pace" / "checkpoint.npz"), "--data", "sample"]) == 2
     assert "loss_val.csv" in capsys.readouterr().err
+
+
+def test_generate_warns_when_the_path_ends_before_seconds(trained, tmp_path, capsys):
+    """#27: an open path shorter than --seconds used to be cut short without a word."""
+    path = tmp_path / "short.csv"
+    path.write_text("0,0\n0.5,0\n1,0\n")
+    out = tmp_path / "short.bvh"
+    assert main(["generate", "--model", "quaternet-long", "--checkpoint", str(trained / "pose" / "checkpoint.npz"),
+                 "--pace", str(trained / "pace" / "checkpoint.npz"), "--path", str(path), "--speed", "walk",
+                 "--seconds", "30", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    frames = read_bvh(out).num_frames
+    assert frames < 900
+    assert f"warning: the path ends after {frames / 30:.1f} s" in err and "asked for 900 frames" in err
+    # a path long enough: no warning
+    assert main(["generate", "--model", "quaternet-long", "--checkpoint", str(trained / "pose" / "checkpoint.npz"),
+                 "--pace", str(trained / "pace" / "checkpoint.npz"), "--path", "circle:r=2", "--seconds", "1",
+                 "--out", str(out)]) == 0
+    assert "warning" not in capsys.readouterr().err

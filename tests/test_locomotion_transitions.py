@@ -16,7 +16,7 @@ from refimpl.protocols.transition_locomotion import (FOLDER, JOINTS, KIND, RUN_M
                                             build_datasets, grouped_errors, heldout_dataset, is_bandai_namco_folder,
                                             load_bandai_namco_source, take_facts, window_kinds, window_speeds,
                                             window_styles)
-from refimpl.protocols.transition_metrics import positions_from_poses, run_method
+from refimpl.protocols.transition_metrics import positions_from_poses
 from refimpl.quat import quat_from_axis_angle, quat_rotate
 from refimpl.tasks import transition
 from refimpl.protocols.locomotion_data import load_bandai_namco
@@ -210,6 +210,3 @@ def test_grouped_errors_metric_and_groups(few_takes):
         assert all(abs(v["mean_cm"] - 5.0) < 1e-9 for v in by.values())
     with pytest.raises(ValueError, match="groups"):
         grouped_errors(test, {"truth": truth}, {"style": np.array(["a"])})
-    assert np.array_equal(run_method(test, "truth", truth, batch_size=5), gt)
-    with pytest.raises(ValueError, match=r"methods\['short'\]"):
-        run_method(test, "short", lambda p, t, T: truth(p, t, T)[:, :-1])

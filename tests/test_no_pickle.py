@@ -1,6 +1,6 @@
 """No-pickle / no-code-execution policy (spec/robustness.md §4).
 
-Every ``.py`` file under ``refimpl/``, ``deploy/`` and ``benchmarks/`` is parsed (``ast``, so words in
+Every ``.py`` file under ``refimpl/``, ``deploy/``, ``benchmarks/``, ``experiments/`` and ``tests/fuzz/`` is parsed (``ast``, so words in
 docstrings and comments never count) and scanned for constructs that can execute code from data or a shell:
 
 ==================  ===========================================================================
@@ -12,7 +12,8 @@ rule                what is flagged
 ``allow-pickle``    a keyword ``allow_pickle=`` whose value is not the constant ``False``
 ``np-load``         ``np.load(...)`` / ``numpy.load(...)`` / ``load(...)`` imported from numpy
                     without the keyword ``allow_pickle=False`` (``**kwargs`` does not count)
-``torch-load``      ``torch.load(...)``
+``torch-load``      ``torch.load(...)`` without the keyword ``weights_only=True`` (torch's tensor-only
+                    unpickler, which refuses code: spec/import.md)
 ``eval`` ``exec``   calls of the builtins ``eval`` / ``exec`` (also ``builtins.eval``)
 ``shell-true``      a keyword ``shell=True`` (any call)
 ``os-system``       ``os.system`` / ``os.popen``
@@ -30,7 +31,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCANNED_DIRS = ("refimpl", "deploy", "benchmarks")
+SCANNED_DIRS = ("refimpl", "deploy", "benchmarks", "experiments", "tests/fuzz")
 
 #: (path relative to the project root, rule) -> justification (at least 20 characters). Empty on purpose.
 ALLOW: dict[tuple[str, str], str] = {}
@@ -107,7 +108,9 @@ def scan_source(source: str, filename: str = "<string>") -> list[tuple[int, str,
             name = _dotted(node.func)
             if name in ("eval", "exec", "builtins.eval", "builtins.exec"):
                 hit(node, name.split(".")[-1])
-            if name == "torch.load":
+            if name == "torch.load" and not any(
+                    k.arg == "weights_only" and isinstance(k.value, ast.Constant) and k.value.value is True
+                    for k in node.keywords):
                 hit(node, "torch-load")
             is_np_load = (name is not None and "." in name and name.rsplit(".", 1)[1] == "load"
                           and name.rsplit(".", 1)[0] in numpy_aliases) or (name in numpy_load_aliases)
@@ -135,7 +138,7 @@ def test_scanned_tree_has_files():
 
 
 def test_no_pickle_no_eval_no_shell():
-    """spec/robustness.md §4: no file under refimpl/, deploy/, benchmarks/ loads pickles or executes strings."""
+    """spec/robustness.md §4: no file under refimpl/, deploy/, benchmarks/, experiments/, tests/fuzz/ loads pickles or executes strings."""
     violations = []
     used = set()
     for path in _python_files():
@@ -170,6 +173,8 @@ _BAD = [
     ("import numpy as np\nnp.load('x.npz', allow_pickle=True)\n", "allow-pickle"),
     ("import numpy as np\nnp.load('x.npz', allow_pickle=flag)\n", "allow-pickle"),
     ("import torch\ntorch.load('m.pt')\n", "torch-load"),
+    ("import torch\ntorch.load('m.pt', weights_only=False)\n", "torch-load"),
+    ("import torch\ntorch.load('m.pt', weights_only=flag)\n", "torch-load"),
     ("eval('1+1')\n", "eval"),
     ("exec('x=1')\n", "exec"),
     ("import builtins\nbuiltins.eval('1')\n", "eval"),

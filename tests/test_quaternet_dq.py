@@ -261,7 +261,7 @@ def test_train_eval_generate_export_dq(capsys, dq_run, tmp_path):
     from deploy.models import runtime_for_dir
     rt = runtime_for_dir(onnx_dir)
     assert rt.step_model.metadata["representation"]["name"] == "quaternet_dq_frame"
-    x = rnn_recipe.network_frames(model, pr.verify_inputs(model, np.random.default_rng(0), 3)[0])
+    x = rnn_recipe.network_frames(model, pr.check_prefixes(model, np.random.default_rng(0), 3))
     x0 = x[:, 0].reshape(3, -1).astype(np.float32)
     h = net.init_state(model.params, 3, model.config.network)
     y, hn = net.step(model.params, h, x0, model.config.network)

@@ -209,7 +209,7 @@ def test_generate_writes_bvh_of_the_decoded_rotations(trained, tmp_path, capsys)
     """``refimpl generate`` with a DQ checkpoint: the BVH holds the rotations decoded current → local (Eq. 12),
     FK bone lengths exact; the printout reports the DQ-vs-FK position gap and the DQ bone-length drift."""
     from refimpl.services import load_trained
-    from refimpl.tasks.locomotion_cli import walk_from_checkpoints
+    from refimpl.tasks.locomotion import walk_from_checkpoints
     out = tmp_path / "walk.bvh"
     assert main(["generate", "--model", "quaternet-long", "--checkpoint", str(trained / "pose" / "checkpoint.npz"),
                  "--pace", str(trained / "pace" / "checkpoint.npz"), "--path", "circle:r=2", "--speed", "walk",

@@ -13,8 +13,8 @@ import pytest
 pytest.importorskip("matplotlib")
 from PIL import Image  # noqa: E402  (pillow is a matplotlib dependency)
 
-from refimpl.render import (  # noqa: E402
-    read_loss_log, render_error_curves, render_gif, render_loss_curve, render_strip)
+from refimpl.render import read_loss_log, render_error_curves, render_gif, render_loss_curve  # noqa: E402
+from refimpl.render_strip import render_strip  # noqa: E402
 
 SAMPLE_BVH = Path(__file__).resolve().parents[1] / "refimpl" / "data" / "sample" / "bvh" / "02_01.bvh"
 

@@ -30,7 +30,8 @@ INVERTIBLE = [n for n in NAMES if REPRESENTATIONS[n].invertible]
 def test_frame_sizes_match_the_paper():
     """spec/representations.md §1: 3 + D·J; CMU J = 31 gives the sizes solved from the paper's Appendix C."""
     expected = {"positions": 96, "euler": 96, "expmap": 96, "quaternions": 127, "ortho6d": 189,
-                "dual_quaternions": 251, "quaternions+positions": 220, "ortho6d+positions": 282}
+                "dual_quaternions": 251, "quaternions+positions": 220, "ortho6d+positions": 282,
+                "positions_acrnn": 93}    # the published acRNN's frame: no root block, 3 + 3·(J − 1)
     assert set(expected) == set(NAMES)
     for name, size in expected.items():
         assert frame_size(name, 31) == size
@@ -78,8 +79,10 @@ def test_per_joint_blocks_are_what_they_claim():
     rot = quat_normalize(rng.normal(size=(5, 31, 4)))
     root = rng.normal(size=(5, 3))
     rel = skel.forward_kinematics(rot, root) - root[:, None]
-    blocks = {n: encode(n, skel, rot, root)[:, 3:].reshape(5, 31, -1) for n in NAMES}
+    blocks = {n: encode(n, skel, rot, root)[:, 3:].reshape(5, 31 - (not REPRESENTATIONS[n].root_block), -1)
+              for n in NAMES}
     assert_close(blocks["positions"], rel, atol=1e-12)
+    assert_close(blocks["positions_acrnn"], rel[:, 1:], atol=1e-12)   # no root block
     assert_close(blocks["positions"][:, 0], np.zeros((5, 3)), atol=0)
     assert_close(blocks["quaternions"], rot, atol=0)
     assert_close(blocks["euler"], euler_from_quat(rot, "zyx"), atol=0)

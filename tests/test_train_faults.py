@@ -33,10 +33,16 @@ def _env():
 
 
 def _finite_checkpoint(path: Path) -> dict:
+    """The checkpoint's metadata, after asserting that its loader would accept its values: finite, and every
+    parameter within the checkpoint schema's ``MAX_PARAM_ABS``."""
+    from refimpl.checkpoint_schema import MAX_PARAM_ABS
+
     arrays, meta = load_checkpoint(path)
     for k, a in arrays.items():
         if a.dtype.kind == "f":
             assert np.isfinite(a).all(), k
+            if k.startswith("param.") and a.size:
+                assert np.abs(a).max() <= MAX_PARAM_ABS, k
     return meta
 
 
@@ -192,7 +198,8 @@ def test_absurd_updates_never_reach_a_checkpoint(tmp_path, lr, grad_scale):
     try:
         train(_tiny_adapter(grad_scale), OptimConfig(lr=lr), cfg, progress=None, callback=callback)
     except TrainingDiverged as exc:
-        assert "\n" not in str(exc) and ("non-finite" in str(exc) or "loss is" in str(exc) or "gradient" in str(exc))
+        assert "\n" not in str(exc) and ("non-finite" in str(exc) or "loss is" in str(exc) or "gradient" in str(exc)
+                                         or "diverged at step" in str(exc))
     if ckpt.is_file():
         _finite_checkpoint(ckpt)
 
@@ -225,3 +232,20 @@ def test_cli_divergence_is_one_line_without_warnings(tmp_path):
     assert len(errors) == 1 and errors[0].startswith("refimpl train: error: qtg: "), r.stderr
     if (out / "checkpoint.npz").is_file():
         _finite_checkpoint(out / "checkpoint.npz")
+
+
+def test_a_diverging_run_stops_at_the_last_step_the_loader_accepts(tmp_path):
+    """#28: a learning rate that throws the parameters beyond the checkpoint limit (finite, 1e30) stops the run at
+    that step with one line naming the step, the parameter and the limit; the checkpoint on disk is the previous
+    step's, which the loader accepts (before: a step-1 checkpoint of 1e30 weights that info/eval/resume refused)."""
+    ckpt = tmp_path / "ckpt.npz"
+    init = {"w": np.full(3, 0.5)}
+    adapter = ModelAdapter(name="const", num_examples=4, init_params=lambda g: dict(init),
+                           get_batch=lambda idx, ctx: idx, loss_and_grads=lambda p, b: (1.0, {"w": -np.ones(3)}))
+    cfg = TrainConfig(steps=8, batch_size=4, checkpoint_path=str(ckpt), checkpoint_every=1)
+    with pytest.raises(TrainingDiverged) as info:  # Adam moves w by ~lr = 3e5 per step: beyond 1e6 at step 4
+        train(adapter, OptimConfig(lr=3e5), cfg, progress=None)
+    msg = str(info.value)
+    assert "\n" not in msg and "diverged at step 4" in msg and "'w'" in msg and "1e+06" in msg, msg
+    meta = _finite_checkpoint(ckpt)
+    assert meta["step"] == 3 and "(step 3) kept" in msg

@@ -11,7 +11,11 @@
  * skeleton). Nothing is hard-coded here: C, P and T are read from the model's declared input and output shapes
  * (the batch axis is symbolic; this program runs B = 1). With in-graph normalisation (metadata "normalization":
  * {"in_graph": true}) poses are raw: root translation in centimetres, relative to the window's first pose (see
- * refimpl/transitions.py).
+ * refimpl/protocols/transition.py).
+ *
+ * A model exported with the join option (`refimpl export --join inertialize`, metadata "join") has the joins
+ * inertialised inside the graph (spec/qtg.md 7.4): nothing to do here, the poses it returns are already joined;
+ * this program prints the metadata entry so that the user sees which variant runs.
  *
  * Without inputs.f32 every joint is at the identity rotation and the root at the origin. With it, the file holds
  * 2 * C * P little-endian float32 values: past then target, row-major. With poses.f32 the whole output (T * P
@@ -93,6 +97,14 @@ int main(int argc, char** argv) {
   if (model_json != NULL) {
     printf("model: %s\n", model_json);
     check(ort->AllocatorFree(allocator, model_json));
+  }
+  char* join_json = NULL; /* absent: the network's frames as they are (join "none") */
+  check(ort->ModelMetadataLookupCustomMetadataMap(metadata, allocator, "join", &join_json));
+  if (join_json != NULL) {
+    printf("join: %s\n", join_json);
+    check(ort->AllocatorFree(allocator, join_json));
+  } else {
+    printf("join: none\n");
   }
   ort->ReleaseModelMetadata(metadata);
 

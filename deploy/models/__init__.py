@@ -5,7 +5,11 @@ of every file it exports) to its entry module, which provides:
 
 * ``load_checkpoint(path) -> (params, config, meta)`` — a ``refimpl train`` checkpoint or a state dict;
 * ``export_dir(params, config, out_dir, **options) -> dict role -> Path`` — validated files written atomically;
-* ``Runtime`` — a class with ``Runtime.from_dir(directory, intra_op_threads=1)`` that runs those files.
+* ``Runtime`` — a class with ``Runtime.from_dir(directory, intra_op_threads=1)`` that runs those files;
+* ``run_command(runtime, args)`` — ``python -m deploy run`` on the model's natural input (``deploy/cli.py``);
+* optionally ``export_checkpoint(entry, args)`` (``python -m deploy export``; without it, ``refimpl export``'s
+  export: ``deploy.models.run_commands.export_trained``), ``add_export_options(group)`` and
+  ``add_run_options(group)`` (the model's own command-line options, refused for other models).
 
 :func:`exporter` imports an entry; :func:`runtime_for_dir` opens a folder of exported models with the runtime
 of the model named in their metadata. Adding a model: its graph builders in ``deploy/models/<name>.py``, its

@@ -34,7 +34,7 @@ from deploy.features import destandardize, standardize
 from deploy.graph import OPSET, GraphBuilder
 from deploy.linear import linear
 from deploy.lstm import lstm_step
-from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
+from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries, skeleton_metadata
 from deploy.quat import dq_normalize, quat_mul, quat_normalize
 from deploy.recurrent import tiled_state
 
@@ -86,13 +86,62 @@ def _decode(g: GraphBuilder, frames: str, representation: str, J: int, D: int, l
     return {}
 
 
+def _decoded_shape(k: str, representation: str, lead: list, J: int) -> list:
+    """The true shape of decoded output ``k``: ``lead + [J, 8]`` (dual-quaternion joints), ``[J, 4]`` (quaternion
+    joints) or ``[J, 3]`` (positions)."""
+    return lead + [J, 3 if k == "positions" else (8 if representation == "dual_quaternions" else 4)]
+
+
+_DECODED_MEANING = {
+    "joints": {"dual_quaternions": "per joint the unit current dual quaternion (q_r | q_d), each (w, x, y, z), "
+                                   "Hamilton, relative to the root joint (Eq. 13 normalisation of the frame's 8 "
+                                   "values: q_r / |q_r|, then q_d / |q_r| minus its component along q_r)",
+               "quaternions": "per joint the unit local quaternion (w, x, y, z), relative to the parent joint "
+                              "(the frame's 4 values divided by their norm)",
+               "quaternions+positions": "per joint the unit local quaternion (w, x, y, z), relative to the parent "
+                                        "joint (the first 4 of the joint's 7 values, divided by their norm)"},
+    "positions": {"dual_quaternions": "per joint the position in metres relative to the root joint (current "
+                                      "coordinates, root at the origin): t = 2 (q_d ⊗ conj(q_r)), vector part, "
+                                      "of the unit dual quaternion"},
+}
+
+#: What the D values of one joint of a frame are, per representation (``refimpl.representations``).
+_JOINT_LAYOUT = {
+    "positions": "(x, y, z) position in metres relative to the root joint, current coordinates",
+    "euler": "local Euler angles in radians, zyx order (angle about z, then y, then x)",
+    "expmap": "local rotation vector (axis × angle, radians)",
+    "quaternions": "local quaternion (w, x, y, z), Hamilton, relative to the parent joint",
+    "ortho6d": "first two columns of the local rotation matrix (m00, m10, m20, m01, m11, m21)",
+    "dual_quaternions": "current dual quaternion (q_r | q_d), each (w, x, y, z), relative to the root joint; "
+                        "translation t = 2 (q_d ⊗ conj(q_r)) in metres",
+    "quaternions+positions": "local quaternion (w, x, y, z) then current position (x, y, z) in metres",
+    "ortho6d+positions": "ortho6D (6) then current position (x, y, z) in metres",
+    "positions_acrnn": "(x, y, z) position in metres relative to the root joint (the published acRNN's frame)",
+}
+
+
 def _metadata(g, config, role, io, mean, std, representation, J, D, frame_rate, extra, skeleton):
-    rep = {"name": representation, "size": config.frame_size,
-           "fields": [{"name": "root", "start": 0, "size": 3,
-                       "meaning": "hip dx (x_{t+1} - x_t), height y, dz (z_{t+1} - z_t)"},
-                      {"name": "joints", "start": 3, "size": J * D, "per_joint": D, "joints": J}]}
+    rep = {"name": representation, "size": config.frame_size, "units": "m",
+           "fields": [{"name": "root", "start": 0, "size": 3, "units": "m",
+                       "meaning": "hip dx = x_{t+1} - x_t, hip height y_t, hip dz = z_{t+1} - z_t (metres, y up; "
+                                  "the hip's ground position is the running sum of dx, dz)"},
+                      {"name": "joints", "start": 3, "size": J * D, "per_joint": D, "joints": J,
+                       "joint_names": "skeleton.names (slot j = joint j)",
+                       "layout": _JOINT_LAYOUT.get(representation, representation)}]}
+    root_block = getattr(REPRESENTATIONS.get(representation), "root_block", True)
+    if not root_block:  # the frames leave the root joint out (its position is the root block)
+        rep["fields"][1]["joint_names"] = "skeleton.names[1:] (slot j = joint j + 1; the root joint has no slot)"
+        rep["fields"][0]["meaning"] = "the root joint's position (x, y, z), metres, y up"
+    sk = None
+    if skeleton is not None:
+        sk = skeleton_metadata(skeleton)
+        sk.setdefault("units", "m")
+        expected = J if root_block else J + 1
+        if len(sk["names"]) != expected:
+            raise ValueError(f"skeleton: expected {expected} joints (the frames' {J}"
+                             f"{'' if root_block else ' and the root'}), got {len(sk['names'])}")
     return build_metadata(g, name="acrnn", role=role, config=config.to_dict(), io=io, representation=rep,
-                          normalization=(mean, std), in_graph=True, skeleton=skeleton, frame_rate=frame_rate,
+                          normalization=(mean, std), in_graph=True, skeleton=sk, frame_rate=frame_rate,
                           source_paper=SOURCE, variant="float", extra=extra)
 
 
@@ -123,14 +172,14 @@ def export_acrnn_step(params: Mapping[str, np.ndarray], config: ACRNNConfig, *, 
     g.output(c_new, "c_next", [L, "B", H])
     dec = _decode(g, "next_frame", representation, J, D, 1, "decode")
     for k, v in dec.items():
-        g.output(v, k, ["B", J, 8 if representation == "dual_quaternions" and k == "joints" else
-                        (3 if k == "positions" else 4)])
+        g.output(v, k, _decoded_shape(k, representation, ["B"], J))
     io = {"inputs": io_entries(("frame", ["B", F], "x_t, raw frame (the seed's, then next_frame)"),
                                ("h", [L, "B", H], "LSTM h (zeros at the start)"),
                                ("c", [L, "B", H], "LSTM c (zeros at the start)")),
           "outputs": io_entries(("next_frame", ["B", F], "prediction of frame t + 1, raw"),
                                 ("h_next", [L, "B", H], "new h"), ("c_next", [L, "B", H], "new c"),
-                                *[(k, ["B", J, "D"], "decoded joints of next_frame") for k in dec])}
+                                *[(k, _decoded_shape(k, representation, ["B"], J),
+                                   _DECODED_MEANING[k][representation] + " (of next_frame)") for k in dec])}
     meta = _metadata(g, config, "step", io, mean, std, representation, J, D, frame_rate, metadata, skeleton)
     return g.model(metadata=meta, doc_string="acRNN step: one frame, state in -> state out",
                    producer_version=EXPORTER_VERSION)
@@ -184,11 +233,11 @@ def export_acrnn_generate(params: Mapping[str, np.ndarray], config: ACRNNConfig,
     g.output(destandardize(g, fr_n, mean, std, name="frames_raw", wname="norm"), "frames", ["B", "N", F])
     dec = _decode(g, "frames", representation, J, D, 2, "decode")
     for k, v in dec.items():
-        g.output(v, k, ["B", "N", J, 8 if representation == "dual_quaternions" and k == "joints" else
-                        (3 if k == "positions" else 4)])
+        g.output(v, k, _decoded_shape(k, representation, ["B", "N"], J))
     io = {"inputs": io_entries(("seed", ["B", "S", F], "raw seed frames (10 in the paper's protocol)"),
                                ("num_frames", [], "N, frames to generate (int64, >= 1)")),
           "outputs": io_entries(("frames", ["B", "N", F], "generated raw frames after the seed"),
-                                *[(k, ["B", "N", J, "D"], "decoded joints of frames") for k in dec])}
+                                *[(k, _decoded_shape(k, representation, ["B", "N"], J),
+                                   _DECODED_MEANING[k][representation] + " (of every frame)") for k in dec])}
     meta = _metadata(g, config, "generate", io, mean, std, representation, J, D, frame_rate, metadata, skeleton)
     return g.model(metadata=meta, doc_string="acRNN generator: seed -> N frames", producer_version=EXPORTER_VERSION)

@@ -16,8 +16,10 @@ import numpy as np
 from refimpl.models.acrnn import ACRNNConfig
 
 from deploy.graph import OPSET
+from deploy.models.arguments import count, frames_array
 from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
-from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
+from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
+                                    write_models)
 from deploy.runtime import DeployedModel, load_model
 
 __all__ = ["load_acrnn_checkpoint", "export_acrnn_dir", "ACRNNRuntime"]
@@ -27,7 +29,8 @@ def load_acrnn_checkpoint(path):
     """``(params, config, meta)`` of an acRNN training checkpoint (parameters ``param.<name>``, config from
     ``meta["model_config"]``; the statistics, representation and skeleton are in ``meta["model_config"]`` too)."""
     arrays, meta = read_checkpoint(path)
-    return checkpoint_params(arrays), config_from_meta(ACRNNConfig, meta), meta
+    config = config_from_meta(ACRNNConfig, meta, task="synthesis", where=str(path))
+    return checked_params(checkpoint_params(arrays), config, str(path)), config, meta
 
 
 def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, parents=None, opset=None,
@@ -44,6 +47,18 @@ def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, pare
     frame_rate = float(extra.pop("frame_rate", 30.0))
     if parents is not None:
         extra["parents"] = [int(p) for p in parents]
+    extra.setdefault("input_transform", {
+        "summary": "raw frames in metres at 30 fps (the graphs standardise inside: normalization.in_graph)",
+        "steps": ["a BVH take: keep every 2nd frame of 60 fps (30 fps), drop the End Sites, multiply offsets and "
+                  "root positions by 0.01 (centimetres -> metres)",
+                  f"frame t = [x_(t+1) - x_t, y_t, z_(t+1) - z_t | the joints of frame t as representation."
+                  f"fields[1].layout], {representation}; quaternion-like values made continuous over time (negate a "
+                  "joint's values when their rotation part has a negative dot product with the previous frame's)",
+                  "seed: 10 such frames in the paper's protocol; any S >= 1 works"]})
+    extra.setdefault("output_transform", {
+        "summary": "frames as the inputs, in metres; the hip's ground position is x_0 + cumulative sum of dx (and "
+                   "z likewise), its height y; the decoded outputs (joints, positions) are computed in the graph",
+        "steps": ["to write the source BVH's units again, multiply lengths by 100 (metres -> centimetres)"]})
     kw = dict(mean=np.asarray(mean), std=np.asarray(std), representation=representation, dtype=dtype,
               opset=OPSET if opset is None else opset, skeleton=skeleton, frame_rate=frame_rate, metadata=extra)
     models = {"step": export_acrnn_step(params, config, **kw), "generate": export_acrnn_generate(params, config, **kw)}
@@ -84,28 +99,37 @@ class ACRNNRuntime:
 
     @property
     def config(self) -> dict:
-        return (self.step_model or self.generate_model).metadata["model"]["config"]
+        """The network's config from the metadata (``model.config``); ``ValueError`` when it is not an object."""
+        model = (self.step_model or self.generate_model).metadata.get("model")
+        cfg = model.get("config") if isinstance(model, dict) else None
+        if not isinstance(cfg, dict):
+            raise ValueError(f"metadata['model']['config']: expected a JSON object, got {type(cfg).__name__}")
+        return cfg
 
     def zero_state(self, batch: int) -> tuple[np.ndarray, np.ndarray]:
         """Zero ``(h, c)``, each ``(L, B, H)``."""
+        batch = count(batch, "batch", "batch")
         cfg = self.config
-        z = np.zeros((cfg["num_layers"], int(batch), cfg["hidden_size"]), dtype=np.float32)
+        L = count(cfg.get("num_layers"), "metadata config.num_layers", "layers")
+        H = count(cfg.get("hidden_size"), "metadata config.hidden_size", "frames")
+        z = np.zeros((L, batch, H), dtype=np.float32)
         return z, z.copy()
 
     def step(self, frame, state) -> tuple[dict, tuple]:
         """One step: ``(outputs dict with next_frame (B, F) and the decoded joints, (h, c))``."""
         if self.step_model is None:
             raise ValueError("step: no step model loaded")
+        frame = frames_array(frame, "frame", ranks=(2,))
+        if not isinstance(state, (tuple, list)) or len(state) != 2:
+            raise ValueError(f"state: expected a pair (h, c) of (L, B, H) arrays, got {type(state).__name__}")
         out = self.step_model.run(frame=frame, h=state[0], c=state[1])
         return out, (out["h_next"], out["c_next"])
 
     def generate(self, seed, num_frames: int, *, use_generator: bool = True) -> np.ndarray:
         """Raw frames ``(B, N, F)`` after the raw ``seed (B, S, F)``: one ``generate`` call, or the seed and N − 1
         fed-back frames through ``step`` (host loop)."""
-        seed = np.asarray(seed)
-        n = int(num_frames)
-        if n < 1:
-            raise ValueError(f"num_frames: expected a positive integer, got {num_frames!r}")
+        seed = frames_array(seed, "seed", ranks=(3,))
+        n = count(num_frames, "num_frames")
         if use_generator and self.generate_model is not None:
             return self.generate_model.run(seed=seed, num_frames=np.array(n, dtype=np.int64))["frames"]
         state = self.zero_state(seed.shape[0])
@@ -122,3 +146,6 @@ class ACRNNRuntime:
 load_checkpoint = load_acrnn_checkpoint
 export_dir = export_acrnn_dir
 Runtime = ACRNNRuntime
+
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.run_commands import run_synthesis as run_command  # noqa: E402,F401

@@ -6,7 +6,9 @@ checkpoints (the arrays and metadata, the parameters ``param.<name>``, a config 
   (``meta`` then ``{}``);
 * :func:`checkpoint_params` — the ``param.<name>`` arrays without the prefix (with ``state_dict_ok``: all arrays
   when there is none);
-* :func:`config_from_meta` — ``config_type(**fields)`` from ``meta["model_config"]`` (unknown keys ignored);
+* :func:`config_from_meta` — ``config_type(**fields)`` from ``meta["model_config"]`` (unknown keys ignored), checked
+  against the checkpoint schema and the task's fields (``ValueError`` only);
+* :func:`checked_params` — the parameters checked against the shapes the config implies;
 * :func:`write_models` — validate each model and write it as ``<name>_<role>.onnx``.
 """
 from __future__ import annotations
@@ -15,11 +17,13 @@ import dataclasses
 from pathlib import Path
 
 from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
+from refimpl.checkpoint_schema import expected_param_shapes, validate_model_config, validate_params
+from refimpl.task_schemas import validate_task_checkpoint
 
 from deploy.graph import save_model
 from deploy.validate import validate_model
 
-__all__ = ["read_checkpoint", "checkpoint_params", "config_from_meta", "write_models"]
+__all__ = ["read_checkpoint", "checkpoint_params", "config_from_meta", "checked_params", "write_models"]
 
 PARAM_PREFIX = "param."
 
@@ -41,14 +45,37 @@ def checkpoint_params(arrays, *, state_dict_ok: bool = False) -> dict:
     return (params or dict(arrays)) if state_dict_ok else params
 
 
-def config_from_meta(config_type, meta, convert=None):
+def config_from_meta(config_type, meta, convert=None, *, task: str | None = None, where: str = "checkpoint"):
     """``config_type`` built from the fields of ``meta["model_config"]`` it has (others ignored); ``convert``, if
-    given, maps that dict first."""
+    given, maps that dict first.
+
+    The fields are checked against the checkpoint schema first (``refimpl.checkpoint_schema``: types, integer
+    limits; with ``task``, that task's stored fields, ``refimpl.task_schemas``), so that every problem is a
+    ``ValueError`` naming ``where`` and the field — never a ``TypeError`` or ``KeyError`` from the dataclass.
+    """
+    model_config = meta.get("model_config") if isinstance(meta, dict) else None
+    if model_config is None:
+        model_config = {}
+    if not isinstance(model_config, dict):
+        raise ValueError(f"{where}: model_config: expected a JSON object, got {type(model_config).__name__}")
     names = {f.name for f in dataclasses.fields(config_type)}
-    cfg = {k: v for k, v in (meta.get("model_config") or {}).items() if k in names}
-    if convert:
-        cfg = convert(cfg)
-    return config_type(**cfg)
+    cfg = {k: v for k, v in model_config.items() if k in names}
+    try:
+        if convert:
+            cfg = convert(cfg)
+        config = validate_model_config(config_type, cfg, where)
+    except (TypeError, KeyError, AttributeError, IndexError) as exc:
+        raise ValueError(f"{where}: model_config: {type(exc).__name__} ({exc})") from None
+    if task is not None:
+        validate_task_checkpoint(task, model_config, config, where)
+    return config
+
+
+def checked_params(params, config, where: str = "checkpoint", dtype=None) -> dict:
+    """``params`` after :func:`refimpl.checkpoint_schema.validate_params` against the shapes ``config`` implies
+    (names, shapes, one float dtype, finite, magnitude at most ``MAX_PARAM_ABS``); ``ValueError`` otherwise."""
+    validate_params(params, expected_param_shapes(None, type(config), config), where, dtype=dtype)
+    return params
 
 
 def write_models(models: dict, out_dir, name: str) -> dict:

@@ -42,11 +42,13 @@ import onnx
 from typing import Mapping
 
 from refimpl.models.qtg import QTGConfig, param_shapes
+from refimpl.protocols.transition_join import check_join, join_blend_frames
 
 from deploy.activations import leaky_relu
 from deploy.features import destandardize, standardize
 from deploy.graph import OPSET, GraphBuilder
 from deploy.gru import gru_step
+from deploy.join import inertialize_joins, join_metadata
 from deploy.linear import linear
 from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
 from deploy.recurrent import tiled_state
@@ -257,6 +259,26 @@ def qtg_metadata(config, role, io, normalization, in_graph, skeleton, frame_rate
                           input_transform=QTG_INPUT_TRANSFORM, output_transform=QTG_OUTPUT_TRANSFORM)
 
 
+def join_blend(join, blend_frames, T, stats, norm):
+    """Validate the join option (``join``, ``join_blend_frames`` of the rollout exporters); the blend in frames
+    (None for ``"none"``)."""
+    if check_join(join) == "none":
+        return None
+    if stats is not None and norm is None:
+        raise ValueError("join: the join works on raw poses; it needs normalize_in_graph=True")
+    n = join_blend_frames(T) if blend_frames is None else blend_frames
+    if not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"join_blend_frames: expected a positive integer, got {blend_frames!r}")
+    return int(n)
+
+
+def join_entry(metadata, join, T, frame_rate, blend, *, in_graph: bool):
+    """``metadata`` with the ``join`` entry (:func:`deploy.join.join_metadata`) when ``join`` is not ``"none"``."""
+    if join == "none" or blend is None:
+        return metadata
+    return {**dict(metadata or {}), "join": join_metadata(join, T, frame_rate, blend, in_graph)}
+
+
 def _builder(name, dtype, opset, primitive):
     return GraphBuilder(name, dtype=dtype, opset=opset, primitive=primitive)
 
@@ -383,7 +405,8 @@ def export_qtg_step(params: Mapping[str, np.ndarray], config: QTGConfig = QTGCon
 def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTGConfig(), *, T: int | None = None,
                        mode: str = "scan", dtype=np.float32, opset: int = OPSET, primitive: bool | None = None,
                        normalization=None, normalize_in_graph: bool = True, skeleton=None,
-                       frame_rate: float = 30.0, metadata: Mapping | None = None) -> onnx.ModelProto:
+                       frame_rate: float = 30.0, metadata: Mapping | None = None, join: str = "none",
+                       join_blend_frames: int | None = None) -> onnx.ModelProto:
     """The ``rollout`` model: a whole transition (``refimpl.models.qtg_fast.rollout_forward``) in one graph.
 
     Parameters
@@ -393,6 +416,12 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
     mode : {"scan", "loop", "unrolled"}
         ``scan`` (default): an ONNX ``Scan`` over a constant ``(T, 1)`` tick tensor, the state carried;
         ``loop``: an ONNX ``Loop`` with the state carried; ``unrolled``: T copies of the step (shared weights).
+    join : {"none", "inertialize"}
+        ``"inertialize"`` bakes :func:`refimpl.protocols.transition_join.inertialize_joins` into the graph after the
+        network (``deploy/join.py``; raw poses, so it needs the statistics in the graph when there are any); the
+        metadata's ``join`` entry says so. ``"none"`` (default): the network's frames.
+    join_blend_frames : int, optional
+        Frames of each blend (default :func:`refimpl.protocols.transition_join.join_blend_frames` of ``T``).
     Others as :func:`export_qtg_init`.
 
     Returns
@@ -409,6 +438,7 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
     if mode not in ROLLOUT_MODES:
         raise ValueError(f"mode: expected one of {ROLLOUT_MODES}, got {mode!r}")
     T = int(T)
+    blend = join_blend(join, join_blend_frames, T, stats, norm)
     P, Z, H, L = config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
     g = _builder("qtg_rollout", dtype, opset, primitive)
     past, target, past_n, target_n = _context_inputs(g, norm, P)
@@ -456,10 +486,13 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
             outs = g.node("Scan", carried + [ticks], "rollout", body=body.graph(), num_scan_inputs=1,
                           outputs=("latent_prev", "pose", "hidden", "poses_tm"))
         out = g.node("Transpose", [outs[-1]], "poses_n", perm=[1, 0, 2])         # (B, T, P)
-    g.output(pose_out(g, out, norm, name="poses_raw"), "poses", ["B", T, P])
+    out = pose_out(g, out, norm, name="poses_raw")
+    if join == "inertialize":
+        out = inertialize_joins(g, past, out, target, T, P, frame_rate, blend, name="join")
+    g.output(out, "poses", ["B", T, P])
     io = {"inputs": io_entries(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
                         ("target", ["B", 2, P], "g1 = p_{T+1}, g2 = p_{T+2}: the two poses after it")),
           "outputs": io_entries(("poses", ["B", T, P], "p_1 ... p_T, the generated transition"))}
     meta = qtg_metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g, f"float.{mode}",
-                        metadata, T=T)
+                        join_entry(metadata, join, T, frame_rate, blend, in_graph=True), T=T)
     return g.model(metadata=meta, doc_string=f"QTG rollout: {T} frames, {mode}", producer_version=EXPORTER_VERSION)

@@ -55,7 +55,9 @@ from refimpl.models.qtg import QTGConfig
 from deploy.graph import OPSET, GraphBuilder
 from deploy.gru import gru_gates
 from deploy.metadata import EXPORTER_VERSION, io_entries
-from deploy.models.qtg import check_normalization, check_params, pose_in, pose_out, qtg_metadata
+from deploy.join import inertialize_joins
+from deploy.models.qtg import (check_normalization, check_params, join_blend, join_entry, pose_in, pose_out,
+                               qtg_metadata)
 from deploy.quantize import WEIGHT_FORMATS, WeightMatmul
 
 __all__ = ["export_qtg_rollout_compact"]
@@ -110,7 +112,8 @@ def _mlp(g, W, x, p, prefix, n_layers, slope, last_linear, name, first_bias=None
 def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConfig = QTGConfig(), *,
                                T: int | None = None, weights: str = "int8", opset: int = OPSET,
                                normalization=None, normalize_in_graph: bool = True, skeleton=None,
-                               frame_rate: float = 30.0, metadata: Mapping | None = None) -> onnx.ModelProto:
+                               frame_rate: float = 30.0, metadata: Mapping | None = None, join: str = "none",
+                               join_blend_frames: int | None = None) -> onnx.ModelProto:
     """The compact (deployment) rollout model: same I/O contract as ``deploy.qtg.export_qtg_rollout``.
 
     Parameters
@@ -141,6 +144,7 @@ def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConf
     if not isinstance(T, (int, np.integer)) or T < 1:
         raise ValueError(f"T: expected a positive integer number of frames, got {T!r}")
     T = int(T)
+    blend = join_blend(join, join_blend_frames, T, stats, norm)
     P, Z, H, L = config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
     slope = config.negative_slope
     prep = _prepare(params, config)
@@ -197,11 +201,14 @@ def export_qtg_rollout_compact(params: Mapping[str, np.ndarray], config: QTGConf
         poses.append(pose)
     flat = poses[0] if T == 1 else g.node("Concat", poses, "poses_flat", axis=-1)  # (B, T·P)
     out = g.node("Reshape", [flat, g.ints([0, T, P])], "poses_n")                   # (B, T, P)
-    g.output(pose_out(g, out, norm, name="poses_raw"), "poses", ["B", T, P])
+    out = pose_out(g, out, norm, name="poses_raw")
+    if join == "inertialize":
+        out = inertialize_joins(g, past, out, target, T, P, frame_rate, blend, name="join")
+    g.output(out, "poses", ["B", T, P])
     io = {"inputs": io_entries(("past", ["B", 2, P], "p_{-1}, p_0: the two poses before the transition"),
                         ("target", ["B", 2, P], "g1 = p_{T+1}, g2 = p_{T+2}: the two poses after it")),
           "outputs": io_entries(("poses", ["B", T, P], "p_1 ... p_T, the generated transition"))}
     meta = qtg_metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g,
-                     f"compact.{weights}", metadata, T=T)
+                     f"compact.{weights}", join_entry(metadata, join, T, frame_rate, blend, in_graph=True), T=T)
     return g.model(metadata=meta, doc_string=f"QTG rollout, compact variant, {weights} weights, {T} frames",
                    producer_version=EXPORTER_VERSION)

@@ -16,19 +16,22 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.bounds import MAX_TRANSITION_FRAMES as _BOUND_T
 from refimpl.models.qtg import QTGConfig
+from refimpl.protocols.transition_join import inertialize_joins, join_blend_frames as default_blend
 
 from deploy.graph import OPSET
 from deploy.models.entry_io import checkpoint_params, read_checkpoint, write_models
-from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
+from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step, join_entry
 from deploy.models.qtg_compact import export_qtg_rollout_compact
 from deploy.quantize import WEIGHT_FORMATS
 from deploy.runtime import DeployedModel, load_model
 
 __all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime", "MAX_TRANSITION_FRAMES"]
 
-#: Largest ``T`` :meth:`QTGRuntime.transition` generates (5.5 minutes at 30 fps; a larger T would only hang).
-MAX_TRANSITION_FRAMES = 10_000
+#: Largest ``T`` :meth:`QTGRuntime.transition` generates (5.5 minutes at 30 fps; a larger T would only hang); the
+#: bound of ``refimpl``'s ``--transition-length`` too (``refimpl.bounds``).
+MAX_TRANSITION_FRAMES = _BOUND_T
 _STATE_KEYS = ("pose", "latent_prev", "hidden", "target_latent")
 
 
@@ -68,8 +71,14 @@ def load_qtg_checkpoint(path):
 
 def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None, opset=None, dtype=np.float32,
                    mode: str = "scan", T: int | None = None, metadata=None,
-                   compact: str | None = None) -> dict[str, Path]:
+                   compact: str | None = None, join: str = "none", join_blend_frames: int | None = None,
+                   frame_rate: float | None = None) -> dict[str, Path]:
     """Export, validate and atomically write ``qtg_init/step/rollout.onnx`` into ``out_dir``; return the paths.
+
+    ``join="inertialize"`` bakes the join option into the rollout graph (``deploy/join.py``) and writes a ``join``
+    entry into all three models' metadata (init and step: "apply after the T frames"; :meth:`QTGRuntime.transition`
+    does so on its step path). ``frame_rate`` (default: ``metadata["frame_rate"]``, else 30) sets the join's frame
+    time and the metadata's rate.
 
     ``compact`` (``"float32"``, ``"int8"`` or ``"int4"``; float32 graphs only) writes the rollout model as the
     compact deployment variant with those weights (``deploy.qtg_compact``, ``spec/deploy.md`` §5.4) instead of
@@ -82,13 +91,20 @@ def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None
             raise ValueError(f"compact: the compact rollout is a float32 graph, got dtype {np.dtype(dtype)}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    rate = float(frame_rate or (metadata or {}).get("frame_rate") or 30.0)
     kw = dict(dtype=dtype, opset=OPSET if opset is None else opset, normalization=normalization,
-              skeleton=skeleton, metadata=metadata)
+              skeleton=skeleton, metadata=metadata, frame_rate=rate)
+    jkw = dict(join=join, join_blend_frames=join_blend_frames)
     if compact is None:
-        rollout = export_qtg_rollout(params, config, T=T, mode=mode, **kw)
+        rollout = export_qtg_rollout(params, config, T=T, mode=mode, **kw, **jkw)
     else:
         rollout = export_qtg_rollout_compact(params, config, T=T, weights=compact, opset=kw["opset"],
-                                             normalization=normalization, skeleton=skeleton, metadata=metadata)
+                                             normalization=normalization, skeleton=skeleton, metadata=metadata,
+                                             frame_rate=rate, **jkw)
+    if join != "none":  # validated by the rollout exporter above
+        T_eff = config.transition_length if T is None else int(T)
+        n = default_blend(T_eff) if join_blend_frames is None else join_blend_frames
+        kw["metadata"] = join_entry(metadata, join, T_eff, rate, n, in_graph=False)
     models = {"init": export_qtg_init(params, config, **kw), "step": export_qtg_step(params, config, **kw),
               "rollout": rollout}
     return write_models(models, out, "qtg")
@@ -159,7 +175,9 @@ class QTGRuntime:
             :meth:`deploy.runtime.DeployedModel.run` (shape, batch mismatch, batch 0, dtype, non-finite values).
         """
         meta = (self.rollout_model or self.step_model or self.init_model).metadata.get("model", {})
-        default_T = meta.get("transition_length") or meta.get("config", {}).get("transition_length")
+        cfg = meta.get("config")
+        default_T = meta.get("transition_length") or (cfg.get("transition_length") if isinstance(cfg, Mapping)
+                                                      else None)
         T = default_T if T is None else T
         if not isinstance(T, (int, np.integer)) or isinstance(T, (bool, np.bool_)) or not 1 <= T <= \
                 MAX_TRANSITION_FRAMES:
@@ -176,10 +194,20 @@ class QTGRuntime:
         for _ in range(int(T)):
             pose, state = self.step(state)
             poses.append(pose)
-        return np.stack(poses, axis=1)                                   # (B, T, P)
+        poses = np.stack(poses, axis=1)                                  # (B, T, P)
+        join = self.step_model.metadata.get("join") or {}
+        if join.get("mode", "none") == "none":
+            return poses
+        # the join option of the export, after the frames (the step model cannot know the last frame)
+        n = int(join["blend_frames"]) if join.get("transition_length") == T else default_blend(int(T))
+        joined = inertialize_joins(past, poses, target, dt=float(join["frame_time"]), blend_frames=n)
+        return joined.astype(poses.dtype)
 
 
 #: The exporter table's names for this model.
 load_checkpoint = load_qtg_checkpoint
 export_dir = export_qtg_dir
 Runtime = QTGRuntime
+
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.qtg_cli import add_export_options, add_run_options, export_checkpoint, run_command  # noqa: E402,F401

@@ -48,7 +48,7 @@ from deploy.conv1d import conv1d_causal
 from deploy.graph import OPSET, GraphBuilder
 from deploy.gru import gru, gru_step
 from deploy.linear import linear
-from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
+from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries, skeleton_metadata
 from deploy.models.quaternet_dq import dq_mul
 from deploy.quat import dq_normalize, quat_mul, quat_normalize
 from deploy.recurrent import tiled_state
@@ -83,13 +83,63 @@ def quaternet_representation(num_joints: int, num_outputs: int = 0, num_controls
     return {"name": name, "size": R + num_outputs + num_controls, "fields": fields}
 
 
+#: Length units of the skeletons of QuaterNet's prediction datasets (``metadata["dataset"]``).
+SKELETON_UNITS = {"cmu": "CMU ASF length units (1 unit = 5.6444 cm = 0.056444 m)", "h36m": "mm"}
+
+
+def _dual(config) -> bool:
+    return getattr(config, "representation", "quaternion") == "dual_quaternion"
+
+
+def frame_words(config) -> str:
+    """What one frame's joint block is, for the ``io`` meanings."""
+    if _dual(config):
+        return "per joint the unit current dual quaternion (q_r | q_d), 8J values"
+    return "per joint the unit local quaternion (w, x, y, z), 4J values"
+
+
+def quaternet_transforms(config, role: str) -> tuple[dict, dict]:
+    """``(input_transform, output_transform)`` of a QuaterNet model (spec/deploy.md §11.1)."""
+    from deploy.models.quaternet_sign import RULE
+
+    in_graph = role == "predict" and not _dual(config)
+    where = "applied inside this graph to the prefix" if in_graph else "apply it to the prefix before feeding it"
+    steps = [f"sign rule ({where}): " + r for r in RULE]
+    if _dual(config):
+        steps = steps + [
+            "then current dual quaternions per joint from the canonical local rotations q_j and skeleton.offsets o_j: "
+            "C_root = (q_root | 0); C_j = C_parent ⊗ (q_j | 0.5 (0, o_j) ⊗ q_j) (dual-quaternion product "
+            "(a_r|a_d) ⊗ (b_r|b_d) = (a_r b_r | a_r b_d + a_d b_r)); the root translation is not part of the frame",
+            "then continuity over time: negate C_j (all 8 values) when its real part has a negative dot product with "
+            "the previous frame's real part"]
+    inp = {"summary": "QuaterNet reads the quaternions' numbers: map each prefix to the canonical representative "
+                      "first (the NumPy predictor's canonical_prefix)" + ("; this graph does it itself (feed any "
+                      "signs)" if in_graph else ""),
+           "in_graph": in_graph, "steps": steps,
+           "applies_to": "the prefix (frames fed before the first prediction); fed-back predictions are already "
+                         "continuous"}
+    if _dual(config):
+        out = {"summary": "outputs are unit current dual quaternions (Eq. 13 in the graph); local rotations: "
+                          "q_root = real part of C_root, q_j = conj(real(C_parent)) ⊗ real(C_j), each divided by "
+                          "its norm (Eq. 12)", "steps": []}
+    else:
+        out = {"summary": "outputs are unit local quaternions (w, x, y, z) per joint, joint-major (normalised in "
+                          "the graph); nothing to undo", "steps": []}
+    return inp, out
+
+
 def _metadata(g, name, role, config, io, skeleton, frame_rate, metadata, variant="float"):
     rep = quaternet_representation(config.num_joints, getattr(config, "num_outputs", 0),
                                    getattr(config, "num_controls", 0),
                                    getattr(config, "representation", "quaternion"))
+    inp, out = quaternet_transforms(config, role)
+    sk = skeleton_metadata(skeleton)
+    if sk is not None and "units" not in sk:
+        sk["units"] = SKELETON_UNITS.get((metadata or {}).get("dataset"), "the dataset's length units")
     return build_metadata(g, name=name, role=role, config=config.to_dict(), io=io, representation=rep,
-                          normalization=None, skeleton=skeleton, frame_rate=frame_rate,
-                          source_paper=QUATERNET_PAPER, variant=variant, extra=metadata)
+                          normalization=None, skeleton=sk, frame_rate=frame_rate,
+                          source_paper=QUATERNET_PAPER, variant=variant, extra=metadata,
+                          input_transform=inp, output_transform=out)
 
 
 def _builder(name, dtype, opset, primitive):
@@ -188,9 +238,12 @@ def export_quaternet_step(params: Mapping[str, np.ndarray], config: rnn.QuaterNe
     y, h_new = _step(g, x, hidden, params, config, name="step")
     g.output(y, "y", ["B", G])
     g.output(h_new, "hidden_next", [L, "B", H])
-    io = {"inputs": io_entries(("x", ["B", F], "frame t: [unit quaternions (4J) | translations (O) | controls (C)]"),
+    io = {"inputs": io_entries(("x", ["B", F], f"frame t: {frame_words(config)} (representation), then "
+                                "translations (O) and controls (C) when the config has them; the prefix's frames "
+                                "canonicalised (input_transform), then the fed-back y"),
                                ("hidden", [L, "B", H], "GRU state (from init, then hidden_next)")),
-          "outputs": io_entries(("y", ["B", G], "prediction of frame t + 1: [unit quaternions | translations]"),
+          "outputs": io_entries(("y", ["B", G], f"prediction of frame t + 1: {frame_words(config)}, then "
+                                 "translations (O)"),
                                 ("hidden_next", [L, "B", H], "GRU state after frame t"))}
     meta = _metadata(g, name, "step", config, io, skeleton, frame_rate, metadata)
     return g.model(metadata=meta, doc_string="QuaterNet step: one frame, state in -> state out",
@@ -221,6 +274,14 @@ def export_quaternet_predict(params: Mapping[str, np.ndarray], config: rnn.Quate
     g = _builder(f"{name}_predict", dtype, opset, primitive)
     prefix = g.input("prefix", ["B", "P", F])
     h0 = tiled_state(g, params["h0"], prefix, name="prefix.h0")                 # (L, B, H)
+    if not _dual(config):  # the sign rule of deploy.models.quaternet_sign, inside the graph
+        from deploy.models.quaternet_sign import canonical_signs_graph
+
+        R = config.rotation_size
+        canon = canonical_signs_graph(g, prefix if F == R else _slice(g, prefix, 0, R, -1, "prefix.q"),
+                                      config.num_joints, name="prefix.canon")
+        prefix = canon if F == R else g.node("Concat", [canon, _slice(g, prefix, R, _INT64_MAX, -1, "prefix.rest")],
+                                             "prefix.canonical", axis=-1)                   # (B, P, F)
     tops, h = gru(g, prefix, h0, params, "rnn", name="prefix.rnn", wname="rnn", num_layers=L)  # (B, P, H)
     top = g.node("Squeeze", [_slice(g, tops, -1, _INT64_MAX, 1, "prefix.top_last"), g.ints([1])], "prefix.top")
     x = g.node("Squeeze", [_slice(g, prefix, -1, _INT64_MAX, 1, "prefix.x_last"), g.ints([1])], "prefix.x")
@@ -232,8 +293,11 @@ def export_quaternet_predict(params: Mapping[str, np.ndarray], config: rnn.Quate
     cols = [g.node("Unsqueeze", [v, g.ints([1])], f"frames.{t:03d}") for t, v in enumerate(ys)]  # (B, 1, G)
     out = cols[0] if k == 1 else g.node("Concat", cols, "frames.all", axis=1)    # (B, k, G)
     g.output(out, "frames", ["B", k, G])
-    io = {"inputs": io_entries(("prefix", ["B", "P", F], "conditioning frames (unit quaternions per joint)")),
-          "outputs": io_entries(("frames", ["B", k, G], "predictions of the k frames after the prefix"))}
+    io = {"inputs": io_entries(("prefix", ["B", "P", F], f"conditioning frames, oldest first: {frame_words(config)}"
+                                + ("; any signs (canonicalised inside)" if not _dual(config) else
+                                   "; built by input_transform"))),
+          "outputs": io_entries(("frames", ["B", k, G], f"predictions of the k frames after the prefix: "
+                                 f"{frame_words(config)}"))}
     meta = _metadata(g, name, "predict", config, io, skeleton, frame_rate, dict(metadata or {}, k=k))
     return g.model(metadata=meta, doc_string=f"QuaterNet predict: prefix -> {k} frames",
                    producer_version=EXPORTER_VERSION)
@@ -278,8 +342,10 @@ def export_quaternet_cnn_window(params: Mapping[str, np.ndarray], config: cnn.Qu
         d4 = quat_mul(g, d4, g.node("Reshape", [xl, g.ints([0, J, 4])], "head.q_in"), name="head.qmul")
     q = quat_normalize(g, d4, name="head.qnorm", eps=config.eps)
     g.output(g.node("Reshape", [q, g.ints([0, R])], "head.q"), "pose_next", ["B", R])
-    io = {"inputs": io_entries(("window", ["B", "W", R], "the latest frames, oldest first (unit quaternions); "
-                                f"the last {config.receptive_field} matter")),
+    io = {"inputs": io_entries(("window", ["B", "W", R], "the latest frames, oldest first: per joint the unit "
+                                "local quaternion (w, x, y, z), 4J values (the prefix canonicalised, "
+                                f"input_transform, then the fed-back predictions); the last "
+                                f"{config.receptive_field} matter")),
           "outputs": io_entries(("pose_next", ["B", R], "prediction of the frame after the window"))}
     meta = _metadata(g, name, "window", config, io, skeleton, frame_rate,
                      dict(metadata or {}, receptive_field=config.receptive_field))

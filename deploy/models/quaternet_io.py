@@ -23,7 +23,9 @@ from refimpl.models.quaternet import QuaterNetConfig
 from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
 
 from deploy.graph import OPSET
-from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint, write_models
+from deploy.models.arguments import count, frames_array, metadata_int
+from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
+                                    write_models)
 from deploy.models.quaternet import (export_quaternet_cnn_window, export_quaternet_init, export_quaternet_predict,
                                      export_quaternet_step)
 from deploy.runtime import DeployedModel, load_model
@@ -42,8 +44,10 @@ def load_quaternet_checkpoint(path):
     state-dict ``.npz`` (the config's defaults: the paper's short-term model)."""
     params, meta = _read(path)
     legacy = {"quat": "quaternion"}  # the registry's representation name, stored by checkpoints before §9
-    return params, config_from_meta(QuaterNetConfig, meta, lambda c: {
-        **c, **({"representation": legacy[c["representation"]]} if c.get("representation") in legacy else {})}), meta
+    config = config_from_meta(QuaterNetConfig, meta, lambda c: {
+        **c, **({"representation": legacy[c["representation"]]} if c.get("representation") in legacy else {})},
+        task="prediction" if meta else None, where=str(path))
+    return checked_params(params, config, str(path)), config, meta
 
 
 def load_cnn_checkpoint(path):
@@ -56,7 +60,8 @@ def load_cnn_checkpoint(path):
         return cfg
 
     params, meta = _read(path)
-    return params, config_from_meta(QuaterNetCNNConfig, meta, convert), meta
+    config = config_from_meta(QuaterNetCNNConfig, meta, convert, task="prediction" if meta else None, where=str(path))
+    return checked_params(params, config, str(path)), config, meta
 
 
 def _network(config):
@@ -103,13 +108,26 @@ def _load(m, role, intra_op_threads):
     return dm
 
 
+def _canonical(x: np.ndarray, meta: dict) -> np.ndarray:
+    """``x (B, P, F)`` with the sign rule (``deploy.models.quaternet_sign``) applied to its joint quaternions when
+    the model's frames are quaternions (``representation.name == "quaternet_frame"``); else unchanged."""
+    rep = meta.get("representation") or {}
+    if rep.get("name") != "quaternet_frame":
+        return x
+    from deploy.models.quaternet_sign import canonical_signs
+
+    R = int(rep["fields"][0]["size"])
+    B, P = x.shape[:2]
+    q = canonical_signs(x[..., :R].reshape(B, P, R // 4, 4)).reshape(B, P, R)
+    return np.concatenate([q, x[..., R:]], axis=-1).astype(np.float32)
+
+
 def _frames(prefix, name="prefix") -> tuple[np.ndarray, tuple]:
-    """``(B, P, J, 4)`` or ``(B, P, F)`` -> ``(B, P, F)`` float32 and the trailing shape to restore."""
-    x = np.asarray(prefix, dtype=np.float32)
+    """``(B, P, J, 4)`` or ``(B, P, F)`` -> ``(B, P, F)`` float32 and the trailing shape to restore (refused, not
+    coerced: :func:`deploy.models.arguments.frames_array`)."""
+    x = frames_array(prefix, name, ranks=(3, 4))
     if x.ndim == 4:
         return x.reshape(x.shape[0], x.shape[1], -1), x.shape[2:]
-    if x.ndim != 3:
-        raise ValueError(f"{name}: expected shape (B, P, J, 4) or (B, P, F), got {x.shape}")
     return x, x.shape[2:]
 
 
@@ -140,31 +158,31 @@ class QuaterNetRuntime:
     @property
     def k(self) -> int | None:
         """Frames of the ``predict`` model (None without one)."""
-        return None if self.predict_model is None else int(self.predict_model.metadata.get("k"))
+        return None if self.predict_model is None else metadata_int(self.predict_model, "k")
 
     def start(self, x) -> np.ndarray:
         """``hidden (L, B, H)``: the learned initial state for a batch of frames ``x (B, F)``."""
         if self.init_model is None:
             raise ValueError("start: no init model loaded")
-        return self.init_model.run(x=np.asarray(x, np.float32))["hidden"]
+        return self.init_model.run(x=frames_array(x, "x", ranks=(2,)))["hidden"]
 
     def step(self, x, hidden) -> tuple[np.ndarray, np.ndarray]:
         """One frame: ``(y (B, G), hidden_next (L, B, H))``."""
         if self.step_model is None:
             raise ValueError("step: no step model loaded")
-        out = self.step_model.run(x=np.asarray(x, np.float32), hidden=hidden)
+        out = self.step_model.run(x=frames_array(x, "x", ranks=(2,)), hidden=hidden)
         return out["y"], out["hidden_next"]
 
     def predict(self, prefix, k: int, *, use_graph: bool = True) -> np.ndarray:
         """``k`` frames after ``prefix (B, P, J, 4)`` (or ``(B, P, F)``), in the prefix's trailing shape: the
         ``predict`` model when its ``k`` matches (and ``use_graph``), else ``init`` + a ``step`` loop."""
         x, tail = _frames(prefix)
+        k = count(k, "k")
         B, P, _ = x.shape
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-            raise ValueError(f"k: expected a positive integer, got {k!r}")
         if use_graph and self.predict_model is not None and self.k == k:
             out = self.predict_model.run(prefix=x)["frames"]
         else:
+            x = _canonical(x, (self.step_model or self.init_model).metadata)   # the predict graph does it inside
             h = self.start(x[:, 0])
             for t in range(P):
                 y, h = self.step(x[:, t], h)
@@ -182,7 +200,9 @@ class QuaterNetCNNRuntime:
 
     def __init__(self, window, *, intra_op_threads: int = 1):
         self.window_model = _load(window, "window", intra_op_threads)
-        self.receptive_field = int(self.window_model.metadata.get("receptive_field"))
+        if self.window_model is None:
+            raise ValueError("window: expected an exported quaternet-cnn window model, got None")
+        self.receptive_field = metadata_int(self.window_model, "receptive_field")
 
     @classmethod
     def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QuaterNetCNNRuntime":
@@ -199,9 +219,9 @@ class QuaterNetCNNRuntime:
     def predict(self, prefix, k: int, *, use_graph: bool = True) -> np.ndarray:
         """``k`` frames after ``prefix (B, P, J, 4)`` (or ``(B, P, 4J)``) in the prefix's trailing shape."""
         x, tail = _frames(prefix)
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-            raise ValueError(f"k: expected a positive integer, got {k!r}")
+        k = count(k, "k")
         R = self.receptive_field
+        x = _canonical(x, self.window_model.metadata)   # the sign rule on the whole prefix (input_transform)
         window, ys = x[:, -R:], []
         for _ in range(int(k)):
             y = self.step(window)
@@ -214,3 +234,7 @@ class QuaterNetCNNRuntime:
 load_checkpoint = load_quaternet_checkpoint
 export_dir = export_quaternet_dir
 Runtime = QuaterNetRuntime
+
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.run_commands import add_prediction_run_options as add_run_options  # noqa: E402,F401
+from deploy.models.run_commands import run_prediction as run_command  # noqa: E402,F401

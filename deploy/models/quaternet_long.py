@@ -24,7 +24,7 @@ from deploy.activations import leaky_relu
 from deploy.graph import OPSET, GraphBuilder
 from deploy.gru import gru, gru_step
 from deploy.linear import linear
-from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
+from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries, skeleton_metadata
 from deploy.quat import dq_normalize, quat_normalize
 from deploy.recurrent import tiled_state
 
@@ -35,20 +35,39 @@ QUATERNET_PAPER = ("Pavllo, Feichtenhofer, Auli, Grangier: Modeling Human Motion
                    "Networks, IJCV 2019 (long-term locomotion, §3.7)")
 
 
+#: Length unit of the long-term networks (QuaterNet's locomotion data; spec/locomotion.md).
+UNITS = "QuaterNet units (1 unit = 5.6444 cm)"
+
+
 def _representation(config: QuaterNetConfig) -> dict:
-    if config.representation == "dual_quaternion":
-        return {"kind": "quaternet_long_dq", "layout": ["rotations (8J, current dual quaternions (q_r | q_d) per "
-                                                       "joint, root-relative, Eq. 13 unit)",
-                                                       "translations (offset, height)", "controls (6, inputs only)"],
-                "num_joints": int(config.num_joints), "units": "QuaterNet units (5.6444 cm)"}
-    return {"kind": "quaternet_long", "layout": ["rotations (4J, (w, x, y, z) per joint, local, root absolute)",
-                                                "translations (offset, height)", "controls (6, inputs only)"],
-            "num_joints": int(config.num_joints), "units": "QuaterNet units (5.6444 cm)"}
+    """Layout of the step model's frames ``[rotations | offset, height | 6 controls]`` with units."""
+    J = int(config.num_joints)
+    D = config.joint_width
+    dual = D == 8
+    rot = ({"name": "joint_dual_quaternions", "start": 0, "size": 8 * J, "joints": J,
+            "meaning": "per joint the current dual quaternion (q_r | q_d), each (w, x, y, z), relative to the root "
+                       "joint; unit (Eq. 13 in the graph on y); translation t = 2 (q_d ⊗ conj(q_r)) scaled by "
+                       "model.config's dq_scale, QuaterNet units"} if dual else
+           {"name": "joint_rotations", "start": 0, "size": 4 * J, "joints": J,
+            "meaning": "per joint the local quaternion (w, x, y, z), Hamilton, relative to the parent joint; the "
+                       "root's absolute about +y (facing); unit on y (normalised in the graph)"})
+    fields = [rot,
+              {"name": "offset", "start": D * J, "size": 1, "units": UNITS,
+               "meaning": "signed distance of the root ahead of the path point reached (s + offset is where the "
+                          "root goes on the path)"},
+              {"name": "height", "start": D * J + 1, "size": 1, "units": UNITS, "meaning": "root height (y)"},
+              {"name": "controls", "start": D * J + 2, "size": 6, "inputs_only": True,
+               "meaning": "[A cos phi, A sin phi, A tx, A tz, fx, fz]: A amplitude (units per frame) and phi phase "
+                          "of the gait (pace model), (tx, tz) the unit path tangent, (fx, fz) the unit facing "
+                          "direction, all in the path's (x, z) ground plane"}]
+    return {"name": "quaternet_long_dq" if dual else "quaternet_long",
+            "kind": "quaternet_long_dq" if dual else "quaternet_long", "size": D * J + 8,
+            "num_joints": J, "units": UNITS, "fields": fields}
 
 
 def export_pose_step(params: Mapping[str, np.ndarray], config: QuaterNetConfig, *, dtype=np.float32,
                      opset: int = OPSET, primitive: bool | None = None, skeleton=None, frame_rate: float = 30.0,
-                     metadata: Mapping | None = None) -> onnx.ModelProto:
+                     metadata: Mapping | None = None, h0_file: str | None = None) -> onnx.ModelProto:
     """The ``step`` model of the long-term pose network (QN Fig. 1 with the controls block, spec/quaternet.md §1).
 
     Graph: ``a = LReLU(fc2(LReLU(fc1(c))))``, ``h' = GRU([q | τ | a], h)``, ``o = fc(h'_top)``,
@@ -78,15 +97,30 @@ def export_pose_step(params: Mapping[str, np.ndarray], config: QuaterNetConfig, 
     y = g.node("Concat", [q, tau], "y", axis=1)                                   # (B, G)
     g.output(y, "y", ["B", G])
     g.output(h_new, "state_next", [L, "B", H])
-    io = {"inputs": io_entries(("x", ["B", F], "[rotations 4J | offset, height | 6 controls] of the current frame"),
-                               ("state", [L, "B", H], "GRU state (h0 repeated at the start; then state_next)")),
-          "outputs": io_entries(("y", ["B", G], "next frame: unit quaternions per joint, offset, height"),
+    R = D * J
+    io = {"inputs": io_entries(("x", ["B", F], f"frame t: [rotations {R} | offset, height | 6 controls] "
+                                "(representation); the seed's frames, then [y | the next controls]"),
+                               ("state", [L, "B", H], "GRU state: the initial state (initial_state) at the start, "
+                                "then state_next")),
+          "outputs": io_entries(("y", ["B", G], f"frame t + 1: [rotations {R} (unit) | offset, height]"),
                                 ("state_next", [L, "B", H], "GRU state after this frame"))}
     extra = dict(metadata or {})
-    extra["initial_state"] = "h0 of the parameters, repeated over B (see the pace/step runtime)"
+    extra["initial_state"] = {
+        "file": h0_file, "shape": [L, 1, H], "dtype": np.dtype(dtype).name, "format": "NumPy .npy (no pickle)",
+        "meaning": "the learned initial GRU state h0; repeat it over the batch (axis 1) for the first call"}
+    sk = skeleton_metadata(skeleton)
+    if sk is not None:
+        sk.setdefault("units", UNITS)
+    inp = {"summary": "no normalisation; frames as representation; the root's facing is absolute about +y",
+           "steps": ["seed: P frames of rotations (root facing aligned with the path's facing at its start), "
+                     "offset, height and the frames' controls; run step on each with the carried state",
+                     "generation: x = [y | controls of the next frame] (6 numbers, representation.fields[3])"]}
+    out = {"summary": "y[:R] unit rotations per joint; root position: the path point at arc length s + offset "
+                      "(x, z) and height (y), QuaterNet units", "steps": []}
     meta = build_metadata(g, name=NAME, role="step", config=config.to_dict(), io=io,
-                          representation=_representation(config), skeleton=skeleton, frame_rate=frame_rate,
-                          source_paper=QUATERNET_PAPER, variant="float", extra=extra)
+                          representation=_representation(config), skeleton=sk, frame_rate=frame_rate,
+                          source_paper=QUATERNET_PAPER, variant="float", extra=extra,
+                          input_transform=inp, output_transform=out)
     return g.model(metadata=meta, doc_string="QuaterNet long-term pose network: one step",
                    producer_version=EXPORTER_VERSION)
 
@@ -111,11 +145,24 @@ def export_pace(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, dt
     out = linear(g, y, params, "fc", name="fc")                                   # (B, N, 4)
     g.output(out, "y", ["B", "N", config.output_size])
     io = {"inputs": io_entries(("x", ["B", "N", 2], "[turning_angle, average_speed] per spline point")),
-          "outputs": io_entries(("y", ["B", "N", 4], "[amplitude, frequency, cos Δ, sin Δ] (before clipping)"))}
+          "outputs": io_entries(("y", ["B", "N", 4], "[amplitude A (units per frame), frequency omega "
+                                 "(radians of gait phase per frame), cos Δ, sin Δ] per point (before "
+                                 "output_transform)"))}
     meta = build_metadata(g, name=NAME, role="pace", config={"bidirectional": True, "hidden_size": int(H),
                                                              "input_size": int(config.input_size),
                                                              "output_size": int(config.output_size)},
-                          io=io, representation={"kind": "pace", "points_per_unit": 5.0}, frame_rate=frame_rate,
-                          source_paper=QUATERNET_PAPER, variant="float", extra=dict(metadata or {}))
+                          io=io, representation={"kind": "pace", "name": "pace", "points_per_unit": 5.0,
+                                                 "units": UNITS, "inputs": ["turning_angle (radians between "
+                                                 "consecutive tangents of the reparameterised path)",
+                                                 "average_speed (units per frame at 30 fps)"],
+                                                 "outputs": ["amplitude", "frequency", "cos_delta", "sin_delta"]},
+                          frame_rate=frame_rate, source_paper=QUATERNET_PAPER, variant="float",
+                          extra=dict(metadata or {}),
+                          input_transform={"summary": "the path reparameterised to points_per_unit points per unit "
+                                           "of length (smoothing 1.0); per point its turning angle and the target "
+                                           "speed", "steps": []},
+                          output_transform={"summary": "A = max(A, 0.1), omega = max(omega, 0); facing = the unit "
+                                            "tangent (tx, tz) rotated by (c, s) = (cos Δ, sin Δ) / (|(cos Δ, "
+                                            "sin Δ)| + 1e-9): (tx c - tz s, tz c + tx s)", "steps": []})
     return g.model(metadata=meta, doc_string="QuaterNet pace network (bidirectional GRU + linear)",
                    producer_version=EXPORTER_VERSION)

@@ -17,11 +17,14 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.atomic import atomic_write_bytes
+from refimpl.bounds import MAX_CONFIG_SIZE
+from refimpl.task_schemas import validate_task_checkpoint
 from refimpl.models import pace
 from refimpl.models.quaternet import QuaterNetConfig
 
 from deploy.graph import save_model
-from deploy.models.entry_io import checkpoint_params, config_from_meta, read_checkpoint
+from deploy.models.arguments import count, frames_array
+from deploy.models.entry_io import checked_params, checkpoint_params, config_from_meta, read_checkpoint
 from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model
@@ -38,17 +41,40 @@ def load_checkpoint(path):
     ``pace`` checkpoint its ``PaceConfig``."""
     arrays, meta = read_checkpoint(path)
     params = checkpoint_params(arrays)
-    cfg = dict(meta.get("model_config") or {})
+    where = str(path)
     if meta.get("model") == "pace":
-        return params, config_from_meta(pace.PaceConfig, meta), meta
+        config = config_from_meta(pace.PaceConfig, meta, task="locomotion", where=where)
+        return checked_params(params, config, where), config, meta
     if meta.get("model") != NAME:
         raise ValueError(f"{path}: expected a quaternet-long or pace checkpoint, got model {meta.get('model')!r}")
-    net = QuaterNetConfig.long_term(num_joints=int(cfg["num_joints"]), hidden_size=int(cfg["hidden_size"]),
-                                    num_layers=int(cfg["num_layers"]), controls_hidden=int(cfg["controls_hidden"]),
-                                    negative_slope=float(cfg["negative_slope"]),
-                                    representation="dual_quaternion" if cfg.get("output") == "dual_quaternion"
-                                    else "quaternion")
-    return params, net, meta
+    cfg = meta.get("model_config")
+    fields = {"num_joints": int, "hidden_size": int, "num_layers": int, "controls_hidden": int,
+              "negative_slope": float}
+    if not isinstance(cfg, dict) or any(k not in cfg for k in fields):
+        raise ValueError(f"{where}: model_config: expected an object with {sorted(fields)}")
+    values = {k: _config_number(cfg[k], t, f"{where}: model_config.{k}") for k, t in fields.items()}
+    if cfg.get("output", "quaternion") not in ("quaternion", "dual_quaternion"):
+        raise ValueError(f"{where}: model_config.output: expected 'quaternion' or 'dual_quaternion' for export, got "
+                         f"{cfg.get('output')!r}")
+    try:
+        net = QuaterNetConfig.long_term(**values, representation="dual_quaternion"
+                                        if cfg.get("output") == "dual_quaternion" else "quaternion")
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: model_config: {exc}") from None
+    validate_task_checkpoint("locomotion", cfg, net, where)
+    return checked_params(params, net, where), net, meta
+
+
+def _config_number(value, kind, name):
+    """One config number of a long-term checkpoint: an int (not bool) within ``±MAX_CONFIG_SIZE`` or a finite
+    float; ``ValueError`` naming ``name``."""
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int) or abs(value) > MAX_CONFIG_SIZE:
+            raise ValueError(f"{name}: expected an integer within {MAX_CONFIG_SIZE}, got {value!r:.40}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise ValueError(f"{name}: expected a finite number, got {value!r:.40}")
+    return float(value)
 
 
 def _network(config):
@@ -56,7 +82,8 @@ def _network(config):
     return config.network() if hasattr(config, "network") else config
 
 
-def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, **_ignored) -> dict[str, Path]:
+def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, skeleton=None,
+               **_ignored) -> dict[str, Path]:
     """Export, validate and write the model(s) of ``config`` into ``out_dir``; returns role -> path.
 
     A pose network writes ``step`` (and its ``h0`` as ``.npy``), a pace network ``pace``. Options of other
@@ -69,12 +96,27 @@ def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, **_i
         m = validate_model(export_pace(params, config, dtype=dtype, metadata=metadata))
         save_model(m, out / PACE_FILE)
         return {"pace": out / PACE_FILE}
-    m = validate_model(export_pose_step(params, config, dtype=dtype, metadata=metadata))
+    m = validate_model(export_pose_step(params, config, dtype=dtype, metadata=metadata, skeleton=skeleton,
+                                        h0_file=H0_FILE))
     save_model(m, out / STEP_FILE)
     buf = io.BytesIO()
     np.save(buf, np.asarray(params["h0"], dtype=dtype), allow_pickle=False)
     atomic_write_bytes(out / H0_FILE, buf.getvalue())
     return {"step": out / STEP_FILE, "h0": out / H0_FILE}
+
+
+def _read_h0(path) -> np.ndarray:
+    """The learned initial state ``(L, 1, H)`` beside a step model: a finite float array of rank 3 (a damaged or
+    pickled file is refused with ``ValueError``)."""
+    try:
+        h0 = np.load(path, allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001 - np.load raises ValueError, OSError, EOFError, ... on junk
+        raise ValueError(f"{path}: not a readable .npy array ({type(exc).__name__})") from None
+    if not isinstance(h0, np.ndarray) or h0.dtype.kind != "f" or h0.ndim != 3 or h0.shape[1] != 1 or \
+            not np.all(np.isfinite(h0)):
+        raise ValueError(f"{path}: expected a finite float array (L, 1, H), got {getattr(h0, 'dtype', '?')} "
+                         f"{getattr(h0, 'shape', '?')}")
+    return h0
 
 
 class Runtime:
@@ -96,19 +138,20 @@ class Runtime:
         if not step.is_file() and not pm.is_file():
             raise ValueError(f"directory: no {STEP_FILE} or {PACE_FILE} in {str(d)!r}")
         return cls(step if step.is_file() else None, pm if pm.is_file() else None,
-                   np.load(h0, allow_pickle=False) if h0.is_file() else None, intra_op_threads=intra_op_threads)
+                   _read_h0(h0) if h0.is_file() else None, intra_op_threads=intra_op_threads)
 
     def initial_state(self, batch: int) -> np.ndarray:
         """``h0`` repeated: ``(L, B, H)``."""
+        batch = count(batch, "batch", "batch")
         if self.h0 is None:
             raise ValueError("initial_state: no h0 file beside the step model")
-        return np.repeat(self.h0, int(batch), axis=1)
+        return np.repeat(self.h0, batch, axis=1)
 
     def step(self, x, state=None):
         """One frame: ``(y (B, G), state_next (L, B, H))``; ``state`` None = the learned initial state."""
         if self.step_model is None:
             raise ValueError("step: no step model loaded")
-        x = np.asarray(x, np.float32)
+        x = frames_array(x, "x", ranks=(2,))
         state = self.initial_state(x.shape[0]) if state is None else state
         out = self.step_model.run(x=x, state=state)
         return out["y"], out["state_next"]
@@ -117,24 +160,34 @@ class Runtime:
         """Raw pace outputs ``(B, N, 4)`` for ``x (B, N, 2)``."""
         if self.pace_model is None:
             raise ValueError("pace: no pace model loaded")
-        return self.pace_model.run(x=np.asarray(x, np.float32))["y"]
+        return self.pace_model.run(x=frames_array(x, "x", ranks=(3,)))["y"]
 
     def rollout(self, inputs, prefix: int):
         """Free-running prediction with the ground-truth controls (the task's method interface):
         ``inputs (B, P + T, F)`` → ``rotations (B, T, J, 4)``, ``translations (B, T, 2)``."""
+        x = frames_array(inputs, "inputs", ranks=(3,))
+        prefix = count(prefix, "prefix")
+        if self.step_model is None:
+            raise ValueError("rollout: no step model loaded")
+        B, Ltot, F = x.shape
+        if not prefix < Ltot:
+            raise ValueError(f"prefix: expected fewer than the {Ltot} frames of inputs, got {prefix}")
+        if F < 12 or (F - 8) % 4:
+            raise ValueError(f"inputs: expected F = 4 J + 8 features per frame, got {F}")
         if (self.step_model.metadata.get("representation") or {}).get("kind") == "quaternet_long_dq":
             raise ValueError("rollout: a dual-quaternion step model takes current-DQ frames; evaluate it in NumPy "
                              "(refimpl eval --checkpoint)")
-        x = np.asarray(inputs, np.float32)
-        B, Ltot, F = x.shape
         G = F - 6
         J = (G - 2) // 4
         h = None
-        for t in range(int(prefix)):
+        for t in range(prefix):
             y, h = self.step(x[:, t], h)
         ys = [y]
-        for t in range(int(prefix), Ltot - 1):
+        for t in range(prefix, Ltot - 1):
             y, h = self.step(np.concatenate([y, x[:, t, G:]], axis=1), h)
             ys.append(y)
         y = np.stack(ys, axis=1)
         return y[..., :4 * J].reshape(B, -1, J, 4), y[..., 4 * J:]
+
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.run_commands import run_locomotion as run_command  # noqa: E402,F401

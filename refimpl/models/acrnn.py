@@ -48,7 +48,7 @@ from refimpl.schedules import ACRNN_CONDITION_LENGTH, ACRNN_GROUND_TRUTH_LENGTH,
 
 __all__ = [
     "ACRNNConfig", "Variant", "VARIANTS", "LossSpec", "TABLE4_PARAMETERS",
-    "param_shapes", "count_parameters", "init_params", "init_state", "step",
+    "param_shapes", "published_names", "count_parameters", "init_params", "init_state", "step",
     "sequence_forward", "sequence_backward", "generate",
     "loss_forward", "loss_backward", "loss_and_grads", "config_for",
 ]
@@ -126,6 +126,25 @@ def param_shapes(config: ACRNNConfig) -> dict[str, tuple[int, ...]]:
     shapes["decoder.weight"] = (F, H)
     shapes["decoder.bias"] = (F,)
     return shapes
+
+
+def published_names(config: ACRNNConfig) -> dict[str, tuple[str, tuple[int, ...]]]:
+    """Name map to the published code (papagina/Auto_Conditioned_RNN_motion, ``code/pytorch_train_aclstm.py``):
+    our name -> ``(published name, published shape)``.
+
+    The published network holds one ``nn.LSTMCell`` per layer, ``lstm1`` … ``lstm3`` (``lstm{k+1}.weight_ih``
+    ``(4H, I_k)``, ``weight_hh``, ``bias_ih``, ``bias_hh``, gate blocks i|f|g|o as ``nn.LSTM``), and
+    ``decoder.weight`` / ``decoder.bias``; the tensors are ours (``lstm.weight_ih_l{k}``, ...) under other names.
+    Its stack is the skewed one (``skewed=True``, spec/acrnn.md §1).
+    """
+    out = {}
+    for name, shape in param_shapes(config).items():
+        if name.startswith("lstm."):
+            what, _, layer = name[len("lstm."):].rpartition("_l")
+            out[name] = (f"lstm{int(layer) + 1}.{what}", shape)
+        else:
+            out[name] = (name, shape)
+    return out
 
 
 def count_parameters(config: ACRNNConfig) -> int:
@@ -310,6 +329,7 @@ class Variant:
 #: local L_quat + 0.01 L_reg; quaternions-FK: MSE + L_quat + 1/4 FK position loss).
 VARIANTS = {v.name: v for v in (
     Variant("positions", "positions"),
+    Variant("positions_acrnn", "positions_acrnn"),      # the published code's 171-value frame (End Sites kept)
     Variant("euler", "euler"),
     Variant("quaternions", "quaternions"),
     Variant("quaternions_fk", "quaternions", {"mse": 1.0, "quat": 1.0, "fk": WEIGHT_ACRNN_QUAT_FK}),
@@ -387,6 +407,7 @@ class LossSpec:
 
     @property
     def num_joints(self) -> int:
+        """Joint blocks in a frame (J, or J − 1 for a representation without the root's block)."""
         return (self.mean.size - 3) // REPRESENTATIONS[self.representation].dim
 
 

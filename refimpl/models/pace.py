@@ -44,7 +44,7 @@ from refimpl.nn.linear import linear_backward, linear_forward, linear_init
 from refimpl.nn.params import check_float_array, init_normal
 
 __all__ = [
-    "PaceConfig", "init_params", "count_parameters", "param_shapes", "forward", "backward",
+    "PaceConfig", "init_params", "count_parameters", "param_shapes", "published_names", "forward", "backward",
     "loss_forward", "loss_backward", "init_state", "delayed_step", "predict", "facing_from_outputs",
     "MIN_AMPLITUDE", "MIN_FREQUENCY", "INPUT_NAMES", "OUTPUT_NAMES",
 ]
@@ -106,6 +106,16 @@ def param_shapes(config: PaceConfig) -> dict[str, tuple[int, ...]]:
     shapes["fc.weight"] = (o, d * h)
     shapes["fc.bias"] = (o,)
     return shapes
+
+
+def published_names(config: PaceConfig) -> dict[str, tuple[str, tuple[int, ...]]]:
+    """Name map to the published code (facebookresearch/QuaterNet ``long_term/pace_network.py``,
+    ``BidirectionalModel`` / ``DelayedModel``): our name -> ``(published name, published shape)``. The same names;
+    only the delayed model's ``eos`` differs in shape, ``(1, 1, I)`` there and ``(I,)`` here."""
+    out = {name: (name, shape) for name, shape in param_shapes(config).items()}
+    if "eos" in out:
+        out["eos"] = ("eos", (1, 1, config.input_size))
+    return out
 
 
 def count_parameters(config: PaceConfig) -> int:

@@ -52,7 +52,7 @@ from refimpl.nn.quat_layers import (dq_normalize_backward, dq_normalize_forward,
                                     quat_normalize_backward, quat_normalize_forward)
 
 __all__ = [
-    "JOINT_WIDTH", "QuaterNetConfig", "param_shapes", "count_parameters", "init_params", "check_params",
+    "JOINT_WIDTH", "QuaterNetConfig", "param_shapes", "published_names", "count_parameters", "init_params", "check_params",
     "init_state", "step", "predict", "forward", "backward",
 ]
 
@@ -190,6 +190,13 @@ def param_shapes(config: QuaterNetConfig = QuaterNetConfig()) -> dict[str, tuple
     shapes["fc.weight"] = (config.output_size, H)
     shapes["fc.bias"] = (config.output_size,)
     return shapes
+
+
+def published_names(config: QuaterNetConfig = QuaterNetConfig()) -> dict[str, tuple[str, tuple[int, ...]]]:
+    """Name map to the published code (facebookresearch/QuaterNet ``common/quaternet.py``, the short-term and the
+    long-term instance): our name -> ``(published name, published shape)``. The identity: our parameters carry
+    the published names and layouts (:func:`param_shapes`)."""
+    return {name: (name, shape) for name, shape in param_shapes(config).items()}
 
 
 def count_parameters(config: QuaterNetConfig = QuaterNetConfig()) -> int:

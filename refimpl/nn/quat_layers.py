@@ -543,6 +543,7 @@ def euler_to_quat_backward(dq, cache) -> np.ndarray:
     """Gradient of :func:`euler_to_quat_forward` w.r.t. the angles (..., 3): ``dq/da_i`` of the elementary
     quaternion is ``½ (−sin a/2, cos a/2 e_axis)``."""
     angles, order, c1, c2 = cache
+    dq = check_grad(dq, angles.shape[:-1] + (4,), "dq")
     dab, de2 = quat_mul_backward(dq, c2)
     de0, de1 = quat_mul_backward(dab, c1)
     out = np.empty_like(angles)
@@ -571,6 +572,7 @@ def axis_angle_to_quat_backward(dq, cache) -> np.ndarray:
     """Gradient of :func:`axis_angle_to_quat_forward`: ``dw/dv = −½ sin(θ/2) v/θ`` (→ −v/4 at 0),
     ``d(s v)/dv = s I + v (s'(θ)/θ) vᵀ`` with ``s'(θ)/θ = (½ θ cos θ/2 − sin θ/2)/θ³`` (→ −1/24 at 0)."""
     v, th, ts, small, s = cache
+    dq = check_grad(dq, v.shape[:-1] + (4,), "dq")
     hw = np.where(small, 0.25 - th * th / 96.0, np.sin(ts / 2) / (2 * ts))       # ½ sin(θ/2)/θ
     ds = np.where(small, -1.0 / 24.0, (0.5 * ts * np.cos(ts / 2) - np.sin(ts / 2)) / ts ** 3)
     dxyz = dq[..., 1:]

@@ -19,7 +19,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from refimpl.motion import Motion
-from refimpl.optim import QUATERNET_LR_DECAY, adam_init, adam_step, exponential_lr
+from refimpl.protocols.locomotion_cache import load_pace_data, load_sequences, sequences_key
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                LocomotionSequence, build_sequences, load_bandai_namco, load_cmu_bvh,
                                                load_cmu_expmap)
@@ -29,7 +29,7 @@ from refimpl.splines import Spline
 
 __all__ = [
     "PoseBatch", "rotate_controls", "pose_batch", "sequence_spline", "pace_training_data", "pace_batch",
-    "train_pace_network", "LocomotionDataset", "build_dataset", "evaluation_windows", "zero_velocity",
+    "LocomotionDataset", "build_dataset", "evaluation_windows", "zero_velocity",
     "position_errors", "evaluate", "format_results",
 ]
 
@@ -187,52 +187,6 @@ def pace_batch(data: Sequence[tuple[np.ndarray, np.ndarray]], rng: np.random.Gen
     return x, y
 
 
-def train_pace_network(train_data, config=None, epochs: int = 10, batch_size: int = 40, chunk_length: int = 1000,
-                       lr: float = 1e-3, lr_decay: float = QUATERNET_LR_DECAY, seed: int = 1234, params=None,
-                       valid_data=None, log: Callable[[str], None] | None = print):
-    """Train the pace network (reference ``train_pace_network.py``): L1 loss, Adam(lr) × ``lr_decay`` per epoch,
-    no gradient clipping, ⌈(number of splines) / batch⌉ batches per epoch.
-
-    Parameters
-    ----------
-    train_data, valid_data : sequence of (inputs (N, 2), targets (N, 4)) from :func:`pace_training_data`
-    config : refimpl.models.pace.PaceConfig, default bidirectional
-
-    Returns
-    -------
-    params : dict
-    history : list of dict ``{"epoch", "train_l1", "valid_l1"}`` (valid: L1 over every valid chunk, or None)
-    """
-    from refimpl.models import pace
-    config = pace.PaceConfig() if config is None else config
-    rng = np.random.default_rng(seed)
-    params = pace.init_params(config, rng) if params is None else params
-    state = adam_init(params)
-    usable = [d for d in train_data if d[0].shape[0] >= chunk_length]
-    batches = max(1, math.ceil(len(usable) / batch_size))
-    history = []
-    for epoch in range(epochs):
-        step_lr = exponential_lr(lr, lr_decay, epoch)
-        total = 0.0
-        for _ in range(batches):
-            x, y = pace_batch(usable, rng, batch_size, chunk_length)
-            pred, cache = pace.forward(params, config, x)
-            loss, lcache = pace.loss_forward(pred, y)
-            _, grads = pace.backward(pace.loss_backward(1.0, lcache), cache)
-            adam_step(params, grads, state, step_lr)
-            total += loss
-        valid = None
-        if valid_data:
-            vals = [pace.loss_forward(pace.forward(params, config, inp[None])[0], tgt[None])[0]
-                    for inp, tgt in valid_data]
-            valid = float(np.mean(vals))
-        history.append({"epoch": epoch + 1, "train_l1": total / batches, "valid_l1": valid})
-        if log is not None:
-            log(f"pace epoch {epoch + 1}/{epochs}: train L1 {total / batches:.5f}"
-                + ("" if valid is None else f", valid L1 {valid:.5f}"))
-    return params, history
-
-
 @dataclasses.dataclass(frozen=True)
 class LocomotionDataset:
     """The locomotion sequences of one side of a whole-file split.
@@ -248,6 +202,9 @@ class LocomotionDataset:
     pace_chunk_length : int
         Spline points per pace-network training chunk (0 = automatic: min(1000, median spline length)).
     fps : float
+    cache_key : str
+        The data-cache key of the sequences (:func:`refimpl.protocols.locomotion_cache.sequences_key`; "" = the
+        pace data are not cached).
     """
 
     sequences: tuple
@@ -257,6 +214,7 @@ class LocomotionDataset:
     target: int = 60
     pace_chunk_length: int = 0
     fps: float = FPS
+    cache_key: str = ""
 
     @property
     def skeleton(self) -> Skeleton:
@@ -273,14 +231,17 @@ class LocomotionDataset:
 
     def pace_data(self) -> list:
         """``(inputs (N, 2), targets (N, 4))`` of every sequence's spline (:func:`pace_training_data`); sequences
-        whose root does not move are skipped."""
-        out = []
-        for s in self.sequences:
-            try:
-                out.append(pace_training_data(sequence_spline(s)))
-            except ValueError:
-                continue
-        return out
+        whose root does not move are skipped. Through the data cache when the dataset has a ``cache_key``."""
+        def build():
+            out = []
+            for s in self.sequences:
+                try:
+                    out.append(pace_training_data(sequence_spline(s)))
+                except ValueError:
+                    continue
+            return out
+
+        return load_pace_data(self.cache_key, build) if self.cache_key else build()
 
 
 def _load_file(kind: str, path: str) -> tuple[Motion, LocomotionRig]:
@@ -294,21 +255,29 @@ def _load_file(kind: str, path: str) -> tuple[Motion, LocomotionRig]:
 def build_dataset(kind: str, files: Sequence[str], *, prefix: int = 30, target: int = 60, mirror: bool = True,
                   pace_chunk_length: int = 0, progress: Callable[[str], None] | None = None) -> LocomotionDataset:
     """Load ``files`` of one ``kind`` (:func:`resolve_files`) into a :class:`LocomotionDataset`
-    (:func:`build_sequences`: mirrored, every downsampling phase)."""
-    seqs, rig = [], None
-    for i, f in enumerate(files):
-        motion, rig = _load_file(kind, f)
-        seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
-        if progress is not None and (i + 1) % 100 == 0:
-            progress(f"  loaded {i + 1}/{len(files)} files")
-    if not seqs:
-        raise ValueError("files: no sequence loaded")
+    (:func:`build_sequences`: mirrored, every downsampling phase), through the data cache
+    (:mod:`refimpl.protocols.locomotion_cache`; ``REFIMPL_CACHE=off`` reads the files every time)."""
+    def read():
+        seqs, rig = [], None
+        for i, f in enumerate(files):
+            motion, rig = _load_file(kind, f)
+            seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
+            if progress is not None and (i + 1) % 100 == 0:
+                progress(f"  loaded {i + 1}/{len(files)} files")
+        if not seqs:
+            raise ValueError("files: no sequence loaded")
+        return seqs, rig
+
+    options = dict(kind=kind, mirror=bool(mirror), fps=FPS)
+    seqs, rig = load_sequences(files, read, sequence_type=LocomotionSequence, rigs=(BANDAI_NAMCO_RIG, CMU_RIG),
+                               options=options, progress=progress)
     ref = seqs[0].skeleton
     for s in seqs:
         if s.skeleton.num_joints != ref.num_joints or not np.allclose(s.skeleton.offsets, ref.offsets, atol=1e-6):
             raise ValueError(f"{s.name}: its skeleton differs from {seqs[0].name}'s; the FK loss needs one skeleton")
     return LocomotionDataset(tuple(seqs), rig, tuple(str(f) for f in files), int(prefix), int(target),
-                             int(pace_chunk_length))
+                             int(pace_chunk_length),
+                             cache_key=sequences_key(files, read, LocomotionSequence, options))
 
 
 # ------------------------------------------------------------------------------------------------------------

@@ -6,7 +6,7 @@ The data of the long-term system (spec/locomotion.md; QuaterNet
 
     load_* (BVH / exp-map)  →  prepare_motion (joint subset, units)  →  build_sequences (mirror × downsample
     phases; world positions, 8 features, phase)  →  pose_batch (windows + random rotation about Y)
-                                                  →  sequence_spline → pace_training_data → train_pace_network
+                                                  →  sequence_spline → pace_training_data (training: the pace recipe)
 
 Units: every position is in "QuaterNet units", the length unit of the CMU/Holden BVH files (CMU ASF units,
 1 unit = 5.6444 cm), so that the reference's constants (spline density 5 points per unit, phase hysteresis 0.1,

@@ -28,25 +28,24 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from refimpl.bvh import read_bvh
-from refimpl.models import acrnn
 from refimpl.motion import Motion
 from refimpl.nn.params import check_float_array
-from refimpl.optim import ACRNN_ADAM, adam_init, adam_step
 from refimpl.preprocess import downsample, feature_statistics
 from refimpl.representations import REPRESENTATIONS, decode, encode, fix_antipodal_frames, positions_from_frames
 from refimpl.skeleton import Skeleton, remove_joints
 
 __all__ = [
     "SALSA_FRAME_TIME", "SALSA_TRAIN", "SALSA_TEST", "SAMPLE_TRAIN", "SAMPLE_TEST", "LENGTH_SCALE", "FPS",
-    "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN",
-    "horizon_frames", "load_salsa_motion", "motion_to_frames", "frames_to_motion", "SynthesisData",
-    "load_synthesis_data", "sample_windows", "seed_windows", "evaluate_generator", "train_acrnn", "NPSS_VARIANTS",
-    "root_zeroed_positions", "mean_joint_error", "npss", "mean_acceleration", "acceleration_comparison",
+    "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN", "TABLE1_ROWS",
+    "DEFAULT_ROW", "horizon_frames", "in_source_units", "END_SITE_REPRESENTATIONS", "load_salsa_motion",
+    "motion_to_frames", "frames_to_motion", "SynthesisData", "skeleton_of", "load_synthesis_data", "sample_windows",
+    "seed_windows", "evaluate_generator", "NPSS_VARIANTS", "root_zeroed_positions", "mean_joint_error", "npss",
+    "mean_acceleration", "acceleration_comparison",
 ]
 
 #: Seconds per frame of the salsa files (60 fps, although the headers say 120).
@@ -68,13 +67,42 @@ ACCELERATION_FRAMES = 300
 WINDOW_MARGIN = 10
 
 
+#: ``--representation`` value -> row of Table 1 (a key of :data:`refimpl.models.acrnn.VARIANTS`).
+TABLE1_ROWS = {
+    "dq-all": "dual_quaternions_all",            # dual quaternions (all losses), the paper's proposal
+    "dq-mse": "dual_quaternions",                # dual quaternions (MSE)
+    "quaternions": "quaternions",                # quaternions (MSE)
+    "quaternions-fk": "quaternions_fk",          # quaternions (MSE + L_quat + FK positions)
+    "quaternions+positions": "quaternions+positions",
+    "ortho6d": "ortho6d",
+    "ortho6d+positions": "ortho6d+positions",
+    "positions": "positions",                    # the original acRNN's positions in the paper's 3 + 3J frame
+    "positions-published": "positions_acrnn",    # the published acRNN code's frame: 171 values, End Sites kept
+    "euler": "euler",                            # Table 4 only
+}
+DEFAULT_ROW = "dq-all"
+
+
 def horizon_frames(ms: float, fps: int = FPS) -> int:
     """Frames in ``ms`` milliseconds at ``fps`` (rounded): 100, 400, 1000 ms → 3, 12, 30 at 30 fps."""
     return int(round(ms * fps / 1000.0))
 
 
-def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE) -> Motion:
-    """One salsa file at 30 fps without End Sites, lengths × ``scale``.
+def in_source_units(motion: Motion, scale: float = LENGTH_SCALE) -> Motion:
+    """``motion`` (the network's metres) back in the units of the takes it was read from: offsets and root
+    positions divided by ``scale`` (0.01: metres -> centimetres, the salsa BVH's units)."""
+    s = motion.skeleton
+    skel = Skeleton(s.parents, np.asarray(s.offsets) / scale, s.names, s.end_sites, s.joints_left, s.joints_right)
+    return Motion(skel, motion.rotations, np.asarray(motion.root_positions) / scale, motion.frame_time, motion.name)
+
+
+#: Representations whose frames keep the End Sites (the published acRNN's 57 nodes, spec/acrnn.md §1.1).
+END_SITE_REPRESENTATIONS = ("positions_acrnn",)
+
+
+def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE, phase: int = 0,
+                      end_sites: bool = False) -> Motion:
+    """One salsa file at 30 fps without End Sites (``end_sites=True``: with them), lengths × ``scale``.
 
     Parameters
     ----------
@@ -83,13 +111,19 @@ def load_salsa_motion(path, stride: int = 2, scale: float = LENGTH_SCALE) -> Mot
         Decimation (2: 60 → 30 fps).
     scale : float
         Length factor for offsets and root positions.
+    phase : int
+        First frame kept (0 or 1 at stride 2: the two parities of the 60 fps frames).
+
+    end_sites : bool
+        Keep the End Sites as joints (identity rotations), in the file's depth-first order.
 
     Returns
     -------
-    Motion with 43 joints, frame time 1/30 s.
+    Motion with 43 joints (57 with the End Sites), frame time 1/30 s.
     """
-    m = downsample(read_bvh(path, frame_time=SALSA_FRAME_TIME), stride)
-    skel, rot = remove_joints(m.skeleton, m.rotations, m.skeleton.end_sites)
+    m = downsample(read_bvh(path, frame_time=SALSA_FRAME_TIME), stride, phase)
+    skel, rot = (m.skeleton, m.rotations) if end_sites else remove_joints(m.skeleton, m.rotations,
+                                                                          m.skeleton.end_sites)
     s = skel
     skel = Skeleton(s.parents, s.offsets * scale, s.names, (), s.joints_left, s.joints_right)
     return Motion(skel, rot, m.root_positions * scale, m.frame_time, m.name)
@@ -153,7 +187,11 @@ class SynthesisData:
         De-standardised frames per take.
     train_names, test_names : tuple of str
     mean, std : ndarray (F,)
-        Training-set statistics (``feature_statistics``; std < 1e-4 → 1).
+        Training-set statistics (``feature_statistics``; std < 1e-4 → 1); 0 and 1 when not ``standardised``.
+    standardised : bool
+        False: raw frames (the published trainer's), mean 0 and std 1.
+    parities : int
+        1, or 2 when the training takes' odd 60 fps frames are extra training sequences (``<name>/odd``).
     """
 
     representation: str
@@ -164,6 +202,8 @@ class SynthesisData:
     test_names: tuple
     mean: np.ndarray
     std: np.ndarray
+    standardised: bool = True
+    parities: int = 1
 
     @property
     def frame_size(self) -> int:
@@ -181,24 +221,45 @@ class SynthesisData:
         return np.asarray(frames) * self.std + self.mean
 
 
+def skeleton_of(model_config: Mapping) -> Skeleton:
+    """The skeleton stored in a checkpoint's model config."""
+    s = model_config["skeleton"]
+    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), s["names"])
+
+
 def load_synthesis_data(representation: str, folder, train: Sequence[str] = SALSA_TRAIN,
-                        test: Sequence[str] = SALSA_TEST, scale: float = LENGTH_SCALE) -> SynthesisData:
+                        test: Sequence[str] = SALSA_TEST, scale: float = LENGTH_SCALE, parities: int = 1,
+                        standardise: bool = True) -> SynthesisData:
     """Read the salsa takes of ``folder`` (``<name>.bvh``) into frames of ``representation``.
 
     Example: ``load_synthesis_data("dual_quaternions", "../shared/data/acrnn_cmu_salsa")``; the embedded sample
-    ``refimpl/data/sample/salsa`` with ``train=SAMPLE_TRAIN, test=SAMPLE_TEST``.
+    ``refimpl/data/sample/salsa`` with ``train=SAMPLE_TRAIN, test=SAMPLE_TEST``. ``parities=2`` adds each
+    training take's odd 60 fps frames as a second training sequence (the published trainer samples both; the test
+    takes keep frames 0, 2, 4, ...); ``standardise=False`` stores mean 0 and std 1 (the published trainer's raw
+    frames) instead of the training statistics (spec/acrnn.md §1.1).
     """
+    if parities not in (1, 2):
+        raise ValueError(f"parities: expected 1 or 2, got {parities!r}")
     if representation not in REPRESENTATIONS:
         raise ValueError(f"representation: expected one of {list(REPRESENTATIONS)}, got {representation!r}")
     folder = Path(folder)
     if set(train) & set(test):
         raise ValueError(f"train and test share takes: {sorted(set(train) & set(test))}")
-    motions = {n: load_salsa_motion(folder / f"{n}.bvh", scale=scale) for n in (*train, *test)}
+    keep = representation in END_SITE_REPRESENTATIONS
+    motions = {n: load_salsa_motion(folder / f"{n}.bvh", scale=scale, end_sites=keep) for n in (*train, *test)}
     skel = motions[train[0]].skeleton
     frames = {n: motion_to_frames(representation, m) for n, m in motions.items()}
-    mean, std = feature_statistics([frames[n] for n in train])
-    return SynthesisData(representation, skel, tuple(frames[n] for n in train), tuple(frames[n] for n in test),
-                         tuple(train), tuple(test), mean, std)
+    train_frames = [frames[n] for n in train]
+    if parities == 2:
+        train_frames += [motion_to_frames(representation, load_salsa_motion(folder / f"{n}.bvh", scale=scale,
+                                                                            phase=1, end_sites=keep))
+                         for n in train]
+    mean, std = feature_statistics(train_frames)
+    if not standardise:
+        mean, std = np.zeros_like(mean), np.ones_like(std)
+    return SynthesisData(representation, skel, tuple(train_frames), tuple(frames[n] for n in test),
+                         tuple(train) + tuple(f"{n}/odd" for n in train if parities == 2), tuple(test), mean, std,
+                         standardise, parities)
 
 
 def sample_windows(rng: np.random.Generator, sequences: Sequence[np.ndarray], batch_size: int = 32,
@@ -279,40 +340,6 @@ def evaluate_generator(generate_fn, data: SynthesisData, horizons_ms: Sequence[f
                                "npss_real": npss(gt[:, :n], pred[:, :n], "real")}
     out["acceleration"] = acceleration_comparison(pred[:, :acceleration_frames], gt[:, :acceleration_frames])
     return out
-
-
-def train_acrnn(params: dict, config: "acrnn.ACRNNConfig", data: SynthesisData, spec: "acrnn.LossSpec",
-                steps: int, rng: np.random.Generator, batch_size: int = 32, length: int = 100,
-                lr: float = ACRNN_ADAM["lr"], state: dict | None = None, log=None) -> list:
-    """A plain acRNN training loop (Adam, constant lr 1e-4, batch 32, windows of 100 + 1 frames by default), on the
-    model's path (:func:`refimpl.models.acrnn.loss_and_grads`; ``refimpl train --model acrnn`` is the
-    resumable, checkpointed version).
-
-    Parameters
-    ----------
-    params : dict
-        Updated in place.
-    state : dict, optional
-        Adam state (``adam_init(params)`` when None; pass the same dict to continue a run).
-    log : callable, optional
-        ``log(step, total, parts)`` after every step (progress).
-
-    Returns
-    -------
-    list of float
-        The training loss of every step.
-    """
-    train = [data.standardise(s).astype(next(iter(params.values())).dtype) for s in data.train]
-    state = adam_init(params) if state is None else state
-    losses = []
-    for k in range(int(steps)):
-        frames = sample_windows(rng, train, batch_size, length)
-        total, parts, grads = acrnn.loss_and_grads(params, config, frames, spec)
-        adam_step(params, grads, state, lr, ACRNN_ADAM["betas"], ACRNN_ADAM["eps"])
-        losses.append(total)
-        if log is not None:
-            log(k, total, parts)
-    return losses
 
 
 # --------------------------------------------------------------------------------------------------

@@ -29,7 +29,7 @@ import numpy as np
 from refimpl.rigs import heading_from_root, subset_22
 from refimpl.protocols.locomotion_data import BANDAI_NAMCO_RIG, bandai_namco_split, load_bandai_namco
 from refimpl.protocols.transition import TransitionSource, build_transition_datasets, split_pose
-from refimpl.protocols.transition_metrics import joint_position_errors, run_method
+from refimpl.protocols.transition_metrics import joint_position_errors, predict_transitions
 
 __all__ = ["KIND", "FOLDER", "JOINTS", "TakeFacts", "take_facts", "find_takes", "is_bandai_namco_folder",
            "bandai_namco_sources", "load_bandai_namco_source", "build_datasets", "heldout_dataset", "window_speeds", "window_kinds",
@@ -230,7 +230,7 @@ def grouped_errors(dataset, methods, groups, batch_size: int = 1024) -> dict:
     gt = dataset.context()[1]
     out = {}
     for name, f in methods.items():
-        pred = run_method(dataset, name, f, batch_size)
+        pred = predict_transitions(dataset, f, name, batch_size)
         per_window = joint_position_errors(pred, gt, dataset.skeletons, dataset.skeleton_index)[0].mean(axis=2)
         res = _summary(per_window)  # (N, T) -> summary
         for g, v in labels.items():

@@ -25,7 +25,7 @@ from refimpl.nn.params import check_float_array
 from refimpl.protocols.transition import TransitionDataset, split_pose
 from refimpl.skeleton import Skeleton
 
-__all__ = ["positions_from_poses", "joint_position_errors", "run_method", "evaluate_methods", "format_table"]
+__all__ = ["positions_from_poses", "joint_position_errors", "evaluate_methods", "predict_transitions", "format_table"]
 
 
 def positions_from_poses(poses, skeleton: Skeleton) -> np.ndarray:
@@ -85,22 +85,6 @@ def joint_position_errors(pred, gt, skeletons, skeleton_index) -> tuple[np.ndarr
     return dist, absc
 
 
-def run_method(dataset: TransitionDataset, name: str, method: Callable, batch_size: int = 1024) -> np.ndarray:
-    """``method(past, target, T)`` on every window of ``dataset``, ``batch_size`` windows per call.
-
-    Returns
-    -------
-    ndarray (N, T, P), float64; ValueError naming ``methods[name]`` when the output has another shape.
-    """
-    past, gt, target = dataset.context()
-    T = dataset.transition_length
-    pred = np.concatenate([np.asarray(method(past[i:i + batch_size], target[i:i + batch_size], T), dtype=np.float64)
-                           for i in range(0, dataset.num_windows, batch_size)])
-    if pred.shape != gt.shape:
-        raise ValueError(f"methods[{name!r}]: expected output shape {gt.shape}, got {pred.shape}")
-    return pred
-
-
 def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable], batch_size: int = 1024,
                      labels: bool = True) -> dict:
     """Run every method on every window of ``dataset`` and measure it (spec/qtg.md §9).
@@ -120,15 +104,12 @@ def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable]
     dict name -> {"mean_cm": float, "per_frame_cm": ndarray (T,), "abs_coord_cm": float,
                   "by_label": {label: mean_cm}, "num_windows": N}
     """
-    if not isinstance(dataset, TransitionDataset):
-        raise ValueError(f"dataset: expected a TransitionDataset, got {type(dataset).__name__}")
-    if dataset.num_windows == 0:
-        raise ValueError("dataset: no windows to evaluate")
+    _check_dataset(dataset)
     gt = dataset.context()[1]
     label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
     out = {}
     for name, f in methods.items():
-        pred = run_method(dataset, name, f, batch_size)
+        pred = predict_transitions(dataset, f, name, batch_size)
         dist, absc = joint_position_errors(pred, gt, dataset.skeletons, dataset.skeleton_index)
         res = {"mean_cm": float(dist.mean()), "per_frame_cm": dist.mean(axis=(0, 2)),
                "abs_coord_cm": float(absc.mean()), "num_windows": int(dataset.num_windows)}
@@ -136,6 +117,39 @@ def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable]
             res["by_label"] = {lab: float(dist[label_of == lab].mean()) for lab in sorted(set(label_of))}
         out[name] = res
     return out
+
+
+def _check_dataset(dataset) -> None:
+    if not isinstance(dataset, TransitionDataset):
+        raise ValueError(f"dataset: expected a TransitionDataset, got {type(dataset).__name__}")
+    if dataset.num_windows == 0:
+        raise ValueError("dataset: no windows to evaluate")
+
+
+def predict_transitions(dataset: TransitionDataset, method: Callable, name: str = "method",
+                        batch_size: int = 1024) -> np.ndarray:
+    """``method``'s transitions of every window of ``dataset``, ``batch_size`` windows per call.
+
+    Parameters
+    ----------
+    dataset : TransitionDataset
+    method : f(past (B, 2, P), target (B, 2, P), T) -> poses (B, T, P), un-normalised
+    name : str
+        For the error message.
+    batch_size : int
+
+    Returns
+    -------
+    ndarray (N, T, P), float64
+    """
+    _check_dataset(dataset)
+    past, gt, target = dataset.context()
+    T = dataset.transition_length
+    pred = np.concatenate([np.asarray(method(past[i:i + batch_size], target[i:i + batch_size], T), dtype=np.float64)
+                           for i in range(0, dataset.num_windows, batch_size)])
+    if pred.shape != gt.shape:
+        raise ValueError(f"methods[{name!r}]: expected output shape {gt.shape}, got {pred.shape}")
+    return pred
 
 
 def format_table(results: Mapping[str, dict], frames: tuple[int, ...] = (1, 5, 10, 20, 30)) -> str:

@@ -1,14 +1,19 @@
 """Recipe of acRNN (Zhou, Li et al., ICLR 2018) with the dual-quaternion paper's representations (Andreou et al.
 2022) on the ``synthesis`` task (spec/acrnn.md §8, spec/architecture.md).
 
-* ``--representation`` picks a row of Table 1 (:data:`refimpl.tasks.synthesis.TABLE1_ROWS`: ``dq-all`` (default),
+* ``--representation`` picks a row of Table 1 (:data:`refimpl.protocols.synthesis.TABLE1_ROWS`: ``dq-all`` (default),
   ``dq-mse``, ``quaternions``, ``quaternions-fk``, ``quaternions+positions``, ``ortho6d``, ``ortho6d+positions``,
-  ``positions``, ``euler``); ``--losses mse=1,pos=0.333,...`` overrides its loss weights (the ablation);
-* :func:`make_config` — :class:`~refimpl.models.acrnn.ACRNNConfig` with the data's frame size, ``--set`` overrides
-  (``hidden_size``, ``num_layers``, ``skewed``, ``ground_truth_length``, ``condition_length``);
+  ``positions``, ``positions-published``, ``euler``); ``--losses mse=1,pos=0.333,...`` overrides its loss weights
+  (the ablation);
+* :func:`make_config` — :class:`~refimpl.models.acrnn.ACRNNConfig` with the data's frame size and the published
+  skewed stack (:data:`PAPER_SKEWED`, spec/acrnn.md §1.1), ``--set`` overrides (``hidden_size``, ``num_layers``,
+  ``skewed``, ``ground_truth_length``, ``condition_length``);
 * :func:`make_adapter` — the trainer's :class:`~refimpl.train.ModelAdapter`: windows of ``T + 1`` standardised
   frames drawn by :func:`~refimpl.protocols.synthesis.sample_windows` with the trainer's Generator (so resuming is
-  exact), the row's loss over every step (:func:`refimpl.models.acrnn.loss_and_grads`);
+  exact), or with ``--augment-heading`` cut from the takes, turned to a random heading and encoded per batch
+  (:func:`refimpl.augment.random_heading_windows`); the row's loss over every step
+  (:func:`refimpl.models.acrnn.loss_and_grads`);
+* :func:`published_names`, :data:`PUBLISHED_SETTINGS` — ``refimpl import --layout published`` (spec/import.md);
 * :func:`make_method` — NumPy generation ``f(seed (B, S, F), n) -> (B, n, F)`` on raw frames;
 * :data:`EXPORTER` ``"acrnn"`` and :func:`export_inputs`, :func:`reference_outputs`, :func:`verify_onnx`.
 
@@ -22,17 +27,18 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.augment import random_heading_windows
 from refimpl.errors import UsageError
 from refimpl.models import acrnn
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
 from refimpl.options import config_with_overrides
-from refimpl.protocols.synthesis import sample_windows
-from refimpl.tasks.synthesis import TABLE1_ROWS, skeleton_of
+from refimpl.protocols.synthesis import TABLE1_ROWS, WINDOW_MARGIN, motion_to_frames, sample_windows, skeleton_of
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
-           "PAPER_WINDOW", "PAPER_GROUND_TRUTH", "PAPER_CONDITION", "PAPER_SEED_FRAMES", "make_config",
+__all__ = ["PUBLISHED_SETTINGS", "IMPORT_HINT", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE",
+           "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH", "PAPER_WINDOW", "PAPER_GROUND_TRUTH", "PAPER_CONDITION",
+           "PAPER_SEED_FRAMES", "PAPER_SKEWED", "make_config",
            "loss_spec", "make_adapter", "acrnn_method", "make_method", "export_inputs", "reference_outputs",
            "verify_onnx"]
 
@@ -52,13 +58,30 @@ PAPER_WINDOW = 100
 PAPER_GROUND_TRUTH = 5
 PAPER_CONDITION = 5
 PAPER_SEED_FRAMES = 10
+#: The published code's skewed stack (spec/acrnn.md §1.1: every number of the dual-quaternion paper came from
+#: training code built on it); ``--set skewed=false`` for the ordinary stack.
+PAPER_SKEWED = True
+
+
+#: ``--set`` values that make the network the published code's (``refimpl import --layout published``): its
+#: skewed stack (spec/acrnn.md §1).
+PUBLISHED_SETTINGS = ("skewed=true",)
+#: Added to ``refimpl import``'s message for a state dict of other shapes.
+IMPORT_HINT = ("the frame size comes from --representation and --data; the published code's positions frame "
+               "(171 values) is --representation positions-published --raw-frames")
+
+
+def published_names(config: ACRNNConfig) -> dict:
+    """Our parameter name -> (published name, shape) (:func:`refimpl.models.acrnn.published_names`)."""
+    return acrnn.published_names(config)
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> ACRNNConfig:
-    """The paper's config (3 × 1024 LSTM, 5/5 auto-conditioning) with the data's frame size and ``--set``
-    overrides. Raises UsageError for an unknown field, a bad value or a ``frame_size`` other than the data's."""
+    """The paper's config (3 × 1024 LSTM in the published skewed stack, 5/5 auto-conditioning) with the data's
+    frame size and ``--set`` overrides. Raises UsageError for an unknown field, a bad value or a ``frame_size`` other than the data's."""
     F = int(train_ds.data.frame_size)
-    base = ACRNNConfig(frame_size=F, ground_truth_length=PAPER_GROUND_TRUTH, condition_length=PAPER_CONDITION)
+    base = ACRNNConfig(frame_size=F, skewed=PAPER_SKEWED, ground_truth_length=PAPER_GROUND_TRUTH,
+                       condition_length=PAPER_CONDITION)
     return config_with_overrides(base, overrides, "frame_size", f"the data has frames of {F} values")
 
 
@@ -82,6 +105,10 @@ def make_adapter(train_ds, val_ds, config: ACRNNConfig, dtype, extra: Mapping) -
     length = int(train_ds.window_length)
 
     def get_batch(idx, ctx):
+        if getattr(train_ds, "augment", False):  # the published trainer: each window at a random heading
+            windows, _ = random_heading_windows(ctx.rng, train_ds.motions, len(idx), length + 2, WINDOW_MARGIN)
+            return np.stack([data.standardise(motion_to_frames(data.representation, w)) for w in windows]
+                            ).astype(dtype)                                                 # (B, T + 1, F)
         return sample_windows(ctx.rng, train, len(idx), length)                             # (B, T + 1, F)
 
     def loss_and_grads(params, batch):
@@ -122,7 +149,10 @@ def export_inputs(model) -> dict:
             "training": {"checkpoint_step": model.meta.get("step"), "row": ex.get("row"),
                          "variant": ex.get("variant")}}
     return {"mean": np.asarray(ex["mean"]), "std": np.asarray(ex["std"]), "representation": ex["data_representation"],
-            "parents": tuple(int(p) for p in sk.parents), "metadata": meta}
+            "parents": tuple(int(p) for p in sk.parents), "metadata": meta,
+            "skeleton": {"names": list(sk.names), "parents": [int(p) for p in sk.parents],
+                         "offsets": np.asarray(sk.offsets, dtype=np.float64).tolist(), "units": "m",
+                         "source": "the training takes' skeleton without End Sites, lengths x 0.01 (cm -> m)"}}
 
 
 def reference_outputs(model, seed, num_frames: int) -> np.ndarray:

@@ -21,7 +21,7 @@ from refimpl.optim import QUATERNET_ADAM, QUATERNET_LR_DECAY
 from refimpl.options import config_with_overrides
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
+__all__ = ["published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "MAX_CHUNK", "make_config", "chunk_length", "make_adapter", "make_method", "export_inputs", "verify_onnx"]
 
 NAME = "pace"
@@ -37,10 +37,16 @@ PAPER_BATCH = 40
 MAX_CHUNK = 1000
 
 
+def published_names(config: pace.PaceConfig) -> dict:
+    """Our parameter name -> (published name, shape) (:func:`refimpl.models.pace.published_names`)."""
+    return pace.published_names(config)
+
+
 def make_config(train_ds, overrides: Sequence[str] = ()) -> pace.PaceConfig:
     """The paper's sizes with ``--set`` overrides (``bidirectional``, ``hidden_size``, ``delay``)."""
     base = pace.PaceConfig()
-    return config_with_overrides(base, overrides)
+    return config_with_overrides(base, overrides, ("input_size", "output_size"),
+                                 "the pace network maps 2-D path points to 4 values (amplitude, frequency, facing)")
 
 
 def chunk_length(data, requested: int = 0) -> int:

@@ -27,11 +27,12 @@ from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import prepare_inference, rollout_backward, rollout_forward, rollout_inference
 from refimpl.optim import QTG_ADAM
 from refimpl.train import ModelAdapter, OptimConfig, StepInfo, TrainConfig, TrainResult, default_progress, train
-from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, split_pose
+from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, pose_statistics, split_pose
+from refimpl.protocols.transition_join import inertialize_joins
 
 __all__ = ["NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM", "PAPER_BATCH",
            "parse_overrides", "make_config", "qtg_adapter", "make_adapter", "train_qtg", "qtg_method",
-           "make_method", "export_inputs", "reference_outputs"]
+           "make_method", "pose_normalization", "export_inputs", "reference_outputs"]
 
 NAME = "qtg"
 SUMMARY = "Quaternion Transition Generator (Geleijn et al., IEEE VR 2021): 2 past + 2 target poses -> T frames"
@@ -180,16 +181,23 @@ def qtg_method(params: Mapping[str, np.ndarray], config: QTGConfig, root_mean, r
 
 def make_method(model) -> Callable:
     """:func:`qtg_method` of a :class:`~refimpl.registry.TrainedModel`."""
-    return qtg_method(model.params, model.config, model.root_mean, model.root_std)
+    return qtg_method(model.params, model.config, model.fields["root_mean"], model.fields["root_std"])
+
+
+def pose_normalization(model) -> tuple[np.ndarray, np.ndarray]:
+    """``(mean (P,), std (P,))`` of a trained model's whole pose vector: its root statistics (the transition
+    task's ``fields``), then 0 / 1 for the quaternions (:func:`refimpl.protocols.transition.pose_statistics`)."""
+    return pose_statistics(model.fields["root_mean"], model.fields["root_std"], model.config.pose_size)
 
 
 def export_inputs(model) -> dict:
     """Keyword arguments of QTG's exporter (``deploy.models.qtg.export_dir``) for a trained model: the pose
     normalisation (in the graphs) and the metadata (frame rate, training statistics, checkpoint step)."""
     meta = {"frame_rate": float(model.fps),
-            "training": {"checkpoint_step": model.meta.get("step"), "root_mean": [float(v) for v in model.root_mean],
-                         "root_std": [float(v) for v in model.root_std]}}
-    return {"normalization": model.pose_normalization, "metadata": meta, "T": model.transition_length}
+            "training": {"checkpoint_step": model.meta.get("step"),
+                         "root_mean": [float(v) for v in model.fields["root_mean"]],
+                         "root_std": [float(v) for v in model.fields["root_std"]]}}
+    return {"normalization": pose_normalization(model), "metadata": meta, "T": model.fields["transition_length"]}
 
 
 def reference_outputs(model, past, target, T: int) -> np.ndarray:
@@ -197,10 +205,11 @@ def reference_outputs(model, past, target, T: int) -> np.ndarray:
     :func:`refimpl.models.qtg_fast.rollout_forward` in the parameters' dtype, before any quaternion
     normalisation (``refimpl export``'s check, :func:`refimpl.services.verify_onnx`)."""
     dtype = next(iter(model.params.values())).dtype
-    pn = normalize_poses(np.asarray(past, np.float64), model.root_mean, model.root_std).astype(dtype)
-    tn = normalize_poses(np.asarray(target, np.float64), model.root_mean, model.root_std).astype(dtype)
+    mean, std = model.fields["root_mean"], model.fields["root_std"]
+    pn = normalize_poses(np.asarray(past, np.float64), mean, std).astype(dtype)
+    tn = normalize_poses(np.asarray(target, np.float64), mean, std).astype(dtype)
     ref, _ = rollout_forward(model.params, pn, tn, T, model.config)
-    return denormalize_poses(ref.astype(np.float64), model.root_mean, model.root_std)  # (B, T, P)
+    return denormalize_poses(ref.astype(np.float64), mean, std)  # (B, T, P)
 
 
 #: Tolerance of :func:`verify_onnx` (``refimpl export``'s check), in normalised units (``atol`` times the pose std).
@@ -216,15 +225,22 @@ def verify_onnx(model, runtime, past, target, T: int | None = None) -> dict:
     """Compare an exported QTG's onnxruntime outputs with :func:`reference_outputs` on raw context poses
     ``past, target (B, 2, P)``: the ``rollout`` model and the ``init`` + ``step`` loop.
 
+    Models exported with the join option (metadata ``join``) are compared with
+    :func:`refimpl.protocols.transition_join.inertialize_joins` of the reference outputs.
+
     Returns
     -------
     dict ``{"rollout": max |Δ|, "step_loop": max |Δ|, "ok": bool}``; ``ok`` against
     :data:`VERIFY_TOL` in the network's (normalised) units: ``|Δ| <= atol · std + rtol · |ref|`` with ``std`` the
     pose statistics (root: the training std in cm; quaternions: 1).
     """
-    T = int(T or model.transition_length)
-    std = np.asarray(model.pose_normalization[1], dtype=np.float64)  # (P,)
+    T = int(T or model.fields["transition_length"])
+    std = np.asarray(pose_normalization(model)[1], dtype=np.float64)  # (P,)
     ref = reference_outputs(model, past, target, T)  # (B, T, P)
+    join = (runtime.rollout_model or runtime.step_model).metadata.get("join") or {}
+    if join.get("mode", "none") != "none":  # exported with the join option: NumPy's join after the network
+        n = int(join["blend_frames"]) if join.get("transition_length") == T else None
+        ref = inertialize_joins(past, ref, target, dt=float(join["frame_time"]), blend_frames=n)
     out = {}
     ok = True
     for key, use_rollout in (("rollout", True), ("step_loop", False)):

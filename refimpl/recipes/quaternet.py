@@ -40,7 +40,7 @@ from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
+__all__ = ["published_names", "param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
            "PAPER_BATCH",
            "PAPER_PREFIX", "PAPER_TARGET", "PAPER_EPOCHS", "SCHEDULES", "LOSSES", "ShortTermConfig", "make_config",
            "make_adapter", "loss_terms", "resolve_loss", "teacher_forcing_mask", "network_method", "raw_outputs", "predictor",
@@ -157,6 +157,12 @@ def param_shapes(config) -> dict:
     """Name -> shape of every parameter of the network ``config`` describes (the checkpoint schema's reference,
     spec/robustness.md §9): the model module's ``param_shapes`` of ``config.network``."""
     return net.param_shapes(config.network)
+
+
+def published_names(config) -> dict:
+    """Our parameter name -> (published name, shape): the published short-term state dict's names
+    (:func:`refimpl.models.quaternet.published_names` of ``config.network``; the identity)."""
+    return net.published_names(config.network)
 
 
 def make_config(train_ds, overrides: Sequence[str] = (), config_type=ShortTermConfig):
@@ -389,6 +395,9 @@ def verify_onnx(model, runtime, prefix, k: int = 10) -> dict:
     units: ``|Δ| <= (atol + rtol) · max(1, max |ref|)`` over each predicted frame)."""
     from refimpl.testing import TOL_ORT_ROLLOUT
 
+    from refimpl.protocols.prediction import canonical_prefix
+
+    prefix = canonical_prefix(prefix)   # the published sign rule, as the predictor (the predict graph repeats it)
     ref = reference_outputs(model, prefix, k)
     frames = network_frames(model, prefix)
     # float32 rounding scales with the largest number of a frame: for dual quaternions the dual parts carry the

@@ -156,8 +156,10 @@ def reference_outputs(model, prefix, k: int) -> np.ndarray:
 def verify_onnx(model, runtime, prefix, k: int = 10) -> dict:
     """Compare the exported window model, run ``k`` times by the runtime, with :func:`reference_outputs`:
     ``{"window_loop": max |Δ|, "ok": bool}``."""
+    from refimpl.protocols.prediction import canonical_prefix
     from refimpl.testing import TOL_ORT_ROLLOUT
 
+    prefix = canonical_prefix(prefix)   # the sign rule, as the predictor (the runtime repeats it)
     ref = reference_outputs(model, prefix, k)
     got = np.asarray(runtime.predict(np.asarray(prefix, np.float32), int(k)), np.float64)
     diff = np.abs(got - ref)

@@ -40,7 +40,7 @@ from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
-__all__ = ["param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
+__all__ = ["published_names", "param_shapes", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE", "EXPORTER", "PAPER_OPTIM",
            "PAPER_BATCH",
            "OUTPUTS", "QuaterNetLongConfig", "make_config", "rotations_from_quat", "quat_from_rotations",
            "quat_from_rotations_backward", "ablation_inputs", "loss_and_grads", "make_adapter", "rollout",
@@ -112,6 +112,12 @@ def param_shapes(config: QuaterNetLongConfig) -> dict:
     """Name -> shape of every parameter of the network ``config`` describes (the checkpoint schema's reference,
     spec/robustness.md §9): the recurrent network's ``param_shapes`` of ``config.network`` (ablations included)."""
     return quaternet.param_shapes(config.network())
+
+
+def published_names(config: QuaterNetLongConfig) -> dict:
+    """Our parameter name -> (published name, shape): the published long-term state dict's names
+    (:func:`refimpl.models.quaternet.published_names` of ``config.network()``; the identity)."""
+    return quaternet.published_names(config.network())
 
 
 def make_config(train_ds, overrides: Sequence[str] = ()) -> QuaterNetLongConfig:
@@ -344,8 +350,11 @@ def export_inputs(model) -> dict:
     if model.config.output not in ("quaternion", "dual_quaternion"):
         raise UsageError(f"export: only quaternion- and dual-quaternion-output models are exported (this one: "
                          f"{model.config.output})")
+    from refimpl.tasks.locomotion import skeleton_of
+
     return {"metadata": {"frame_rate": float(model.fps or 30.0),
-                         "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}}}
+                         "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}},
+            "skeleton": skeleton_of(model.extra)}
 
 
 def reference_outputs(model, x, state=None):

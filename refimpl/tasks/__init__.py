@@ -1,7 +1,9 @@
-"""Tasks: one module per task (its data options, dataset building, protocol and metrics, baselines and
-generation), used by the registry, the services and the command line (spec/architecture.md §tasks).
+"""Tasks: one module per task, the application layer of a paper's protocol (spec/architecture.md §tasks).
 
-``transition`` (QTG's: 2 past + 2 target poses -> T frames) today; ``prediction``, ``locomotion`` and
-``synthesis`` next. Import the task module itself (``from refimpl.tasks import transition``); this package
-re-exports nothing.
+Each task module implements the task interface :class:`refimpl.task_api.Task` (its options of every command,
+datasets of ``--data``, checkpoint facts, methods and baselines, ``eval_command``, ``generate_command``,
+``export_options``, ``verify_inputs``) on top of its paper's protocol in :mod:`refimpl.protocols`:
+``transition`` (QTG), ``prediction`` (QuaterNet short-term), ``synthesis`` (acRNN), ``locomotion`` (QuaterNet
+long-term); ``transition_generate`` and ``locomotion_generate`` hold their generation. Import the task module
+itself (``from refimpl.tasks import transition``); this package re-exports nothing.
 """

@@ -8,26 +8,39 @@ Shape legend: B batch, P prefix, T target frames, F = 4 J + 8 values per input f
 """
 from __future__ import annotations
 
+import json
+import math
+import sys
 from pathlib import Path
 from typing import Callable, Mapping
 
 import numpy as np
 
-from refimpl.protocols.locomotion import LocomotionDataset, build_dataset, evaluate, zero_velocity
-from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, LocomotionRig, bandai_namco_split,
-                                               cmu_split)
+from refimpl.atomic import atomic_write_text
+from refimpl.bounds import bounded_float, check_number
+from refimpl.errors import UsageError, existing_file, reading
+from refimpl.protocols.locomotion import LocomotionDataset, build_dataset, evaluate, format_results, zero_velocity
+from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
+                                               bandai_namco_split, cmu_split)
+from refimpl.services import load_trained, network_methods
 from refimpl.skeleton import Skeleton
+from refimpl.tasks.locomotion_generate import (SPEEDS, bone_length_drift, dq_bone_length_drift, facing_of,
+                                              foot_skating, generate_walk, parse_path, parse_speed, read_path_file,
+                                              write_outputs)
 
 __all__ = [
-    "NAME", "SPEEDS", "SEED_FRAMES", "add_train_options", "resolve_files", "train_datasets", "num_examples",
+    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SEED_FRAMES", "add_train_options", "add_eval_options",
+    "add_export_options", "add_generate_options", "resolve_files", "train_datasets", "num_examples",
     "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of", "rig_of",
-    "onnx_method", "methods", "evaluate", "load_eval_data",
+    "onnx_method", "methods", "evaluate", "load_eval_data", "eval_command", "walk_options", "walk_from_checkpoints",
+    "generate_command", "export_options", "verify_inputs",
 ]
 
 NAME = "locomotion"
-#: Target speeds of ``refimpl generate --speed`` in units per frame at 30 fps (the reference notebook: walk 0.5,
-#: run 1.2; jog between them is ours).
-SPEEDS = {"walk": 0.5, "jog": 0.85, "run": 1.2}
+EVAL_SUMMARY = ("locomotion (quaternet-long): free-running position and velocity error over the held-out windows "
+                "with ground-truth controls, against zero-velocity")
+GENERATE_USAGE = ("refimpl generate --model quaternet-long --checkpoint POSE.npz --pace PACE.npz [--path ...]  "
+                  "(locomotion)")
 #: Frames of the seed clip stored in a pose-network checkpoint (the generation prefix).
 SEED_FRAMES = 30
 
@@ -35,14 +48,36 @@ SEED_FRAMES = 30
 def add_train_options(parser) -> None:
     """The locomotion task's options of ``refimpl train`` (its own names: every task adds its options to the
     same parser)."""
-    parser.add_argument("--locomotion-prefix", type=int, default=30, metavar="P",
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--locomotion-prefix", type=bounded_int("window"), default=30, metavar="P",
                         help="locomotion: conditioning frames of a pose window (default 30)")
-    parser.add_argument("--locomotion-target", type=int, default=60, metavar="T",
+    parser.add_argument("--locomotion-target", type=bounded_int("window"), default=60, metavar="T",
                         help="locomotion: predicted frames of a pose window (default 60)")
-    parser.add_argument("--locomotion-max-files", type=int, default=0, metavar="N",
+    parser.add_argument("--locomotion-max-files", type=bounded_int("files"), default=0, metavar="N",
                         help="locomotion: use at most N training and N held-out files (evenly spaced; 0 = all)")
-    parser.add_argument("--pace-chunk-length", type=int, default=0, metavar="N",
+    parser.add_argument("--pace-chunk-length", type=bounded_int("chunk"), default=0, metavar="N",
                         help="locomotion: spline points per pace-network chunk (default: min(1000, median))")
+
+
+def add_eval_options(parser) -> None:
+    """The task's options of ``refimpl eval``: none."""
+
+
+def add_export_options(parser) -> None:
+    """The task's options of ``refimpl export``: none."""
+
+
+def add_generate_options(parser) -> None:
+    """The task's options of ``refimpl generate`` (``--model quaternet-long``): the pace network, the path, the
+    speed, the length, the controls output."""
+    parser.add_argument("--pace", default=None, help="pace-network checkpoint (`refimpl train --model pace`)")
+    parser.add_argument("--path", default="circle:r=3",
+                        help="circle[:r=M], figure8[:size=M], line-turn[:turn=DEG] or a CSV of x,z points in metres")
+    parser.add_argument("--speed", default="walk", help="walk, jog, run or units per frame (default walk)")
+    parser.add_argument("--seconds", type=bounded_float("seconds"), default=10.0,
+                        help="length of the motion (default 10)")
+    parser.add_argument("--controls", default=None, help="also write the per-frame controls as JSON")
 
 
 def _evenly(items: list, n: int) -> list:
@@ -211,3 +246,131 @@ def load_eval_data(data: str, model_config: Mapping, max_files: int = 0) -> Loco
         raise BadInputError(f"--data {data}: a {ds.rig.name} rig, but the checkpoint was trained on the "
                             f"{model_config.get('rig')} rig")
     return ds
+
+
+# ------------------------------------------------------------------------------------------------------------
+# commands (spec/cli.md, spec/locomotion.md §8-§9)
+# ------------------------------------------------------------------------------------------------------------
+
+def _say(*parts) -> None:
+    print(*parts, flush=True)
+
+
+def eval_command(args, model) -> int:
+    """``refimpl eval`` for the long-term pose network: free-running position and velocity error over the held-out
+    windows (QN §4.4.2; spec/locomotion.md §8), against zero-velocity."""
+    if model is None or model.spec.name != "quaternet-long":
+        raise UsageError("locomotion: evaluation needs --checkpoint of a quaternet-long model (the pace network's "
+                         "held-out L1 is its loss_val.csv)")
+    _say(f"reading {args.data} ...")
+    data = load_eval_data(args.data, model.extra)
+    extra = model.spec.extra_methods  # e.g. a DQ model's positions read from the DQs
+    nets = {**network_methods(model), **(extra(model) if extra else {})}
+    results = evaluate(data, methods(nets))
+    _say(f"held-out windows: {next(iter(results.values()))['windows']} of {data.prefix} + {data.target} frames "
+         f"({len(data.files)} files); error in QuaterNet units (1 unit = 5.6444 cm)")
+    _say(format_results(results))
+    if args.json:
+        serial = {n: {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()}
+                  for n, r in results.items()}
+        atomic_write_text(args.json, json.dumps(serial, indent=1) + "\n")
+        _say(f"results          {args.json}")
+    return 0
+
+
+def walk_options(path_text: str, speed_text: str, seconds) -> tuple:
+    """``(path Spline, speed, frames)`` of ``--path``, ``--speed``, ``--seconds``, checked before any work: a value
+    outside :mod:`refimpl.bounds` is a ``UsageError`` (exit 2), a ``--path`` CSV file that is missing or malformed a
+    ``BadInputError`` naming the file and line (exit 3)."""
+    try:
+        speed = parse_speed(speed_text)
+        seconds = check_number(seconds, "--seconds", "seconds")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if Path(path_text).suffix.lower() == ".csv":
+        p = existing_file(path_text)
+        with reading(p):
+            path = read_path_file(p)
+    else:
+        try:
+            path = parse_path(path_text)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    return path, speed, int(round(seconds * FPS))
+
+
+def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: str, seconds: float):
+    """:func:`~refimpl.tasks.locomotion_generate.generate_walk` from two loaded
+    :class:`~refimpl.registry.TrainedModel` (``quaternet-long`` and ``pace``)."""
+    if pose_model.spec.name != "quaternet-long":
+        raise UsageError(f"--checkpoint: expected a quaternet-long checkpoint, got {pose_model.spec.name!r}")
+    if pace_model.spec.name != "pace":
+        raise UsageError(f"--pace: expected a pace checkpoint, got {pace_model.spec.name!r}")
+    path, speed, frames = walk_options(path_text, speed_text, seconds)
+    if pose_model.config.output not in ("quaternion", "dual_quaternion"):
+        raise UsageError(f"--checkpoint: generation needs a quaternion or dual-quaternion model, got output = "
+                         f"{pose_model.config.output!r} (an ablation)")
+    seed = pose_model.extra["seed_clip"]
+    return generate_walk(pose_model.params, pose_model.config.network(), pace_model.params, pace_model.config,
+                         skeleton_of(pose_model.extra), np.asarray(seed["rotations"]), np.asarray(seed["features"]),
+                         path, speed, frames, dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
+
+
+def generate_command(args, model) -> int:
+    """``refimpl generate --model quaternet-long``: load the two checkpoints, walk the path, write BVH / pictures /
+    controls, and print the stability numbers (spec/cli.md, spec/locomotion.md §9)."""
+    if args.model is None:  # the task came from a checkpoint or exported models: both networks are needed
+        raise UsageError("a quaternet-long / pace checkpoint: pass --model quaternet-long --checkpoint POSE.npz "
+                         "--pace PACE.npz [--path ...]")
+    if not args.checkpoint or not args.pace:
+        raise UsageError("--model quaternet-long needs --checkpoint POSE.npz and --pace PACE.npz")
+    if args.backend != "numpy":
+        raise UsageError("--model quaternet-long runs in NumPy (use `python -m deploy` for the exported models)")
+    walk_options(args.path, args.speed, args.seconds)  # option values and the path file before any work
+    pose_model, pace_model = load_trained(args.checkpoint), load_trained(args.pace)
+    walk = walk_from_checkpoints(pose_model, pace_model, args.path, args.speed, args.seconds)
+    out = args.out or "walk.bvh"
+    if not str(out).lower().endswith(".bvh"):
+        raise UsageError(f"--out {out}: expected a .bvh file name")
+    m = walk.motion
+    write_outputs(walk, bvh=out, gif=args.gif, png=args.png, controls=args.controls,
+                  title=f"quaternet-long, {args.path}, {args.speed}")
+    asked = int(round(args.seconds * FPS))
+    if m.num_frames < asked:  # an open path ended before --seconds: say so (the motion is shorter)
+        print(f"refimpl generate: warning: the path ends after {m.num_frames / FPS:.1f} s at this speed; "
+              f"--seconds {args.seconds:g} asked for {asked} frames, the motion has {m.num_frames}",
+              file=sys.stderr, flush=True)
+    rig = rig_of(pose_model.extra)
+    feet = [m.skeleton.index(rig.left_foot), m.skeleton.index(rig.right_foot)]
+    skate = foot_skating(m.positions(), feet)
+    face = facing_of(walk, rig)
+    agree = np.sum(face * walk.controls[:, 4:6], axis=-1)
+    dist = np.linalg.norm(np.diff(m.root_positions[:, [0, 2]], axis=0), axis=-1).sum() * QUATERNET_UNIT_CM / 100
+    _say(f"wrote {out}: {m.num_frames} frames at {FPS:g} fps ({m.num_frames / FPS:.1f} s), {m.num_joints} joints, "
+        f"centimetres; root travelled {dist:.1f} m along a {walk.path.length * QUATERNET_UNIT_CM / 100:.1f} m path")
+    _say(f"facing vs the pace network: median angle {math.degrees(np.median(np.arccos(np.clip(agree, -1, 1)))):.1f}°;"
+        f" foot skating {skate['speed_cm_s']:.1f} cm/s in contact ({100 * skate['contact_fraction']:.0f} % of "
+        f"foot-frames); bone-length drift {bone_length_drift(m) * QUATERNET_UNIT_CM:.2g} cm")
+    if walk.dq_positions is not None:  # dual quaternions: the positions the network's losses saw (Eq. 8)
+        gap = np.linalg.norm(walk.dq_positions - m.positions(), axis=-1) * QUATERNET_UNIT_CM
+        drift = dq_bone_length_drift(walk.dq_positions, m.skeleton)
+        dq_skate = foot_skating(walk.dq_positions, feet)
+        _say(f"dual quaternions: positions read from the DQs (Eq. 8) vs FK of the decoded rotations (Eq. 12): mean "
+            f"{gap.mean():.2f} cm, max {gap.max():.2f} cm; DQ bone-length drift mean {drift['mean'] * QUATERNET_UNIT_CM:.2f}"
+            f" cm ({100 * drift['mean_relative']:.1f} %), max {drift['max'] * QUATERNET_UNIT_CM:.2f} cm (not enforced "
+            f"by the representation); foot skating of the DQ positions {dq_skate['speed_cm_s']:.1f} cm/s")
+    for f in (args.gif, args.png, args.controls):
+        if f:
+            _say(f"wrote {f}")
+    return 0
+
+
+def export_options(args) -> dict:
+    """The exporter's options of ``refimpl export``: none."""
+    return {}
+
+
+def verify_inputs(args, model) -> tuple:
+    """``((), {"seed": ...})``: the recipe draws its own random inputs (``--seed``) for ``refimpl export``'s
+    check."""
+    return (), {"seed": args.seed}

@@ -28,6 +28,7 @@ from typing import Mapping
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
+from refimpl.bounds import BOUNDS, check_number
 from refimpl.models import pace, quaternet
 from refimpl.motion import Motion
 from refimpl.protocols.locomotion import rotate_controls
@@ -36,15 +37,18 @@ from refimpl.quat import quat_mul
 from refimpl.recipes import quaternet_long_dq
 from refimpl.skeleton import Skeleton
 from refimpl.splines import Spline, circle_path, figure_eight_path, line_with_turn_path, read_path_csv
-from refimpl.tasks.locomotion import SPEEDS
 
-__all__ = ["GeneratedWalk", "parse_path", "parse_speed", "align_seed", "generate_walk", "foot_skating",
-           "bone_length_drift", "dq_bone_length_drift", "facing_of", "write_outputs", "BUILTIN_PATHS"]
+__all__ = ["GeneratedWalk", "parse_path", "read_path_file", "parse_speed", "align_seed", "generate_walk",
+           "foot_skating", "bone_length_drift", "dq_bone_length_drift", "facing_of", "write_outputs", "BUILTIN_PATHS",
+           "SPEEDS"]
 
 #: Built-in paths of ``--path``, sizes in metres: ``circle[:r=R]`` (default 3 m), ``figure8[:size=S]`` (default
 #: 4 m), ``line-turn[:turn=DEG]`` (6 m straight, a 2 m-radius turn of DEG degrees, default 90, then 6 m); or a CSV
 #: file of x,z points in metres.
 BUILTIN_PATHS = ("circle", "figure8", "line-turn")
+#: Target speeds of ``refimpl generate --speed`` in units per frame at 30 fps (the reference notebook: walk 0.5,
+#: run 1.2; jog between them is ours).
+SPEEDS = {"walk": 0.5, "jog": 0.85, "run": 1.2}
 _M = 100.0 / QUATERNET_UNIT_CM  # units per metre
 
 
@@ -95,22 +99,36 @@ def parse_path(text: str) -> Spline:
         except ValueError:
             raise ValueError(f"--path {text!r}: {v!r} is not a number") from None
     if name == "circle":
-        r = opts.pop("r", 3.0)
+        r = check_number(opts.pop("r", 3.0), f"--path {text!r}: r", "path_metres")
         _no_extra(opts, text)
         return circle_path(r * _M)
     if name == "figure8":
-        size = opts.pop("size", 4.0)
+        size = check_number(opts.pop("size", 4.0), f"--path {text!r}: size", "path_metres")
         _no_extra(opts, text)
         return figure_eight_path(size * _M)
     if name == "line-turn":
-        turn = opts.pop("turn", 90.0)
+        turn = check_number(opts.pop("turn", 90.0), f"--path {text!r}: turn", "path_turn")
         _no_extra(opts, text)
         return line_with_turn_path(6.0 * _M, turn, 2.0 * _M, 6.0 * _M)
     p = Path(text)
     if p.suffix.lower() == ".csv":
-        sp = read_path_csv(p)
-        return Spline(sp.points * _M, closed=False)
+        return read_path_file(p)
     raise ValueError(f"--path {text!r}: expected circle[:r=M], figure8[:size=M], line-turn[:turn=DEG] or a .csv file")
+
+
+def read_path_file(path) -> Spline:
+    """A ``--path`` CSV file (``x,z`` metres, :func:`refimpl.splines.read_path_csv`) in QuaterNet units, within
+    the bounds of :mod:`refimpl.bounds` (coordinates, length); ``ValueError`` naming the file (and line)."""
+    sp = read_path_csv(path)
+    lo, hi = BOUNDS["path_csv_metres"].lo, BOUNDS["path_csv_metres"].hi
+    bad = np.flatnonzero(~((sp.points >= lo) & (sp.points <= hi)).all(axis=1))
+    if bad.size:
+        raise ValueError(f"{path}: point {int(bad[0]) + 1} ({sp.points[bad[0], 0]:.6g}, {sp.points[bad[0], 1]:.6g})"
+                         f": expected coordinates in [{lo:g}, {hi:g}] metres")
+    if sp.length > BOUNDS["path_length_metres"].hi:
+        raise ValueError(f"{path}: the path is {sp.length:.6g} m long, more than the limit "
+                         f"{BOUNDS['path_length_metres'].hi:g} m")
+    return Spline(sp.points * _M, closed=False)
 
 
 def _no_extra(opts: Mapping, text: str) -> None:
@@ -119,16 +137,14 @@ def _no_extra(opts: Mapping, text: str) -> None:
 
 
 def parse_speed(text) -> float:
-    """``walk``, ``jog``, ``run`` (:data:`~refimpl.tasks.locomotion.SPEEDS`) or a number of units per frame."""
+    """``walk``, ``jog``, ``run`` (:data:`SPEEDS`) or a number of units per frame."""
     if text in SPEEDS:
         return SPEEDS[text]
     try:
         v = float(text)
     except (TypeError, ValueError):
         raise ValueError(f"--speed {text!r}: expected walk, jog, run or units per frame") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"--speed {text!r}: expected a positive number")
-    return v
+    return check_number(v, f"--speed {text!r}", "speed")
 
 
 def _angle(v) -> float:
@@ -296,7 +312,7 @@ def write_outputs(walk: GeneratedWalk, *, bvh=None, gif=None, png=None, controls
     """Write the BVH (centimetres, End Sites added below leaves), the pictures (the path drawn under the
     character) and the per-frame controls JSON."""
     from refimpl.bvh import write_bvh
-    from refimpl.tasks.transition import with_end_sites
+    from refimpl.tasks.transition_generate import with_end_sites
 
     written = []
     cm = _scaled(walk.motion, QUATERNET_UNIT_CM)

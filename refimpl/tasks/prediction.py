@@ -8,24 +8,30 @@ Shape legend: B batch, P prefix frames, K predicted frames, F frames of a file, 
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.errors import BadInputError, UsageError
 from refimpl.expmap import read_expmap
 from refimpl.preprocess import downsample, fix_antipodal
-from refimpl.protocols.prediction import (Protocol, baseline_methods, euler_errors, evaluate_all, make_protocol,
-                                          table2_protocol)
+from refimpl.protocols.prediction import (Protocol, average_curves, baseline_methods, canonical_prefix, euler_errors,
+                                          evaluate_all, format_table, make_protocol, table2_protocol,
+                                          write_results_json)
 from refimpl.protocols.prediction_data import (SUBJECT_DIR, PredictionData, load_cmu, load_h36m, skeleton_of,
                                                stride_of)
+from refimpl.registry import require_source
+from refimpl.services import checkpoint_for, network_methods, onnx_frame_rate, onnx_metadata
 from refimpl.skeleton import Skeleton
 
 __all__ = [
-    "NAME", "SAMPLE_EXPMAP_DIR", "add_train_options", "add_eval_options", "resolve_data", "train_datasets",
-    "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
-    "methods", "evaluate", "eval_protocol", "eval_actions", "load_clip", "Prediction", "make_prediction",
-    "render_prediction", "verify_inputs",
+    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SAMPLE_EXPMAP_DIR", "add_train_options", "add_eval_options",
+    "add_export_options", "add_generate_options", "resolve_data", "train_datasets", "num_examples", "describe_data",
+    "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method", "methods", "evaluate", "eval_protocol",
+    "eval_actions", "load_clip", "Prediction", "make_prediction", "render_prediction", "check_prefixes",
+    "eval_command", "generate_command", "export_options", "verify_inputs",
 ]
 
 # ------------------------------------------------------------------------------------------------------------
@@ -33,13 +39,18 @@ __all__ = [
 # ------------------------------------------------------------------------------------------------------------
 
 NAME = "prediction"
+EVAL_SUMMARY = ("prediction (quaternet, quaternet-cnn): the published short-term protocol, Euler-angle error per "
+                "action and horizon, against zero-velocity and running averages")
+GENERATE_USAGE = "refimpl generate --checkpoint CKPT --source FILE [...]  (prediction)"
 #: ``--data sample``: the embedded CMU exp-map sample.
 SAMPLE_EXPMAP_DIR = Path(__file__).resolve().parent.parent / "data" / "sample" / "expmap"
 
 
 def add_train_options(parser) -> None:
     """The task's options of ``refimpl train`` (``--downsample``); its data is ``--data`` (:func:`resolve_data`)."""
-    parser.add_argument("--downsample", type=int, default=2,
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--downsample", type=bounded_int("downsample"), default=2,
                         help="prediction task: keep every k-th frame, every phase for training (default 2: "
                              "H3.6M 50 -> 25 Hz, CMU 120 -> 60 fps)")
 
@@ -48,7 +59,9 @@ def add_eval_options(parser) -> None:
     """The task's options of ``refimpl eval`` (``--protocol``, ``--samples-per-sequence``, ``--wrap``)."""
     parser.add_argument("--protocol", default="standard", choices=("standard", "dense"),
                         help="prediction task: 4 (standard, Table 1) or 128 (dense, Table 2) samples per sequence")
-    parser.add_argument("--samples-per-sequence", type=int, default=None,
+    from refimpl.bounds import bounded_int
+
+    parser.add_argument("--samples-per-sequence", type=bounded_int("samples"), default=None,
                         help="prediction task: override the protocol's samples per sequence")
     parser.add_argument("--horizons", default="default", choices=("default", "table2"),
                         help="prediction task: the dataset's horizons (default) or the dual-quaternion paper's "
@@ -56,6 +69,15 @@ def add_eval_options(parser) -> None:
                              "allow (table2)")
     parser.add_argument("--actions", default=None,
                         help="prediction task: comma-separated test actions to evaluate (default all)")
+
+
+def add_export_options(parser) -> None:
+    """The task's options of ``refimpl export``: none."""
+
+
+def add_generate_options(parser) -> None:
+    """The task's options of ``refimpl generate``: none (``--source``, ``--source-frame``, ``--length`` are
+    common)."""
 
 
 def resolve_data(data: str, *, downsample: int = 2) -> PredictionData:
@@ -89,9 +111,11 @@ def resolve_data(data: str, *, downsample: int = 2) -> PredictionData:
 def train_datasets(args):
     """``(data, data)``: the :class:`PredictionData` of ``refimpl train``'s ``--data`` (its ``train`` sequences
     are the training examples, its ``test`` sequences the held-out ones)."""
+    from refimpl.errors import BadInputError
+
     data = resolve_data(args.data, downsample=getattr(args, "downsample", 2))
     if not data.train:
-        raise ValueError(f"--data {args.data}: no training sequences")
+        raise BadInputError(f"--data {args.data}: no training sequences")
     return data, data
 
 
@@ -149,6 +173,7 @@ def onnx_method(runtime) -> Callable:
         if skeleton is not None:  # QuaterNet with dual quaternions: current DQs in, decoded local rotations out
             from refimpl.dq_prediction import dq_frames_from_rotations, rotations_from_dq_frames
 
+            x = canonical_prefix(x)   # the sign rule first, as the NumPy method (metadata input_transform)
             y = np.asarray(runtime.predict(dq_frames_from_rotations(x, skeleton), int(n_future)), np.float64)
             return rotations_from_dq_frames(y, skeleton.parents)
         return np.asarray(runtime.predict(x, int(n_future)), dtype=np.float64)
@@ -278,14 +303,18 @@ def make_prediction(method: Callable, rotations, frame: int, prefix_length: int,
 
 def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: int = 10) -> list:
     """Draw a :class:`Prediction` (against its ground truth when it has one): the last ``context`` prefix frames
-    and the predicted ones, as a PNG strip and / or a GIF."""
-    from refimpl.render import render_gif, render_strip
+    and the predicted ones, as a PNG strip and / or a GIF, numbered as in the BVH the prediction is written to,
+    with a title (default: the method and the predicted frames)."""
+    from refimpl.render import render_gif
+    from refimpl.render_strip import render_strip
 
     a = max(0, pr.start - context)
     parents = np.asarray(pr.motion.skeleton.parents)
     pred = pr.motion.positions()[a:]
     gt = pr.truth.positions()[a:] if pr.truth is not None else pred
     hl = (pr.start - a, pr.stop - a)
+    numbers = np.arange(a, a + pred.shape[0])  # the panels carry the BVH's frame numbers
+    title = title or f"{pr.method}: frames {pr.start}-{pr.stop - 1} predicted"
     labels = ("ground truth", pr.method) if pr.truth is not None else (pr.method, "")
     written = []
     if png:
@@ -293,15 +322,16 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
         frames = sorted(set([0, hl[0] - 1] + list(range(hl[0], hl[1], max(1, (hl[1] - hl[0]) // 6))) + [n - 1]))
         written.append(render_strip(png, gt, parents, prediction=pred if pr.truth is not None else None,
                                     frames=frames, highlight=hl, labels=labels, title=title,
-                                    frame_time=pr.motion.frame_time))
+                                    frame_time=pr.motion.frame_time, frame_numbers=numbers))
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred if pr.truth is not None else None,
-                                  fps=pr.motion.fps, highlight=hl, labels=labels, title=title))
+                                  fps=pr.motion.fps, highlight=hl, labels=labels, title=title,
+                                  frame_numbers=numbers))
     return written
 
 
-def verify_inputs(model, rng: np.random.Generator, batch: int = 8) -> tuple:
-    """``(prefix (B, P, J, 4),)`` for ``refimpl export``'s check: real CMU test windows of the embedded sample
+def check_prefixes(model, rng: np.random.Generator, batch: int = 8) -> np.ndarray:
+    """``prefix (B, P, J, 4)`` for ``refimpl export``'s check: real CMU test windows of the embedded sample
     (prefix of the model's training length) for a CMU model, small random rotations otherwise."""
     from refimpl.quat import quat_from_axis_angle
 
@@ -310,6 +340,115 @@ def verify_inputs(model, rng: np.random.Generator, batch: int = 8) -> tuple:
         data = load_cmu(SAMPLE_EXPMAP_DIR, stride=stride_of("cmu", model.extra["frame_time"]))
         windows = [s.rotations[i:i + P] for s in data.test
                    for i in rng.integers(0, s.num_frames - P + 1, size=batch)]
-        return (np.stack(windows[:batch]),)
+        return np.stack(windows[:batch])
     J = int(model.config.num_joints)
-    return (quat_from_axis_angle(0.3 * rng.standard_normal((batch, P, J, 3))),)
+    return quat_from_axis_angle(0.3 * rng.standard_normal((batch, P, J, 3)))
+
+
+# ------------------------------------------------------------------------------------------------------------
+# commands (spec/cli.md)
+# ------------------------------------------------------------------------------------------------------------
+
+def _say(*parts) -> None:
+    print(*parts, flush=True)
+
+
+def _progress_line(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def eval_command(args, model) -> int:
+    """``refimpl eval`` on the prediction task: the network(s) and the baselines, the paper's table, JSON, PNG."""
+    _say(f"reading {args.data} ...")
+    stride = stride_of(model.extra["dataset"], model.extra["frame_time"]) if model else 2
+    data = resolve_data(args.data, downsample=stride)
+    if model is not None and model.extra.get("dataset") != data.dataset:
+        raise UsageError(f"--data {args.data} is {data.dataset}, the model was trained on {model.extra.get('dataset')}")
+    actions = eval_actions(args)
+    try:
+        protocol = eval_protocol(data.dataset, args.protocol, args.samples_per_sequence, horizons=args.horizons,
+                                 data=data, actions=actions)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    networks = network_methods(model, onnx_dir=args.onnx) if (model is not None or args.onnx) else {}
+    try:
+        results = evaluate_all(data, methods(networks), protocol, progress=_progress_line, actions=actions)
+    except ValueError as exc:
+        raise BadInputError(f"--data {args.data}: {exc}") from exc
+    if model is not None:
+        _say(f"network {model.spec.name} from {model.path} (step {model.meta.get('step')})")
+    _say("Mean Euler-angle error (radians, zyx, joint 0 excluded) per action and horizon:")
+    _say(format_table(results))
+    if args.json:
+        write_results_json(args.json, results[0] if len(results) == 1 else results)
+        _say(f"results          {args.json}")
+    if args.plot:
+        from refimpl.render import render_error_curves
+
+        render_error_curves(args.plot, average_curves(results), frame_time=protocol.frame_ms / 1000.0)
+        _say(f"plot             {args.plot}")
+    return 0
+
+
+def generate_command(args, model) -> int:
+    """``refimpl generate`` on the prediction task: a prefix of ``--source`` -> ``--length`` frames, BVH out."""
+    from refimpl.bvh import write_bvh
+
+    require_source(args)
+    if args.backend == "numpy":
+        model = checkpoint_for(NAME, model, args.checkpoint)
+        if model is None:
+            raise UsageError("--backend numpy needs --checkpoint")
+    if args.backend == "onnx":
+        if not args.onnx:
+            raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
+        fps, _ = onnx_frame_rate(args.onnx)  # frame rate and model entry checked (exit 3 when wrong)
+        meta = onnx_metadata(args.onnx)
+        P = meta.get("prefix_length", 50)
+        if isinstance(P, bool) or not isinstance(P, int) or not 1 <= P <= 100_000:
+            raise BadInputError(f"{args.onnx}: metadata prefix_length: expected an integer in [1, 100000], "
+                                f"got {P!r}"[:300])
+        model_name = (meta.get("model") or {}).get("name")
+        if not isinstance(model_name, str):
+            raise BadInputError(f"{args.onnx}: the models' metadata names no model (model.name)")
+        dataset, frame_time, name = meta.get("dataset"), 1.0 / fps, f"{model_name}_onnx"
+        if dataset not in ("cmu", "h36m"):
+            raise BadInputError(f"{args.onnx}: the models' metadata names no prediction dataset")
+    else:
+        dataset, frame_time = model.extra["dataset"], float(model.extra["frame_time"])
+        P, name = int(model.config.prefix_length), model.spec.name
+    networks = network_methods(None if args.backend == "onnx" else model,
+                               onnx_dir=args.onnx if args.backend == "onnx" else None, expect=model)
+    rotations = load_clip(args.source, dataset, frame_time)
+    k = args.length or 25
+    out = args.out or "prediction.bvh"
+    pr = make_prediction(next(iter(networks.values())), rotations, args.source_frame, P, k,
+                         skeleton=skeleton_of(dataset), frame_time=frame_time, method_name=name, name=Path(out).stem)
+    write_bvh(out, pr.motion)
+    _say(f"wrote {out}: {pr.motion.num_frames} frames at {1.0 / frame_time:g} fps ({dataset} skeleton, root "
+         f"at the origin): prefix frames 0..{pr.start - 1}, predicted {pr.start}..{pr.stop - 1} ({name}, "
+         f"{args.backend})")
+    err = pr.euler_error()
+    if err is not None:
+        _say("ground truth available: Euler-angle error (rad) at predicted frames 2, 4, 8, 10: "
+             + ", ".join(f"{err[i]:.3f}" for i in (1, 3, 7, 9) if i < len(err)))
+        if args.truth:
+            write_bvh(args.truth, pr.truth)
+            _say(f"wrote {args.truth} (ground truth)")
+    elif args.truth:
+        raise UsageError(f"--truth: {args.source} ends before the {k} predicted frames")
+    if args.png or args.gif:
+        title = f"{name}: frames {pr.start}-{pr.stop - 1} predicted from {Path(args.source).name}"
+        for f in render_prediction(pr, png=args.png, gif=args.gif, title=title):
+            _say(f"wrote {f}")
+    return 0
+
+
+def export_options(args) -> dict:
+    """The exporter's options of ``refimpl export``: none."""
+    return {}
+
+
+def verify_inputs(args, model) -> tuple:
+    """``((prefix,), {})``: 8 check prefixes (:func:`check_prefixes`, ``--seed``) for ``refimpl export``'s check."""
+    return (check_prefixes(model, np.random.default_rng(args.seed), 8),), {}

@@ -8,23 +8,30 @@ Shape legend: T frames, F frame size, B batch, S seed frames, N generated frames
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
+from refimpl.errors import UsageError
 from refimpl.models import acrnn
-from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, FPS, MAX_SEEDS, SALSA_TEST, SALSA_TRAIN, SAMPLE_TEST,
-                                         SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE, SynthesisData, evaluate_generator,
-                                         frames_to_motion, load_salsa_motion, load_synthesis_data, motion_to_frames)
+from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS,
+                                         SALSA_TEST, SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE,
+                                         TABLE1_ROWS, SynthesisData, evaluate_generator, frames_to_motion,
+                                         in_source_units, load_salsa_motion, load_synthesis_data, motion_to_frames,
+                                         skeleton_of)
+from refimpl.registry import require_source
 from refimpl.representations import REPRESENTATIONS
-from refimpl.skeleton import Skeleton
+from refimpl.services import checkpoint_for, evaluate_model, network_methods
+from refimpl.tasks.transition_generate import with_end_sites
 
 __all__ = [
-    "NAME", "TABLE1_ROWS", "DEFAULT_ROW", "NPSS_REPORTED", "TrainingSet", "add_train_options", "resolve_data",
-    "train_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields",
-    "skeleton_of", "onnx_method", "methods", "evaluate", "print_results", "write_results", "random_inputs",
-    "continue_seed",
+    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "NPSS_REPORTED", "SAMPLE_SALSA", "TrainingSet", "add_train_options",
+    "add_eval_options", "add_export_options", "add_generate_options", "resolve_data", "train_datasets",
+    "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
+    "methods", "evaluate", "load_eval_data", "print_results", "write_results", "random_inputs", "continue_seed",
+    "eval_command", "generate_command", "export_options", "verify_inputs",
 ]
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -32,20 +39,10 @@ __all__ = [
 # ----------------------------------------------------------------------------------------------------------------
 
 NAME = "synthesis"
+EVAL_SUMMARY = ("synthesis (acrnn): the dual-quaternion paper's Table 1 on the salsa test takes (Euclidean error, "
+                "NPSS, acceleration), against holding the last seed frame")
+GENERATE_USAGE = "refimpl generate --checkpoint CKPT --source FILE [...]  (synthesis: acrnn continues a seed)"
 
-#: ``--representation`` value -> row of Table 1 (a key of :data:`refimpl.models.acrnn.VARIANTS`).
-TABLE1_ROWS = {
-    "dq-all": "dual_quaternions_all",            # dual quaternions (all losses), the paper's proposal
-    "dq-mse": "dual_quaternions",                # dual quaternions (MSE)
-    "quaternions": "quaternions",                # quaternions (MSE)
-    "quaternions-fk": "quaternions_fk",          # quaternions (MSE + L_quat + FK positions)
-    "quaternions+positions": "quaternions+positions",
-    "ortho6d": "ortho6d",
-    "ortho6d+positions": "ortho6d+positions",
-    "positions": "positions",                    # the original acRNN
-    "euler": "euler",                            # Table 4 only
-}
-DEFAULT_ROW = "dq-all"
 #: The NPSS the table shows first: ``"real"`` (``P = (Re X)²``, LaFAN1's fast_npss, which the dual-quaternion
 #: paper's evaluation code used for its Table 1); ``"power"`` (``|X|²``, Gopalakrishnan et al.'s original) is
 #: printed beside it in brackets (spec/acrnn.md §6).
@@ -72,12 +69,19 @@ class TrainingSet:
         ``--losses`` override of the row's loss weights (the ablation), None = the row's.
     window_length : int
         T, predicted frames per training window (100).
+    motions : tuple of Motion
+        With ``augment``: the training takes at 30 fps (each parity), from which the windows are cut, turned to a
+        random heading (:func:`refimpl.augment.random_heading_windows`) and encoded per batch. Else empty.
+    augment : bool
+        ``--augment-heading``: the published trainer's random heading per window (spec/acrnn.md §1.1).
     """
 
     data: SynthesisData
     row: str
     weights: dict | None = None
     window_length: int = 100
+    motions: tuple = ()
+    augment: bool = False
 
     @property
     def variant(self) -> str:
@@ -101,13 +105,35 @@ def _parse_losses(text: str | None) -> dict | None:
 
 def add_train_options(parser) -> None:
     """The task's options of ``refimpl train``: ``--window-length`` and ``--losses`` (loss-weight override)."""
-    from refimpl.options import positive_int
+    from refimpl.bounds import bounded_int
 
-    parser.add_argument("--window-length", type=positive_int, default=100,
+    parser.add_argument("--window-length", type=bounded_int("window"), default=100,
                         help="synthesis: predicted frames per training window (default 100, acRNN)")
     parser.add_argument("--losses", default=None, metavar="NAME=W,...",
                         help="synthesis: override the row's loss weights, e.g. mse=1,reg=0.01,pos=0.333 "
                              "(dual quaternions: mse reg pos offset quat quat_current; quaternions: mse quat fk reg)")
+    parser.add_argument("--augment-heading", action="store_true",
+                        help="synthesis: turn every training window to a random heading about the vertical (the "
+                             "published acRNN trainer; spec/acrnn.md §1.1)")
+    parser.add_argument("--parities", type=int, default=1, choices=(1, 2),
+                        help="synthesis: 2 = train on both parities of the 60 fps frames (the published trainer); "
+                             "default 1 (frames 0, 2, 4, ...)")
+    parser.add_argument("--raw-frames", action="store_true",
+                        help="synthesis: no per-feature standardisation (mean 0, std 1; the published trainer's raw "
+                             "metres) instead of the dual-quaternion paper's training mean/std")
+
+
+def add_eval_options(parser) -> None:
+    """The task's options of ``refimpl eval``: none."""
+
+
+def add_export_options(parser) -> None:
+    """The task's options of ``refimpl export``: none."""
+
+
+def add_generate_options(parser) -> None:
+    """The task's options of ``refimpl generate``: none (``--source``, ``--source-frame`` (first seed frame,
+    default 1: frame 0 is the reference T-pose), ``--length`` (default 300) are common)."""
 
 
 def resolve_data(data: str) -> tuple[Path, tuple, tuple]:
@@ -135,15 +161,21 @@ def train_datasets(args):
     if row not in TABLE1_ROWS:
         raise UsageError(f"--representation {row!r}: expected one of {list(TABLE1_ROWS)}")
     folder, train, test = resolve_data(args.data)
+    parities, augment = int(getattr(args, "parities", 1)), bool(getattr(args, "augment_heading", False))
+    representation = acrnn.VARIANTS[TABLE1_ROWS[row]].representation
     try:
-        data = load_synthesis_data(acrnn.VARIANTS[TABLE1_ROWS[row]].representation, folder, train, test)
+        data = load_synthesis_data(representation, folder, train, test, parities=parities,
+                                   standardise=not getattr(args, "raw_frames", False))
+        keep = representation in END_SITE_REPRESENTATIONS
+        motions = tuple(load_salsa_motion(folder / f"{n}.bvh", phase=p, end_sites=keep) for p in range(parities)
+                        for n in train) if augment else ()
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
     length = int(getattr(args, "window_length", 100))
     if min(len(s) for s in data.train) < length + 1:
         raise UsageError(f"--window-length {length}: the shortest training take has "
                          f"{min(len(s) for s in data.train)} frames")
-    return TrainingSet(data, row, _parse_losses(getattr(args, "losses", None)), length), data
+    return TrainingSet(data, row, _parse_losses(getattr(args, "losses", None)), length, motions, augment), data
 
 
 def num_examples(dataset) -> int:
@@ -169,6 +201,7 @@ def checkpoint_extra(train_ds) -> dict:
     return {"mean": [float(v) for v in d.mean], "std": [float(v) for v in d.std], "fps": float(FPS),
             "data_representation": d.representation, "variant": train_ds.variant, "row": train_ds.row,
             "loss_weights": weights, "window_length": int(train_ds.window_length),
+            "augment_heading": bool(train_ds.augment), "standardised": bool(d.standardised), "parities": d.parities,
             "train_takes": list(d.train_names), "test_takes": list(d.test_names),
             "skeleton": {"parents": [int(p) for p in sk.parents], "names": list(sk.names),
                          "offsets": [[float(v) for v in o] for o in sk.offsets]}}
@@ -186,12 +219,6 @@ def check_checkpoint(model_config: Mapping, path) -> None:
 def trained_fields(model_config: Mapping, config) -> dict:
     """The :class:`~refimpl.registry.TrainedModel` fields of this task: the frame rate (the rest is in ``extra``)."""
     return {"fps": float(model_config.get("fps", FPS))}
-
-
-def skeleton_of(model_config: Mapping) -> Skeleton:
-    """The skeleton stored in a checkpoint's model config."""
-    s = model_config["skeleton"]
-    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), s["names"])
 
 
 def onnx_method(runtime):
@@ -315,3 +342,76 @@ def continue_seed(method, model_config: Mapping, path, start: int, num_frames: i
     m = frames_to_motion(rep, skeleton_of(model_config), allf, start=(root0[0], root0[2]),
                          name=Path(path).stem)
     return m, SEED_LENGTH
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# commands (spec/cli.md, spec/acrnn.md §8)
+# ----------------------------------------------------------------------------------------------------------------
+
+def eval_command(args, model) -> int:
+    """``refimpl eval`` for a synthesis model (acRNN): Table 1's metrics on the test takes (spec/acrnn.md §8)."""
+    if model is None:
+        raise UsageError("--model acrnn: evaluation needs --checkpoint (the statistics and the representation)")
+    _say(f"reading {args.data} ...")
+    data = load_eval_data(args.data, model.extra)
+    seen = sorted(set(data.test_names) & set(model.extra.get("train_takes") or ()))
+    if seen:
+        print(f"refimpl eval: warning: take(s) {', '.join(seen)} of --data {args.data} were training takes of "
+              f"{args.checkpoint} (trained on {', '.join(model.extra.get('train_takes'))}): these scores are not "
+              "held-out (pass --data with the model's own test takes)", file=sys.stderr, flush=True)
+    results = evaluate_model(model, data, onnx_dir=args.onnx)
+    print_results(results, data, model)
+    if args.json:
+        write_results(results, args.json)
+        _say(f"results          {args.json}")
+    return 0
+
+
+def generate_command(args, model) -> int:
+    """``refimpl generate --model acrnn``: seed frames of ``--source`` continued for ``--length`` frames, BVH out."""
+    from refimpl.bvh import write_bvh
+
+    require_source(args)
+    if model is None and not args.checkpoint:
+        raise UsageError("--model acrnn needs --checkpoint (with --backend onnx too: skeleton and statistics)")
+    model = checkpoint_for(NAME, model, args.checkpoint)
+    if args.backend == "onnx" and not args.onnx:
+        raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
+    networks = network_methods(None if args.backend == "onnx" else model,
+                               onnx_dir=args.onnx if args.backend == "onnx" else None, expect=model)
+    method = next(iter(networks.values()))
+    n = args.length or 300
+    out = args.out or "synthesis.bvh"
+    start = 1 if args.source_frame is None else args.source_frame  # frame 0 of a CMU file: its reference T-pose
+    motion, seed_frames = continue_seed(method, model.extra, args.source, start, n)
+    write_bvh(out, with_end_sites(in_source_units(motion)))   # the take's centimetres
+    _say(f"wrote {out}: {seed_frames} seed frames of {args.source} (from frame {start} at "
+         f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
+         "centimetres (the take's units)")
+    if args.png or args.gif:
+        from refimpl.render import render_gif
+        from refimpl.render_strip import render_strip
+
+        pos = motion.positions()
+        parents = np.asarray(motion.skeleton.parents)
+        labels = (f"acrnn {model.extra.get('row')}", "")
+        if args.png:
+            render_strip(args.png, pos, parents, highlight=(seed_frames, motion.num_frames), labels=labels,
+                         frame_time=motion.frame_time)
+            _say(f"wrote {args.png}")
+        if args.gif:
+            render_gif(args.gif, pos, parents, fps=motion.fps, highlight=(seed_frames, motion.num_frames),
+                       labels=labels)
+            _say(f"wrote {args.gif}")
+    return 0
+
+
+def export_options(args) -> dict:
+    """The exporter's options of ``refimpl export``: none."""
+    return {}
+
+
+def verify_inputs(args, model) -> tuple:
+    """``(random_inputs(...), {})``: random seeds in the data's range (:func:`random_inputs`, ``--seed``) for
+    ``refimpl export``'s check."""
+    return random_inputs(model, np.random.default_rng(args.seed)), {}

@@ -1,54 +1,65 @@
 """The transition task (QTG's; spec/qtg.md §7-§9, spec/cli.md): 2 past + 2 target poses -> the T frames between.
 
-Everything the application layer needs about this task, and nothing about a particular network:
+The task interface (:class:`refimpl.task_api.Task`) for this task, and nothing about a particular network:
 
-* data options: :func:`add_train_options` (``--transition-length``), :func:`resolve_data` (``--data``: the
-  embedded sample, ``../shared/data``, a folder, a file), :func:`source_for_file`, :func:`build_datasets`,
-  :func:`train_datasets`; the checkpoint facts the task needs (:func:`checkpoint_extra`, :func:`check_checkpoint`);
+* options: :func:`add_train_options` (``--transition-length``), :func:`add_eval_options`,
+  :func:`add_export_options`, :func:`add_generate_options`; ``--data``: :func:`resolve_data` (the embedded
+  sample, ``../shared/data``, a folder, a file), :func:`source_for_file`, :func:`build_datasets`,
+  :func:`train_datasets`; the checkpoint facts (:func:`checkpoint_extra`, :func:`check_checkpoint`,
+  :func:`trained_fields`: ``root_mean``, ``root_std``, ``transition_length``);
 * baselines and protocol: :func:`methods` (the networks' methods, then inertialisation and interpolation from
-  :mod:`refimpl.protocols.transition_baselines`), :func:`evaluate` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`, the paper's metric),
-  :func:`print_results` / :func:`write_results` (table, per-frame curve, CSV, JSON);
-* generation: :func:`make_transition` between two clips in world coordinates, :func:`with_end_sites` for BVH
-  readers, :func:`render_transition`, :func:`clip_for`, :func:`random_context` (context poses for numerical checks).
+  :mod:`refimpl.protocols.transition_baselines`), :func:`evaluate`
+  (:func:`refimpl.protocols.transition_metrics.evaluate_methods`, the paper's metric), :func:`print_results` /
+  :func:`write_results` (table, per-frame curve, CSV, JSON);
+* commands: :func:`eval_command`, :func:`generate_command` (a transition between two clips,
+  :mod:`refimpl.tasks.transition_generate`), :func:`export_options`, :func:`verify_inputs`
+  (:func:`random_context`: context poses for numerical checks), :func:`clip_for`.
 
-The building blocks live below: windows, sources and datasets in :mod:`refimpl.protocols.transition`, the baselines in
-:mod:`refimpl.protocols.transition_baselines`, the metric in :mod:`refimpl.protocols.transition_metrics`.
+The building blocks live below: windows, sources and datasets in :mod:`refimpl.protocols.transition`, the
+baselines in :mod:`refimpl.protocols.transition_baselines`, the metric in
+:mod:`refimpl.protocols.transition_metrics`.
 
 Shape legend: N windows, T transition frames, F frames of a clip, J joints, P pose size (3 + 4 J), B batch.
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
-from refimpl.protocols.transition_baselines import method_registry
 from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
+from refimpl.bounds import bounded_int
+from refimpl.options import nonneg_int, positive_float
+from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
+                                          build_transition_datasets, declared_rate, join_pose, load_source,
+                                          sample_sources, shared_sources, split_pose)
+from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
+from refimpl.protocols.transition_join import JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_locomotion import build_datasets as build_bandai_namco, is_bandai_namco_folder
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table
-from refimpl.motion import Motion
-from refimpl.options import positive_int
-from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_rotate
-from refimpl.skeleton import Skeleton
-from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
-                                 build_transition_datasets, declared_rate, heading_from_root, join_pose, load_source,
-                                 make_windows, sample_sources, shared_sources, split_pose, window_to_world)
+from refimpl.protocols.transition_quality import evaluate_quality, format_quality
+from refimpl.quat import quat_from_axis_angle
+from refimpl.registry import generate_usage, require_source
+from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
+from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
 
 __all__ = [
-    "NAME", "add_train_options", "resolve_data", "source_for_file", "build_datasets", "train_datasets",
-    "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
-    "methods", "evaluate",
-    "print_results", "write_results", "Transition", "make_transition", "with_end_sites", "render_transition",
-    "clip_for", "random_context",
+    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "add_train_options", "add_eval_options", "add_export_options",
+    "add_generate_options", "source_for_file", "resolve_data", "build_datasets", "train_datasets", "num_examples",
+    "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "JoinedOnnxMethod", "onnx_method",
+    "methods", "evaluate", "print_results", "write_results", "clip_for", "random_context", "eval_command",
+    "generate_command", "export_options", "verify_inputs",
 ]
 
 NAME = "transition"
+EVAL_SUMMARY = ("transition (qtg): the QTG paper's protocol, mean joint-position error per joint per frame (cm) on "
+                "held-out transition windows with the per-frame curve, against inertialisation and interpolation")
+GENERATE_USAGE = "refimpl generate --source FILE --source-frame S [...]  (a transition)"
 
 
 def _say(*parts) -> None:
@@ -61,7 +72,41 @@ def _say(*parts) -> None:
 
 def add_train_options(parser) -> None:
     """The task's options of ``refimpl train`` (its data options are the command line's common ones)."""
-    parser.add_argument("--transition-length", type=positive_int, default=30, help="T (default 30 = 1 s)")
+    parser.add_argument("--transition-length", type=bounded_int("transition_length"), default=30,
+                        help="T (default 30 = 1 s)")
+
+
+def add_eval_options(parser) -> None:
+    """The task's options of ``refimpl eval``: ``--transition-length``, ``--csv``, ``--join``."""
+    parser.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
+                        help="T (default: the model's)")
+    parser.add_argument("--csv", default=None, help="write the per-frame curve as CSV")
+    parser.add_argument("--join", default="none", choices=JOIN_MODES,
+                        help="inertialize: also evaluate each network with its joins inertialised (spec/qtg.md "
+                             "7.4), as <name>+join beside the paper-faithful row (default none)")
+
+
+def add_export_options(parser) -> None:
+    """The task's options of ``refimpl export``: ``--join``."""
+    parser.add_argument("--join", default="none", choices=JOIN_MODES,
+                        help="transition models: inertialize = bake the join option into the rollout graph "
+                             "(spec/qtg.md 7.4; the C example gets it too); default none")
+
+
+def add_generate_options(parser) -> None:
+    """The task's options of ``refimpl generate``: the target clip, the method, the context and the alignment."""
+    parser.add_argument("--target", default=None, help=".bvh or exp-map .txt (default: --source)")
+    parser.add_argument("--target-frame", type=nonneg_int, default=None,
+                        help="g, first target frame (default: s + T + 1 in the same file, else 1)")
+    parser.add_argument("--method", default=METHOD_NAMES[0], choices=METHOD_NAMES)
+    parser.add_argument("--context", type=bounded_int("context"), default=10,
+                        help="frames kept on each side (default 10)")
+    parser.add_argument("--join", default="none", choices=JOIN_MODES,
+                        help="inertialize: carry the jump at each end of the transition away (spec/qtg.md 7.4)")
+    parser.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
+                        help="place the target clip: none = as in its file, continue = after the source (default: "
+                             "none for one file, continue for two)")
+    parser.add_argument("--fps", type=positive_float, default=None, help="true frame rate of the input files")
 
 
 def source_for_file(path, *, fps: float | None = None, label: str | None = None, frames=(0.0, 1.0)):
@@ -185,16 +230,28 @@ def check_checkpoint(model_config: Mapping, path) -> None:
 
 
 def trained_fields(model_config: Mapping, config) -> dict:
-    """The :class:`~refimpl.registry.TrainedModel` fields of this task from a checkpoint's model config: root
-    statistics, frame rate and T."""
-    return {"root_mean": np.asarray(model_config["root_mean"], dtype=np.float64),
-            "root_std": np.asarray(model_config["root_std"], dtype=np.float64),
-            "fps": float(model_config.get("fps", 30.0)),
-            "transition_length": int(model_config.get("transition_length", config.transition_length))}
+    """The :class:`~refimpl.registry.TrainedModel` fields of this task from a checkpoint's model config: the
+    frame rate, and the task's ``fields`` ``root_mean``, ``root_std`` (3,) and T (``transition_length``)."""
+    return {"fps": float(model_config.get("fps", 30.0)),
+            "fields": {"root_mean": np.asarray(model_config["root_mean"], dtype=np.float64),
+                       "root_std": np.asarray(model_config["root_std"], dtype=np.float64),
+                       "transition_length": int(model_config.get("transition_length", config.transition_length))}}
+
+
+class JoinedOnnxMethod:
+    """An exported transition model's method whose graphs carry the join option (metadata ``join``, spec/qtg.md
+    §7.4): :func:`methods` lists it as ``<name>+join`` (e.g. ``qtg_onnx+join``)."""
+
+    def __init__(self, method: Callable):
+        self.method = method
+
+    def __call__(self, past, target, T):
+        return self.method(past, target, T)
 
 
 def onnx_method(runtime) -> Callable:
-    """``f(past, target, T) -> poses`` running an exported transition model's runtime (``runtime.transition``).
+    """``f(past, target, T) -> poses`` running an exported transition model's runtime (``runtime.transition``);
+    a :class:`JoinedOnnxMethod` when the files were exported with the join option.
 
     The models standardise inside the graph, so ``f`` takes and returns raw poses like the NumPy methods; output
     quaternions are normalised to unit length.
@@ -206,22 +263,37 @@ def onnx_method(runtime) -> Callable:
         quats = quats / np.maximum(np.linalg.norm(quats, axis=-1, keepdims=True), 1e-12)
         return join_pose(root, quats)
 
-    return network_onnx
+    join = (runtime.rollout_model or runtime.step_model).metadata.get("join") or {}
+    return JoinedOnnxMethod(network_onnx) if join.get("mode", "none") != "none" else network_onnx
 
 
 # ----------------------------------------------------------------------------------------------------------------
 # baselines and protocol
 # ----------------------------------------------------------------------------------------------------------------
 
-def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0) -> dict:
-    """``name -> f(past, target, T)``: the given networks' methods (in order), then both baselines
+def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0, join: str = "none") -> dict:
+    """``name -> f(past, target, T)``: the given networks' methods (in order; an exported model with the join option
+    as ``<name>+join``; with ``join="inertialize"`` each followed by ``<name>+join``,
+    :func:`refimpl.protocols.transition_join.with_join`), then both baselines
     (:func:`refimpl.protocols.transition_baselines.method_registry` with ``dt = 1 / fps``)."""
-    return {**dict(networks or {}), **method_registry(dt=1.0 / fps)}
+    out = {}
+    for name, f in dict(networks or {}).items():
+        key = f"{name}+join" if isinstance(f, JoinedOnnxMethod) else name
+        out[key] = f
+        if check_join(join) != "none":
+            out[f"{key}+join"] = with_join(f, join, dt=1.0 / fps)
+    return {**out, **method_registry(dt=1.0 / fps)}
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds``: :func:`refimpl.protocols.transition_metrics.evaluate_methods`."""
-    return evaluate_methods(test_ds, methods_by_name)
+    """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`) and,
+    under each method's ``"quality"``, the animator's measures
+    (:func:`refimpl.protocols.transition_quality.evaluate_quality`: joins, foot skating, first and last frame, with
+    the ground truth's numbers)."""
+    results = evaluate_methods(test_ds, methods_by_name)
+    for name, q in evaluate_quality(test_ds, methods_by_name).items():
+        results[name]["quality"] = q
+    return results
 
 
 def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
@@ -237,14 +309,16 @@ def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
 def _results_json(results: Mapping[str, dict]) -> str:
     def conv(v):
         if isinstance(v, np.ndarray):
-            return [float(x) for x in v]
+            return [conv(float(x)) for x in v]
         if isinstance(v, dict):
             return {k: conv(x) for k, x in v.items()}
         if isinstance(v, (np.floating, np.integer)):
-            return v.item()
+            v = v.item()
+        if isinstance(v, float) and not np.isfinite(v):
+            return None  # e.g. skating without a contact: null, so that the file is strict JSON
         return v
 
-    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True) + "\n"
+    return json.dumps({k: conv(v) for k, v in results.items()}, indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def _curve_table(results: Mapping[str, dict], frame_time: float) -> str:
@@ -273,6 +347,11 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
     _say("")
     _say("Mean joint-position error per joint per frame (cm), by motion category and at transition frames fK:")
     _say(format_table(results))
+    if all("quality" in r for r in results.values()):
+        _say("")
+        _say("Joins (mean joint displacement into frame 1 and out of frame T), foot skating (horizontal speed of "
+             "the foot joints in contact) and the error at the first and last frames:")
+        _say(format_quality({k: r["quality"] for k, r in results.items()}))
     if curve:
         _say("")
         _say("Per-frame curve (cm):")
@@ -288,171 +367,6 @@ def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=N
         atomic_write_text(Path(csv_path), _curve_csv(results, frame_time), make_parents=True)
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# generation
-# ----------------------------------------------------------------------------------------------------------------
-
-@dataclasses.dataclass(frozen=True)
-class Transition:
-    """A generated transition in world coordinates with its context frames.
-
-    Attributes
-    ----------
-    motion : Motion
-        ``context`` source frames ending at the source frame, the ``T`` generated frames, then ``context``
-        target frames starting at the target frame (placed by the alignment), 22 joints, centimetres.
-    truth : Motion or None
-        The same frames from the data, when source and target come from one clip and
-        ``target_frame = source_frame + T + 1`` (a held-out window): the ground truth to compare with.
-    start, stop : int
-        The generated frames are ``motion`` frames ``[start, stop)``.
-    method : str
-    """
-
-    motion: Any
-    truth: Any
-    start: int
-    stop: int
-    method: str
-
-    def error_cm(self) -> float | None:
-        """Mean joint-position error (cm) of the generated frames against ``truth`` (None without truth)."""
-        if self.truth is None:
-            return None
-        a = self.motion.positions()[self.start:self.stop]
-        b = self.truth.positions()[self.start:self.stop]
-        return float(np.mean(np.linalg.norm(a - b, axis=-1)))
-
-
-def with_end_sites(motion, fraction: float = 0.4):
-    """The motion with an End Site below every leaf joint, for BVH files that other tools read.
-
-    The 22-joint transition skeleton has no End Sites (toes, head and hands are leaves). Each leaf ``j`` gets a
-    child ``<name>_end`` with offset ``fraction · offsets[j]`` (the bone continued; straight up for a leaf with a
-    zero offset) and identity rotation. Joint positions of the original joints are unchanged.
-    """
-    skel = motion.skeleton
-    leaves = [j for j in range(skel.num_joints) if not skel.children[j] and j not in set(skel.end_sites)]
-    if not leaves:
-        return motion
-    offsets = np.asarray(skel.offsets, dtype=np.float64)
-    scale = float(np.median(np.linalg.norm(offsets[1:], axis=-1))) if skel.num_joints > 1 else 1.0
-    extra = [fraction * offsets[j] if np.linalg.norm(offsets[j]) > 0 else np.array([0.0, fraction * scale, 0.0])
-             for j in leaves]
-    J = skel.num_joints
-    new = Skeleton(list(skel.parents) + leaves, np.concatenate([offsets, np.asarray(extra)]),
-                   names=list(skel.names) + [f"{skel.names[j]}_end" for j in leaves],
-                   end_sites=tuple(skel.end_sites) + tuple(range(J, J + len(leaves))))
-    rot = np.asarray(motion.rotations)
-    ident = np.zeros(rot.shape[:1] + (len(leaves), 4), dtype=rot.dtype)
-    ident[..., 0] = 1.0
-    return Motion(new, np.concatenate([rot, ident], axis=1), motion.root_positions, motion.frame_time, motion.name)
-
-
-def _heading(q_root) -> np.ndarray:
-    return heading_from_root(np.asarray(q_root, dtype=np.float64))
-
-
-def _align_target(src_rot, src_pos, s, tgt_rot, tgt_pos, g, T):
-    """Move and turn the target clip about the vertical so that it continues the source clip.
-
-    The target's heading at frame ``g`` is made equal to the source's at ``s``, and its root is placed (in the
-    horizontal plane) where the source root would be after ``T + 1`` frames at the mean of the source's
-    velocity at ``s`` and the (turned) target's velocity at ``g``. Heights are kept.
-    """
-    turn = quat_mul(_heading(src_rot[s, 0]), quat_conj(_heading(tgt_rot[g, 0])))  # (4,)
-    rot = np.array(tgt_rot, dtype=np.float64, copy=True)
-    rot[:, 0] = quat_mul(turn[None], rot[:, 0])
-    rel = quat_rotate(turn[None], np.asarray(tgt_pos, np.float64) - tgt_pos[g])  # (F, 3)
-    v_src = src_pos[s] - src_pos[s - 1]
-    v_tgt = rel[g + 1] - rel[g]
-    anchor = src_pos[s] + (T + 1) * 0.5 * (v_src + v_tgt)
-    anchor[1] = tgt_pos[g][1]  # keep the target's own root height (Y up)
-    return rot, rel + anchor
-
-
-def make_transition(method: Callable, skeleton, source_clip, source_frame: int, target_clip, target_frame: int,
-                    T: int, *, frame_time: float, context: int = 10, align: str = "auto", same_clip: bool = False,
-                    method_name: str = "qtg", name: str = "transition") -> Transition:
-    """Generate the ``T`` frames between two clips and return them in world coordinates.
-
-    The four context poses (source frames ``s − 1, s``, target frames ``g, g + 1``) are expressed relative to
-    the first one (:func:`refimpl.protocols.transition.make_windows` on the 4 frames), ``method`` generates the
-    transition in that frame, and the result is moved back to the world (:func:`refimpl.protocols.transition.window_to_world`).
-
-    Parameters
-    ----------
-    method : callable ``f(past (1, 2, P), target (1, 2, P), T) -> (1, T, P)`` (un-normalised poses)
-    skeleton : Skeleton
-        The 22-joint skeleton of both clips (centimetres).
-    source_clip, target_clip : (rotations (F, J, 4), root_positions (F, 3))
-    source_frame, target_frame : int
-        ``s`` (the last source frame kept, ``>= 1``) and ``g`` (the first target frame, ``<= F − 2``).
-    T : int
-    frame_time : float
-    context : int
-        Source frames before and target frames after the transition included in the output (>= 1).
-    align : {"auto", "none", "continue"}
-        ``none`` keeps the target clip where it is; ``continue`` places it after the source
-        (:func:`_align_target`); ``auto`` = ``none`` for one clip, ``continue`` for two.
-    same_clip : bool
-        Both clips are the same one (enables the ground truth).
-    """
-    src_rot, src_pos = (np.asarray(a, np.float64) for a in source_clip)
-    tgt_rot, tgt_pos = (np.asarray(a, np.float64) for a in target_clip)
-    s, g = int(source_frame), int(target_frame)
-    if not 1 <= s < len(src_rot):
-        raise UsageError(f"--source-frame must lie in [1, {len(src_rot) - 1}] (frames at the model's rate), got {s}")
-    if not 0 <= g < len(tgt_rot) - 1:
-        raise UsageError(f"--target-frame must lie in [0, {len(tgt_rot) - 2}] (frames at the model's rate), got {g}")
-    if context < 1:
-        raise UsageError(f"--context must be >= 1, got {context}")
-    if align not in ("auto", "none", "continue"):
-        raise UsageError(f"--align must be auto, none or continue, got {align!r}")
-    if align == "continue" or (align == "auto" and not same_clip):
-        tgt_rot, tgt_pos = _align_target(src_rot, src_pos, s, tgt_rot, tgt_pos, g, T)
-
-    rot4 = np.stack([src_rot[s - 1], src_rot[s], tgt_rot[g], tgt_rot[g + 1]])  # (4, J, 4)
-    pos4 = np.stack([src_pos[s - 1], src_pos[s], tgt_pos[g], tgt_pos[g + 1]])  # (4, 3)
-    window = make_windows(rot4, pos4, length=4)  # (1, 4, P) relative to source frame s - 1
-    pred = np.asarray(method(window[:, :2], window[:, 2:], T), dtype=np.float64)[0]  # (T, P)
-    gen_pos, gen_rot = window_to_world(pred, _heading(src_rot[s - 1, 0]), src_pos[s - 1])  # (T, 3), (T, J, 4)
-
-    a = max(0, s - context + 1)
-    b = min(len(tgt_rot), g + context)
-    rot = np.concatenate([src_rot[a:s + 1], gen_rot, tgt_rot[g:b]])  # (F, J, 4)
-    pos = np.concatenate([src_pos[a:s + 1], gen_pos, tgt_pos[g:b]])  # (F, 3)
-    start = s + 1 - a
-    motion = Motion(skeleton, rot, pos, frame_time, name)
-    truth = None
-    if same_clip and g == s + T + 1 and align in ("auto", "none"):
-        truth = Motion(skeleton, src_rot[a:b], src_pos[a:b], frame_time, f"{name}_truth")
-    return Transition(motion=motion, truth=truth, start=start, stop=start + T, method=method_name)
-
-
-def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
-    """Draw a :class:`Transition` (against its ground truth when it has one) as a PNG strip and / or a GIF."""
-    from refimpl.render import render_gif, render_strip
-
-    parents = np.asarray(tr.motion.skeleton.parents)
-    gt = (tr.truth if tr.truth is not None else tr.motion).positions()
-    pred = tr.motion.positions() if tr.truth is not None else None
-    labels = ("ground truth", tr.method) if pred is not None else (tr.method, "")
-    written = []
-    if png:
-        n = tr.motion.num_frames
-        frames = sorted(set([0, tr.start - 1] + list(range(tr.start, tr.stop, max(1, (tr.stop - tr.start) // 6)))
-                            + [tr.stop - 1, n - 1]))
-        written.append(render_strip(png, gt, parents, prediction=pred, frames=frames, highlight=(tr.start, tr.stop),
-                                    labels=labels, title=title, frame_time=tr.motion.frame_time))
-        _say(f"wrote {png}")
-    if gif:
-        written.append(render_gif(gif, gt, parents, prediction=pred, fps=tr.motion.fps,
-                                  highlight=(tr.start, tr.stop), labels=labels, title=title))
-        _say(f"wrote {gif}")
-    return written
-
-
 def clip_for(path, model_fps: float, fps_override):
     """(skeleton, (rotations, root_positions)) of a file at the model's rate (phase 0 of the resampling)."""
     src = source_for_file(path, fps=fps_override)
@@ -466,7 +380,117 @@ def clip_for(path, model_fps: float, fps_override):
 def random_context(model, rng, B: int):
     """Plausible raw context poses for a numerical check: root ~ N(mean, std), small random joint rotations."""
     J = (model.config.pose_size - 3) // 4
-    root = model.root_mean + model.root_std * rng.standard_normal((B, 4, 3))  # (B, 4, 3)
+    root = model.fields["root_mean"] + model.fields["root_std"] * rng.standard_normal((B, 4, 3))  # (B, 4, 3)
     quats = quat_from_axis_angle(0.3 * rng.standard_normal((B, 4, J, 3)))  # (B, 4, J, 4)
     poses = join_pose(root, quats)
     return poses[:, :2], poses[:, 2:]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# commands (spec/cli.md)
+# ----------------------------------------------------------------------------------------------------------------
+
+def eval_command(args, model) -> int:
+    """``refimpl eval`` on the transition task: the network(s) (``model``, ``--onnx``) and the baselines on the
+    held-out windows of ``--data``; table, per-frame curve, JSON / CSV / PNG."""
+    T = args.transition_length or (model.fields["transition_length"] if model else 30)
+    _say(f"reading {args.data} ...")
+    _, test_ds = build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
+    if test_ds.num_windows == 0:
+        raise BadInputError(f"--data {args.data}: no held-out window of {T + 4} frames")
+    results = evaluate_model(model, test_ds, onnx_dir=args.onnx, task=NAME, join=args.join)
+    print_results(results, test_ds, model)
+    frame_time = 1.0 / test_ds.fps
+    write_results(results, frame_time, json_path=args.json, csv_path=args.csv)
+    if args.csv:
+        _say(f"per-frame curve  {args.csv}")
+    if args.json:
+        _say(f"results          {args.json}")
+    if args.plot:
+        from refimpl.render import render_error_curves
+
+        render_error_curves(args.plot, {k: v["per_frame_cm"] for k, v in results.items()}, frame_time=frame_time)
+        _say(f"plot             {args.plot}")
+    return 0
+
+
+def _onnx_rate_and_length(onnx_dir, default_T: int) -> tuple[float, int]:
+    """Frame rate and T from the exported models' metadata, checked (a T of the wrong type is exit 3)."""
+    fps, model_meta = onnx_frame_rate(onnx_dir)
+    T = model_meta.get("transition_length")
+    if T is None:
+        T = default_T
+    elif isinstance(T, bool) or not isinstance(T, int) or not 1 <= T <= 100_000:
+        raise BadInputError(f"{onnx_dir}: metadata model.transition_length: expected an integer in [1, 100000], "
+                            f"got {T!r}"[:300])
+    return fps, int(T)
+
+
+def generate_command(args, model) -> int:
+    """``refimpl generate`` on the transition task: frames s-1, s of ``--source`` and g, g+1 of ``--target``, the
+    T frames between them from the network (``--method qtg``, NumPy or onnxruntime) or a baseline, BVH out."""
+    from refimpl.bvh import write_bvh
+
+    require_source(args)
+    if args.source_frame is None:
+        raise UsageError("the following arguments are required for a transition: --source, --source-frame\n"
+                         + generate_usage())
+    network = None
+    if args.method == METHOD_NAMES[0]:
+        if args.backend == "numpy" and not args.checkpoint:
+            raise UsageError(f"--method {args.method} with --backend numpy needs --checkpoint")
+        if args.backend == "onnx" and not args.onnx:
+            raise UsageError("--backend onnx needs --onnx DIR (the folder written by `refimpl export`)")
+        network = checkpoint_for(NAME, model, args.checkpoint)
+    elif args.backend == "onnx":
+        raise UsageError(f"--backend onnx runs the network; --method {args.method} is a NumPy baseline")
+    fps, T_model = (network.fps, network.fields["transition_length"]) if network else (30.0, 30)
+    if args.backend == "onnx" and network is None:
+        fps, T_model = _onnx_rate_and_length(args.onnx, T_model)
+    T = args.length or T_model
+    target_path = args.target or args.source
+    skel, src_clip, src = clip_for(args.source, fps, args.fps)
+    skel2, tgt_clip, tgt = clip_for(target_path, fps, args.fps)
+    if skel != skel2:
+        raise BadInputError(f"{target_path}: its 22-joint skeleton differs from {args.source}'s "
+                            "(both clips must come from the same skeleton)")
+    if args.method == METHOD_NAMES[0]:
+        networks = network_methods(None if args.backend == "onnx" else network,
+                                   onnx_dir=args.onnx if args.backend == "onnx" else None, expect=network)
+        method = next(iter(networks.values()))
+    else:
+        method = methods(fps=fps)[args.method]
+    method = with_join(method, args.join, dt=1.0 / fps)
+    same = Path(args.source).resolve() == Path(target_path).resolve()
+    target_frame = args.target_frame if args.target_frame is not None else (
+        args.source_frame + T + 1 if same else 1)
+    out = args.out or "transition.bvh"
+    tr = make_transition(method, skel, src_clip, args.source_frame, tgt_clip, target_frame, T,
+                         frame_time=1.0 / fps, context=args.context, align=args.align, same_clip=same,
+                         method_name=args.method + ("" if args.join == "none" else "+join"), name=Path(out).stem)
+    write_bvh(out, with_end_sites(tr.motion))
+    _say(f"wrote {out}: {tr.motion.num_frames} frames at {fps:g} fps, {tr.motion.num_joints} joints (centimetres); "
+         f"generated frames {tr.start}..{tr.stop - 1} ({tr.method}, {args.backend})")
+    err = tr.error_cm()
+    if err is not None:
+        _say(f"ground truth available (same clip, target = source + T + 1): mean joint error {err:.2f} cm")
+        if args.truth:
+            write_bvh(args.truth, with_end_sites(tr.truth))
+            _say(f"wrote {args.truth} (ground truth)")
+    elif args.truth:
+        raise UsageError("--truth needs --target-frame = --source-frame + T + 1 in the same file (and --align none)")
+    if args.png or args.gif:
+        render_transition(tr, png=args.png, gif=args.gif)
+    return 0
+
+
+def export_options(args) -> dict:
+    """The exporter's options of ``refimpl export``: ``join`` (``--join``, when not ``none``)."""
+    return {} if args.join == "none" else {"join": args.join}
+
+
+def verify_inputs(args, model) -> tuple:
+    """``((past, target), {"T": ...})``: 8 random context poses (:func:`random_context`, ``--seed``) for
+    ``refimpl export``'s check."""
+    past, target = random_context(model, np.random.default_rng(args.seed), 8)
+    return (past, target), {"T": args.transition_length}

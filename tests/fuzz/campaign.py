@@ -244,8 +244,9 @@ def _sane_trained(model) -> str | None:
             return f"param {k} {a.dtype} {a.shape}"
     if model.fps is not None and not (np.isfinite(model.fps) and model.fps > 0):
         return f"fps {model.fps}"
-    if model.root_std is not None and not (np.isfinite(model.root_std).all() and (model.root_std > 0).all()):
-        return f"root_std {model.root_std}"
+    root_std = model.fields.get("root_std")
+    if root_std is not None and not (np.isfinite(root_std).all() and (root_std > 0).all()):
+        return f"root_std {root_std}"
     return None
 
 
@@ -723,6 +724,11 @@ def campaign(scale: float = 1.0, seed: int = 0, only: set | None = None, log=pri
             seconds[fam] = round(time.perf_counter() - t0, 1)
             if fam in stats.families:
                 stats.families[fam]["seconds"] = seconds[fam]
+    return summary(stats, seed, scale, counts, t_all)
+
+
+def summary(stats: Stats, seed: int, scale: float, counts: dict, t_all: float) -> dict:
+    """The result object of a campaign (totals, per family, examples) from its :class:`Stats`."""
     total = sum(s["cases"] for s in stats.families.values())
     failures = sum(sum(s["failures"].values()) for s in stats.families.values())
     return {"seed": seed, "scale": scale, "cases": total, "failures": failures,
@@ -752,19 +758,25 @@ def print_table(res: dict) -> None:
     print(f"total: {res['cases']} cases in {res['seconds']} s, {res['failures']} failures")
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def run_main(argv, doc: str, families, run, default_out: str) -> int:
+    """The command line of a campaign: ``--scale``, ``--seed``, ``--only``, ``--out``; ``run(scale, seed, only)``
+    returns the result, which is printed, written (atomically) and gives exit 1 on any failure."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("--scale", type=float, default=1.0, help="multiplies every family's number of cases")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--only", default="", help=f"comma-separated families ({','.join(FAMILIES)})")
-    ap.add_argument("--out", default=str(ROOT / "tests" / "fuzz" / "results" / "fuzz_campaign.json"))
+    ap.add_argument("--only", default="", help=f"comma-separated families ({','.join(families)})")
+    ap.add_argument("--out", default=str(ROOT / "tests" / "fuzz" / "results" / default_out))
     args = ap.parse_args(argv)
     only = {s.strip() for s in args.only.split(",") if s.strip()} or None
-    res = campaign(args.scale, args.seed, only)
+    res = run(args.scale, args.seed, only)
     print_table(res)
     atomic_write_text(Path(args.out), json.dumps(res, indent=1, sort_keys=True, default=str), make_parents=True)
     print(f"wrote {args.out}")
     return 1 if res["failures"] else 0
+
+
+def main(argv=None) -> int:
+    return run_main(argv, __doc__, FAMILIES, campaign, "fuzz_campaign.json")
 
 
 if __name__ == "__main__":

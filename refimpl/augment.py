@@ -1,0 +1,86 @@
+"""Heading augmentation of motions: turn a motion about the vertical axis (spec/acrnn.md §1.1).
+
+The published acRNN trainer (papagina/Auto_Conditioned_RNN_motion) turns every training window to a random heading
+about the vertical axis before it computes its features: angle ``θ = (u − 0.5)·2π``, ``u ~ U(0, 1)``, applied
+to the whole window in world space. On local rotations this is one product on the root,
+``q_0' = r(θ) ⊗ q_0`` with ``r(θ) = (cos θ/2, sin θ/2 · up)``, and the root positions turn with it,
+``p' = R(θ) p`` (about the vertical through the origin; the translation the published code adds as well is
+cancelled by the hip-velocity features, so it is not reproduced). Every representation is then computed from the
+turned window, so the augmentation is the same for positions, rotations and dual quaternions.
+
+Shape legend: T frames, J joints, B windows.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from refimpl.motion import Motion
+from refimpl.quat import quat_mul, quat_rotate
+
+__all__ = ["UP_AXES", "heading_quaternion", "rotate_heading", "random_heading_windows"]
+
+#: Vertical axis name -> its index in ``(x, y, z)``.
+UP_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def heading_quaternion(angle, up: str = "y") -> np.ndarray:
+    """The rotation by ``angle`` (radians, scalar or ``(B,)``) about the axis ``up``: ``(..., 4)`` (w, x, y, z)."""
+    if up not in UP_AXES:
+        raise ValueError(f"up: expected one of {list(UP_AXES)}, got {up!r}")
+    a = np.asarray(angle, dtype=np.float64)
+    q = np.zeros(a.shape + (4,))
+    q[..., 0] = np.cos(a / 2)
+    q[..., 1 + UP_AXES[up]] = np.sin(a / 2)
+    return q
+
+
+def rotate_heading(motion: Motion, angle: float, up: str = "y") -> Motion:
+    """``motion`` turned by ``angle`` radians about the vertical axis ``up`` through the origin.
+
+    Parameters
+    ----------
+    motion : Motion
+        Local rotations ``(T, J, 4)``, root positions ``(T, 3)``.
+    angle : float
+    up : ``"x"``, ``"y"`` (default; BVH and CMU) or ``"z"``
+
+    Returns
+    -------
+    Motion
+        Root rotations ``r ⊗ q_0``, root positions ``R(r) p``; the other joints' local rotations unchanged.
+    """
+    if not np.isfinite(angle):
+        raise ValueError(f"angle: expected a finite number, got {angle!r}")
+    r = heading_quaternion(float(angle), up)
+    rot = np.array(motion.rotations, copy=True)
+    rot[:, 0] = quat_mul(np.broadcast_to(r, rot[:, 0].shape), rot[:, 0])
+    pos = quat_rotate(np.broadcast_to(r, motion.root_positions.shape[:-1] + (4,)), motion.root_positions)
+    return Motion(motion.skeleton, rot, pos, motion.frame_time, motion.name)
+
+
+def random_heading_windows(rng: np.random.Generator, motions: Sequence[Motion], batch_size: int, length: int,
+                           margin: int = 0, up: str = "y") -> tuple[list[Motion], np.ndarray]:
+    """``batch_size`` windows of ``length`` consecutive frames, each turned to a random heading.
+
+    Each window: a motion chosen uniformly (equal weight per take, as acRNN), a start uniformly in
+    ``[margin, T − length − margin]`` (the margin drops to 0 for short motions), an angle ``U(−π, π)``.
+
+    Returns
+    -------
+    windows : list of B Motion (``length`` frames each)
+    angles : ndarray (B,)
+    """
+    if not motions or min(m.num_frames for m in motions) < length:
+        raise ValueError(f"motions: expected every motion to have at least {length} frames")
+    windows, angles = [], np.empty(batch_size)
+    for b in range(batch_size):
+        m = motions[int(rng.integers(len(motions)))]
+        pad = margin if m.num_frames - length - 2 * margin >= 0 else 0
+        start = int(rng.integers(pad, m.num_frames - length - pad + 1))
+        angles[b] = rng.uniform(-np.pi, np.pi)
+        piece = Motion(m.skeleton, m.rotations[start:start + length], m.root_positions[start:start + length],
+                       m.frame_time, m.name)
+        windows.append(rotate_heading(piece, angles[b], up))
+    return windows, angles

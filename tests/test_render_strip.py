@@ -1,0 +1,79 @@
+"""Tests of the transition strip's parts (refimpl/render_strip.py, refimpl/render.py's grid and colours;
+spec/cli.md §Pictures): join frames, left/right shades, a floor grid fixed in the world, foot tracks."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+from PIL import Image  # noqa: E402
+
+from refimpl.render import bone_colors, grid_segments  # noqa: E402
+from refimpl.render_strip import join_frames, limb_sides, render_strip  # noqa: E402
+from refimpl.rigs import CMU_22_JOINTS  # noqa: E402
+from refimpl.skeleton import Skeleton  # noqa: E402
+
+# root, spine, left leg, left foot, right leg, right foot (Y-up)
+_PARENTS = np.array([-1, 0, 0, 2, 0, 4])
+_NAMES = ["Hips", "Spine", "LeftLeg", "LeftFoot", "RightLeg", "RightFoot"]
+
+
+def _png(path):
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGB"), dtype=np.float64)
+
+
+def test_join_frames_hold_both_sides_of_each_join():
+    assert join_frames(10, 40, 55) == [8, 9, 10, 11, 24, 38, 39, 40, 41]
+    assert join_frames(10, 40, 55, middle=0) == [8, 9, 10, 11, 38, 39, 40, 41]
+    assert join_frames(1, 3, 3) == [0, 1, 2]  # clipped to the frames that exist
+    with pytest.raises(ValueError, match="start, stop"):
+        join_frames(5, 5, 10)
+
+
+def test_limb_sides_from_the_mirror_map():
+    skel = Skeleton([-1] + [0] * 21, np.ones((22, 3)), names=list(CMU_22_JOINTS))
+    sides = limb_sides(skel)
+    names = dict(zip(CMU_22_JOINTS, sides))
+    assert names["LeftFoot"] == -1 and names["RightHand"] == 1 and names["Spine"] == 0 and names["Hips"] == 0
+    assert (sides == -1).sum() == (sides == 1).sum() == 8
+    bandai = ["Hips", "Spine", "UpperLeg_L", "Foot_L", "UpperLeg_R", "Foot_R"]  # no prefixes: suffixes
+    assert limb_sides(Skeleton(_PARENTS, np.ones((6, 3)), names=bandai)).tolist() == [0, 0, -1, -1, 1, 1]
+
+
+def test_bone_colors_shade_left_darker_and_right_lighter():
+    cols = np.array(bone_colors("tab:blue", _PARENTS, np.array([0, 0, -1, -1, 1, 1])))  # bones of joints 1..5
+    centre, left, right = cols[0], cols[1], cols[3]
+    assert left.sum() < centre.sum() < right.sum()
+    assert np.allclose(cols[1], cols[2]) and np.allclose(cols[3], cols[4])
+    assert len(set(map(tuple, bone_colors("tab:red", _PARENTS)))) == 1
+
+
+def test_floor_grid_is_fixed_in_the_world():
+    """Moving the camera centre by less than a grid step keeps the lines where they are (only clipped)."""
+    a = grid_segments(np.array([0.0, 0.0]), 100.0, 0.0)
+    b = grid_segments(np.array([13.0, -7.0]), 100.0, 0.0)
+    xs = lambda g: sorted({round(s[0, 0], 9) for s in g if s[0, 0] == s[1, 0]})  # noqa: E731  lines along y
+    assert set(xs(a)) & set(xs(b)) and all(x % 50 == 0 for x in xs(a) + xs(b))
+    assert a[:, :, 2].max() == 0.0
+
+
+def test_strip_with_sides_and_skating_feet(tmp_path):
+    """A character sliding with both feet on the floor: the prediction row shows foot streaks (red shades on the
+    floor), the truth (feet planted) none."""
+    T = 12
+    base = np.array([[0, 90, 0], [0, 140, 0], [-10, 45, 0], [-10, 0, 0], [10, 45, 0], [10, 0, 0]], dtype=float)
+    truth = np.broadcast_to(base, (T, 6, 3)).copy()
+    slide = truth.copy()
+    slide[:, :, 0] += 6.0 * np.arange(T)[:, None]  # 6 cm per frame, feet on the floor
+    sides = limb_sides(Skeleton(_PARENTS, np.ones((6, 3)), names=_NAMES))
+    args = dict(frames=join_frames(2, 10, T), highlight=(2, 10), sides=sides, labels=("truth", "slide"))
+    with_feet = _png(render_strip(tmp_path / "a.png", truth, _PARENTS, prediction=slide, feet=[3, 5], **args))
+    no_feet = _png(render_strip(tmp_path / "b.png", truth, _PARENTS, prediction=slide, **args))
+    h = with_feet.shape[0]
+    diff = np.abs(with_feet - no_feet).sum(axis=-1) > 30
+    assert diff[h // 2:].sum() > 3 * max(1, diff[:h // 2].sum())  # streaks (prediction) against dots (truth)
+    with pytest.raises(ValueError, match="sides"):
+        render_strip(tmp_path / "c.png", truth, _PARENTS, sides=[0, 0, 2, 0, 0, 0])
+    with pytest.raises(ValueError, match="feet"):
+        render_strip(tmp_path / "c.png", truth, _PARENTS, feet=[9])

@@ -1,0 +1,250 @@
+"""The application's seams (spec/architecture.md §the application): a model is a recipe and a registry line, a
+task a module implementing :class:`refimpl.task_api.Task`, and ``refimpl/cli.py`` / ``refimpl/services.py`` know
+neither.
+
+The guard test registers a toy model (a linear map ``y = x W`` fitted by least squares) and a toy task from this
+file (monkeypatching the registry's tables and deploy's exporter table) and runs ``train``, ``eval`` and ``export``
+through :func:`refimpl.cli.main`: if the command line still named a model or a task, or reached past the task
+interface, the toy could not go through it.
+"""
+from __future__ import annotations
+
+import ast
+import dataclasses
+import json
+import re
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from refimpl import registry
+from refimpl.cli import main
+from refimpl.task_api import TASK_MEMBERS, Task, check_task
+from refimpl.train import ModelAdapter, OptimConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+TOY_A = np.array([[1.0, -2.0], [0.5, 3.0], [-1.5, 0.25]])  # (3, 2): the toy data's true map
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the toy task: rows x (3,) -> y = x A (2,); metric mean |f(x) - y|; baseline "zero"
+# ----------------------------------------------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class ToyData:
+    x: np.ndarray  # (N, 3)
+    y: np.ndarray  # (N, 2)
+    fps: float = 1.0
+
+
+def _toy_data(n: int, seed: int) -> ToyData:
+    x = np.random.default_rng(seed).standard_normal((n, 3))
+    return ToyData(x, x @ TOY_A)
+
+
+def _toy_task_module() -> types.ModuleType:
+    t = types.ModuleType("toy_task_for_tests")
+    t.NAME = "toy"
+    t.EVAL_SUMMARY = "toy: mean |f(x) - y| on held-out rows, against zero"
+    t.GENERATE_USAGE = "refimpl generate --model toy-linear (toy)"
+    t.add_train_options = lambda parser: parser.add_argument("--toy-rows", type=int, default=64)
+    t.add_eval_options = lambda parser: None
+    t.add_export_options = lambda parser: None
+    t.add_generate_options = lambda parser: None
+    t.train_datasets = lambda args: (_toy_data(args.toy_rows, 1), _toy_data(32, 2))
+    t.num_examples = lambda ds: len(ds.x)
+    t.describe_data = lambda train, test: f"toy rows: {len(train.x)} / {len(test.x)}"
+    t.checkpoint_extra = lambda train_ds: {"rows": len(train_ds.x)}
+    t.check_checkpoint = lambda model_config, path: None
+    t.trained_fields = lambda model_config, config: {"fps": 1.0, "fields": {"rows": model_config["rows"]}}
+    t.onnx_method = lambda runtime: runtime.run
+    t.methods = lambda networks=None, *, fps=None: {**dict(networks or {}), "zero": lambda x: np.zeros((len(x), 2))}
+    t.evaluate = lambda ds, methods: {k: float(np.abs(f(ds.x) - ds.y).mean()) for k, f in methods.items()}
+
+    def eval_command(args, model):
+        from refimpl.services import evaluate_model
+
+        results = evaluate_model(model, _toy_data(32, 2), onnx_dir=args.onnx, task="toy")
+        Path(args.json).write_text(json.dumps(results))
+        return 0
+
+    t.eval_command = eval_command
+    t.generate_command = lambda args, model: 0
+    t.export_options = lambda args: {}
+    t.verify_inputs = lambda args, model: ((np.random.default_rng(args.seed).standard_normal((4, 3)),), {})
+    return t
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the toy recipe and its exporter
+# ----------------------------------------------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class ToyConfig:
+    inputs: int = 3
+    outputs: int = 2
+
+
+def _toy_recipe_module() -> types.ModuleType:
+    r = types.ModuleType("toy_recipe_for_tests")
+    r.NAME, r.SUMMARY, r.TASK = "toy-linear", "y = x W (tests only)", "toy"
+    r.REPRESENTATIONS, r.CONFIG_TYPE, r.EXPORTER = ("rows",), ToyConfig, "toy-linear"
+    r.PAPER_OPTIM, r.PAPER_BATCH = OptimConfig(lr=0.05), 16
+    r.make_config = lambda train_ds, overrides: ToyConfig()
+    r.param_shapes = lambda config: {"weight": (config.inputs, config.outputs)}
+
+    def make_adapter(train_ds, val_ds, config, dtype, extra):
+        def loss_and_grads(params, batch):
+            x, y = batch
+            err = x @ params["weight"] - y                                    # (B, 2)
+            return float((err ** 2).mean()), {"weight": (2.0 / err.size) * (x.T @ err).astype(dtype)}
+
+        return ModelAdapter(
+            name="toy-linear", num_examples=len(train_ds.x),
+            init_params=lambda rng: {"weight": np.zeros((config.inputs, config.outputs), dtype)},
+            get_batch=lambda idx, ctx: (train_ds.x[idx].astype(dtype), train_ds.y[idx].astype(dtype)),
+            loss_and_grads=loss_and_grads,
+            config=dict(dataclasses.asdict(config), dtype=np.dtype(dtype).name, **extra))
+
+    r.make_adapter = make_adapter
+    r.make_method = lambda model: (lambda x: np.asarray(x) @ model.params["weight"].astype(np.float64))
+
+    def verify_onnx(model, runtime, x):
+        diff = float(np.abs(runtime.run(x) - x @ model.params["weight"]).max())
+        return {"step": diff, "ok": diff < 1e-5}
+
+    r.verify_onnx = verify_onnx
+    return r
+
+
+def _toy_exporter_module() -> types.ModuleType:
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    e = types.ModuleType("toy_exporter_for_tests")
+
+    def export_dir(params, config, out_dir, *, dtype=np.float32, mode="unrolled"):
+        w = numpy_helper.from_array(np.asarray(params["weight"], np.float32), "weight")
+        graph = helper.make_graph([helper.make_node("MatMul", ["x", "weight"], ["y"])], "toy_linear",
+                                  [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["B", config.inputs])],
+                                  [helper.make_tensor_value_info("y", TensorProto.FLOAT, ["B", config.outputs])],
+                                  [w])
+        model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+        helper.set_model_props(model, {"model": json.dumps({"name": "toy-linear"})})
+        out_dir.mkdir(parents=True, exist_ok=True)
+        path = out_dir / "toy-linear_step.onnx"
+        onnx.save(model, str(path))
+        return {"step": path}
+
+    class Runtime:
+        def __init__(self, path):
+            import onnxruntime
+
+            self.session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+
+        @classmethod
+        def from_dir(cls, directory, intra_op_threads: int = 1):
+            return cls(Path(directory) / "toy-linear_step.onnx")
+
+        def run(self, x):
+            return self.session.run(None, {"x": np.asarray(x, np.float32)})[0].astype(np.float64)
+
+    e.export_dir, e.Runtime = export_dir, Runtime
+    return e
+
+
+@pytest.fixture()
+def toy(monkeypatch):
+    """The toy task, model and exporter registered for one test (the tables restored afterwards)."""
+    task, recipe = _toy_task_module(), _toy_recipe_module()
+    monkeypatch.setitem(sys.modules, task.__name__, task)
+    monkeypatch.setitem(registry.TASKS, "toy", task.__name__)
+    monkeypatch.setitem(registry.RECIPES, "toy-linear", (recipe.__name__, "toy"))
+    monkeypatch.setitem(registry.MODELS, "toy-linear", registry.ModelSpec.from_recipe(recipe, "toy"))
+    try:
+        import deploy.models
+    except ImportError:
+        deploy = None
+    else:
+        exporter = _toy_exporter_module()
+        monkeypatch.setitem(sys.modules, exporter.__name__, exporter)
+        monkeypatch.setitem(deploy.models.EXPORTERS, "toy-linear", exporter.__name__)
+    return deploy
+
+
+def test_a_toy_model_and_task_go_through_the_command_line(toy, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["--blas-threads", "1", "train", "--model", "toy-linear", "--out", str(out), "--steps", "150",
+                 "--toy-rows", "48", "--progress-every", "50"]) == 0
+    assert "toy rows: 48 / 32" in capsys.readouterr().out
+    ckpt = out / "checkpoint.npz"
+    js = tmp_path / "eval.json"
+    assert main(["eval", "--checkpoint", str(ckpt), "--json", str(js)]) == 0
+    got = json.loads(js.read_text())
+    from refimpl.services import load_trained
+
+    model = load_trained(ckpt)
+    assert model.spec.name == "toy-linear" and model.fields == {"rows": 48}
+    data = _toy_data(32, 2)
+    assert got["toy-linear"] == pytest.approx(float(np.abs(data.x @ model.params["weight"] - data.y).mean()),
+                                              rel=1e-12)
+    assert got["toy-linear"] < 0.2 * got["zero"]  # trained: the least-squares fit beats the zero baseline
+    if toy is None:
+        pytest.skip("deploy (onnx) is not installed: export not exercised")
+    assert main(["export", "--checkpoint", str(ckpt), "--out", str(tmp_path / "onnx")]) == 0
+    text = capsys.readouterr().out
+    assert "toy-linear_step.onnx" in text and "onnxruntime vs NumPy (step)" in text
+    assert main(["eval", "--checkpoint", str(ckpt), "--onnx", str(tmp_path / "onnx"), "--json", str(js)]) == 0
+    got = json.loads(js.read_text())
+    assert got["toy-linear_onnx"] == pytest.approx(got["toy-linear"], abs=1e-5)
+
+
+def test_every_registered_task_implements_the_interface():
+    for name in registry.TASKS:
+        module = registry.task_of(name)
+        assert isinstance(module, Task) and module.NAME == name
+    spec = {n: registry.MODELS[n] for n in registry.MODELS}
+    text = (ROOT / "deploy" / "models" / "__init__.py").read_text(encoding="utf-8")
+    for name, s in spec.items():  # a recipe's exporter is a line of deploy's table
+        assert s.exporter is None or f'"{s.exporter}":' in text, name
+
+
+def test_a_module_lacking_a_member_is_refused():
+    task = _toy_task_module()
+    assert check_task(task) is task
+    del task.verify_inputs
+    with pytest.raises(TypeError, match="verify_inputs"):
+        check_task(task)
+    assert "verify_inputs" in TASK_MEMBERS and "eval_command" in TASK_MEMBERS
+
+
+def _words(path: Path) -> set[str]:
+    """Every identifier and every word of every string in ``path``, except keyword-argument names (API
+    parameters of other modules, e.g. ``render_strip(..., prediction=...)``)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            out |= set(re.findall(r"[A-Za-z][A-Za-z0-9_-]*", node.value.lower()))
+        elif isinstance(node, ast.Name):
+            out.add(node.id.lower())
+        elif isinstance(node, ast.Attribute):
+            out.add(node.attr.lower())
+        elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            out.add(node.name.lower())
+        elif isinstance(node, ast.alias):
+            out |= set((node.asname or node.name).lower().split("."))
+        elif isinstance(node, ast.arg):
+            out.add(node.arg.lower())
+    return out
+
+
+@pytest.mark.parametrize("module", ["refimpl/cli.py", "refimpl/services.py"])
+def test_the_command_line_and_the_services_name_no_model_and_no_task(module):
+    names = {n.lower() for n in (*registry.MODELS, *registry.TASKS)}
+    names |= {n.replace("-", "_") for n in names}
+    found = sorted(_words(ROOT / module) & names)
+    assert not found, f"{module} names {found}: move that code into the task or the recipe"
