@@ -210,3 +210,20 @@ def test_grouped_errors_metric_and_groups(few_takes):
         assert all(abs(v["mean_cm"] - 5.0) < 1e-9 for v in by.values())
     with pytest.raises(ValueError, match="groups"):
         grouped_errors(test, {"truth": truth}, {"style": np.array(["a"])})
+
+
+def test_train_and_eval_commands_on_takes(few_takes, tmp_path, capsys):
+    """``refimpl train --model qtg --data <takes>`` trains at the paper's settings; ``eval`` reads the same split."""
+    from refimpl.cli import EXIT_OK, main
+
+    out = tmp_path / "run"
+    code = main(["train", "--model", "qtg", "--data", str(few_takes), "--out", str(out), "--steps", "2",
+                 "--stride", "8", "--set", "encoder_sizes=16,8", "--set", "gru_hidden=8", "--set", "decoder_sizes=16"])
+    text = capsys.readouterr().out
+    assert code == EXIT_OK, text
+    assert "batch 32, Adam lr 0.0001, betas (0.5, 0.9)" in text and '"pose_size": 87' in text
+    code = main(["eval", "--checkpoint", str(out / "checkpoint.npz"), "--data", str(few_takes), "--stride", "8",
+                 "--json", str(tmp_path / "r.json")])
+    text = capsys.readouterr().out
+    assert code == EXIT_OK, text
+    assert "21 joints" in text and "from 4 sources" in text
