@@ -28,23 +28,24 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.qtg_locomotion import heldout_windows
 from refimpl.atomic import atomic_write_text
 from refimpl.protocols.transition_metrics import joint_position_errors
 from refimpl.models.qtg import encode
 from refimpl.nn.mlp import mlp_forward
 from refimpl.services import load_trained, network_methods
-from refimpl.protocols.transition_locomotion import heldout_dataset
 from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, split_pose
 
 
 def autoencode(model, poses):
     """``D(E(p))`` of raw poses ``(N, P)`` through the checkpoint's encoder and decoder (quaternions unit)."""
     dtype = next(iter(model.params.values())).dtype
-    pn = normalize_poses(poses, model.root_mean, model.root_std).astype(dtype)
+    mean, std = model.fields["root_mean"], model.fields["root_std"]
+    pn = normalize_poses(poses, mean, std).astype(dtype)
     z = encode(model.params, pn, model.config)  # (N, Z)
     out, _ = mlp_forward(z, model.params, "dec", len(model.config.decoder_sizes) + 1, model.config.negative_slope,
                          last_linear=True)
-    root, quats = split_pose(denormalize_poses(out.astype(np.float64), model.root_mean, model.root_std))
+    root, quats = split_pose(denormalize_poses(out.astype(np.float64), mean, std))
     return join_pose(root, quats / np.linalg.norm(quats, axis=-1, keepdims=True))
 
 
@@ -82,8 +83,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     models = [load_trained(c) for c in args.checkpoint]
-    test_ds = heldout_dataset(args.data, models[0].root_mean, models[0].root_std, models[0].transition_length,
-                              args.stride)
+    test_ds = heldout_windows(args, models[0])
     print(f"{test_ds.num_windows} held-out windows in {time.perf_counter() - t0:.1f} s", flush=True)
     results = {}
     for c, m in zip(args.checkpoint, models):

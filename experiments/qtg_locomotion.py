@@ -95,7 +95,7 @@ def markdown(results: dict, meta: dict) -> str:
 def cmd_eval(args) -> int:
     t0 = time.perf_counter()
     model = load_trained(args.checkpoint)
-    test_ds = heldout_dataset(args.data, model.root_mean, model.root_std, model.transition_length, args.stride)
+    test_ds = heldout_windows(args, model)
     _say(f"{test_ds.num_windows} held-out windows of {len(test_ds.sources)} takes in {time.perf_counter() - t0:.1f} s")
     methods = transition.methods(network_methods(model), fps=test_ds.fps)
     results = grouped_errors(test_ds, methods, _groups(test_ds))
@@ -128,8 +128,7 @@ def cmd_curve(args) -> int:
         if prev.get("data") == str(args.data) and prev.get("stride") == args.stride:
             done = {p["checkpoint"]: p for p in prev["points"]}
     models = [load_trained(s) for s in snaps]
-    test_ds = heldout_dataset(args.data, models[0].root_mean, models[0].root_std, models[0].transition_length,
-                              args.stride)
+    test_ds = heldout_windows(args, models[0])
     groups = _groups(test_ds)
     base = grouped_errors(test_ds, transition.methods({}, fps=test_ds.fps), groups)
     points = []
@@ -188,6 +187,12 @@ def _plot(curve: dict, path) -> None:
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=100)
+
+
+def heldout_windows(args, model):
+    """The held-out windows of ``--data`` every ``--stride`` frames, with the model's root statistics and T."""
+    f = model.fields
+    return heldout_dataset(args.data, f["root_mean"], f["root_std"], f["transition_length"], args.stride)
 
 
 def main(argv=None) -> int:

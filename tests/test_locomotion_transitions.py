@@ -227,3 +227,19 @@ def test_train_and_eval_commands_on_takes(few_takes, tmp_path, capsys):
     text = capsys.readouterr().out
     assert code == EXIT_OK, text
     assert "21 joints" in text and "from 4 sources" in text
+    # the experiments' commands on the same checkpoint: grouped JSON + markdown, the end-frame diagnostic
+    import json
+
+    from experiments import qtg_ends, qtg_locomotion
+
+    ck = str(out / "checkpoint.npz")
+    assert qtg_locomotion.main(["eval", "--checkpoint", ck, "--data", str(few_takes), "--stride", "8",
+                                "--out", str(tmp_path / "g.json"), "--md", str(tmp_path / "g.md")]) == 0
+    res = json.loads((tmp_path / "g.json").read_text())
+    assert set(res["results"]) == {"qtg", "inertialization", "interpolation"} and res["meta"]["step"] == 2
+    assert set(res["results"]["qtg"]["by_style"]) == {"normal", "elderly", "active", "feminine"}
+    assert "## by kind" in (tmp_path / "g.md").read_text()
+    assert qtg_ends.main(["--checkpoint", ck, "--data", str(few_takes), "--stride", "8",
+                          "--json", str(tmp_path / "e.json")]) == 0
+    ends = json.loads((tmp_path / "e.json").read_text())[ck]
+    assert len(ends["per_frame_cm"]) == 30 and set(ends["autoencoder_cm"]) == {"frame_1", "frame_30", "g1"}
