@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 import numpy as np
@@ -184,12 +185,18 @@ def _parser():
 
 
 def main(argv=None) -> int:
-    """Entry point; returns 0 on success, 2 on a bad option value, 3 on a bad input file (message on stderr)."""
+    """Entry point; returns 0 on success, 2 on a bad option value, 3 on a bad input file (message on stderr), 1
+    quietly when stdout is closed early (`... | head`)."""
     from refimpl.errors import BadInputError, MissingDependency, UsageError
 
     args = _parser().parse_args(argv)
     try:
-        return int(args.func(args))
+        rc = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
+        return rc
+    except BrokenPipeError:  # the reader went away (`python -m deploy info m.onnx | head`): stop quietly
+        _discard_stdout()
+        return 1
     except (BadInputError, _BadInput, FileNotFoundError, IsADirectoryError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3
@@ -199,3 +206,11 @@ def main(argv=None) -> int:
     except MissingDependency as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+
+
+def _discard_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush does not raise again."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass

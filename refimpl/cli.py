@@ -54,8 +54,9 @@ from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
 from refimpl.bounds import bounded_int
-from refimpl.options import add_data_options, beta, nonneg_int, positive_float, positive_int
+from refimpl.options import add_data_options, beta, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
+from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
 from refimpl.services import (blas_threads, export_onnx, load_trained, onnx_metadata, read_motion, train_model,
                               verify_onnx)
 from refimpl.train import check_resumable, output_lock
@@ -81,14 +82,42 @@ def _progress_line(line: str) -> None:
 # ----------------------------------------------------------------------------------------------------------------
 
 
+def _reuse_run_options(args, ckpt: Path) -> None:
+    """``--resume``: the options stored in the checkpoint fill those not given; a given option that differs is a
+    usage error listing only the differing fields, before any data is read (spec/cli.md §4)."""
+    from refimpl.checkpoint import load_checkpoint
+
+    with reading(ckpt):
+        _, meta = load_checkpoint(ckpt)
+    stored = (meta.get("train_config") or {}).get("run_options") if isinstance(meta, dict) else None
+    if not isinstance(stored, dict):  # a checkpoint written before the options were stored: the flags as given
+        return
+    if stored.get("model") not in MODELS:
+        raise BadInputError(f"{ckpt}: run option model {stored.get('model')!r} is not one of {sorted(MODELS)}")
+    conflicts = reconcile(args, stored, args.option_defaults)
+    if conflicts:
+        raise UsageError(f"--resume: {ckpt} was trained with other options:\n  " + "\n  ".join(conflicts)
+                         + "\n(leave them out to continue with the checkpoint's, or start again with --overwrite)")
+
+
+def _resumable(args) -> tuple:
+    """The options that decide a run: :data:`refimpl.run_options.RUN_OPTIONS` and every task's train options."""
+    return RUN_OPTIONS + tuple(dest for options in args.task_options.values() for dest, _, _ in options)
+
+
 def cmd_train(args) -> int:
     """``refimpl train``."""
+    if args.steps == 0 or (args.steps is None and args.epochs == 0):
+        raise UsageError("--steps 0 / --epochs 0: nothing to train (a checkpoint would hold an untrained network)")
+    out = Path(args.out or f"runs/{args.model}")
+    if args.resume and (out / "checkpoint.npz").is_file():
+        _reuse_run_options(args, out / "checkpoint.npz")
     spec = MODELS[args.model]
     task = task_of(spec)
     rep = args.representation or spec.representations[0]
     if rep not in spec.representations:
         raise UsageError(f"--representation {rep!r}: model {spec.name!r} trains on {list(spec.representations)}")
-    out = Path(args.out)
+    check_overrides(spec.config_type, args.set)  # a --set typo is exit 2 before any data is read
     ckpt = out / "checkpoint.npz"
     if args.resume and not ckpt.is_file():
         raise BadInputError(f"{ckpt}: no checkpoint to resume (train without --resume first)")
@@ -129,7 +158,8 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
                          lr=lr, betas=betas, clip_norm=args.clip_norm, seed=args.seed,
                          dtype=np.dtype(args.dtype).type, resume=args.resume,
                          checkpoint_every=args.checkpoint_every, validate_every=args.validate_every,
-                         progress_every=args.progress_every, progress=_progress_line)
+                         progress_every=args.progress_every, progress=_progress_line,
+                         run_options=run_options(args, _resumable(args)))
     last = float(np.mean(result.losses[-20:])) if result.losses else float("nan")
     _say(f"{'interrupted' if result.interrupted else 'done'}: step {result.step}, epoch {result.epoch}, "
          f"recent loss {last:.5g}, {result.elapsed_s:.1f} s")
@@ -140,9 +170,17 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
     return EXIT_OK
 
 
+def _check_model_option(args, model) -> None:
+    """``--model`` and ``--checkpoint`` must name the same network (the checkpoint would silently win)."""
+    if model is not None and getattr(args, "model", None) and args.model != model.spec.name:
+        raise UsageError(f"--model {args.model}, but {args.checkpoint} holds a {model.spec.name} model "
+                         f"(leave --model out, or pass a {args.model} checkpoint)")
+
+
 def cmd_eval(args) -> int:
     """``refimpl eval``: the task of ``--checkpoint``'s model (else of ``--model``, else of the default model)."""
     model = load_trained(args.checkpoint) if args.checkpoint else None
+    _check_model_option(args, model)
     spec = model.spec if model is not None else MODELS[args.model or DEFAULT_MODEL]
     return task_of(spec).eval_command(args, model)
 
@@ -152,7 +190,7 @@ def cmd_export(args) -> int:
     model = load_trained(args.checkpoint)
     out = Path(args.out) if args.out else Path(model.path).parent / "onnx"
     task = task_of(model.spec)
-    _refuse_other_tasks_options(args, model)
+    _refuse_other_tasks_options(args, model.spec.task, model.spec.name)
     written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length,
                           **task.export_options(args))
     for role, path in written.items():
@@ -169,13 +207,13 @@ def cmd_export(args) -> int:
     return EXIT_OK
 
 
-def _refuse_other_tasks_options(args, model) -> None:
+def _refuse_other_tasks_options(args, task: str, who: str) -> None:
     """UsageError for an option of another task's group given a value (``export --join`` of a model whose task
-    has no such option)."""
+    has no such option; ``generate --target`` of a model whose task has no target clip)."""
     for task_name, options in args.task_options.items():
         for dest, default, flag in options:
-            if task_name != model.spec.task and getattr(args, dest) != default:
-                raise UsageError(f"{flag} applies to {task_name} models, not {model.spec.name}")
+            if task_name != task and getattr(args, dest) != default:
+                raise UsageError(f"{flag} applies to {task_name} models, not {who}")
 
 
 def _add_task_options(p, add) -> None:
@@ -210,8 +248,11 @@ def _generate_task(args):
 
 
 def cmd_generate(args) -> int:
-    """``refimpl generate``: the task's ``generate_command``."""
+    """``refimpl generate``: the task's ``generate_command`` (options of another task's group are refused)."""
+    if args.model is not None and args.checkpoint:
+        _check_model_option(args, load_trained(args.checkpoint))
     task, model = _generate_task(args)
+    _refuse_other_tasks_options(args, task.NAME, model.spec.name if model is not None else f"a {task.NAME} run")
     return task.generate_command(args, model)
 
 
@@ -270,7 +311,7 @@ def cmd_demo(args) -> int:
     from refimpl.demo import run_demo
 
     run_demo(args.out, seed=args.seed, quick=args.quick, steps=args.steps, onnx=not args.no_onnx,
-             render=not args.no_render)
+             render=not args.no_render, overwrite=args.overwrite)
     return EXIT_OK
 
 
@@ -291,12 +332,11 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
     parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=bounded_int("threads"), default=2,
-                        help="BLAS threads for NumPy (default 2: measured fastest on an idle 2-core machine, "
-                             "0.58-0.74x the one-thread time per training step of every network and equal or "
-                             "faster at batch 1, benchmarks/bench_threads.py; pass 1 when other jobs share the "
-                             "cores, where two threads were 1.2-20x slower; 0 = library default; needs "
-                             "threadpoolctl)")
+    parser.add_argument("--blas-threads", type=bounded_int("threads"), default=1,
+                        help="BLAS threads for NumPy (default 1: it cannot collapse; 2 threads took 0.58-0.99x "
+                             "the one-thread time per training step on an idle 2-core machine, but 8-31x when other "
+                             "jobs shared the cores, benchmarks/bench_thread_default.py; pass 2 on a machine you "
+                             "have to yourself; 0 = library default; needs threadpoolctl)")
     parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
                         help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
                              "training step instead of faulting it in again (step time 0.76-0.99x of glibc's defaults, "
@@ -321,7 +361,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pose representation (default: the model's first; "
                         + "; ".join(f"{n}: {', '.join(s.representations)}" for n, s in sorted(MODELS.items())) + ")")
     add_data_options(p)
-    p.add_argument("--out", default=f"runs/{DEFAULT_MODEL}", help=f"output folder (default runs/{DEFAULT_MODEL})")
+    p.add_argument("--out", default=None, help="output folder (default runs/<model>)")
     length = p.add_mutually_exclusive_group()
     length.add_argument("--steps", type=bounded_int("steps"), default=None, help="optimiser steps")
     length.add_argument("--epochs", type=bounded_int("steps"), default=10, help="epochs, when --steps is not given (default 10)")
@@ -340,13 +380,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
     p.add_argument("--seed", type=int, default=0)
     resume = p.add_mutually_exclusive_group()
-    resume.add_argument("--resume", action="store_true", help="continue from --out/checkpoint.npz")
+    resume.add_argument("--resume", action="store_true",
+                        help="continue from --out/checkpoint.npz with the options stored in it (give only "
+                             "--steps/--epochs; a different option is refused, field by field)")
     resume.add_argument("--overwrite", action="store_true", help="start again, replacing --out's checkpoint and logs")
     p.add_argument("--checkpoint-every", type=bounded_int("every"), default=500)
     p.add_argument("--validate-every", type=bounded_int("every"), default=None,
                    help="log the held-out MAE every N steps (loss_val.csv)")
     p.add_argument("--progress-every", type=bounded_int("every"), default=50)
-    p.set_defaults(func=cmd_train)
+    p.set_defaults(func=cmd_train, option_defaults={a.dest: a.default for a in p._actions})
 
     p = sub.add_parser("eval", help="a network against its task's baselines, under its task's protocol",
                        description="Evaluate a network (--checkpoint, --onnx) or, without one, the baselines of "
@@ -364,10 +406,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_options(p, lambda task, group: task.add_eval_options(group))
     p.set_defaults(func=cmd_eval)
 
-    p = sub.add_parser("export", help="export a checkpoint to ONNX (needs the deploy extra)",
+    p = sub.add_parser("export", help="export a checkpoint of any model to ONNX, verified (needs the deploy extra)",
                        description="Write the model's ONNX files <model>_<role>.onnx (validated; the exporter's "
                                    "roles); the graphs standardise inside (raw poses in and out) and carry their "
-                                   "metadata.")
+                                   "metadata. A folder holding another network's graphs is refused before anything "
+                                   "is written.")
     p.add_argument("--checkpoint", required=True)
     p.add_argument("--out", default=None, help="output folder (default: onnx/ beside the checkpoint)")
     p.add_argument("--mode", default="unrolled", choices=("unrolled", "loop", "scan"), help="rollout graph form")
@@ -380,7 +423,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_options(p, lambda task, group: task.add_export_options(group))
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("generate", help="generate motion with a network or a baseline, BVH out",
+    p = sub.add_parser("generate", help="generate motion with a network or a baseline, BVH out (every model: "
+                                        "`refimpl generate --help` lists each task's form)",
                        description="Generate motion with the task of --model (else of --checkpoint's model, else "
                                    f"of the exported models in --onnx, else {DEFAULT_MODEL}'s) and write a BVH.",
                        usage=generate_usage().replace("usage: ", "", 1))
@@ -421,6 +465,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="train, evaluate, export, verify, generate and render on the sample",
                        description="The whole tour on the embedded CMU sample in a few minutes on 2 cores.")
     p.add_argument("--out", default="demo_out", help="output folder (default ./demo_out)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the results of a longer demo in --out (a --quick run refuses otherwise)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quick", action="store_true", help="a tiny network and a few steps (a smoke test, ~30 s)")
     p.add_argument("--steps", type=positive_int, default=None, help="override the number of training steps")

@@ -103,6 +103,26 @@ def _seconds(x) -> str:
     return f"{x!r:.40}"
 
 
+def _config_summary(cfg: Mapping, width: int = 60, line_width: int = 100) -> list[str]:
+    """The config as ``key=value`` pairs in lines of at most ``line_width`` characters; a value longer than
+    ``width`` characters (statistics, skeletons) is summarised by its type and size."""
+    parts = []
+    for k in sorted(cfg):
+        text = json.dumps(cfg[k])
+        if len(text) > width:
+            v = cfg[k]
+            size = f"{len(v)} values" if isinstance(v, list) else f"{len(v)} keys" if isinstance(v, dict) else \
+                f"{len(text)} characters"
+            text = f"<{type(v).__name__}, {size}>"
+        parts.append(f"{k}={text}")
+    lines = [""]
+    for part in parts:
+        if lines[-1] and len(lines[-1]) + len(part) + 2 > line_width:
+            lines.append("")
+        lines[-1] += (", " if lines[-1] else "") + part
+    return lines
+
+
 def _info_npz(p: Path, args) -> None:
     from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
 
@@ -139,7 +159,8 @@ def _info_npz(p: Path, args) -> None:
                  f"{str(imp.get('sha256'))[:16]}...), not trained here")
         _say(f"progress    step {meta.get('step')} of {meta.get('steps_target')}, epoch {meta.get('epoch')}, "
              f"trained for {_seconds(meta.get('elapsed_s', 0.0))}")
-        _say(f"config      {json.dumps(cfg, sort_keys=True)}")
+        for i, line in enumerate(_config_summary(cfg)):
+            _say(("config      " if i == 0 else " " * 12) + line)
         if stats:
             _say(f"normalise   root mean {np.round(stats.get('root_mean', []), 3).tolist()} "
                  f"std {np.round(stats.get('root_std', []), 3).tolist()}")

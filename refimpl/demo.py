@@ -94,15 +94,35 @@ def _missing(module: str) -> str | None:
     return None
 
 
+def _refuse_to_replace_a_fuller_run(out: Path, n_steps: int) -> None:
+    """A demo of fewer steps (``--quick``) does not silently replace the results of a longer one in the same
+    folder (as ``refimpl train`` refuses to replace a checkpoint): ``UsageError`` unless ``overwrite``."""
+    from refimpl.checkpoint import load_checkpoint
+    from refimpl.errors import UsageError
+
+    ckpt = out / "train" / "checkpoint.npz"
+    if not ckpt.is_file():
+        return
+    try:
+        _, meta = load_checkpoint(ckpt)
+        done = int(meta.get("steps_target") or 0)
+    except (OSError, ValueError, TypeError):  # a damaged checkpoint is not results worth keeping
+        return
+    if done > n_steps:
+        raise UsageError(f"{out} holds the results of a {done}-step demo; this {n_steps}-step run would replace "
+                         "them: pass --out another folder, or --overwrite")
+
+
 def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: int | None = None,
-             onnx: bool = True, render: bool = True, threads: int = 1,
+             onnx: bool = True, render: bool = True, threads: int = 1, overwrite: bool = False,
              say: Callable[[str], None] | None = None) -> DemoResult:
     """Run the demo into ``out_dir`` (see the module docstring) and return what it wrote.
 
     Parameters
     ----------
     out_dir : str or Path
-        Output folder (created; files of an earlier run are replaced, the training starts again).
+        Output folder (created; files of an earlier run are replaced, the training starts again; those of a
+        longer run only with ``overwrite``).
     seed : int
         Seed of the training run.
     quick : bool
@@ -113,10 +133,15 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
         Do the ONNX steps (export, verify, ONNX generation) / the pictures, when their dependencies are installed.
     threads : int
         BLAS threads (1: fastest for this network size, and deterministic).
+    overwrite : bool
+        Replace the results of a longer demo in ``out_dir`` (otherwise ``UsageError``).
     say : callable, optional
         Receives each report line (default: print to stdout).
     """
     say = say or (lambda line: print(line, flush=True))
+    if not overwrite:
+        _refuse_to_replace_a_fuller_run(Path(out_dir), steps if steps is not None else
+                                        (QUICK_STEPS if quick else DEMO_STEPS))
     with blas_threads(threads):
         return _run(Path(out_dir), seed, quick, steps, onnx, render, say)
 

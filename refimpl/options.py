@@ -13,8 +13,8 @@ from typing import Mapping, Sequence
 from refimpl.bounds import bounded_int, check_config_sizes
 from refimpl.errors import UsageError
 
-__all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "beta", "add_data_options", "parse_overrides",
-           "config_with_overrides"]
+__all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "beta", "add_data_options",
+           "parse_overrides", "check_overrides", "config_with_overrides"]
 
 
 def number_parser(convert, accept, expected: str):
@@ -90,6 +90,24 @@ def parse_overrides(config_type, defaults: Mapping, overrides: Sequence[str]) ->
         except ValueError:
             raise UsageError(f"--set {item!r}: {value!r} is not a valid {type(default).__name__}") from None
     return out
+
+
+def check_overrides(config_type, overrides: Sequence[str]) -> dict:
+    """Validate ``--set`` items against ``config_type`` alone, before any data is read: the field exists and the
+    value parses as the type of the field's default (fields the data fills in, without a default, are checked
+    by name only; :func:`config_with_overrides` checks them against the data). Returns the parsed values of the
+    fields that have defaults. Raises ``UsageError`` as :func:`parse_overrides` does."""
+    defaults = {}
+    for f in dataclasses.fields(config_type):
+        if f.default is not dataclasses.MISSING:
+            defaults[f.name] = f.default
+        elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+            defaults[f.name] = f.default_factory()  # type: ignore[misc]
+    known = [item for item in overrides or () if item.partition("=")[0].strip().replace("-", "_") in defaults]
+    unknown_default = [item for item in overrides or () if item not in known]
+    parse_overrides(config_type, {**{f.name: "" for f in dataclasses.fields(config_type)}, **defaults},
+                    unknown_default)  # names (and the FIELD=VALUE form) of the rest
+    return parse_overrides(config_type, defaults, known)
 
 
 def config_with_overrides(base, overrides: Sequence[str], fixed: str | Sequence[str] | None = None,

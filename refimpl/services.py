@@ -27,8 +27,8 @@ __all__ = ["blas_threads", "read_motion", "load_trained", "checkpoint_for", "tra
 def blas_threads(n: int | None):
     """Limit the BLAS thread pool to ``n`` threads inside the block (threadpoolctl, when installed).
 
-    The command line passes 2 by default (fastest on an idle 2-core machine, spec/cli.md); one thread is much
-    faster than two when other jobs share the cores. ``None`` or 0 leaves the library default.
+    The command line passes 1 by default (spec/cli.md): two threads are somewhat faster on an idle 2-core
+    machine but many times slower when other jobs share the cores. ``None`` or 0 leaves the library default.
     """
     if not n:
         yield
@@ -111,12 +111,13 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
                 lr: float | None = None, betas=None, clip_norm: float | None = None, seed: int = 0,
                 dtype=np.float32, resume: bool = False, checkpoint_every: int = 500,
                 validate_every: int | None = None, progress_every: int = 100,
-                progress: Callable[[str], None] | None = None):
+                progress: Callable[[str], None] | None = None, run_options: dict | None = None):
     """Train ``spec``'s network into ``out_dir`` (``checkpoint.npz``, ``loss.csv``, ``loss_val.csv``).
 
     ``lr`` and ``betas`` default to the recipe's paper values (``spec.optim``). The checkpoint's model config also
     holds what the task needs later (its ``checkpoint_extra``: statistics, frame rate, skeleton, ...), so that
-    ``eval``, ``export`` and ``generate`` need nothing else.
+    ``eval``, ``export`` and ``generate`` need nothing else; ``run_options`` (the command line's,
+    :mod:`refimpl.run_options`) go into its ``train_config`` for ``--resume``.
 
     Returns
     -------
@@ -134,7 +135,7 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
                                 clip_norm=spec.optim.clip_norm if clip_norm is None else clip_norm)
     tc = TrainConfig(steps=steps, batch_size=batch_size, seed=seed, checkpoint_path=str(out_dir / "checkpoint.npz"),
                      checkpoint_every=checkpoint_every, log_path=str(out_dir / "loss.csv"),
-                     progress_every=progress_every, validate_every=validate_every)
+                     progress_every=progress_every, validate_every=validate_every, run_options=run_options)
     kw = {} if progress is None else {"progress": progress}
     return train(adapter, optim, tc, resume=resume, **kw)
 
@@ -240,11 +241,34 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     if model.spec.exporter is None:
         raise UsageError(f"model {model.spec.name!r} has no ONNX exporter")
     entry = _deploy_models("ONNX export").exporter(model.spec.exporter)
+    _check_export_dir(Path(out_dir), model.spec.exporter)
     kw = dict(model.spec.export_inputs(model)) if model.spec.export_inputs is not None else {}
     mode, dtype, T = options.pop("mode", "unrolled"), options.pop("dtype", np.float32), options.pop("T", None)
     if T:
         kw["T"] = T
     return entry.export_dir(model.params, model.config, Path(out_dir), dtype=dtype, mode=mode, **kw, **options)
+
+
+def _check_export_dir(out_dir: Path, name: str) -> None:
+    """Refuse, before anything is written, a folder holding ONNX models of another network than ``name``
+    (exported side by side they would make the folder unusable for both: a runtime opens one network's
+    models)."""
+    if not out_dir.is_dir():
+        return
+    from deploy.metadata import read_metadata
+
+    others = set()
+    for f in sorted(out_dir.glob("*.onnx")):
+        try:
+            model = read_metadata(str(f)).get("model")
+        except Exception:  # noqa: BLE001 - an unreadable .onnx is not ours to overwrite either
+            model = None
+        other = model.get("name") if isinstance(model, dict) else None
+        if other != name:
+            others.add(f"{f.name} ({other or 'no refimpl metadata'})")
+    if others:
+        raise UsageError(f"--out {out_dir}: holds ONNX models of another network: {', '.join(sorted(others)[:4])}"
+                         f"{' ...' if len(others) > 4 else ''}; export {name} into another folder")
 
 
 def verify_onnx(model: TrainedModel, onnx_dir, *inputs, **options) -> dict:

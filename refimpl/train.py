@@ -144,6 +144,9 @@ class TrainConfig:
     progress_every : int
         Steps between progress lines (rate and ETA).
     validate_every : int, optional
+    run_options : dict, optional
+        The command line's options of the run (:mod:`refimpl.run_options`), stored in the checkpoint's
+        ``train_config`` so that ``refimpl train --resume`` reuses them; the loop itself ignores them.
     """
 
     steps: int
@@ -155,6 +158,7 @@ class TrainConfig:
     log_every_csv: int = 1
     progress_every: int = 100
     validate_every: int | None = None
+    run_options: dict | None = None
 
     def __post_init__(self):
         for name in ("steps", "batch_size", "checkpoint_every", "log_every_csv", "progress_every"):

@@ -24,10 +24,17 @@ settings.register_profile(
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
+# The tests' data cache (refimpl/datacache.py) lives in a fresh temporary folder, never in ~/.cache/refimpl;
+# subprocesses of the tests inherit it.
+if "REFIMPL_CACHE" not in os.environ:
+    import tempfile
+
+    os.environ["REFIMPL_CACHE"] = tempfile.mkdtemp(prefix="refimpl-test-cache-")
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
 SHARED_DATA = SHARED / "data"
-GOLDEN = SHARED / "golden"
+GOLDEN = ROOT / "tests" / "golden"  # in the repository (tests/golden/README.md); was ../shared/golden
 
 
 @pytest.fixture(scope="session")
@@ -38,20 +45,10 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
-@pytest.fixture(scope="session")
-def golden_dir() -> Path:
-    """``../shared/golden`` (PyTorch float64 reference vectors); skipped when absent."""
-    if not GOLDEN.is_dir():
-        pytest.skip("../shared/golden is not available")
-    return GOLDEN
-
-
 def load_golden(name: str) -> dict:
-    """Load one golden ``.npz`` as a plain dict (no pickle); skip when ``../shared`` is absent."""
+    """Load one golden ``.npz`` of ``tests/golden/`` as a plain dict (no pickle); a missing file fails."""
     import numpy as np
 
     path = GOLDEN / name
-    if not path.is_file():
-        pytest.skip(f"golden file {name} is not available")
     with np.load(path, allow_pickle=False) as z:
         return {k: z[k] for k in z.files}

@@ -373,3 +373,22 @@ def test_eval_quaternet_long_through_the_command_line(trained, capsys, tmp_path)
     # the pace network has no protocol here: a usage error naming its validation log
     assert main(["eval", "--checkpoint", str(trained / "pace" / "checkpoint.npz"), "--data", "sample"]) == 2
     assert "loss_val.csv" in capsys.readouterr().err
+
+
+def test_generate_warns_when_the_path_ends_before_seconds(trained, tmp_path, capsys):
+    """#27: an open path shorter than --seconds used to be cut short without a word."""
+    path = tmp_path / "short.csv"
+    path.write_text("0,0\n0.5,0\n1,0\n")
+    out = tmp_path / "short.bvh"
+    assert main(["generate", "--model", "quaternet-long", "--checkpoint", str(trained / "pose" / "checkpoint.npz"),
+                 "--pace", str(trained / "pace" / "checkpoint.npz"), "--path", str(path), "--speed", "walk",
+                 "--seconds", "30", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    frames = read_bvh(out).num_frames
+    assert frames < 900
+    assert f"warning: the path ends after {frames / 30:.1f} s" in err and "asked for 900 frames" in err
+    # a path long enough: no warning
+    assert main(["generate", "--model", "quaternet-long", "--checkpoint", str(trained / "pose" / "checkpoint.npz"),
+                 "--pace", str(trained / "pace" / "checkpoint.npz"), "--path", "circle:r=2", "--seconds", "1",
+                 "--out", str(out)]) == 0
+    assert "warning" not in capsys.readouterr().err

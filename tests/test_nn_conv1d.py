@@ -22,7 +22,7 @@ def _case(seed, batch, t_len, c_in, c_out, taps, dtype=np.float64):
     return params, x, gy
 
 
-# the golden set holds (K, d) = (2, 1), (2, 4), (3, 2); see ../shared/golden/README.md
+# the golden set holds (K, d) = (2, 1), (2, 4), (3, 2); see tests/golden/README.md
 @pytest.mark.parametrize("name", ["conv1d_causal_k2_d1", "conv1d_causal_k2_d4", "conv1d_causal_k3_d2"])
 def test_golden(name):
     """spec/layers.md §6 vs PyTorch nn.Conv1d on the left-padded input: y and the gradients of x, weight, bias."""

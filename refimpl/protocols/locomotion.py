@@ -19,6 +19,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from refimpl.motion import Motion
+from refimpl.protocols.locomotion_cache import load_pace_data, load_sequences, sequences_key
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                LocomotionSequence, build_sequences, load_bandai_namco, load_cmu_bvh,
                                                load_cmu_expmap)
@@ -201,6 +202,9 @@ class LocomotionDataset:
     pace_chunk_length : int
         Spline points per pace-network training chunk (0 = automatic: min(1000, median spline length)).
     fps : float
+    cache_key : str
+        The data-cache key of the sequences (:func:`refimpl.protocols.locomotion_cache.sequences_key`; "" = the
+        pace data are not cached).
     """
 
     sequences: tuple
@@ -210,6 +214,7 @@ class LocomotionDataset:
     target: int = 60
     pace_chunk_length: int = 0
     fps: float = FPS
+    cache_key: str = ""
 
     @property
     def skeleton(self) -> Skeleton:
@@ -226,14 +231,17 @@ class LocomotionDataset:
 
     def pace_data(self) -> list:
         """``(inputs (N, 2), targets (N, 4))`` of every sequence's spline (:func:`pace_training_data`); sequences
-        whose root does not move are skipped."""
-        out = []
-        for s in self.sequences:
-            try:
-                out.append(pace_training_data(sequence_spline(s)))
-            except ValueError:
-                continue
-        return out
+        whose root does not move are skipped. Through the data cache when the dataset has a ``cache_key``."""
+        def build():
+            out = []
+            for s in self.sequences:
+                try:
+                    out.append(pace_training_data(sequence_spline(s)))
+                except ValueError:
+                    continue
+            return out
+
+        return load_pace_data(self.cache_key, build) if self.cache_key else build()
 
 
 def _load_file(kind: str, path: str) -> tuple[Motion, LocomotionRig]:
@@ -247,21 +255,29 @@ def _load_file(kind: str, path: str) -> tuple[Motion, LocomotionRig]:
 def build_dataset(kind: str, files: Sequence[str], *, prefix: int = 30, target: int = 60, mirror: bool = True,
                   pace_chunk_length: int = 0, progress: Callable[[str], None] | None = None) -> LocomotionDataset:
     """Load ``files`` of one ``kind`` (:func:`resolve_files`) into a :class:`LocomotionDataset`
-    (:func:`build_sequences`: mirrored, every downsampling phase)."""
-    seqs, rig = [], None
-    for i, f in enumerate(files):
-        motion, rig = _load_file(kind, f)
-        seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
-        if progress is not None and (i + 1) % 100 == 0:
-            progress(f"  loaded {i + 1}/{len(files)} files")
-    if not seqs:
-        raise ValueError("files: no sequence loaded")
+    (:func:`build_sequences`: mirrored, every downsampling phase), through the data cache
+    (:mod:`refimpl.protocols.locomotion_cache`; ``REFIMPL_CACHE=off`` reads the files every time)."""
+    def read():
+        seqs, rig = [], None
+        for i, f in enumerate(files):
+            motion, rig = _load_file(kind, f)
+            seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
+            if progress is not None and (i + 1) % 100 == 0:
+                progress(f"  loaded {i + 1}/{len(files)} files")
+        if not seqs:
+            raise ValueError("files: no sequence loaded")
+        return seqs, rig
+
+    options = dict(kind=kind, mirror=bool(mirror), fps=FPS)
+    seqs, rig = load_sequences(files, read, sequence_type=LocomotionSequence, rigs=(BANDAI_NAMCO_RIG, CMU_RIG),
+                               options=options, progress=progress)
     ref = seqs[0].skeleton
     for s in seqs:
         if s.skeleton.num_joints != ref.num_joints or not np.allclose(s.skeleton.offsets, ref.offsets, atol=1e-6):
             raise ValueError(f"{s.name}: its skeleton differs from {seqs[0].name}'s; the FK loss needs one skeleton")
     return LocomotionDataset(tuple(seqs), rig, tuple(str(f) for f in files), int(prefix), int(target),
-                             int(pace_chunk_length))
+                             int(pace_chunk_length),
+                             cache_key=sequences_key(files, read, LocomotionSequence, options))
 
 
 # ------------------------------------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -334,6 +335,11 @@ def generate_command(args, model) -> int:
     m = walk.motion
     write_outputs(walk, bvh=out, gif=args.gif, png=args.png, controls=args.controls,
                   title=f"quaternet-long, {args.path}, {args.speed}")
+    asked = int(round(args.seconds * FPS))
+    if m.num_frames < asked:  # an open path ended before --seconds: say so (the motion is shorter)
+        print(f"refimpl generate: warning: the path ends after {m.num_frames / FPS:.1f} s at this speed; "
+              f"--seconds {args.seconds:g} asked for {asked} frames, the motion has {m.num_frames}",
+              file=sys.stderr, flush=True)
     rig = rig_of(pose_model.extra)
     feet = [m.skeleton.index(rig.left_foot), m.skeleton.index(rig.right_foot)]
     skate = foot_skating(m.positions(), feet)

@@ -303,7 +303,8 @@ def make_prediction(method: Callable, rotations, frame: int, prefix_length: int,
 
 def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: int = 10) -> list:
     """Draw a :class:`Prediction` (against its ground truth when it has one): the last ``context`` prefix frames
-    and the predicted ones, as a PNG strip and / or a GIF."""
+    and the predicted ones, as a PNG strip and / or a GIF, numbered as in the BVH the prediction is written to,
+    with a title (default: the method and the predicted frames)."""
     from refimpl.render import render_gif
     from refimpl.render_strip import render_strip
 
@@ -312,6 +313,8 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
     pred = pr.motion.positions()[a:]
     gt = pr.truth.positions()[a:] if pr.truth is not None else pred
     hl = (pr.start - a, pr.stop - a)
+    numbers = np.arange(a, a + pred.shape[0])  # the panels carry the BVH's frame numbers
+    title = title or f"{pr.method}: frames {pr.start}-{pr.stop - 1} predicted"
     labels = ("ground truth", pr.method) if pr.truth is not None else (pr.method, "")
     written = []
     if png:
@@ -319,10 +322,11 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
         frames = sorted(set([0, hl[0] - 1] + list(range(hl[0], hl[1], max(1, (hl[1] - hl[0]) // 6))) + [n - 1]))
         written.append(render_strip(png, gt, parents, prediction=pred if pr.truth is not None else None,
                                     frames=frames, highlight=hl, labels=labels, title=title,
-                                    frame_time=pr.motion.frame_time))
+                                    frame_time=pr.motion.frame_time, frame_numbers=numbers))
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred if pr.truth is not None else None,
-                                  fps=pr.motion.fps, highlight=hl, labels=labels, title=title))
+                                  fps=pr.motion.fps, highlight=hl, labels=labels, title=title,
+                                  frame_numbers=numbers))
     return written
 
 
@@ -434,7 +438,8 @@ def generate_command(args, model) -> int:
     elif args.truth:
         raise UsageError(f"--truth: {args.source} ends before the {k} predicted frames")
     if args.png or args.gif:
-        for f in render_prediction(pr, png=args.png, gif=args.gif):
+        title = f"{name}: frames {pr.start}-{pr.stop - 1} predicted from {Path(args.source).name}"
+        for f in render_prediction(pr, png=args.png, gif=args.gif, title=title):
             _say(f"wrote {f}")
     return 0
 

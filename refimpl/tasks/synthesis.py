@@ -8,6 +8,7 @@ Shape legend: T frames, F frame size, B batch, S seed frames, N generated frames
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 from typing import Mapping
 
@@ -131,8 +132,8 @@ def add_export_options(parser) -> None:
 
 
 def add_generate_options(parser) -> None:
-    """The task's options of ``refimpl generate``: none (``--source``, ``--source-frame`` (first seed frame),
-    ``--length`` (default 300) are common)."""
+    """The task's options of ``refimpl generate``: none (``--source``, ``--source-frame`` (first seed frame,
+    default 1: frame 0 is the reference T-pose), ``--length`` (default 300) are common)."""
 
 
 def resolve_data(data: str) -> tuple[Path, tuple, tuple]:
@@ -353,6 +354,11 @@ def eval_command(args, model) -> int:
         raise UsageError("--model acrnn: evaluation needs --checkpoint (the statistics and the representation)")
     _say(f"reading {args.data} ...")
     data = load_eval_data(args.data, model.extra)
+    seen = sorted(set(data.test_names) & set(model.extra.get("train_takes") or ()))
+    if seen:
+        print(f"refimpl eval: warning: take(s) {', '.join(seen)} of --data {args.data} were training takes of "
+              f"{args.checkpoint} (trained on {', '.join(model.extra.get('train_takes'))}): these scores are not "
+              "held-out (pass --data with the model's own test takes)", file=sys.stderr, flush=True)
     results = evaluate_model(model, data, onnx_dir=args.onnx)
     print_results(results, data, model)
     if args.json:
@@ -376,9 +382,10 @@ def generate_command(args, model) -> int:
     method = next(iter(networks.values()))
     n = args.length or 300
     out = args.out or "synthesis.bvh"
-    motion, seed_frames = continue_seed(method, model.extra, args.source, args.source_frame or 0, n)
+    start = 1 if args.source_frame is None else args.source_frame  # frame 0 of a CMU file: its reference T-pose
+    motion, seed_frames = continue_seed(method, model.extra, args.source, start, n)
     write_bvh(out, with_end_sites(in_source_units(motion)))   # the take's centimetres
-    _say(f"wrote {out}: {seed_frames} seed frames of {args.source} (from frame {args.source_frame or 0} at "
+    _say(f"wrote {out}: {seed_frames} seed frames of {args.source} (from frame {start} at "
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
          "centimetres (the take's units)")
     if args.png or args.gif:
