@@ -21,15 +21,18 @@ Algorithm, on the whole sequence ``p_{-1}, p_0 | G_1 … G_T | g1, g2`` (frames 
    when it reaches the target context, else its first frame ``s``. Its weight is 1 on the *hold* and falls to 0
    over ``n`` (:data:`FOOTLOCK_BLEND_FRAMES`) frames outside it with ``S(u) = 3u² − 2u³``: hold ``[s_h, e_h]``
    with ``s_h = max(s, start)`` (``max(s, start + n)`` when ``p = stop``, so that the blend in has room), and
-   ``e_h = stop − 1`` when ``p = stop``, else ``min(e, stop − 1 − n)`` (so that the blend out ends before
-   ``g1``); ``w(k) = min(S((k − s_h + m + 1)/(m + 1)), S((e_h + n + 1 − k)/(n + 1)))`` with
-   ``m = min(n, s_h − start)``, ``S`` clipped to ``[0, 1]``; ``w = 0`` outside ``[start, stop)``.
+   ``e_h = stop − 1`` when ``p = stop``, else ``min(e, stop − 2 − n)`` (so that the blend out ends at ``G_T``);
+   ``w(k) = min(S((k − s_h + m + 1)/(m + 1)), S((e_h + n + 1 − k)/(n + 1)))`` with ``m = min(n, s_h − start)``
+   when ``p = stop``, else ``m = 0`` (pinned where it lands, the foot needs no blend in), ``S`` clipped to
+   ``[0, 1]``; ``w = 0`` outside ``[start, stop)``.
 4. **targets**: with the runs' weights ``w_r`` at frame ``k``, ``W = Σ w_r`` and ``c = max(1, W)``, the ankle's
    target is ``x_a + Σ_r w_r (x_a[p_r] − x_a) / c`` with its height replaced by ``x_a``'s own (the pin holds
    the foot's horizontal position; heel lift and toe-off stay the motion's), and the foot's world rotation
    ``normalize((1 − W/c) Q_a + Σ_r w_r Q_a[p_r] / c)`` (each pin's quaternion in ``Q_a``'s hemisphere).
 5. **IK** (:func:`two_bone_ik`) moves the ankle onto its target; the ankle's local rotation is set to give the
-   target world rotation, so the toes follow the foot.
+   target world rotation, so the toes follow the foot. A target out of the leg's reach (the body has moved on
+   too far from the pin) gives the straight leg pointing at it: the foot is then dragged, and lifted off the
+   floor, until the run ends.
 
 Frames outside ``[start, stop)`` and frames where no leg has weight are returned bit for bit.
 
@@ -210,12 +213,12 @@ def lock_weights(contact, start: int, stop: int, blend_frames: int = FOOTLOCK_BL
     pad = np.pad(np.asarray(contact, bool), ((0, 0), (1, 1)))
     for b, s, e in _runs(pad):
         if s < start:
-            p, s_h, e_h = start - 1, start, min(e, stop - 1 - n)
+            p, s_h, e_h = start - 1, start, min(e, stop - 2 - n)
         elif e >= stop:
             p, s_h, e_h = stop, max(s, start + n), stop - 1
         else:
-            p, s_h, e_h = s, s, min(e, stop - 1 - n)
-        m = min(n, s_h - start)
+            p, s_h, e_h = s, s, min(e, stop - 2 - n)
+        m = min(n, s_h - start) if p == stop else 0  # a pin at the run's own start needs no blend in
         w = np.minimum(_smooth((k - s_h + m + 1) / (m + 1)), _smooth((e_h + n + 1 - k) / (n + 1)))
         w[:start], w[stop:] = 0.0, 0.0
         if np.any(w > 0):
