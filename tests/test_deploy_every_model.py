@@ -69,7 +69,7 @@ FILES = {"qtg": {"qtg_init.onnx", "qtg_step.onnx", "qtg_rollout.onnx"},
          "quaternet-dq": {"quaternet_init.onnx", "quaternet_step.onnx", "quaternet_predict.onnx"},
          "quaternet-cnn": {"quaternet-cnn_window.onnx"},
          "acrnn": {"acrnn_step.onnx", "acrnn_generate.onnx"},
-         "quaternet-long": {"quaternet-long_step.onnx", "quaternet-long_h0.npy"},
+         "quaternet-long": {"quaternet-long_step.onnx", "quaternet-long_h0.npy", "quaternet-long_seed.npy"},
          "pace": {"quaternet-long_pace.onnx"}}
 
 
