@@ -26,8 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from refimpl.errors import BadInputError, UsageError
-
 __all__ = ["add_run_options", "run_walk", "walk_exported"]
 
 _OPTIONS = ("pace", "speed", "seconds", "controls")
@@ -49,6 +47,8 @@ def walk_options_given(args) -> list:
 
 
 def _seconds(text) -> float:
+    from refimpl.errors import UsageError
+
     if text is None:
         return 10.0
     try:
@@ -60,6 +60,8 @@ def _seconds(text) -> float:
 def _pace_runtime(runtime, args):
     """The runtime holding the pace graph: ``--pace DIR``, else MODEL_DIR's; ``BadInputError`` when there is
     none or the folder holds another network."""
+    from refimpl.errors import BadInputError
+
     from deploy.models import model_name_of_dir
 
     if args.pace is None:
@@ -88,6 +90,7 @@ def _pace_runtime(runtime, args):
 def _step_parts(runtime, model_dir):
     """``(skeleton, seed (P, 4J + 8), dual, dq_scale)`` of the exported step model; ``BadInputError`` for a
     folder without a step model, its seed clip or its skeleton (exported by an older version)."""
+    from refimpl.errors import BadInputError
     from refimpl.skeleton import Skeleton
 
     if runtime.step_model is None:
@@ -144,7 +147,7 @@ def walk_exported(runtime, pace_runtime, path, speed: float, frames: int, model_
 
 def run_walk(runtime, args) -> int:
     """``run DIR PATH OUT.bvh|OUT.npy [--pace DIR] [--speed S] [--seconds T] [--controls C.json]``."""
-    from refimpl.errors import existing_file
+    from refimpl.errors import BadInputError, UsageError, existing_file
     from refimpl.tasks.locomotion import describe_walk, short_walk_warning, walk_options
     from refimpl.tasks.locomotion_generate import write_outputs
 
