@@ -343,7 +343,8 @@ def generate_command(args, model) -> int:
     if not args.checkpoint or not args.pace:
         raise UsageError("--model quaternet-long needs --checkpoint POSE.npz and --pace PACE.npz")
     if args.backend != "numpy":
-        raise UsageError("--model quaternet-long runs in NumPy (use `python -m deploy` for the exported models)")
+        raise UsageError("--model quaternet-long runs in NumPy (the exported models walk a path with `python -m "
+                         "deploy run ONNX_DIR PATH walk.bvh --pace PACE_DIR`)")
     walk_options(args.path, args.speed, args.seconds)  # option values and the path file before any work
     pose_model, pace_model = load_trained(args.checkpoint), load_trained(args.pace)
     walk = walk_from_checkpoints(pose_model, pace_model, args.path, args.speed, args.seconds)
