@@ -145,6 +145,9 @@ def test_bad_walk_invocations(exported, tmp_path, capsys):
             (no_seed / f.name).write_bytes(f.read_bytes())
     txt = tmp_path / "walk.txt"
     txt.write_text("1 2 3\n")
+    tiny, bad = tmp_path / "tiny.csv", tmp_path / "bad.csv"
+    tiny.write_text("0,0\n0.01,0\n")
+    bad.write_text("0,0\nx,1\n")
     cases = [(["circle:r=0", "--pace", pace], 2, "r:"),
              (["square", "--pace", pace], 2, "square"),
              (["circle", "--pace", pace, "--seconds", "0"], 2, "--seconds"),
@@ -155,6 +158,8 @@ def test_bad_walk_invocations(exported, tmp_path, capsys):
              (["circle", "--pace", pace, "--prefix", "3"], 2, "--prefix"),
              ([str(tmp_path / "absent.csv"), "--pace", pace], 3, "absent.csv"),
              ([str(txt), "--pace", pace], 3, "walk.txt"),
+             ([str(tiny), "--pace", pace], 3, "tiny.csv"),
+             ([str(bad), "--pace", pace], 3, "bad.csv:2"),
              (["circle", "--pace", str(tmp_path / "absent")], 3, "absent"),
              (["circle", "--pace", qn], 3, "quaternet"),
              (["circle", "--pace", long], 3, "pace"),

@@ -147,7 +147,7 @@ def walk_exported(runtime, pace_runtime, path, speed: float, frames: int, model_
 
 def run_walk(runtime, args) -> int:
     """``run DIR PATH OUT.bvh|OUT.npy [--pace DIR] [--speed S] [--seconds T] [--controls C.json]``."""
-    from refimpl.errors import BadInputError, UsageError, existing_file
+    from refimpl.errors import BadInputError, UsageError
     from refimpl.tasks.locomotion import describe_walk, short_walk_warning, walk_options
     from refimpl.tasks.locomotion_generate import write_outputs
 
@@ -164,16 +164,14 @@ def run_walk(runtime, args) -> int:
     if Path(text).suffix.lower() != ".csv" and Path(text).is_file():
         raise BadInputError(f"{text}: expected a path (circle[:r=M], figure8[:size=M], line-turn[:turn=DEG], a .csv "
                             "of x,z points) or .npy frames with controls")
-    if Path(text).suffix.lower() == ".csv":
-        existing_file(text)
     seconds = _seconds(args.seconds)
     path, speed, frames = walk_options(text, args.speed or "walk", seconds)
     pace_rt = _pace_runtime(runtime, args)
     _step_parts(runtime, args.model_dir)              # every file checked before the walk and before any write
     try:
         walk = walk_exported(runtime, pace_rt, path, speed, frames, args.model_dir)
-    except ValueError as exc:                          # e.g. an open path too short for one frame
-        raise UsageError(f"{text}: {exc}") from None
+    except ValueError as exc:                          # e.g. a path CSV too short for one frame: a bad file
+        raise (BadInputError if Path(text).suffix.lower() == ".csv" else UsageError)(f"{text}: {exc}") from None
     m = walk.motion
     if kind == ".npy":
         write_npy(out, np.concatenate([m.rotations.reshape(m.num_frames, -1), m.root_positions], axis=1))
