@@ -178,3 +178,16 @@ def test_bad_walk_invocations(exported, tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and word in err and "Traceback" not in err, (argv, err)
     assert not out.exists() and not (tmp_path / "w.txt").exists()
+
+
+def test_refimpl_generate_refuses_a_csv_path_too_short_for_a_frame(exported, tmp_path, capsys):
+    """``refimpl generate`` on a path CSV too short for one frame: exit 3 naming the file, as ``deploy run`` (it
+    used to end in exit 1 with the bare ValueError); nothing written."""
+    tiny = tmp_path / "tiny.csv"
+    tiny.write_text("0,0\n0.01,0\n")
+    out = tmp_path / "walk.bvh"
+    code = refimpl_main(["generate", "--model", "quaternet-long", "--checkpoint", str(exported["pose"]),
+                         "--pace", str(exported["pace"]), "--path", str(tiny), "--seconds", "2", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 3 and len(err) == 1 and "tiny.csv" in err[-1], err
+    assert not out.exists()

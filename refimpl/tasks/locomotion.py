@@ -347,7 +347,12 @@ def generate_command(args, model) -> int:
                          "deploy run ONNX_DIR PATH walk.bvh --pace PACE_DIR`)")
     walk_options(args.path, args.speed, args.seconds)  # option values and the path file before any work
     pose_model, pace_model = load_trained(args.checkpoint), load_trained(args.pace)
-    walk = walk_from_checkpoints(pose_model, pace_model, args.path, args.speed, args.seconds)
+    try:
+        walk = walk_from_checkpoints(pose_model, pace_model, args.path, args.speed, args.seconds)
+    except ValueError as exc:  # the path cannot be walked (too short for a frame): a bad file (CSV) or option
+        from refimpl.errors import BadInputError
+        raise (BadInputError if str(args.path).lower().endswith(".csv") else UsageError)(
+            f"--path {args.path}: {exc}") from None
     out = args.out or "walk.bvh"
     if not str(out).lower().endswith(".bvh"):
         raise UsageError(f"--out {out}: expected a .bvh file name")
