@@ -25,10 +25,13 @@ WALK_BVH = SAMPLE / "bvh" / "02_01.bvh"
 
 
 def _chain(rng, n):
+    """``n`` random chains hip → knee → ankle, their bone lengths and random unit directions."""
     hip = rng.normal(size=(n, 3))
     knee = hip + rng.normal(size=(n, 3))
     ankle = knee + rng.normal(size=(n, 3))
-    return hip, knee, ankle
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    return hip, knee, ankle, np.linalg.norm(knee - hip, axis=-1), np.linalg.norm(ankle - knee, axis=-1), u
 
 
 def _apply(hip, knee, ankle, rot_hip, rot_knee):
@@ -38,10 +41,7 @@ def _apply(hip, knee, ankle, rot_hip, rot_knee):
 
 def test_ik_reaches_a_reachable_target_and_keeps_bone_lengths():
     rng = np.random.default_rng(0)
-    hip, knee, ankle = _chain(rng, 2000)
-    l1, l2 = np.linalg.norm(knee - hip, axis=-1), np.linalg.norm(ankle - knee, axis=-1)
-    u = rng.normal(size=(2000, 3))
-    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    hip, knee, ankle, l1, l2, u = _chain(rng, 2000)
     r = np.abs(l1 - l2) + (l1 + l2 - np.abs(l1 - l2)) * rng.uniform(0.001, 0.999, 2000)
     target = hip + r[:, None] * u
     k2, a2 = _apply(hip, knee, ankle, *two_bone_ik(hip, knee, ankle, target))
@@ -56,10 +56,7 @@ def test_ik_reaches_a_reachable_target_and_keeps_bone_lengths():
 
 def test_an_unreachable_target_gives_the_straight_leg_pointing_at_it():
     rng = np.random.default_rng(1)
-    hip, knee, ankle = _chain(rng, 500)
-    l1, l2 = np.linalg.norm(knee - hip, axis=-1), np.linalg.norm(ankle - knee, axis=-1)
-    u = rng.normal(size=(500, 3))
-    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    hip, knee, ankle, l1, l2, u = _chain(rng, 500)
     target = hip + (l1 + l2 + rng.uniform(0.1, 5.0, 500))[:, None] * u
     k2, a2 = _apply(hip, knee, ankle, *two_bone_ik(hip, knee, ankle, target))
     np.testing.assert_allclose(k2, hip + l1[:, None] * u, atol=1e-9)
