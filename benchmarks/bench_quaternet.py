@@ -127,7 +127,7 @@ def main(argv=None) -> int:
     config = ShortTermConfig(hidden_size=256 if args.quick else 1000).network
     rng = np.random.default_rng(0)
     params = net.init_params(config, rng, dtype=np.float32)
-    from refimpl.quat import quat_from_axis_angle
+    from refimpl.rotations import quat_from_axis_angle
 
     frames = quat_from_axis_angle(0.3 * rng.standard_normal((60, 60, 32, 3))).astype(np.float32).reshape(60, 60, 128)
     try:

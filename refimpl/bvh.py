@@ -49,7 +49,8 @@ from refimpl._parsing import locate_bad_row
 from refimpl.atomic import atomic_write_text
 
 from refimpl.motion import TRANSLATION_TOLERANCE, Motion, simplify_translations
-from refimpl.quat import euler_from_quat, quat_fix, quat_from_euler
+from refimpl.quat import quat_fix
+from refimpl.rotations import euler_from_quat, quat_from_euler
 from refimpl.skeleton import Skeleton
 
 __all__ = ["BvhHeader", "read_bvh", "read_bvh_header", "write_bvh", "MAX_JOINTS", "MAX_DEPTH", "MAX_FRAME_VALUES"]

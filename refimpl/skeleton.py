@@ -33,9 +33,8 @@ import numpy as np
 
 from refimpl.dualquat import (dq_conj_kernel, dq_from_quat_translation_kernel,
                               dq_mul_kernel, dq_from_quat_translation, dq_mul, translation_from_dq)
-from refimpl.quat import (check_scalar, finite_output,
-                          quat_mul_kernel, quat_rotate_kernel, matrix_from_quat,
-                          quat_from_axis_angle, quat_mul, quat_rotate)
+from refimpl.quat import check_scalar, finite_output, quat_mul_kernel, quat_rotate_kernel, quat_mul, quat_rotate
+from refimpl.rotations import matrix_from_quat, quat_from_axis_angle
 
 __all__ = [
     "Skeleton",

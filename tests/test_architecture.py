@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS = {
     0: ["refimpl", "refimpl._parsing", "refimpl.atomic", "refimpl.datacache", "refimpl.testing", "refimpl.gradcheck",
         "refimpl.bounds"],
-    1: ["refimpl.quat", "refimpl.dualquat"],
+    1: ["refimpl.quat", "refimpl.rotations", "refimpl.dualquat"],
     2: ["refimpl.skeleton"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.expmap", "refimpl.skeletons", "refimpl.preprocess",
         "refimpl.representations", "refimpl.strategies", "refimpl.splines", "refimpl.augment"],

@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 
 import refimpl.losses as L
 from refimpl.gradcheck import check_gradients, check_vjp
-from refimpl.quat import euler_from_quat, quat_from_euler, quat_mul, quat_conj
+from refimpl.quat import quat_mul, quat_conj
+from refimpl.rotations import euler_from_quat, quat_from_euler
 from refimpl.skeleton import Skeleton, current_dq_from_local, positions_from_current_dq
 from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
 

@@ -14,7 +14,7 @@ from refimpl.cli import EXIT_OK, main
 from refimpl.gradcheck import check_vjp, numerical_gradient
 from refimpl.models import quaternet as net
 from refimpl.protocols import prediction as PP
-from refimpl.quat import quat_from_axis_angle
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.recipes import quaternet as rnn_recipe
 from refimpl.services import load_trained
 from refimpl.skeleton import Skeleton, current_dq_from_local

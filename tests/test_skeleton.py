@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 from refimpl.bvh import read_bvh
 from refimpl.dualquat import dq_from_quat_translation
 from refimpl.expmap import read_expmap
-from refimpl.quat import matrix_from_quat, quat_from_axis_angle, quat_mul, quat_normalize
+from refimpl.quat import quat_mul, quat_normalize
+from refimpl.rotations import matrix_from_quat, quat_from_axis_angle
 from refimpl.skeleton import (UNIT_TOLERANCE, Skeleton, _current_dq_from_local_naive, _forward_kinematics_naive,
                               current_dq_from_local,
                               local_from_current_dq, mirror, offsets_from_current_dq, positions_from_current_dq,

@@ -34,7 +34,7 @@ from refimpl.models import quaternet
 from refimpl.recipes import quaternet_long_dq
 from refimpl.nn.quat_layers import (axis_angle_to_quat_backward, axis_angle_to_quat_forward, euler_to_quat_backward,
                                     euler_to_quat_forward)
-from refimpl.quat import axis_angle_from_quat, euler_from_quat
+from refimpl.rotations import axis_angle_from_quat, euler_from_quat
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
 from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio

@@ -42,7 +42,7 @@ from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
 from refimpl.protocols.transition_join import JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table
 from refimpl.protocols.transition_quality import evaluate_quality, format_quality
-from refimpl.quat import quat_from_axis_angle
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
 from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
