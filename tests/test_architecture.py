@@ -13,7 +13,7 @@ LAYERS = {
     0: ["refimpl", "refimpl._parsing", "refimpl.atomic", "refimpl.datacache", "refimpl.testing", "refimpl.gradcheck",
         "refimpl.bounds"],
     1: ["refimpl.quat", "refimpl.rotations", "refimpl.dualquat"],
-    2: ["refimpl.skeleton"],
+    2: ["refimpl.skeleton", "refimpl.current_dq", "refimpl.mirroring"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.expmap", "refimpl.skeletons", "refimpl.preprocess",
         "refimpl.representations", "refimpl.strategies", "refimpl.splines", "refimpl.augment"],
     4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.dq_output_fast", "refimpl.dq_prediction",

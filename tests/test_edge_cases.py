@@ -456,7 +456,7 @@ def test_zero_length_bones_forward_kinematics():
 
 def test_zero_length_bones_offsets_from_dq():
     """spec/robustness.md §2.6: local offsets recovered from current DQs are exactly 0 for zero-length bones."""
-    from refimpl.skeleton import current_dq_from_local, offsets_from_current_dq, positions_from_current_dq
+    from refimpl.current_dq import current_dq_from_local, offsets_from_current_dq, positions_from_current_dq
 
     rot = _zb_rotations()
     cur = current_dq_from_local(rot, _ZB_OFFSETS, _ZB_PARENTS)
@@ -468,7 +468,7 @@ def test_zero_length_bones_offsets_from_dq():
 
 
 def _zb_dqs(seed, offsets=_ZB_OFFSETS):
-    from refimpl.skeleton import current_dq_from_local
+    from refimpl.current_dq import current_dq_from_local
 
     return current_dq_from_local(_zb_rotations(2, seed), offsets, _ZB_PARENTS)
 

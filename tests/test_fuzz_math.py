@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from refimpl import dualquat as DQ
+from refimpl import mirroring as MI
 from refimpl import quat as Q
 from refimpl import rotations as R
 from refimpl import skeleton as S
@@ -173,7 +174,7 @@ def test_remove_joints_wrong_typed_joints(joints):
 def test_random_rotate_about_up_bad_range(low, high):
     rot = Q.quat_identity((2, 3))
     with pytest.raises(ValueError):
-        S.random_rotate_about_up(rot, np.zeros((2, 3)), np.random.default_rng(0), low, high)
+        MI.random_rotate_about_up(rot, np.zeros((2, 3)), np.random.default_rng(0), low, high)
 
 
 def test_forward_kinematics_overflow_is_value_error():
@@ -203,5 +204,5 @@ def test_depth_levels_long_chain_is_fast():
 
     parents = [-1] + list(range(19999))
     t0 = time.perf_counter()
-    levels = S._depth_levels(np.array(parents))
+    levels = S.depth_levels(np.array(parents))
     assert len(levels) == 19999 and time.perf_counter() - t0 < 1.0

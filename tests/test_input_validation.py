@@ -420,7 +420,7 @@ def test_bad_parents(parents):
     ValueError naming ``parents``, in every function that takes them."""
     from refimpl.losses import dq_offset_loss_forward
     from refimpl.nn.kinematics_layers import forward_kinematics_forward
-    from refimpl.skeleton import current_dq_from_local
+    from refimpl.current_dq import current_dq_from_local
 
     calls = [lambda: current_dq_from_local(_uq(2, J), np.ones((J, 3)), parents),
              lambda: forward_kinematics_forward(_uq(2, J), np.zeros((2, 3)), np.ones((J, 3)), parents),
@@ -476,7 +476,7 @@ def test_skeleton_constructor_validation():
 
 def test_rotate_about_up_validation():
     """spec/robustness.md §3: rotate_about_up / random_rotate_about_up validate their arrays."""
-    from refimpl.skeleton import random_rotate_about_up, rotate_about_up
+    from refimpl.mirroring import random_rotate_about_up, rotate_about_up
 
     rot, pos = _uq(5, J), np.zeros((5, 3))
     with pytest.raises(ValueError):

@@ -17,7 +17,8 @@ from refimpl.protocols import prediction as PP
 from refimpl.rotations import quat_from_axis_angle
 from refimpl.recipes import quaternet as rnn_recipe
 from refimpl.services import load_trained
-from refimpl.skeleton import Skeleton, current_dq_from_local
+from refimpl.skeleton import Skeleton
+from refimpl.current_dq import current_dq_from_local
 from refimpl.tasks import prediction as pr
 from refimpl.testing import TOL_ORT_STEP, assert_close
 from refimpl.train import TrainContext

@@ -18,7 +18,8 @@ from refimpl.quat import quat_normalize
 from refimpl.rotations import TAIT_BRYAN_ORDERS, euler_from_quat, quat_from_axis_angle
 from refimpl.representations import (REPRESENTATIONS, decode, encode, fix_antipodal_frames, frame_size,
                                      positions_from_frames)
-from refimpl.skeleton import Skeleton, current_dq_from_local, remove_joints
+from refimpl.skeleton import Skeleton, remove_joints
+from refimpl.current_dq import current_dq_from_local
 from refimpl.skeletons import cmu_skeleton
 from refimpl.strategies import skeleton_arrays, unit_quaternions
 from refimpl.testing import assert_close, assert_quat_close

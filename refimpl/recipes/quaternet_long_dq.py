@@ -2,7 +2,7 @@
 §11): ``refimpl train --model quaternet-long --set output=dual_quaternion``.
 
 * :func:`dq_inputs` — windows ``[q (4J) | offset, height | controls]`` → ``[C (8J) | offset, height | controls]``:
-  each joint's current (root-relative) unit dual quaternion (Eq. 9-11, :func:`refimpl.skeleton.current_dq_from_local`,
+  each joint's current (root-relative) unit dual quaternion (Eq. 9-11, :func:`refimpl.current_dq.current_dq_from_local`,
   from the window's local quaternions after the augmentation's rotation and the skeleton's offsets), made
   antipodally continuous over the window's frames (:func:`refimpl.dualquat.dq_fix`, §5.1);
 * :func:`loss_and_grads` — ``L_pos + L_offset + L_quat + 0.01 · L_reg`` of the raw head output through
@@ -26,7 +26,7 @@ from refimpl.dualquat import dq_fix, translation_from_dq
 from refimpl.losses import WEIGHTS_QUATERNET_DQ
 from refimpl.models import quaternet
 from refimpl.quat import quat_normalize
-from refimpl.skeleton import current_dq_from_local, local_from_current_dq
+from refimpl.current_dq import current_dq_from_local, local_from_current_dq
 
 __all__ = ["dq_inputs", "loss_and_grads", "rollout", "decode", "bone_lengths"]
 

@@ -1,8 +1,8 @@
 """Fuzz campaign for the math API (spec/robustness.md §8).
 
-Calls every public function of ``refimpl.quat``, ``refimpl.rotations``, ``refimpl.dualquat`` and
-``refimpl.skeleton`` (the ``Skeleton`` constructor and methods included) with hostile arguments and checks the
-contract:
+Calls every public function of ``refimpl.quat``, ``refimpl.rotations``, ``refimpl.dualquat``, ``refimpl.skeleton``,
+``refimpl.current_dq`` and ``refimpl.mirroring`` (the ``Skeleton`` constructor and methods included) with hostile
+arguments and checks the contract:
 
 * the only exception that escapes is ``ValueError``;
 * nothing takes longer than ``--limit`` seconds (1 s; a ``SIGALRM`` at 5 × the limit stops a real hang);
@@ -53,7 +53,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 
+from refimpl import current_dq as CD  # noqa: E402
 from refimpl import dualquat as DQ  # noqa: E402
+from refimpl import mirroring as MI  # noqa: E402
 from refimpl import quat as Q  # noqa: E402
 from refimpl import rotations as R  # noqa: E402
 from refimpl import skeleton as S  # noqa: E402
@@ -184,17 +186,17 @@ def _targets():
                                    [("joints", "joints"), ("offsets", "offmode")])
     t["remove_joints"] = (lambda rotations, joints, offsets: S.remove_joints(_skeleton(), rotations, joints, offsets),
                           [("rotations", "rotJ"), ("joints", "joints"), ("offsets", "offmode")])
-    t["current_dq_from_local"] = (S.current_dq_from_local, [("rotations", "rotJ"), ("offsets", "offJ"),
+    t["current_dq_from_local"] = (CD.current_dq_from_local, [("rotations", "rotJ"), ("offsets", "offJ"),
                                                             ("parents", "parents")])
-    t["local_from_current_dq"] = (S.local_from_current_dq, [("dqs", "dqJ"), ("parents", "parents")])
-    t["offsets_from_current_dq"] = (S.offsets_from_current_dq, [("dqs", "dqJ"), ("parents", "parents")])
-    t["positions_from_current_dq"] = (S.positions_from_current_dq, [("dqs", "dqJ")])
-    t["mirror"] = (lambda rotations, root_positions, axis, mirror_offsets: S.mirror(
+    t["local_from_current_dq"] = (CD.local_from_current_dq, [("dqs", "dqJ"), ("parents", "parents")])
+    t["offsets_from_current_dq"] = (CD.offsets_from_current_dq, [("dqs", "dqJ"), ("parents", "parents")])
+    t["positions_from_current_dq"] = (CD.positions_from_current_dq, [("dqs", "dqJ")])
+    t["mirror"] = (lambda rotations, root_positions, axis, mirror_offsets: MI.mirror(
         _skeleton(), rotations, root_positions, axis, mirror_offsets),
         [("rotations", "rotJ"), ("root_positions", "root"), ("axis", "axis"), ("mirror_offsets", "mirror_offsets")])
-    t["rotate_about_up"] = (S.rotate_about_up, [("rotations", "rotJ"), ("root_positions", "root"),
+    t["rotate_about_up"] = (MI.rotate_about_up, [("rotations", "rotJ"), ("root_positions", "root"),
                                                 ("angle", "angle"), ("up", "axis")])
-    t["random_rotate_about_up"] = (lambda rotations, root_positions, low, high: S.random_rotate_about_up(
+    t["random_rotate_about_up"] = (lambda rotations, root_positions, low, high: MI.random_rotate_about_up(
         rotations, root_positions, np.random.default_rng(0), low, high),
         [("rotations", "rotJ"), ("root_positions", "root"), ("low", "lowhigh"), ("high", "lowhigh")])
     return t
