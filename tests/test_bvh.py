@@ -14,7 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from refimpl.bvh import BvhHeader, read_bvh, read_bvh_header, write_bvh
+from refimpl.bvh import BvhHeader, read_bvh, read_bvh_header
+from refimpl.bvh_write import write_bvh
 from refimpl.motion import Motion
 from refimpl.quat import quat_normalize
 from refimpl.rotations import TAIT_BRYAN_ORDERS, matrix_from_quat, quat_from_euler

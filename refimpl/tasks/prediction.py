@@ -392,7 +392,7 @@ def eval_command(args, model) -> int:
 
 def generate_command(args, model) -> int:
     """``refimpl generate`` on the prediction task: a prefix of ``--source`` -> ``--length`` frames, BVH out."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
 
     require_source(args)
     if args.backend == "numpy":

@@ -421,7 +421,7 @@ def _onnx_rate_and_length(onnx_dir, default_T: int) -> tuple[float, int]:
 def generate_command(args, model) -> int:
     """``refimpl generate`` on the transition task: frames s-1, s of ``--source`` and g, g+1 of ``--target``, the
     T frames between them from the network (``--method qtg``, NumPy or onnxruntime) or a baseline, BVH out."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
 
     require_source(args)
     if args.source_frame is None:
