@@ -114,8 +114,8 @@ def _refuse_to_replace_a_fuller_run(out: Path, n_steps: int) -> None:
 
 
 def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: int | None = None,
-             onnx: bool = True, render: bool = True, threads: int = 1, overwrite: bool = False,
-             say: Callable[[str], None] | None = None) -> DemoResult:
+             onnx: bool = True, render: bool = True, threads: int | str = 1, overwrite: bool = False,
+             say: Callable[[str], None] | None = None, on_step: Callable[..., None] | None = None) -> DemoResult:
     """Run the demo into ``out_dir`` (see the module docstring) and return what it wrote.
 
     Parameters
@@ -131,22 +131,25 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
         Override the number of training steps.
     onnx, render : bool
         Do the ONNX steps (export, verify, ONNX generation) / the pictures, when their dependencies are installed.
-    threads : int
-        BLAS threads (1: fastest for this network size, and deterministic).
+    threads : int or "auto"
+        BLAS threads (default 1; "auto": :class:`refimpl.threads.AutoThreads`; 0 leaves the pool as it is, which
+        is what ``refimpl demo`` passes: its ``--blas-threads`` already set it).
     overwrite : bool
         Replace the results of a longer demo in ``out_dir`` (otherwise ``UsageError``).
     say : callable, optional
         Receives each report line (default: print to stdout).
+    on_step : callable, optional
+        The training loop's per-step callback (``refimpl demo`` passes its :meth:`~refimpl.threads.AutoThreads.poll`).
     """
     say = say or (lambda line: print(line, flush=True))
     if not overwrite:
         _refuse_to_replace_a_fuller_run(Path(out_dir), steps if steps is not None else
                                         (QUICK_STEPS if quick else DEMO_STEPS))
-    with blas_threads(threads):
-        return _run(Path(out_dir), seed, quick, steps, onnx, render, say)
+    with blas_threads(threads) as auto:
+        return _run(Path(out_dir), seed, quick, steps, onnx, render, say, on_step or (auto and auto.poll))
 
 
-def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
+def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResult:
     from refimpl.protocols.transition import build_transition_datasets, load_source, sample_sources
 
     t_start = time.perf_counter()
@@ -188,7 +191,8 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
     result = train_model(spec, config, train_ds, test_ds, train_dir, steps=n_steps, batch_size=DEMO_BATCH,
                          lr=DEMO_LR, seed=seed, checkpoint_every=max(n_steps, 1),
                          validate_every=max(1, n_steps // 10), progress_every=max(1, n_steps // 20),
-                         progress=lambda line: print("      " + line, file=sys.stderr, flush=True))
+                         progress=lambda line: print("      " + line, file=sys.stderr, flush=True),
+                         on_step=on_step)
     files.update(checkpoint=train_dir / "checkpoint.npz", loss_log=train_dir / "loss.csv",
                  validation_log=train_dir / "loss_val.csv")
     losses = result.losses

@@ -24,7 +24,7 @@ LAYERS = {
         "refimpl.protocols.*"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
-        "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.run_options"],
+        "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.run_options", "refimpl.threads"],
     8: ["refimpl.cli", "refimpl.cli_info", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).
@@ -117,7 +117,8 @@ def test_deploy_is_imported_only_lazily_by_the_top_layer():
 
 #: deploy's command layer (``python -m deploy``): reads clips, checkpoints and options as ``refimpl``'s
 #: application layer does, so it may import layer 7 (tasks, recipes, services, errors, registry), inside functions.
-DEPLOY_COMMANDS = {"deploy.cli", "deploy.models.qtg_cli", "deploy.models.run_commands"}
+DEPLOY_COMMANDS = {"deploy.cli", "deploy.models.qtg_cli", "deploy.models.run_commands",
+                   "deploy.models.quaternet_long_walk"}
 
 
 def test_deploy_imports_only_lower_refimpl_layers():

@@ -239,13 +239,37 @@ def test_dq_bone_length_drift_is_zero_on_fk_positions():
     assert G.dq_bone_length_drift(p, sk)["max"] > 0.1
 
 
+@pytest.mark.parametrize("dq_scale", [None, "0.056444"])
+def test_deploy_run_walks_a_dq_export_like_refimpl_generate(trained, tmp_path, dq_scale):
+    """``python -m deploy run`` with an exported DQ step (the seed turned into current DQs with the metadata's
+    ``dq_scale``, the outputs decoded with Eq. 12) against ``refimpl generate`` on the same checkpoints."""
+    pytest.importorskip("onnxruntime")
+    from deploy.cli import main as deploy_main
+    pose = trained / "pose" / "checkpoint.npz"
+    if dq_scale is not None:  # DQ translations in metres: the walk must read dq_scale from the metadata
+        assert main(["train", "--model", "quaternet-long", *SMALL, "--set", f"dq_scale={dq_scale}", "--steps", "1",
+                     "--out", str(tmp_path / "pose_m")]) == 0
+        pose = tmp_path / "pose_m" / "checkpoint.npz"
+    for ck, folder in ((pose, "long"), (trained / "pace" / "checkpoint.npz", "pace")):
+        assert deploy_main(["export", str(ck), str(tmp_path / folder)]) == 0
+    assert main(["generate", "--model", "quaternet-long", "--checkpoint", str(pose),
+                 "--pace", str(trained / "pace" / "checkpoint.npz"), "--path", "circle:r=2", "--seconds", "1.5",
+                 "--out", str(tmp_path / "ref.bvh")]) == 0
+    assert deploy_main(["run", str(tmp_path / "long"), "circle:r=2", str(tmp_path / "walk.bvh"), "--pace",
+                        str(tmp_path / "pace"), "--seconds", "1.5"]) == 0
+    ref, got = read_bvh(tmp_path / "ref.bvh"), read_bvh(tmp_path / "walk.bvh")
+    assert got.num_frames == ref.num_frames == 45
+    scale = np.abs(ref.positions()).max()
+    assert np.abs(got.positions() - ref.positions()).max() <= 1e-4 * scale
+
+
 def test_export_step_with_eq13_in_the_graph(trained, tmp_path):
     """The exported DQ step (Eq. 13 per joint in the graph) against NumPy over 5 chained steps from h0; its
     outputs are unit dual quaternions; the task's ONNX rollout refuses a DQ step model (it takes DQ frames)."""
     pytest.importorskip("onnxruntime")
     from refimpl.services import export_onnx, load_trained, verify_onnx
     pose = load_trained(trained / "pose" / "checkpoint.npz")
-    assert set(export_onnx(pose, tmp_path)) == {"step", "h0"}
+    assert set(export_onnx(pose, tmp_path)) == {"step", "h0", "seed"}
     check = verify_onnx(pose, tmp_path, seed=1)
     assert check["ok"] and check["step"] < 1e-4
     from deploy.models import runtime_for_dir

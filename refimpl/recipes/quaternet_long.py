@@ -345,16 +345,19 @@ def extra_methods(model) -> dict:
 
 
 def export_inputs(model) -> dict:
-    """Keyword arguments of the exporter (``deploy.models.quaternet_long_io.export_dir``); quaternion and
-    dual-quaternion models (the step graph normalises each joint's 8 numbers with Eq. 13)."""
+    """Keyword arguments of the exporter (``deploy.models.quaternet_long_io.export_dir``): metadata, skeleton and
+    the seed clip that starts a walk; quaternion and dual-quaternion models (the step graph normalises each
+    joint's 8 numbers with Eq. 13; ``dq_scale`` in the metadata)."""
     if model.config.output not in ("quaternion", "dual_quaternion"):
         raise UsageError(f"export: only quaternion- and dual-quaternion-output models are exported (this one: "
                          f"{model.config.output})")
     from refimpl.tasks.locomotion import skeleton_of
 
-    return {"metadata": {"frame_rate": float(model.fps or 30.0),
-                         "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}},
-            "skeleton": skeleton_of(model.extra)}
+    metadata = {"frame_rate": float(model.fps or 30.0),
+                "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}}
+    if model.config.output == "dual_quaternion":  # the DQs' translation unit, for a walk from the exported step
+        metadata["dq_scale"] = float(model.config.dq_scale)
+    return {"metadata": metadata, "skeleton": skeleton_of(model.extra), "seed_clip": model.extra.get("seed_clip")}
 
 
 def reference_outputs(model, x, state=None):
