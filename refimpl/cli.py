@@ -60,7 +60,7 @@ from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_
 from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
 from refimpl.services import (blas_threads, export_onnx, load_trained, onnx_metadata, read_motion, train_model,
                               verify_onnx)
-from refimpl.train import check_resumable, output_lock
+from refimpl.train_files import check_resumable, output_lock
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
 

@@ -247,7 +247,7 @@ def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResul
         say("[5/7] verify: skipped")
 
     # 6. generate ----------------------------------------------------------------------------------------
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
 
     say("[6/7] generate: transitions written as BVH (22 joints, centimetres, 30 fps)")
     methods = network_methods(model, onnx_dir=onnx_dir if onnx else None)  # qtg (NumPy), qtg_onnx

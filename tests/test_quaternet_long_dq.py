@@ -8,7 +8,7 @@ import numpy as np
 from refimpl.dualquat import dq_conj, dq_mul, dq_normalize, translation_from_dq
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.losses import WEIGHTS_QUATERNET_DQ
-from refimpl.models import quaternet
+from refimpl.models import quaternet, quaternet_sequence
 from refimpl.quat import quat_conj, quat_mul, quat_normalize
 from refimpl.recipes import quaternet_long as recipe
 from refimpl.recipes import quaternet_long_dq as dqr
@@ -122,7 +122,7 @@ def _loop_loss(pre, y, target, dtr, parents):
 
 def test_loss_and_grads_against_the_slow_loop_oracles():
     """The value equals a per-(b, t, j) loop over the public DQ functions; the gradients equal the per-step
-    oracle of the network (``quaternet._backward_per_step``, no vectorised prefix) fed the same cotangents (the
+    oracle of the network (``quaternet_sequence._backward_per_step``, no vectorised prefix) fed the same cotangents (the
     loss's ``dpre`` and only translation cotangents in ``dy``)."""
     from refimpl.dq_output import dq_output_loss_backward, dq_output_loss_forward
     rng = np.random.default_rng(5)
@@ -131,7 +131,7 @@ def test_loss_and_grads_against_the_slow_loop_oracles():
     x, P = batch["inputs"], batch["prefix"]
     B, L, _ = x.shape
     T, J = L - P, net.num_joints
-    y, pre, _ = quaternet.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
+    y, pre, _ = quaternet_sequence.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
     target = x[:, P:, :8 * J].reshape(B, T, J, 8)
     dtr = y[..., 8 * J:] - batch["target_translations"]
     assert np.isclose(value, _loop_loss(pre.reshape(B, T, J, 8), y[..., :8 * J].reshape(B, T, J, 8), target, dtr,
@@ -140,7 +140,7 @@ def test_loss_and_grads_against_the_slow_loop_oracles():
     dpre = dq_output_loss_backward(1.0, dc).reshape(B, T, 8 * J)
     dy = np.zeros_like(y)
     dy[..., 8 * J:] = np.sign(dtr) / (B * T)
-    slow, _, _ = quaternet._backward_per_step(dy, dpre, params, x[:, :P], x[:, P:], batch["mask"], net)
+    slow, _, _ = quaternet_sequence._backward_per_step(dy, dpre, params, x[:, :P], x[:, P:], batch["mask"], net)
     assert set(slow) == set(grads)
     for k in grads:
         assert np.allclose(grads[k], slow[k], rtol=1e-10, atol=1e-13), k

@@ -63,7 +63,7 @@ def add_prediction_run_options(group) -> None:
 def run_prediction(runtime, args) -> int:
     """QuaterNet: ``run DIR IN.txt OUT.bvh|OUT.npy --start S [--frames k] [--prefix P]``: the ``k`` frames after
     frame ``S`` (default: the last possible) predicted from the ``P`` frames ending at ``S``."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
     from refimpl.tasks import prediction
 
     model = runtime.predict_model if getattr(runtime, "predict_model", None) is not None else None
@@ -95,7 +95,7 @@ def run_prediction(runtime, args) -> int:
 def run_synthesis(runtime, args) -> int:
     """acRNN: ``run DIR TAKE.bvh OUT.bvh|OUT.npy [--start S] [--frames N]``: the 10 seed frames from ``S``
     continued for ``N`` frames (default 300)."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
     from refimpl.tasks import synthesis
     from refimpl.tasks.transition_generate import with_end_sites
 

@@ -353,7 +353,7 @@ def predict_with(network, spline, average_speed: float, points_per_unit: float =
 
 def _forward_naive(params, config: PaceConfig, x: np.ndarray) -> np.ndarray:
     """Loop oracle for :func:`forward`: the GRU's per-gate loop and one ``W h + b`` per point."""
-    from refimpl.nn.gru import gru_forward_naive
+    from refimpl.nn.gru_naive import gru_forward_naive
     batch, n, _ = x.shape
     h0 = np.repeat(params["h0"], batch, axis=1)
     seq = x if config.bidirectional else np.concatenate(
@@ -370,7 +370,7 @@ def _forward_naive(params, config: PaceConfig, x: np.ndarray) -> np.ndarray:
 
 def _backward_naive(dy: np.ndarray, params, config: PaceConfig, x: np.ndarray):
     """Loop oracle for :func:`backward` (recomputes the forward): ``(dx, grads)``."""
-    from refimpl.nn.gru import gru_backward_naive, gru_forward_naive
+    from refimpl.nn.gru_naive import gru_backward_naive, gru_forward_naive
     batch, n, _ = x.shape
     h0 = np.repeat(params["h0"], batch, axis=1)
     seq = x if config.bidirectional else np.concatenate(

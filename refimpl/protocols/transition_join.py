@@ -36,7 +36,8 @@ import numpy as np
 from refimpl.protocols.transition_footlock import FootLocked
 from refimpl.protocols.transition_baselines import check_context, check_length, quintic_inertialization
 from refimpl.nn.params import check_float_array
-from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul
+from refimpl.quat import quat_conj, quat_mul
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.protocols.transition import join_pose, split_pose
 
 __all__ = ["JOIN_MODES", "EXPORT_JOIN_MODES", "JOIN_BLEND_FRAMES", "check_join", "check_export_join",

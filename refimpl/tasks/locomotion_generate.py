@@ -340,7 +340,7 @@ def write_outputs(walk: GeneratedWalk, *, bvh=None, gif=None, png=None, controls
                   gif_stride: int = 2) -> list:
     """Write the BVH (centimetres, End Sites added below leaves), the pictures (the path drawn under the
     character) and the per-frame controls JSON."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
     from refimpl.tasks.transition_generate import with_end_sites
 
     written = []

@@ -42,7 +42,7 @@ from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
 from refimpl.protocols.transition_join import EXPORT_JOIN_MODES, JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table
 from refimpl.protocols.transition_quality import evaluate_quality, format_quality
-from refimpl.quat import quat_from_axis_angle
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
 from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
@@ -426,7 +426,7 @@ def _onnx_rate_and_length(onnx_dir, default_T: int) -> tuple[float, int]:
 def generate_command(args, model) -> int:
     """``refimpl generate`` on the transition task: frames s-1, s of ``--source`` and g, g+1 of ``--target``, the
     T frames between them from the network (``--method qtg``, NumPy or onnxruntime) or a baseline, BVH out."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
 
     require_source(args)
     if args.source_frame is None:
