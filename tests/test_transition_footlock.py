@@ -16,7 +16,8 @@ from refimpl.protocols.transition_footlock import (FootLocked, detect_contacts, 
 from refimpl.protocols.transition_join import check_export_join, with_join
 from refimpl.protocols.transition_metrics import evaluate_methods, positions_from_poses
 from refimpl.protocols.transition_quality import evaluate_quality, foot_joints, window_quality
-from refimpl.quat import quat_from_axis_angle, quat_mul, quat_rotate
+from refimpl.quat import quat_mul, quat_rotate
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.skeleton import Skeleton
 
 DT = 1.0 / 30.0

@@ -49,7 +49,8 @@ from refimpl.nn.params import check_float_array
 from refimpl.protocols.transition import join_pose, split_pose
 from refimpl.protocols.transition_baselines import check_context, check_length
 from refimpl.protocols.transition_quality import foot_joints
-from refimpl.quat import hemisphere_sign, quat_conj, quat_from_axis_angle, quat_mul, quat_rotate
+from refimpl.quat import hemisphere_sign, quat_conj, quat_mul, quat_rotate
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.skeleton import Skeleton
 
 __all__ = ["FOOTLOCK_HEIGHT_CM", "FOOTLOCK_SPEED_CM_S", "FOOTLOCK_BLEND_FRAMES", "LegChain", "leg_chains", "two_bone_ik",
