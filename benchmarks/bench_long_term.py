@@ -21,9 +21,9 @@ What is timed, float32, ``--threads`` BLAS / intra-op threads for every framewor
 
 Before timing, the PyTorch models are checked against NumPy with the same weights: the long-term network's
 teacher-forced predictions and every parameter's gradient of the L1 loss on them (NumPy through
-``quaternet.backward``), the long-term step (PyTorch and onnxruntime), the pace network's outputs, and in float64 its L1
-loss and every gradient of it (the recipe's ``loss_and_grads``) (max error relative to the largest magnitude of each array;
-float32 precision, < 1e-4 required). Variants are interleaved per round (order rotated, 0.15 s of settling between
+``quaternet_sequence.backward``), the long-term step (PyTorch and onnxruntime), the pace network's outputs, and in
+float64 its L1 loss and every gradient of it (the recipe's ``loss_and_grads``) (max error relative to the largest
+magnitude of each array; float32 precision, < 1e-4 required). Variants are interleaved per round (order rotated, 0.15 s of settling between
 variants); each round's time is the median of ``--steps`` calls (training) or of blocks of 20 calls (inference);
 ratios NumPy / PyTorch are paired per round. Nothing asserts on time.
 
@@ -51,7 +51,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_threads import adapter_case, training_step  # noqa: E402
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
-from refimpl.models import pace, quaternet  # noqa: E402
+from refimpl.models import pace, quaternet, quaternet_sequence  # noqa: E402
 
 SETTLE = 0.15
 TOL = 1e-4
@@ -126,14 +126,14 @@ def _torch_pace(torch, params, config):
 
 def _long_term_grad_check(torch, params, net, x, P, mask) -> dict:
     """Both frameworks' gradients of the same L1 loss on the teacher-forced outputs (the benchmark's PyTorch loss):
-    NumPy through ``quaternet.forward`` / ``backward`` (the code the FK loss of the recipe also runs)."""
+    NumPy through ``quaternet_sequence.forward`` / ``backward`` (the code the FK loss of the recipe also runs)."""
     fwd, _, t_params = _torch_long_term(torch, params, net)
     G = net.output_size
     target = np.ascontiguousarray(x[:, P:, :G])
     loss_t = (fwd(torch.from_numpy(x), P) - torch.from_numpy(target)).abs().mean()
     loss_t.backward()
-    y, pre, cache = quaternet.forward(params, x[:, :P], x[:, P:], mask, net)
-    grads = quaternet.backward((np.sign(y - target) / y.size).astype(y.dtype), None, cache)
+    y, pre, cache = quaternet_sequence.forward(params, x[:, :P], x[:, P:], mask, net)
+    grads = quaternet_sequence.backward((np.sign(y - target) / y.size).astype(y.dtype), None, cache)
     names = ["fc1.weight", "fc1.bias", "fc2.weight", "fc2.bias"] + [
         f"rnn.{n}_l{k}" for k in range(net.num_layers) for n in ("weight_ih", "weight_hh", "bias_ih", "bias_hh")] + [
         "fc.weight", "fc.bias", "h0"]
@@ -208,7 +208,7 @@ def main(argv=None) -> dict:
     assert bool(np.all(batch["mask"])), "epoch 0 should be all teacher forcing"
     B, Lx, _ = x.shape
     t_fwd, t_step, t_params = _torch_long_term(torch, params, net)
-    y_np = quaternet.forward(params, x[:, :P], x[:, P:], batch["mask"], net)[0]
+    y_np = quaternet_sequence.forward(params, x[:, :P], x[:, P:], batch["mask"], net)[0]
     xt = torch.from_numpy(x)
     with torch.no_grad():
         y_t = t_fwd(xt, P).numpy()

@@ -65,7 +65,8 @@ from deploy.runtime import make_session  # noqa: E402
 from deploy.validate import validate_model  # noqa: E402
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.models.qtg import QTGConfig, init_params, init_state, step  # noqa: E402
-from refimpl.models.qtg_fast import prepare_inference, rollout_forward, rollout_inference  # noqa: E402
+from refimpl.models.qtg_fast import rollout_forward  # noqa: E402
+from refimpl.models.qtg_fast_inference import prepare_inference, rollout_inference  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.nn.gru import gru_init, gru_step_forward  # noqa: E402
 from refimpl.quat import quat_normalize  # noqa: E402

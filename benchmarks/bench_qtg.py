@@ -51,8 +51,8 @@ sys.path.insert(0, str(ROOT))
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.models.qtg import (QTGConfig, count_parameters, init_params, macs_per_frame,  # noqa: E402
                                 rtn_macs_per_frame)
-from refimpl.models.qtg_fast import (prepare_inference, rollout_backward, rollout_forward,  # noqa: E402
-                                     rollout_inference)
+from refimpl.models.qtg_fast import rollout_backward, rollout_forward  # noqa: E402
+from refimpl.models.qtg_fast_inference import prepare_inference, rollout_inference  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.losses import mae_loss_backward, mae_loss_forward  # noqa: E402
 from refimpl.optim import QTG_ADAM, adam_init, adam_step  # noqa: E402

@@ -38,6 +38,7 @@ from deploy.runtime import load_model  # noqa: E402
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.models import quaternet as net  # noqa: E402
+from refimpl.models import quaternet_sequence  # noqa: E402
 from refimpl.recipes.quaternet import ShortTermConfig, loss_terms  # noqa: E402
 
 
@@ -127,7 +128,7 @@ def main(argv=None) -> int:
     config = ShortTermConfig(hidden_size=256 if args.quick else 1000).network
     rng = np.random.default_rng(0)
     params = net.init_params(config, rng, dtype=np.float32)
-    from refimpl.quat import quat_from_axis_angle
+    from refimpl.rotations import quat_from_axis_angle
 
     frames = quat_from_axis_angle(0.3 * rng.standard_normal((60, 60, 32, 3))).astype(np.float32).reshape(60, 60, 128)
     try:
@@ -168,9 +169,9 @@ def main(argv=None) -> int:
     target = frames[:, 50:].reshape(60, 10, 32, 4)
 
     def np_train():
-        y, pre, cache = net.forward(params, frames[:, :50], frames[:, 50:], np.ones(9, bool), config)
+        y, pre, cache = quaternet_sequence.forward(params, frames[:, :50], frames[:, 50:], np.ones(9, bool), config)
         _, _, dy, dpre = loss_terms(y, pre, target, scfg)
-        net.backward(dy, dpre, cache)
+        quaternet_sequence.backward(dy, dpre, cache)
 
     cases.append(("train iter B=60 numpy", np_train))
     if tm is not None:

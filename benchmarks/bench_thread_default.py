@@ -5,7 +5,8 @@ idle machine and with two other CPU-bound processes running. This runs the comma
 ``python -m refimpl [--blas-threads N] train --out DIR --steps S`` (QTG on the embedded sample, the recipe's
 default network), as a subprocess, for each setting:
 
-* ``default`` — no ``--blas-threads`` flag (whatever the parser's default is now);
+* ``default`` — no ``--blas-threads`` flag (whatever the parser's default is now: ``auto``, which measures what
+  other processes use and sets the thread count from it, refimpl/threads.py; the counts it chose are recorded);
 * ``1`` and ``2`` — the flag given.
 
 Each setting runs under two conditions: ``alone`` (nothing started by the benchmark; the machine may still be
@@ -14,9 +15,10 @@ starts two Python processes that spin on the CPU, bounded by ``--hog-seconds``, 
 The time per step is the median of the per-step differences of ``elapsed_s`` in the run's ``loss.csv`` after
 ``--skip`` warm-up steps, so start-up (imports, data) is not counted. Settings alternate order between rounds.
 The children's environment has ``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS`` and ``MKL_NUM_THREADS`` removed,
-so only the command line decides the thread count. Nothing asserts on time.
+so only the command line decides the thread count. Nothing asserts on time. ``--conditions`` runs only some
+conditions (e.g. ``2hogs`` now and ``alone`` later, when the machine is idle), each into its own ``--out``.
 
-    python benchmarks/bench_thread_default.py [--rounds 2] [--steps 30] [--out benchmarks/results/bench_thread_default.json]
+    python benchmarks/bench_thread_default.py [--rounds 2] [--steps 30] [--conditions alone,2hogs] [--out FILE.json]
 
 Prints a table (median ms per step, steps/s, the ratio to the fastest setting of the same condition, the load
 average before each run) and writes the JSON.
@@ -41,6 +43,7 @@ from refimpl.atomic import atomic_write_text  # noqa: E402
 
 SETTINGS = ("default", "1", "2")
 CONDITIONS = ("alone", "2 hogs")
+_AUTO_LINE = "BLAS threads (auto): "
 _HOG = "import time\nend = time.time() + {s}\nx = 0\nwhile time.time() < end:\n    x += 1\n"
 
 
@@ -70,8 +73,9 @@ def run_once(setting: str, steps: int, skip: int, timeout: float) -> dict:
         if proc.returncode != 0:
             raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {proc.stderr.strip()[-300:]}")
         dts = _step_times(Path(d) / "loss.csv", skip)
+    auto = [line[len(_AUTO_LINE):] for line in proc.stdout.splitlines() if line.startswith(_AUTO_LINE)]
     return dict(setting=setting, step_ms=1e3 * statistics.median(dts), steps_timed=len(dts), wall_s=wall,
-                load_before=load0, load_after=os.getloadavg()[0])
+                load_before=load0, load_after=os.getloadavg()[0], auto_threads=auto[0] if auto else None)
 
 
 def _start_hogs(n: int, seconds: float) -> list[subprocess.Popen]:
@@ -96,15 +100,22 @@ def main(argv=None) -> int:
     ap.add_argument("--hog-seconds", type=float, default=900.0,
                     help="upper bound on each CPU hog's life (they are ended after every run; default 900)")
     ap.add_argument("--timeout", type=float, default=900.0, help="upper bound on one run (default 900 s)")
+    ap.add_argument("--conditions", default="alone,2hogs",
+                    help="comma-separated conditions to run: alone, 2hogs (default both)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_thread_default.json"))
     a = ap.parse_args(argv)
+    names = {"alone": "alone", "2hogs": "2 hogs"}
+    try:
+        conditions = [names[c.strip()] for c in a.conditions.split(",")]
+    except KeyError:
+        ap.error(f"--conditions: expected a comma-separated list of alone, 2hogs; got {a.conditions!r}")
 
     from refimpl.cli import build_parser
 
     default = build_parser().get_default("blas_threads")
     runs = []
     for r in range(a.rounds):
-        for cond in CONDITIONS:
+        for cond in conditions:
             order = SETTINGS if r % 2 == 0 else SETTINGS[::-1]
             for setting in order:
                 hogs = _start_hogs(2, a.hog_seconds) if cond == "2 hogs" else []
@@ -116,27 +127,30 @@ def main(argv=None) -> int:
                     _stop(hogs)
                 res.update(round=r, condition=cond)
                 runs.append(res)
+                chose = f", auto chose {res['auto_threads']}" if res["auto_threads"] else ""
                 print(f"round {r} {cond:7s} threads {setting:7s} {res['step_ms']:8.1f} ms/step "
-                      f"(load {res['load_before']:.1f} -> {res['load_after']:.1f}, wall {res['wall_s']:.0f} s)",
-                      flush=True)
+                      f"(load {res['load_before']:.1f} -> {res['load_after']:.1f}, wall {res['wall_s']:.0f} s"
+                      f"{chose})", flush=True)
 
     summary = {}
     print(f"\n--blas-threads default of the command line: {default}; {a.steps} steps per run, median after "
           f"{a.skip}; {a.rounds} rounds")
     print(f"| condition | setting | ms/step (median of rounds) | steps/s | / fastest | load before each run |")
     print("|---|---|---|---|---|---|")
-    for cond in CONDITIONS:
+    for cond in conditions:
         med = {s: statistics.median(x["step_ms"] for x in runs if x["condition"] == cond and x["setting"] == s)
                for s in SETTINGS}
         best = min(med.values())
         for s in SETTINGS:
             loads = [round(x["load_before"], 1) for x in runs if x["condition"] == cond and x["setting"] == s]
             label = f"default ({default})" if s == "default" else s
-            summary.setdefault(cond, {})[s] = dict(step_ms=med[s], ratio_to_fastest=med[s] / best, loads=loads)
+            chose = [x["auto_threads"] for x in runs if x["condition"] == cond and x["setting"] == s]
+            summary.setdefault(cond, {})[s] = dict(step_ms=med[s], ratio_to_fastest=med[s] / best, loads=loads,
+                                                   **({"auto_threads": chose} if s == "default" else {}))
             print(f"| {cond} | {label} | {med[s]:.1f} | {1e3 / med[s]:.1f} | {med[s] / best:.2f} | "
                   f"{', '.join(map(str, loads))} |")
     out = dict(command="python -m refimpl [--blas-threads N] train --out DIR --steps %d" % a.steps,
-               default_blas_threads=default, rounds=a.rounds, steps=a.steps, skip=a.skip,
+               default_blas_threads=default, conditions=conditions, rounds=a.rounds, steps=a.steps, skip=a.skip,
                cpu_count=os.cpu_count(), time_utc=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                summary=summary, runs=runs)
     atomic_write_text(a.out, json.dumps(out, indent=1) + "\n", make_parents=True)

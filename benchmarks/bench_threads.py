@@ -87,7 +87,7 @@ def _inference_case(name: str, params, config):
     """``(fn, description)``: batch-1 inference of ``name``'s network, or None."""
     rng = np.random.default_rng(2)
     if name == "qtg":
-        from refimpl.models.qtg_fast import prepare_inference, rollout_inference
+        from refimpl.models.qtg_fast_inference import prepare_inference, rollout_inference
         lean = prepare_inference(params, config)
         past = rng.standard_normal((1, 2, config.pose_size)).astype(np.float32)
         target = rng.standard_normal((1, 2, config.pose_size)).astype(np.float32)

@@ -65,7 +65,7 @@ def _offset_drift(model, data) -> dict:
     on the standard walking windows: how far the unsupervised dual parts drift when the network runs free."""
     from refimpl.dq_prediction import dq_frames_from_rotations
     from refimpl.models import quaternet as net
-    from refimpl.skeleton import local_from_current_dq
+    from refimpl.current_dq import local_from_current_dq
 
     protocol = PP.table2_protocol(data, "standard", actions=("walking",))
     prefix, _, _ = PP.evaluation_windows(data, "walking", protocol)

@@ -12,10 +12,14 @@ Layers, losses and models keep their namespaces, because their names are only me
 import importlib
 
 from .quat import *  # noqa: F401,F403
+from .rotations import *  # noqa: F401,F403
 from .dualquat import *  # noqa: F401,F403
 from .skeleton import *  # noqa: F401,F403
+from .current_dq import *  # noqa: F401,F403
+from .mirroring import *  # noqa: F401,F403
 from .motion import *  # noqa: F401,F403
 from .bvh import *  # noqa: F401,F403
+from .bvh_write import *  # noqa: F401,F403
 from .expmap import *  # noqa: F401,F403
 from .skeletons import *  # noqa: F401,F403
 from .preprocess import *  # noqa: F401,F403
@@ -27,7 +31,7 @@ from . import nn, losses, models, representations  # noqa: F401  (namespaces)
 
 __version__ = "0.1.0"
 
-__all__ = [name for mod in ("quat", "dualquat", "skeleton", "motion", "bvh", "expmap", "skeletons", "preprocess",
-                            "optim", "schedules", "checkpoint")
+__all__ = [name for mod in ("quat", "rotations", "dualquat", "skeleton", "current_dq", "mirroring", "motion", "bvh",
+                            "bvh_write", "expmap", "skeletons", "preprocess", "optim", "schedules", "checkpoint")
            for name in importlib.import_module(f"{__name__}.{mod}").__all__]
 __all__ += ["nn", "losses", "models", "representations", "__version__"]

@@ -54,12 +54,13 @@ from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
 from refimpl.bounds import bounded_int
+from refimpl.threads import AUTO, threads_option
 from refimpl.options import add_data_options, beta, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
 from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
 from refimpl.services import (blas_threads, export_onnx, load_trained, onnx_metadata, read_motion, train_model,
                               verify_onnx)
-from refimpl.train import check_resumable, output_lock
+from refimpl.train_files import check_resumable, output_lock
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
 
@@ -159,15 +160,23 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
                          dtype=np.dtype(args.dtype).type, resume=args.resume,
                          checkpoint_every=args.checkpoint_every, validate_every=args.validate_every,
                          progress_every=args.progress_every, progress=_progress_line,
-                         run_options=run_options(args, _resumable(args)))
+                         run_options=run_options(args, _resumable(args)), on_step=_thread_poll(args))
     last = float(np.mean(result.losses[-20:])) if result.losses else float("nan")
     _say(f"{'interrupted' if result.interrupted else 'done'}: step {result.step}, epoch {result.epoch}, "
          f"recent loss {last:.5g}, {result.elapsed_s:.1f} s")
+    if getattr(args, "blas_auto", None) is not None:
+        _say(f"BLAS threads (auto): {' -> '.join(map(str, args.blas_auto.applied))}")
     _say(f"checkpoint  {result.checkpoint_path}")
     _say(f"loss log    {out / 'loss.csv'}" + (f", {out / 'loss_val.csv'}" if args.validate_every else ""))
     if result.interrupted:
         return 128 + int(getattr(result, "signal", None) or 2)  # 130 for SIGINT / Ctrl-C, 143 for SIGTERM
     return EXIT_OK
+
+
+def _thread_poll(args):
+    """The per-step hook of a training run: ``--blas-threads auto``'s poll (main sets ``args.blas_auto``), or None."""
+    auto = getattr(args, "blas_auto", None)
+    return None if auto is None else auto.poll
 
 
 def _check_model_option(args, model) -> None:
@@ -311,7 +320,8 @@ def cmd_demo(args) -> int:
     from refimpl.demo import run_demo
 
     run_demo(args.out, seed=args.seed, quick=args.quick, steps=args.steps, onnx=not args.no_onnx,
-             render=not args.no_render, overwrite=args.overwrite)
+             render=not args.no_render, overwrite=args.overwrite, threads=0,
+             on_step=_thread_poll(args))  # the pool is --blas-threads' (main)
     return EXIT_OK
 
 
@@ -332,11 +342,12 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
     parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=bounded_int("threads"), default=1,
-                        help="BLAS threads for NumPy (default 1: it cannot collapse; 2 threads took 0.58-0.99x "
-                             "the one-thread time per training step on an idle 2-core machine, but 8-31x when other "
-                             "jobs shared the cores, benchmarks/bench_thread_default.py; pass 2 on a machine you "
-                             "have to yourself; 0 = library default; needs threadpoolctl)")
+    parser.add_argument("--blas-threads", type=threads_option, default=AUTO, metavar="{auto,N}",
+                        help="BLAS threads for NumPy (default auto: the cores other processes leave free, measured "
+                             "from /proc at the start and every ~2 s of training; 1 without /proc. A fixed count "
+                             "N forces it: 2 threads are faster on an idle 2-core machine but 8-31x slower when "
+                             "other jobs share the cores, benchmarks/bench_thread_default.py; 0 = library default; "
+                             "needs threadpoolctl)")
     parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
                         help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
                              "training step instead of faulting it in again (step time 0.76-0.99x of glibc's defaults, "
@@ -502,7 +513,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.malloc == "retain":
         retain_freed_memory()
     try:
-        with blas_threads(args.blas_threads):
+        with blas_threads(args.blas_threads) as auto:
+            args.blas_auto = auto  # train polls it every step (refimpl/threads.py)
             return int(args.func(args) or EXIT_OK)
     except BadInputError as exc:
         if args.traceback:

@@ -6,8 +6,8 @@ Steps (each prints what it did and where the files are):
                ``refimpl/data/sample``, split by file / by time into training and held-out windows;
 2. train     — QTG with the paper's loss and optimiser (MAE, Adam β = (0.5, 0.9)) but a smaller network
                and a larger learning rate, so that it trains in minutes (:data:`DEMO_CONFIG`);
-3. evaluate  — QTG (and QTG with ``--join inertialize``, spec/qtg.md §7.4) vs inertialisation vs interpolation on
-               the held-out windows, the paper's metric (mean joint-position error per joint per frame, cm) as a
+3. evaluate  — QTG (and QTG with ``--join inertialize``, spec/qtg.md §7.4, and ``inertialize+footlock``, §7.5) vs
+               inertialisation vs interpolation on the held-out windows, the paper's metric (mean joint-position error per joint per frame, cm) as a
                table and a per-frame curve, and the animator's measures (joins, foot skating, first and last
                frame; spec/qtg.md §9.1);
 4. export    — ONNX ``init``/``step``/``rollout`` models (``deploy``; skipped with a message without it);
@@ -114,8 +114,8 @@ def _refuse_to_replace_a_fuller_run(out: Path, n_steps: int) -> None:
 
 
 def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: int | None = None,
-             onnx: bool = True, render: bool = True, threads: int = 1, overwrite: bool = False,
-             say: Callable[[str], None] | None = None) -> DemoResult:
+             onnx: bool = True, render: bool = True, threads: int | str = 1, overwrite: bool = False,
+             say: Callable[[str], None] | None = None, on_step: Callable[..., None] | None = None) -> DemoResult:
     """Run the demo into ``out_dir`` (see the module docstring) and return what it wrote.
 
     Parameters
@@ -131,22 +131,25 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
         Override the number of training steps.
     onnx, render : bool
         Do the ONNX steps (export, verify, ONNX generation) / the pictures, when their dependencies are installed.
-    threads : int
-        BLAS threads (1: fastest for this network size, and deterministic).
+    threads : int or "auto"
+        BLAS threads (default 1; "auto": :class:`refimpl.threads.AutoThreads`; 0 leaves the pool as it is, which
+        is what ``refimpl demo`` passes: its ``--blas-threads`` already set it).
     overwrite : bool
         Replace the results of a longer demo in ``out_dir`` (otherwise ``UsageError``).
     say : callable, optional
         Receives each report line (default: print to stdout).
+    on_step : callable, optional
+        The training loop's per-step callback (``refimpl demo`` passes its :meth:`~refimpl.threads.AutoThreads.poll`).
     """
     say = say or (lambda line: print(line, flush=True))
     if not overwrite:
         _refuse_to_replace_a_fuller_run(Path(out_dir), steps if steps is not None else
                                         (QUICK_STEPS if quick else DEMO_STEPS))
-    with blas_threads(threads):
-        return _run(Path(out_dir), seed, quick, steps, onnx, render, say)
+    with blas_threads(threads) as auto:
+        return _run(Path(out_dir), seed, quick, steps, onnx, render, say, on_step or (auto and auto.poll))
 
 
-def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
+def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResult:
     from refimpl.protocols.transition import build_transition_datasets, load_source, sample_sources
 
     t_start = time.perf_counter()
@@ -188,7 +191,8 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
     result = train_model(spec, config, train_ds, test_ds, train_dir, steps=n_steps, batch_size=DEMO_BATCH,
                          lr=DEMO_LR, seed=seed, checkpoint_every=max(n_steps, 1),
                          validate_every=max(1, n_steps // 10), progress_every=max(1, n_steps // 20),
-                         progress=lambda line: print("      " + line, file=sys.stderr, flush=True))
+                         progress=lambda line: print("      " + line, file=sys.stderr, flush=True),
+                         on_step=on_step)
     files.update(checkpoint=train_dir / "checkpoint.npz", loss_log=train_dir / "loss.csv",
                  validation_log=train_dir / "loss_val.csv")
     losses = result.losses
@@ -199,7 +203,8 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
     # 3. evaluate ----------------------------------------------------------------------------------------
     t0 = time.perf_counter()
     say("[3/7] evaluate: QTG vs inertialisation vs interpolation on the held-out windows")
-    results = evaluate_model(model, test_ds, join="inertialize")  # qtg, qtg+join (spec/qtg.md 7.4), baselines
+    # qtg, qtg+join (spec/qtg.md 7.4), qtg+join+footlock (7.5), baselines
+    results = evaluate_model(model, test_ds, join="inertialize+footlock")
     print_results(results, test_ds, model, curve=False)
     files["eval_json"] = out / "eval.json"
     files["eval_curve_csv"] = out / "eval_per_frame.csv"
@@ -211,10 +216,11 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
                + (f"{100 * (1 - q / b):.0f} % lower" if q < b else f"NOT better ({100 * (q / b - 1):.0f} % higher)"))
     say(f"      {verdict}" + ("  [quick mode: a smoke test, not a trained model]" if quick else ""))
     qa, qj, gt = results["qtg"]["quality"], results["qtg+join"]["quality"], results["qtg"]["quality"]["ground_truth"]
+    qf = results["qtg+join+footlock"]["quality"]
     say(f"      joins in/out: QTG {qa['join_in_cm']:.1f}/{qa['join_out_cm']:.1f} cm, with --join inertialize "
         f"{qj['join_in_cm']:.1f}/{qj['join_out_cm']:.1f} cm, ground truth {gt['join_in_cm']:.1f}/"
         f"{gt['join_out_cm']:.1f} cm; foot skating {qa['skate_cm_s']:.0f} / {qj['skate_cm_s']:.0f} / "
-        f"{gt['skate_cm_s']:.0f} cm/s")
+        f"{qf['skate_cm_s']:.0f} with inertialize+footlock / {gt['skate_cm_s']:.0f} cm/s")
     say(f"      tables {files['eval_json']}, {files['eval_curve_csv']} ({time.perf_counter() - t0:.1f} s)")
 
     # 4. export / 5. verify ------------------------------------------------------------------------------
@@ -241,7 +247,7 @@ def _run(out: Path, seed, quick, steps, onnx, render, say) -> DemoResult:
         say("[5/7] verify: skipped")
 
     # 6. generate ----------------------------------------------------------------------------------------
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
 
     say("[6/7] generate: transitions written as BVH (22 joints, centimetres, 30 fps)")
     methods = network_methods(model, onnx_dir=onnx_dir if onnx else None)  # qtg (NumPy), qtg_onnx

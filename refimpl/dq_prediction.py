@@ -36,7 +36,8 @@ from refimpl.losses import (dq_reg_loss_backward, dq_reg_loss_forward, euler_l1_
                             euler_l1_loss_forward, quat_loss_backward, quat_loss_forward)
 from refimpl.nn.kinematics_layers import local_dq_from_current_backward, local_dq_from_current_forward
 from refimpl.quat import quat_conj, quat_mul
-from refimpl.skeleton import Skeleton, current_dq_from_local, local_from_current_dq
+from refimpl.skeleton import Skeleton
+from refimpl.current_dq import current_dq_from_local, local_from_current_dq
 
 __all__ = ["ROTATION_LOSSES", "dq_frames_from_rotations", "rotations_from_dq_frames",
            "local_rotations_from_dq_forward", "local_rotations_from_dq_backward", "dq_rotation_loss_forward",
@@ -79,7 +80,7 @@ def dq_frames_from_rotations(rotations, skeleton: Skeleton, time_axis: int = -3)
 
 
 def rotations_from_dq_frames(dqs, parents) -> np.ndarray:
-    """Local rotations of (unit) current dual quaternions (Eq. 12; :func:`refimpl.skeleton.local_from_current_dq`),
+    """Local rotations of (unit) current dual quaternions (Eq. 12; :func:`refimpl.current_dq.local_from_current_dq`),
     each made unit: ``(..., J, 8) -> (..., J, 4)``. The offsets the DQs imply are discarded (the task scores
     rotations)."""
     rot, _ = local_from_current_dq(dqs, parents)

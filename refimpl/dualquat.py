@@ -20,14 +20,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import (as_float, atan_ratio,
-                          check_rotation_matrix, hemisphere_sign,
-                          matrix_from_quat_kernel, prescaled,
-                          quat_conj_kernel, quat_from_matrix_kernel,
-                          quat_mul_kernel, quat_norm_kernel,
-                          quat_rotate_kernel, sin_over_x,
-                          check_scalar, finite_output,
-                          zeros_of)
+from refimpl.quat import (as_float, atan_ratio, hemisphere_sign, prescaled, quat_conj_kernel, quat_mul_kernel,
+                          quat_norm_kernel, quat_rotate_kernel, sin_over_x, check_scalar, finite_output, zeros_of)
+from refimpl.rotations import check_rotation_matrix, matrix_from_quat_kernel, quat_from_matrix_kernel
 
 __all__ = [
     "dq_identity", "dq_mul", "dq_conj", "dq_conj_dual", "dq_conj_combined", "dq_inv", "dq_norm", "dq_is_unit",

@@ -27,7 +27,8 @@ import numpy as np
 
 from refimpl._parsing import locate_bad_row
 from refimpl.motion import Motion
-from refimpl.quat import quat_fix, quat_from_axis_angle
+from refimpl.quat import quat_fix
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
 
 __all__ = ["read_expmap", "EXPMAP_LAYOUTS", "MAX_EXPMAP_VALUES"]

@@ -40,10 +40,11 @@ import dataclasses
 import numpy as np
 
 from refimpl.dualquat import dq_fix, dq_normalize, translation_from_dq
-from refimpl.quat import (axis_angle_from_quat, euler_from_quat, matrix_from_ortho6d, matrix_from_quat,
-                          ortho6d_from_matrix, quat_fix, quat_from_axis_angle, quat_from_euler, quat_from_matrix,
-                          quat_normalize)
-from refimpl.skeleton import Skeleton, as_float_array, current_dq_from_local, local_from_current_dq
+from refimpl.quat import quat_fix, quat_normalize
+from refimpl.rotations import (axis_angle_from_quat, euler_from_quat, matrix_from_ortho6d, matrix_from_quat,
+                               ortho6d_from_matrix, quat_from_axis_angle, quat_from_euler, quat_from_matrix)
+from refimpl.skeleton import Skeleton, as_float_array
+from refimpl.current_dq import current_dq_from_local, local_from_current_dq
 
 __all__ = ["Representation", "REPRESENTATIONS", "encode", "decode", "frame_size", "positions_from_frames",
            "fix_antipodal_frames"]

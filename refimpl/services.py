@@ -9,7 +9,6 @@ Shape legend: none (arrays are the tasks' and the recipes', see their modules).
 """
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 from pathlib import Path
 from typing import Callable
@@ -18,28 +17,13 @@ import numpy as np
 
 from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
+from refimpl.threads import blas_thread_pool
 
 __all__ = ["blas_threads", "read_motion", "load_trained", "checkpoint_for", "train_model", "network_methods",
            "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata", "onnx_frame_rate"]
 
 
-@contextlib.contextmanager
-def blas_threads(n: int | None):
-    """Limit the BLAS thread pool to ``n`` threads inside the block (threadpoolctl, when installed).
-
-    The command line passes 1 by default (spec/cli.md): two threads are somewhat faster on an idle 2-core
-    machine but many times slower when other jobs share the cores. ``None`` or 0 leaves the library default.
-    """
-    if not n:
-        yield
-        return
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:
-        yield
-        return
-    with threadpool_limits(limits=int(n), user_api="blas"):
-        yield
+blas_threads = blas_thread_pool  # the BLAS pool of one command: "auto", n threads, or 0 (refimpl/threads.py)
 
 
 def read_motion(path, *, fps: float | None = None, layout: str = "cmu"):
@@ -111,13 +95,15 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
                 lr: float | None = None, betas=None, clip_norm: float | None = None, seed: int = 0,
                 dtype=np.float32, resume: bool = False, checkpoint_every: int = 500,
                 validate_every: int | None = None, progress_every: int = 100,
-                progress: Callable[[str], None] | None = None, run_options: dict | None = None):
+                progress: Callable[[str], None] | None = None, run_options: dict | None = None,
+                on_step: Callable[..., None] | None = None):
     """Train ``spec``'s network into ``out_dir`` (``checkpoint.npz``, ``loss.csv``, ``loss_val.csv``).
 
     ``lr`` and ``betas`` default to the recipe's paper values (``spec.optim``). The checkpoint's model config also
     holds what the task needs later (its ``checkpoint_extra``: statistics, frame rate, skeleton, ...), so that
     ``eval``, ``export`` and ``generate`` need nothing else; ``run_options`` (the command line's,
-    :mod:`refimpl.run_options`) go into its ``train_config`` for ``--resume``.
+    :mod:`refimpl.run_options`) go into its ``train_config`` for ``--resume``. ``on_step`` is the training
+    loop's per-step ``callback`` (the command line passes :meth:`refimpl.threads.AutoThreads.poll`).
 
     Returns
     -------
@@ -137,7 +123,7 @@ def train_model(spec: ModelSpec, config, train_ds, val_ds, out_dir, *, steps: in
                      checkpoint_every=checkpoint_every, log_path=str(out_dir / "loss.csv"),
                      progress_every=progress_every, validate_every=validate_every, run_options=run_options)
     kw = {} if progress is None else {"progress": progress}
-    return train(adapter, optim, tc, resume=resume, **kw)
+    return train(adapter, optim, tc, resume=resume, callback=on_step, **kw)
 
 
 def _check_writable_checkpoint(spec: ModelSpec, adapter) -> None:

@@ -1,4 +1,5 @@
-"""Skeletons and kinematics: forward kinematics, current ↔ local dual quaternions, joint removal, mirroring.
+"""Skeletons and kinematics: the ``Skeleton`` value, forward kinematics, joint removal. Current ↔ local dual
+quaternions are in :mod:`refimpl.current_dq`, mirroring and turning about the up axis in :mod:`refimpl.mirroring`.
 
 Conventions (spec/kinematics.md, spec/conventions.md)
 -----------------------------------------------------
@@ -18,12 +19,9 @@ Conventions (spec/kinematics.md, spec/conventions.md)
 * End Sites (BVH leaves without channels) are kept as ordinary joints whose rotation is the identity; their
   indices are listed in ``Skeleton.end_sites`` so that the BVH writer emits them as ``End Site`` blocks.
   A leaf's own rotation never moves any position.
-* Current coordinates (dual-quaternion paper, Eq. 9-12): ``C[0] = (q[0] | 0)`` (rotation only),
-  ``C[j] = C[p(j)] ⊗ DQ(q[j], offset[j])`` with ``DQ(q, t) = (q | ½ (0, t) ⊗ q)``. The translation of
-  ``C[j]`` (Eq. 8) is joint ``j``'s position relative to the root position, in world axes.
 
-Shape legend: ``...`` any leading axes (batch B, time T), J joints, 4 quaternion, 8 dual quaternion,
-3 vector, (4, 4) homogeneous matrix.
+Shape legend: ``...`` any leading axes (batch B, time T), J joints, 4 quaternion, 3 vector, (4, 4) homogeneous
+matrix.
 """
 from __future__ import annotations
 
@@ -31,33 +29,21 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from refimpl.dualquat import (dq_conj_kernel, dq_from_quat_translation_kernel,
-                              dq_mul_kernel, dq_from_quat_translation, dq_mul, translation_from_dq)
-from refimpl.quat import (check_scalar, finite_output,
-                          quat_mul_kernel, quat_rotate_kernel, matrix_from_quat,
-                          quat_from_axis_angle, quat_mul, quat_rotate)
+from refimpl.quat import finite_output, quat_mul_kernel, quat_rotate_kernel, quat_mul, quat_rotate
+from refimpl.rotations import matrix_from_quat
 
 __all__ = [
     "Skeleton",
     "UNIT_TOLERANCE",
-    "current_dq_from_local",
-    "local_from_current_dq",
-    "positions_from_current_dq",
-    "offsets_from_current_dq",
     "remove_joints",
-    "mirror",
-    "rotate_about_up",
-    "random_rotate_about_up",
 ]
-
-_AXES = {"x": 0, "y": 1, "z": 2}
 
 
 # ---------------------------------------------------------------------------------------------------------
 # validation helpers (public boundaries only)
 # ---------------------------------------------------------------------------------------------------------
 
-def _validate_parents(parents, name: str = "parents") -> np.ndarray:
+def validate_parents(parents, name: str = "parents") -> np.ndarray:
     """Return ``parents`` as an int64 array after checking the topological-order rules."""
     try:
         arr = np.asarray(parents)
@@ -115,12 +101,13 @@ def check_unit(rot: np.ndarray, name: str) -> None:
                          f"index {idx} has norm {norm:.6g} (normalise with refimpl.quat.quat_normalize first)")
 
 
-def _check_last_axes(arr: np.ndarray, name: str, tail: tuple, legend: str) -> None:
+def check_last_axes(arr: np.ndarray, name: str, tail: tuple, legend: str) -> None:
+    """Raise ValueError unless the trailing axes of ``arr`` are ``tail`` (``legend`` names the expected shape)."""
     if arr.ndim < len(tail) or arr.shape[arr.ndim - len(tail):] != tail:
         raise ValueError(f"{name}: expected shape {legend}, got {arr.shape}")
 
 
-def _depth_levels(parents: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+def depth_levels(parents: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     """Group the non-root joints by depth: ``((joints at depth 1, their parents), (depth 2, ...), ...)``."""
     depth = np.zeros(parents.size, dtype=np.int64)
     for j in range(1, parents.size):
@@ -220,7 +207,7 @@ class Skeleton:
 
     def __init__(self, parents, offsets, names: Sequence[str] | None = None, end_sites: Iterable[int] = (),
                  joints_left: Sequence[int] | None = None, joints_right: Sequence[int] | None = None):
-        par = _validate_parents(parents)
+        par = validate_parents(parents)
         num = par.size
         off = as_float_array(offsets, "offsets").astype(np.float64)
         if off.shape != (num, 3):
@@ -273,7 +260,7 @@ class Skeleton:
         self._end_sites = ends
         self._joints_left = left
         self._joints_right = right
-        self._levels = _depth_levels(par)
+        self._levels = depth_levels(par)
 
     # -- read-only attributes ------------------------------------------------------------------------------
     parents = property(lambda self: self._parents, doc="(J,) int64, read-only; ``-1`` for the root.")
@@ -313,7 +300,7 @@ class Skeleton:
     # -- kinematics ----------------------------------------------------------------------------------------
     def _check_motion(self, rotations, root_positions=None, unit: bool = False):
         rot = as_float_array(rotations, "rotations")
-        _check_last_axes(rot, "rotations", (self.num_joints, 4), f"(..., {self.num_joints}, 4)")
+        check_last_axes(rot, "rotations", (self.num_joints, 4), f"(..., {self.num_joints}, 4)")
         if unit:
             check_unit(rot, "rotations")
         if root_positions is None:
@@ -448,130 +435,6 @@ def _forward_kinematics_naive(parents, offsets, rot, root_pos):
     return pos
 
 
-# ---------------------------------------------------------------------------------------------------------
-# current coordinates (dual-quaternion paper Eq. 8-12)
-# ---------------------------------------------------------------------------------------------------------
-
-@finite_output
-def current_dq_from_local(rotations, offsets, parents) -> np.ndarray:
-    """Current (root-relative) dual quaternions from local rotations and offsets (paper Eq. 9-11).
-
-    ``C[0] = (q[0] | 0)`` (rotation only, zero dual part, Eq. 9);
-    ``C[j] = C[p(j)] ⊗ DQ(q[j], offset[j])`` with ``DQ(q, t) = (q | ½ (0, t) ⊗ q)`` (Eq. 10-11 as dual
-    quaternions). ``offsets[0]`` is ignored.
-
-    Parameters
-    ----------
-    rotations : array_like, shape (..., J, 4)
-        Local unit quaternions ``(w, x, y, z)``.
-    offsets : array_like, shape (J, 3) or (..., J, 3)
-        Local bone offsets (broadcast against ``rotations``).
-    parents : sequence of int, length J
-        Topologically ordered parents (``parents[0] == -1``, ``parents[j] < j``).
-
-    Returns
-    -------
-    ndarray, shape (..., J, 8): ``(q_r | q_d)`` per joint; the translation of ``C[j]`` is joint ``j``'s
-    position relative to the root.
-    """
-    par = _validate_parents(parents)
-    rot = as_float_array(rotations, "rotations")
-    _check_last_axes(rot, "rotations", (par.size, 4), f"(..., {par.size}, 4)")
-    off = as_float_array(offsets, "offsets")
-    _check_last_axes(off, "offsets", (par.size, 3), f"({par.size}, 3) or (..., {par.size}, 3)")
-    dtype = np.result_type(rot.dtype, off.dtype)
-    return _current_dq_from_local(_depth_levels(par), rot.astype(dtype, copy=False), off.astype(dtype, copy=False))
-
-
-def _current_dq_from_local(levels, rot, off):
-    off = np.broadcast_to(off, rot.shape[:-1] + (3,))
-    local = dq_from_quat_translation_kernel(rot, off)                             # (..., J, 8)
-    cur = np.empty_like(local)
-    cur[..., 0, :4] = rot[..., 0, :]
-    cur[..., 0, 4:] = 0.0
-    for idx, par in levels:
-        cur[..., idx, :] = dq_mul_kernel(cur[..., par, :], local[..., idx, :])
-    return cur
-
-
-def _current_dq_from_local_naive(parents, rot, off):
-    """Slow per-joint loop version of :func:`_current_dq_from_local` through 4x4-free DQ products (test oracle)."""
-    off = np.broadcast_to(off, rot.shape[:-1] + (3,))
-    cur = np.empty(rot.shape[:-1] + (8,), dtype=rot.dtype)
-    for j, p in enumerate(parents):
-        if p < 0:
-            cur[..., j, :] = dq_from_quat_translation(rot[..., j, :], np.zeros(3, dtype=rot.dtype))
-        else:
-            cur[..., j, :] = dq_mul(cur[..., p, :], dq_from_quat_translation(rot[..., j, :], off[..., j, :]))
-    return cur
-
-
-@finite_output
-def local_from_current_dq(dqs, parents) -> tuple[np.ndarray, np.ndarray]:
-    """Local rotations and offsets from current dual quaternions (paper Eq. 12).
-
-    ``L[j] = C[p(j)]⁻¹ ⊗ C[j]`` (for a unit DQ the inverse is ``(q_r* | q_d*)``), ``L[0] = C[0]``; the local
-    rotation is the real part of ``L[j]`` and the local offset its translation ``vec(2 q_d ⊗ q_r*)`` (Eq. 8).
-    The inputs are assumed unit (normalise network outputs first with ``refimpl.dualquat.dq_normalize``).
-
-    Parameters
-    ----------
-    dqs : array_like, shape (..., J, 8)
-    parents : sequence of int, length J
-
-    Returns
-    -------
-    rotations : ndarray, shape (..., J, 4)
-        Local quaternions (sign as produced by the product; ``q`` and ``-q`` are the same rotation).
-    offsets : ndarray, shape (..., J, 3)
-        Local offsets (the root's is its own translation, 0 for data built by :func:`current_dq_from_local`).
-    """
-    par = _validate_parents(parents)
-    dq = as_float_array(dqs, "dqs")
-    _check_last_axes(dq, "dqs", (par.size, 8), f"(..., {par.size}, 8)")
-    local = _local_dq_from_current(par, dq)
-    return local[..., :4].copy(), translation_from_dq(local)
-
-
-def _local_dq_from_current(par, dq):
-    parent_dq = dq[..., np.maximum(par, 0), :].copy()                       # (..., J, 8)
-    parent_dq[..., 0, :] = np.array([1, 0, 0, 0, 0, 0, 0, 0], dtype=dq.dtype)
-    return dq_mul_kernel(dq_conj_kernel(parent_dq), dq)                                 # (..., J, 8)
-
-
-@finite_output
-def positions_from_current_dq(dqs) -> np.ndarray:
-    """Root-relative joint positions from current dual quaternions: ``p[j] = vec(2 q_d ⊗ q_r*)`` (paper Eq. 8).
-
-    Add the root position to get world positions (the root DQ has no translation).
-
-    Parameters
-    ----------
-    dqs : array_like, shape (..., J, 8)
-
-    Returns
-    -------
-    ndarray, shape (..., J, 3)
-    """
-    dq = as_float_array(dqs, "dqs")
-    _check_last_axes(dq, "dqs", (8,), "(..., 8)")
-    return translation_from_dq(dq)
-
-
-@finite_output
-def offsets_from_current_dq(dqs, parents) -> np.ndarray:
-    """Local bone offsets ``vec(2 L_d ⊗ L_r*)`` with ``L[j] = C[p(j)]⁻¹ ⊗ C[j]`` (root: its own translation).
-
-    Parameters
-    ----------
-    dqs : array_like, shape (..., J, 8)
-    parents : sequence of int, length J
-
-    Returns
-    -------
-    ndarray, shape (..., J, 3)
-    """
-    return local_from_current_dq(dqs, parents)[1]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -642,140 +505,5 @@ def remove_joints(skeleton: Skeleton, rotations, joints: Iterable[int | str], of
     return new_skel, (None if rot is None else rot[..., keep, :])
 
 
-# ---------------------------------------------------------------------------------------------------------
-# mirroring and rotation about the up axis
-# ---------------------------------------------------------------------------------------------------------
-
-def _axis_index(axis) -> int:
-    if isinstance(axis, str) and axis.lower() in _AXES:
-        return _AXES[axis.lower()]
-    if isinstance(axis, (int, np.integer)) and 0 <= int(axis) <= 2:
-        return int(axis)
-    raise ValueError(f"axis: expected 'x', 'y', 'z' or 0, 1, 2, got {axis!r}")
-
-
-@finite_output
-def mirror(skeleton: Skeleton, rotations, root_positions, axis="x", mirror_offsets: bool = False):
-    """Reflect a motion across the plane normal to ``axis`` through the origin and swap left and right.
-
-    With ``M = diag(-1, 1, 1)`` for ``axis="x"``: every local rotation becomes ``M R M`` — for quaternions
-    ``(w, x, y, z) → (w, x, -y, -z)`` (``axis="y"``: ``(w, -x, y, -z)``, ``axis="z"``: ``(w, -x, -y, z)``);
-    the rotation columns of ``joints_left[i]`` and ``joints_right[i]`` are swapped; the root position's
-    ``axis`` component is negated. This is QuaterNet's mirroring (quaternet_reference_code.md §3.4), which
-    leaves the offsets alone (exact for a symmetric skeleton). With ``mirror_offsets=True`` the skeleton is
-    mirrored too (offsets reflected by ``M`` and swapped between partners), which makes the result the exact
-    mirror image: ``FK'(p)[swap(j)] = M · FK(p)[j]``. Mirroring twice is the identity. Consecutive frames keep
-    their hemisphere (the quaternion dot products are unchanged), so no antipodal fix is needed.
-
-    Parameters
-    ----------
-    skeleton : Skeleton
-    rotations : array_like, shape (..., J, 4)
-    root_positions : array_like, shape (..., 3)
-    axis : {"x", "y", "z"} or {0, 1, 2}
-        Normal of the mirror plane (QuaterNet: x).
-    mirror_offsets : bool
-
-    Returns
-    -------
-    skeleton : Skeleton (the same object unless ``mirror_offsets``)
-    rotations : ndarray, shape (..., J, 4)
-    root_positions : ndarray, shape (..., 3)
-    """
-    if not isinstance(skeleton, Skeleton):
-        raise ValueError(f"skeleton: expected a Skeleton, got {type(skeleton).__name__}")
-    a = _axis_index(axis)
-    rot, pos = skeleton._check_motion(rotations, root_positions)
-    perm = np.arange(skeleton.num_joints)
-    left = np.asarray(skeleton.joints_left, dtype=np.int64)
-    right = np.asarray(skeleton.joints_right, dtype=np.int64)
-    perm[left], perm[right] = right, left
-    sign_q = np.array([1.0, -1.0, -1.0, -1.0], dtype=rot.dtype)
-    sign_q[1 + a] = 1.0
-    new_rot = rot[..., perm, :] * sign_q                                    # (..., J, 4)
-    sign_v = np.ones(3, dtype=pos.dtype)
-    sign_v[a] = -1.0
-    new_pos = pos * sign_v                                                  # (..., 3)
-    new_skel = skeleton
-    if mirror_offsets:
-        new_skel = Skeleton(skeleton.parents, skeleton.offsets[perm] * sign_v.astype(np.float64),
-                            names=skeleton.names, end_sites=skeleton.end_sites,
-                            joints_left=skeleton.joints_left, joints_right=skeleton.joints_right)
-    return new_skel, new_rot, new_pos
-
-
-@finite_output
-def rotate_about_up(rotations, root_positions, angle, up="y"):
-    """Rotate a whole motion about the vertical axis through the origin (data augmentation).
-
-    ``q[..., 0, :] ← q_up(angle) ⊗ q[..., 0, :]`` (only the root's local rotation changes) and
-    ``root_position ← R_up(angle) · root_position``; world positions rotate rigidly about the ``up`` axis.
-
-    Parameters
-    ----------
-    rotations : array_like, shape (..., J, 4)
-    root_positions : array_like, shape (..., 3)
-    angle : float or array_like broadcastable to ``root_positions.shape[:-1]``
-        Radians, counter-clockwise seen from +up. For one angle per sequence of a ``(B, T, ...)`` batch pass
-        shape ``(B, 1)``.
-    up : {"x", "y", "z"}
-        The up axis (y for every data set in this project).
-
-    Returns
-    -------
-    rotations : ndarray, shape (..., J, 4)
-    root_positions : ndarray, shape (..., 3)
-    """
-    a = _axis_index(up)
-    rot = as_float_array(rotations, "rotations")
-    _check_last_axes(rot, "rotations", (4,), "(..., J, 4)")
-    if rot.ndim < 2 or rot.shape[-2] == 0:
-        raise ValueError(f"rotations: expected shape (..., J, 4) with J >= 1 joints, got {rot.shape}")
-    pos = as_float_array(root_positions, "root_positions")
-    if pos.shape != rot.shape[:-2] + (3,):
-        raise ValueError(f"root_positions: expected shape {rot.shape[:-2] + (3,)}, got {pos.shape}")
-    ang = as_float_array(angle, "angle")
-    try:
-        ang = np.broadcast_to(ang, pos.shape[:-1])
-    except ValueError:
-        raise ValueError(f"angle: expected a shape broadcastable to {pos.shape[:-1]}, got {ang.shape}") from None
-    dtype = np.result_type(rot.dtype, pos.dtype)
-    axis_vec = np.zeros(3, dtype=dtype)
-    axis_vec[a] = 1.0
-    q_up = quat_from_axis_angle(ang.astype(dtype)[..., None] * axis_vec)   # (..., 4)
-    new_rot = rot.astype(dtype, copy=True)
-    new_rot[..., 0, :] = quat_mul(q_up, new_rot[..., 0, :])
-    return new_rot, quat_rotate(q_up, pos.astype(dtype))
-
-
-@finite_output
-def random_rotate_about_up(rotations, root_positions, rng: np.random.Generator, low: float = -np.pi,
-                           high: float = np.pi, up="y"):
-    """:func:`rotate_about_up` by one angle drawn from ``U(low, high)`` for the whole motion.
-
-    Parameters
-    ----------
-    rotations : array_like, shape (..., J, 4)
-    root_positions : array_like, shape (..., 3)
-    rng : numpy.random.Generator
-    low, high : float
-        Range of the angle in radians (QuaterNet's long-term training draws from [-2π, 2π]).
-    up : {"x", "y", "z"}
-
-    Returns
-    -------
-    rotations, root_positions : as :func:`rotate_about_up`
-    angle : float
-    """
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
-    low, high = check_scalar(low, "low", -np.inf), check_scalar(high, "high", -np.inf)
-    if not (high >= low and np.isfinite(high - low)):
-        raise ValueError(f"low, high: expected low <= high with a finite difference, got {low!r}, {high!r}")
-    angle = float(rng.uniform(low, high))
-    rot, pos = rotate_about_up(rotations, root_positions, angle, up=up)
-    return rot, pos, angle
-
-
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
-# as_float_array, check_unit.
+# as_float_array, check_last_axes, check_unit, depth_levels, validate_parents.

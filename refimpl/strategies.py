@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from refimpl.dualquat import dq_from_quat_translation_kernel
-from refimpl.quat import EULER_ORDERS, TAIT_BRYAN_ORDERS, matrix_from_quat_kernel
+from refimpl.rotations import EULER_ORDERS, TAIT_BRYAN_ORDERS, matrix_from_quat_kernel
 
 __all__ = [
     "small_shapes", "unit_quaternions", "quaternions", "translations", "unit_dual_quaternions", "angles",

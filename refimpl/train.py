@@ -13,7 +13,8 @@ Batches: one ``numpy.random.Generator`` (PCG64, ``seed``) initialises the parame
 of the ``num_examples`` training examples at the start of every epoch; an epoch is ``max(1, N // batch_size)``
 consecutive slices of it (the remainder is dropped). The same Generator is handed to ``get_batch``.
 
-Checkpoints (``refimpl.checkpoint``: atomic ``.npz``, no pickle, checksum) hold the parameters
+Checkpoints (``refimpl.checkpoint``: atomic ``.npz``, no pickle, checksum; written and read by
+:mod:`refimpl.train_files`) hold the parameters
 (``param.<name>``), the Adam state (``optim.<key>``), the current permutation, and as metadata the step,
 epoch, position in the epoch, the Generator state, the schedule state (current learning rate), both configs
 and the adapter's config. Resuming restores all of it, so ``k`` steps + resume + ``N − k`` steps gives
@@ -29,8 +30,9 @@ Failure handling (spec/robustness.md §10):
 * ``KeyboardInterrupt`` (Ctrl-C, or raised by a callback), ``SIGINT`` and ``SIGTERM`` end the run at a step
   boundary: the state after the last completed step is checkpointed and the result is returned with
   ``interrupted=True`` and ``signal`` the signal number (2 or 15; None for a ``KeyboardInterrupt``);
-* the checkpoint is locked (:func:`output_lock`, a ``.<checkpoint name>.lock`` file beside it): a second
-  trainer of the same checkpoint stops with :class:`OutputLocked`; a lock left by a dead process is taken over;
+* the checkpoint is locked (:func:`refimpl.train_files.output_lock`, a ``.<checkpoint name>.lock`` file beside
+  it): a second trainer of the same checkpoint stops with :class:`~refimpl.train_files.OutputLocked`; a lock left
+  by a dead process is taken over;
 * temporary files of the atomic writer left beside the trainer's files by a killed run
   (``.checkpoint.<12 hex>.tmp.npz``, ``.loss.<12 hex>.tmp.csv``) are removed when the next run starts (it holds
   the lock, so no writer of those files is alive).
@@ -38,11 +40,8 @@ Failure handling (spec/robustness.md §10):
 from __future__ import annotations
 
 import contextlib
-import csv
 import dataclasses
-import io
 import math
-import os
 import re
 import signal
 import sys
@@ -53,26 +52,22 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from refimpl.atomic import atomic_write_text
-from refimpl.checkpoint import load_checkpoint, rng_from_json, rng_state_to_json, save_checkpoint
+from refimpl.checkpoint import rng_from_json, rng_state_to_json
 from refimpl.checkpoint_schema import MAX_PARAM_ABS, validate_training_state
 from refimpl.optim import adam_init, adam_step, clip_grad_norm, exponential_lr
+from refimpl.train_files import (TRAIN_FORMAT, CsvLog, load_state, output_lock, remove_stale_temp_files, save_state,
+                                 truncate_csv)
 
 __all__ = [
     "ModelAdapter", "OptimConfig", "TrainConfig", "TrainContext", "StepInfo", "TrainResult", "TrainingDiverged",
-    "OutputLocked", "train", "check_resumable", "format_duration", "default_progress", "output_lock", "remove_stale_temp_files",
+    "train", "format_duration", "default_progress",
 ]
 
-_FORMAT = "refimpl.train/1"
 _LOG_FIELDS = ("step", "epoch", "loss", "grad_norm", "lr", "elapsed_s")
 
 
 class TrainingDiverged(RuntimeError):
     """A non-finite loss, gradient, parameter or optimiser state; no checkpoint was written with it."""
-
-
-class OutputLocked(RuntimeError):
-    """Another live process holds the lock of the output (a second trainer writing the same checkpoint)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -218,109 +213,6 @@ def format_duration(seconds: float) -> str:
     return f"{h}h{m:02d}m{s:02d}s" if h else (f"{m}m{s:02d}s" if m else f"{s}s")
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# lock and stale temporary files
-# ----------------------------------------------------------------------------------------------------------------
-
-def _pid_alive(pid: int) -> bool:
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OSError):
-        return True  # it exists (another user's process)
-    return True
-
-
-def _lock_owner(path: Path) -> int:
-    try:
-        text = path.read_text(encoding="ascii", errors="replace").split()
-        return int(text[0]) if text else 0
-    except (OSError, ValueError):
-        return 0
-
-
-@contextlib.contextmanager
-def output_lock(folder, name: str = ".refimpl-train.lock"):
-    """Hold the lock file ``folder/name`` inside the block; :class:`OutputLocked` if a live process holds it.
-
-    POSIX: an exclusive ``fcntl.flock`` on the file (the kernel drops it when its process dies, so the lock of a
-    killed run is free at once; the file stays, holding the last owner's PID). Elsewhere: the file is created
-    exclusively and holds the PID; a file whose PID is not a live process (a stale lock) is taken over.
-    The folder is created if needed.
-    """
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / name
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
-        fcntl = None
-    if fcntl is not None:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
-        try:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                owner = _lock_owner(path)
-                raise OutputLocked(f"{folder}: another trainer (PID {owner or '?'}) is writing here (lock file "
-                                   f"{path}); wait for it, stop it, or choose another output") from None
-            os.ftruncate(fd, 0)
-            os.write(fd, f"{os.getpid()}\n".encode("ascii"))
-            try:
-                yield path
-            finally:
-                with contextlib.suppress(OSError):
-                    os.ftruncate(fd, 0)
-                fcntl.flock(fd, fcntl.LOCK_UN)
-        finally:
-            os.close(fd)
-        return
-    for _ in range(2):  # pragma: no cover - not POSIX
-        try:
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-            break
-        except FileExistsError:
-            owner = _lock_owner(path)
-            if _pid_alive(owner) and owner != os.getpid():
-                raise OutputLocked(f"{folder}: another trainer (PID {owner}) is writing here (lock file {path})")
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(path)  # stale: its process is gone
-    else:  # pragma: no cover
-        raise OutputLocked(f"{folder}: could not take the lock file {path}")
-    try:  # pragma: no cover
-        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
-        os.close(fd)
-        yield path
-    finally:  # pragma: no cover
-        with contextlib.suppress(OSError):
-            os.unlink(path)
-
-
-def remove_stale_temp_files(target) -> list[Path]:
-    """Remove the temporary files :mod:`refimpl.atomic` leaves beside ``target`` when its writer is killed.
-
-    Only names of the writer's exact pattern for this target (``.<stem>.<12 hex digits>.tmp<suffix>``) are
-    touched, and only regular files. Call it while holding the lock that excludes other writers of ``target``
-    (:func:`output_lock`): then no such file belongs to a live writer. Returns the removed paths.
-    """
-    target = Path(target)
-    pattern = re.compile(r"\." + re.escape(target.stem) + r"\.[0-9a-f]{12}\.tmp" + re.escape(target.suffix) + r"\Z")
-    removed = []
-    try:
-        entries = list(os.scandir(target.parent))
-    except OSError:
-        return removed
-    for e in entries:
-        if pattern.match(e.name) and e.is_file(follow_symlinks=False):
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(e.path)
-                removed.append(Path(e.path))
-    return removed
-
-
 def _kept(ckpt, step) -> str:
     if ckpt is None:
         return "no checkpoint path"
@@ -346,85 +238,6 @@ def _first_non_finite(arrays: Mapping[str, np.ndarray]) -> str | None:
         if not np.isfinite(a).all():
             return k
     return None
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# state <-> checkpoint
-# ----------------------------------------------------------------------------------------------------------------
-
-#: Metadata every training checkpoint carries (checked on resume).
-_META_KEYS = ("step", "epoch", "position", "rng_state")
-
-
-def _save(path, params, opt_state, perm, meta) -> None:
-    arrays = {f"param.{k}": v for k, v in params.items()}
-    arrays.update({f"optim.{k}": np.asarray(v) for k, v in opt_state.items()})
-    arrays["sampler.perm"] = perm
-    save_checkpoint(path, arrays, meta)
-
-
-def _load(path):
-    arrays, meta = load_checkpoint(path)
-    if meta.get("format") != _FORMAT:
-        raise ValueError(f"checkpoint {path}: expected format {_FORMAT!r}, got {meta.get('format')!r}")
-    missing = [k for k in _META_KEYS if k not in meta] + [k for k in ("sampler.perm",) if k not in arrays]
-    if missing:
-        raise ValueError(f"checkpoint {path}: not a complete training state, missing {missing}")
-    params = {k[len("param."):]: np.array(v) for k, v in arrays.items() if k.startswith("param.")}
-    opt = {k[len("optim."):]: np.array(v) for k, v in arrays.items() if k.startswith("optim.")}
-    return params, opt, np.array(arrays["sampler.perm"]), meta
-
-
-def check_resumable(path) -> None:
-    """Raise ``ValueError`` (naming the file and the field) unless ``path`` is a complete, valid training state:
-    what :func:`train` checks on resume before the run's data and settings are known (the permutation's length
-    is checked against the data then)."""
-    params, opt, perm, meta = _load(path)
-    validate_training_state(params, opt, perm, meta, None, where=f"checkpoint {path}")
-
-
-def _truncate_csv(path: Path, max_step: int) -> None:
-    """Keep the header and the rows with ``step <= max_step`` (after a resume), rewritten atomically."""
-    if not path.is_file():
-        return
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
-    if not rows:
-        return
-    keep = [rows[0]] + [r for r in rows[1:] if r and int(r[0]) <= max_step]
-    buf = io.StringIO()
-    csv.writer(buf).writerows(keep)
-    atomic_write_text(path, buf.getvalue())
-
-
-class _CsvLog:
-    def __init__(self, path: Path | None, fields):
-        self.path, self.fields, self.file, self.writer = path, list(fields) if fields else None, None, None
-
-    def write(self, row: Mapping) -> None:
-        if self.path is None:
-            return
-        if self.file is None:
-            new = not self.path.is_file() or self.path.stat().st_size == 0
-            if self.fields is None:
-                self.fields = list(row)
-            self.file = open(self.path, "a", newline="")
-            self.writer = csv.writer(self.file)
-            if new:
-                self.writer.writerow(self.fields)
-        self.writer.writerow([_fmt(row.get(k)) for k in self.fields])
-        self.file.flush()
-
-    def close(self) -> None:
-        if self.file is not None:
-            self.file.close()
-            self.file = None
-
-
-def _fmt(v) -> str:
-    if isinstance(v, float):
-        return repr(v)
-    return "" if v is None else str(v)
 
 
 #: Signals that stop a run at the next step boundary (with a checkpoint): Ctrl-C and the schedulers' stop.
@@ -528,7 +341,7 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
 
 def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, per_epoch, ckpt, identity):
     if ckpt is not None and resume and ckpt.is_file():
-        params, opt_state, perm, meta = _load(ckpt)
+        params, opt_state, perm, meta = load_state(ckpt)
         validate_training_state(params, opt_state, perm, meta, N, where=f"checkpoint {ckpt}")
         for key, value in identity.items():
             if _jsonable(meta.get(key)) != _jsonable(value):
@@ -543,16 +356,16 @@ def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, pe
         perm = np.arange(N)
         step, epoch, pos, elapsed0 = 0, 0, 0, 0.0
 
-    log = _CsvLog(Path(config.log_path) if config.log_path else None, _LOG_FIELDS)
-    val_log = _CsvLog(None if config.log_path is None else
+    log = CsvLog(Path(config.log_path) if config.log_path else None, _LOG_FIELDS)
+    val_log = CsvLog(None if config.log_path is None else
                       Path(config.log_path).with_name(Path(config.log_path).stem + "_val.csv"), None)
     for lg in (log, val_log):
         if lg.path is not None:
             lg.path.parent.mkdir(parents=True, exist_ok=True)
-            _truncate_csv(lg.path, step)
+            truncate_csv(lg.path, step)
 
     def meta_now():
-        return dict(identity, format=_FORMAT, step=step, epoch=epoch, position=pos,
+        return dict(identity, format=TRAIN_FORMAT, step=step, epoch=epoch, position=pos,
                     rng_state=rng_state_to_json(rng), lr=exponential_lr(optim.lr, optim.lr_decay, epoch),
                     steps_target=config.steps, elapsed_s=elapsed0 + (time.perf_counter() - t0),
                     train_config=dataclasses.asdict(config))
@@ -567,7 +380,7 @@ def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, pe
                 raise TrainingDiverged(f"{adapter.name}: {bad!r} is not finite or beyond {MAX_PARAM_ABS:g} at step "
                                        f"{step}; not saved, " + _kept(ckpt, last_saved[0]))
             ckpt.parent.mkdir(parents=True, exist_ok=True)
-            _save(ckpt, params, opt_state, perm, meta_now())
+            save_state(ckpt, params, opt_state, perm, meta_now())
             last_saved[0] = step
 
     losses, validation = [], []

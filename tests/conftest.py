@@ -24,6 +24,12 @@ settings.register_profile(
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
+# One BLAS thread for the whole suite, in this process and its subprocesses: `--blas-threads auto` (the command
+# line's default, refimpl/threads.py) never goes above these, so the tests that compare runs bit for bit (resume,
+# exports, demo numbers) do not depend on what else the machine is doing. Set them yourself to test other counts.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 # The tests' data cache (refimpl/datacache.py) lives in a fresh temporary folder, never in ~/.cache/refimpl;
 # subprocesses of the tests inherit it.
 if "REFIMPL_CACHE" not in os.environ:

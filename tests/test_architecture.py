@@ -12,18 +12,19 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS = {
     0: ["refimpl", "refimpl._parsing", "refimpl.atomic", "refimpl.datacache", "refimpl.testing", "refimpl.gradcheck",
         "refimpl.bounds"],
-    1: ["refimpl.quat", "refimpl.dualquat"],
-    2: ["refimpl.skeleton"],
-    3: ["refimpl.motion", "refimpl.bvh", "refimpl.expmap", "refimpl.skeletons", "refimpl.preprocess",
-        "refimpl.representations", "refimpl.strategies", "refimpl.splines", "refimpl.augment"],
+    1: ["refimpl.quat", "refimpl.rotations", "refimpl.dualquat"],
+    2: ["refimpl.skeleton", "refimpl.current_dq", "refimpl.mirroring"],
+    3: ["refimpl.motion", "refimpl.bvh", "refimpl.bvh_write", "refimpl.expmap", "refimpl.skeletons",
+        "refimpl.preprocess", "refimpl.representations", "refimpl.strategies", "refimpl.splines", "refimpl.augment"],
     4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.dq_output_fast", "refimpl.dq_prediction",
         "refimpl.schedules"],
     5: ["refimpl.models", "refimpl.models.*"],
     6: ["refimpl.optim", "refimpl.checkpoint", "refimpl.checkpoint_schema", "refimpl.task_schemas",
-        "refimpl.safetensors", "refimpl.train", "refimpl.rigs", "refimpl.protocols", "refimpl.protocols.*"],
+        "refimpl.safetensors", "refimpl.train", "refimpl.train_files", "refimpl.rigs", "refimpl.protocols",
+        "refimpl.protocols.*"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
-        "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.run_options"],
+        "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.run_options", "refimpl.threads"],
     8: ["refimpl.cli", "refimpl.cli_info", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).
@@ -116,7 +117,8 @@ def test_deploy_is_imported_only_lazily_by_the_top_layer():
 
 #: deploy's command layer (``python -m deploy``): reads clips, checkpoints and options as ``refimpl``'s
 #: application layer does, so it may import layer 7 (tasks, recipes, services, errors, registry), inside functions.
-DEPLOY_COMMANDS = {"deploy.cli", "deploy.models.qtg_cli", "deploy.models.run_commands"}
+DEPLOY_COMMANDS = {"deploy.cli", "deploy.models.qtg_cli", "deploy.models.run_commands",
+                   "deploy.models.quaternet_long_walk"}
 
 
 def test_deploy_imports_only_lower_refimpl_layers():

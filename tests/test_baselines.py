@@ -10,7 +10,8 @@ from refimpl.protocols.transition_baselines import (METHOD_NAMES, _inertializati
                                interpolate, method_registry, quintic_inertialization)
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import rollout_forward
-from refimpl.quat import quat_angle, quat_from_axis_angle, quat_mul, quat_normalize
+from refimpl.quat import quat_angle, quat_mul, quat_normalize
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.recipes.qtg import qtg_method
 from refimpl.testing import TOL_EXACT, assert_close, assert_quat_close
 from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, split_pose

@@ -14,9 +14,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from refimpl.bvh import BvhHeader, read_bvh, read_bvh_header, write_bvh
+from refimpl.bvh import BvhHeader, read_bvh, read_bvh_header
+from refimpl.bvh_write import write_bvh
 from refimpl.motion import Motion
-from refimpl.quat import TAIT_BRYAN_ORDERS, matrix_from_quat, quat_from_euler, quat_normalize
+from refimpl.quat import quat_normalize
+from refimpl.rotations import TAIT_BRYAN_ORDERS, matrix_from_quat, quat_from_euler
 from refimpl.skeleton import Skeleton, remove_joints
 from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton, quaternet_locomotion_skeleton
 from refimpl.strategies import skeleton_arrays, unit_quaternions

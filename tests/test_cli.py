@@ -370,7 +370,8 @@ def test_align_target_continues_the_source():
 
 def test_with_end_sites_keeps_joints_and_round_trips(tmp_path):
     """spec/cli.md §7: End Sites are added below leaves; the original joints do not move; BVH round trip."""
-    from refimpl.bvh import read_bvh, write_bvh
+    from refimpl.bvh import read_bvh
+    from refimpl.bvh_write import write_bvh
     from refimpl.tasks.transition_generate import with_end_sites
     from refimpl.motion import Motion
     from refimpl.protocols.transition import load_source

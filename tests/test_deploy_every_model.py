@@ -69,7 +69,7 @@ FILES = {"qtg": {"qtg_init.onnx", "qtg_step.onnx", "qtg_rollout.onnx"},
          "quaternet-dq": {"quaternet_init.onnx", "quaternet_step.onnx", "quaternet_predict.onnx"},
          "quaternet-cnn": {"quaternet-cnn_window.onnx"},
          "acrnn": {"acrnn_step.onnx", "acrnn_generate.onnx"},
-         "quaternet-long": {"quaternet-long_step.onnx", "quaternet-long_h0.npy"},
+         "quaternet-long": {"quaternet-long_step.onnx", "quaternet-long_h0.npy", "quaternet-long_seed.npy"},
          "pace": {"quaternet-long_pace.onnx"}}
 
 
@@ -127,10 +127,11 @@ def test_metadata_shapes_are_the_graphs(exported, name):
         for key in ("input_transform", "output_transform"):
             if name != "qtg" or key in meta:
                 assert isinstance(meta[key], dict) and meta[key]["summary"], (f.name, key)
-        state = meta.get("initial_state")
-        if isinstance(state, dict):
-            arr = np.load(folder / state["file"], allow_pickle=False)
-            assert list(arr.shape) == state["shape"] and arr.dtype.name == state["dtype"]
+        for key in ("initial_state", "seed_clip"):
+            state = meta.get(key)
+            if isinstance(state, dict):
+                arr = np.load(folder / state["file"], allow_pickle=False)
+                assert list(arr.shape) == state["shape"] and arr.dtype.name == state["dtype"]
 
 
 def test_acrnn_metadata_names_the_slots(exported):

@@ -14,7 +14,7 @@ from deploy.kinematics import depth_levels, forward_kinematics
 from deploy.quat import dq_normalize, quat_mul, quat_normalize, quat_rotate, quat_rotation_matrix
 from deploy.validate import run_onnxruntime, run_reference, validate_model
 from refimpl.dualquat import dq_normalize as np_dq_normalize
-from refimpl.quat import matrix_from_quat
+from refimpl.rotations import matrix_from_quat
 from refimpl.quat import quat_mul as np_quat_mul
 from refimpl.quat import quat_normalize as np_quat_normalize
 from refimpl.quat import quat_rotate as np_quat_rotate

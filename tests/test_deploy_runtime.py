@@ -153,7 +153,7 @@ def test_cli_export_run_info(tmp_path, capsys):
 def test_cli_run_reads_only_the_context_frames(tmp_path, capsys):
     """spec/deploy.md §8: ``run`` builds its inputs from frames S−2, S−1, S+T, S+T+1 only (the metadata's
     input_transform): changing the frames it replaces does not change the generated ones."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
     from refimpl.motion import Motion
 
     out = tmp_path / "models"

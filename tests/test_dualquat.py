@@ -17,8 +17,8 @@ from refimpl.dualquat import (_dq_blend_naive, _dq_fix_naive, _dq_transform_poin
                               dq_conj_combined, dq_conj_dual, dq_fix, dq_from_matrix, dq_from_quat_translation,
                               dq_identity, dq_inv, dq_is_unit, dq_mul, dq_norm, dq_normalize, dq_sclerp,
                               dq_transform_point, matrix_from_dq, quat_translation_from_dq, translation_from_dq)
-from refimpl.quat import (quat_angle, quat_conj, quat_from_axis_angle, quat_identity, quat_mul,
-                          quat_rotate, quat_slerp, quat_xyzw_from_wxyz)
+from refimpl.quat import quat_angle, quat_conj, quat_identity, quat_mul, quat_rotate, quat_slerp, quat_xyzw_from_wxyz
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.strategies import small_shapes, translations, unit_dual_quaternions, unit_quaternions
 from refimpl.testing import assert_close
 

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from refimpl.testing import assert_close, assert_quat_close
 from refimpl import quat as Q
+from refimpl import rotations as R
 from refimpl import dualquat as DQ
 
 RNG_SEED = 1234
@@ -49,8 +50,8 @@ def _same_dq(a, b, atol):
 # §2.1 zero and near-zero quaternions / dual quaternions
 # ------------------------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("fn", [Q.quat_normalize, Q.quat_inv, Q.quat_log, Q.axis_angle_from_quat,
-                                Q.matrix_from_quat, lambda q: Q.euler_from_quat(q, "zyx")])
+@pytest.mark.parametrize("fn", [Q.quat_normalize, Q.quat_inv, Q.quat_log, R.axis_angle_from_quat,
+                                R.matrix_from_quat, lambda q: R.euler_from_quat(q, "zyx")])
 def test_zero_quaternion_is_refused(fn):
     """spec/robustness.md §2.1: a zero quaternion has no direction: ValueError naming ``q``, no identity
     substituted."""
@@ -122,12 +123,12 @@ _SCALE_INVARIANT = {
     # (spec/math.md §1.6, §2.1, §3.2, §4.1, §4.3, §5.3, §5.5, §5.7, §5.8)
     "quat_angle": (lambda q: Q.quat_angle(q), "q"),
     "quat_angle[q, r]": (lambda q: Q.quat_angle(q, q[::-1]), "q"),
-    "axis_angle_from_quat": (Q.axis_angle_from_quat, "q"),
-    "matrix_from_quat": (Q.matrix_from_quat, "q"),
-    "euler_from_quat": (lambda q: Q.euler_from_quat(q, "zyx"), "q"),
+    "axis_angle_from_quat": (R.axis_angle_from_quat, "q"),
+    "matrix_from_quat": (R.matrix_from_quat, "q"),
+    "euler_from_quat": (lambda q: R.euler_from_quat(q, "zyx"), "q"),
     "quat_log[vector part]": (lambda q: Q.quat_log(q)[..., 1:], "q"),
     "quat_normalize": (Q.quat_normalize, "q"),
-    "matrix_from_ortho6d": (lambda q: Q.matrix_from_ortho6d(Q.ortho6d_from_matrix(Q.matrix_from_quat(q))), "6d"),
+    "matrix_from_ortho6d": (lambda q: R.matrix_from_ortho6d(R.ortho6d_from_matrix(R.matrix_from_quat(q))), "6d"),
     "dq_normalize": (DQ.dq_normalize, "dq"),
     "translation_from_dq": (DQ.translation_from_dq, "dq"),
     "quat_translation_from_dq": (lambda a: np.concatenate(DQ.quat_translation_from_dq(a), axis=-1), "dq"),
@@ -142,7 +143,7 @@ def _scale_case(name, scale):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if kind == "6d":  # the 6-D input itself is scaled (each column independently invariant)
-            actual = Q.matrix_from_ortho6d(Q.ortho6d_from_matrix(Q.matrix_from_quat(x)) * scale)
+            actual = R.matrix_from_ortho6d(R.ortho6d_from_matrix(R.matrix_from_quat(x)) * scale)
         else:
             actual = fn(x * scale)
     assert_close(actual, expected, rtol=0, atol=1e-12, name=f"{name}(s·x) vs {name}(x), s={scale:g}")
@@ -206,12 +207,12 @@ def test_scale_invariance_float32():
     for s in (np.float32(1e-30), np.float32(1e30)):
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            m = Q.matrix_from_quat(q * s)
-            v = Q.axis_angle_from_quat(q * s)
+            m = R.matrix_from_quat(q * s)
+            v = R.axis_angle_from_quat(q * s)
             lg = Q.quat_log(q * s)
         assert m.dtype == v.dtype == lg.dtype == np.float32
-        assert_close(m, Q.matrix_from_quat(q), rtol=0, atol=1e-6)
-        assert_close(v, Q.axis_angle_from_quat(q), rtol=0, atol=1e-5)
+        assert_close(m, R.matrix_from_quat(q), rtol=0, atol=1e-6)
+        assert_close(v, R.axis_angle_from_quat(q), rtol=0, atol=1e-5)
         assert_close(lg[..., 0], np.full(16, np.log(float(s)), np.float32), rtol=1e-6, atol=0)
 
 
@@ -301,10 +302,10 @@ def test_half_turn_matrix_to_quat():
     axes = _half_turn_axes()
     q = np.concatenate([np.zeros((len(axes), 1)), axes], axis=-1)
     m = 2 * axes[:, :, None] * axes[:, None, :] - np.eye(3)  # R = 2 n nᵀ − I, built without quaternions
-    out = Q.quat_from_matrix(m)
+    out = R.quat_from_matrix(m)
     assert_close(out[:, 0], np.zeros(len(axes)), rtol=0, atol=1e-15)
     assert_quat_close(out, q, atol=1e-14)
-    assert_close(Q.matrix_from_quat(out), m, rtol=0, atol=1e-14)
+    assert_close(R.matrix_from_quat(out), m, rtol=0, atol=1e-14)
 
 
 @pytest.mark.parametrize("delta", [0.0, 1e-15, 1e-12, 1e-8])
@@ -312,8 +313,8 @@ def test_near_half_turn_matrix_roundtrip(delta):
     """spec/robustness.md §2.3: rotations within 1e-8 of 180° convert accurately (no branch-switch jump)."""
     axes = _half_turn_axes()
     v = (np.pi - delta) * axes
-    q = Q.quat_from_axis_angle(v)
-    out = Q.quat_from_matrix(Q.matrix_from_quat(q))
+    q = R.quat_from_axis_angle(v)
+    out = R.quat_from_matrix(R.matrix_from_quat(q))
     assert_quat_close(out, q, atol=1e-14)
 
 
@@ -322,11 +323,11 @@ def test_half_turn_axis_angle():
     rotation."""
     axes = _half_turn_axes()
     q = np.concatenate([np.zeros((len(axes), 1)), axes], axis=-1)
-    v = Q.axis_angle_from_quat(q)
+    v = R.axis_angle_from_quat(q)
     assert_close(np.linalg.norm(v, axis=-1), np.full(len(axes), np.pi), rtol=0, atol=1e-14)
-    _same_rotation(Q.quat_from_axis_angle(v), q, 1e-15)
-    v_neg = Q.axis_angle_from_quat(-q)  # −q is the same rotation: π(−n) is as valid as πn
-    _same_rotation(Q.quat_from_axis_angle(v_neg), q, 1e-15)
+    _same_rotation(R.quat_from_axis_angle(v), q, 1e-15)
+    v_neg = R.axis_angle_from_quat(-q)  # −q is the same rotation: π(−n) is as valid as πn
+    _same_rotation(R.quat_from_axis_angle(v_neg), q, 1e-15)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -342,7 +343,7 @@ def _lock_angles(order, n, offset, seed):
 
 
 @pytest.mark.parametrize("offset", [0.0, 1e-12, 1e-9, 1e-6])
-@pytest.mark.parametrize("order", Q.EULER_ORDERS)
+@pytest.mark.parametrize("order", R.EULER_ORDERS)
 def test_gimbal_lock_reproduces_rotation(order, offset):
     """spec/robustness.md §2.4: at (and near) gimbal lock, the returned angles reproduce the rotation.
 
@@ -350,13 +351,13 @@ def test_gimbal_lock_reproduces_rotation(order, offset):
     convention), the middle angle is in its range.
     """
     a = _lock_angles(order, 64, offset, seed=hash(order) % 1000)
-    q = Q.quat_from_euler(a, order)
-    e = Q.euler_from_quat(q, order)
+    q = R.quat_from_euler(a, order)
+    e = R.euler_from_quat(q, order)
     assert np.all(np.isfinite(e))
-    _same_rotation(Q.quat_from_euler(e, order), q, 1e-8)
-    m = Q.matrix_from_euler(a, order)
-    e2 = Q.euler_from_matrix(m, order)
-    assert_close(Q.matrix_from_euler(e2, order), m, rtol=0, atol=2e-8)
+    _same_rotation(R.quat_from_euler(e, order), q, 1e-8)
+    m = R.matrix_from_euler(a, order)
+    e2 = R.euler_from_matrix(m, order)
+    assert_close(R.matrix_from_euler(e2, order), m, rtol=0, atol=2e-8)
     if order[0] == order[2]:
         assert np.all((e[:, 1] >= 0) & (e[:, 1] <= np.pi))
     else:
@@ -365,25 +366,25 @@ def test_gimbal_lock_reproduces_rotation(order, offset):
         assert_close(e[:, 2], np.zeros(64), rtol=0, atol=1e-15, name="last angle at exact lock")
 
 
-@pytest.mark.parametrize("order", Q.EULER_ORDERS)
+@pytest.mark.parametrize("order", R.EULER_ORDERS)
 def test_gimbal_lock_float32(order):
     """spec/robustness.md §2.4: float32 inputs at lock stay float32 and reproduce the rotation to float32 accuracy."""
     a = _lock_angles(order, 32, 0.0, seed=5).astype(np.float32)
-    q = Q.quat_from_euler(a, order)
-    e = Q.euler_from_quat(q, order)
+    q = R.quat_from_euler(a, order)
+    e = R.euler_from_quat(q, order)
     assert e.dtype == np.float32
-    _same_rotation(Q.quat_from_euler(e, order), q, 1e-5)
+    _same_rotation(R.quat_from_euler(e, order), q, 1e-5)
 
 
 @settings(max_examples=30, deadline=None)
-@given(order=st.sampled_from(Q.EULER_ORDERS), a0=st.floats(-np.pi, np.pi), a2=st.floats(-np.pi, np.pi),
+@given(order=st.sampled_from(R.EULER_ORDERS), a0=st.floats(-np.pi, np.pi), a2=st.floats(-np.pi, np.pi),
        sign=st.sampled_from([0, 1]), tiny=st.sampled_from([0.0, 5e-324, 1e-300, 1e-16, 1e-10]))
 def test_gimbal_lock_property(order, a0, a2, sign, tiny):
     """spec/robustness.md §2.4 (hypothesis): any outer angles at/near lock round-trip to the same rotation."""
     mid = ([0.0, np.pi] if order[0] == order[2] else [np.pi / 2, -np.pi / 2])[sign]
     a = np.array([a0, mid + tiny, a2])
-    q = Q.quat_from_euler(a, order)
-    _same_rotation(Q.quat_from_euler(Q.euler_from_quat(q, order), order), q, 1e-8)
+    q = R.quat_from_euler(a, order)
+    _same_rotation(R.quat_from_euler(R.euler_from_quat(q, order), order), q, 1e-8)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -396,11 +397,11 @@ def test_axis_angle_at_zero(theta):
     exact."""
     n = np.array([0.6, 0.0, 0.8])
     v = theta * n
-    q = Q.quat_from_axis_angle(v)
+    q = R.quat_from_axis_angle(v)
     assert np.all(np.isfinite(q))
     assert_close(q[1:], 0.5 * v, rtol=1e-9, atol=1e-323)
     assert abs(np.linalg.norm(q) - 1) <= 1e-15
-    back = Q.axis_angle_from_quat(q)
+    back = R.axis_angle_from_quat(q)
     assert_close(back, v, rtol=1e-12, atol=1e-323)
 
 
@@ -412,18 +413,18 @@ def test_axis_angle_at_full_turns(theta):
     The inverse map returns the equivalent vector with θ ∈ [0, π], i.e. ≈ 0 at 2π.
     """
     n = np.array([0.0, 0.6, -0.8])
-    q = Q.quat_from_axis_angle(theta * n)
+    q = R.quat_from_axis_angle(theta * n)
     _same_rotation(q, np.array([1.0, 0, 0, 0]), 1e-8)
     if theta == 2 * np.pi:
         assert q[0] == pytest.approx(-1.0, abs=1e-15)
-    back = Q.axis_angle_from_quat(q)
+    back = R.axis_angle_from_quat(q)
     assert np.linalg.norm(back) <= 1e-8
-    _same_rotation(Q.quat_from_axis_angle(back), q, 1e-15)
+    _same_rotation(R.quat_from_axis_angle(back), q, 1e-15)
 
 
 def test_axis_angle_identity_both_signs():
     """spec/robustness.md §2.5: (±1, 0, 0, 0) both give the zero vector."""
-    assert_close(Q.axis_angle_from_quat(np.array([[1.0, 0, 0, 0], [-1.0, 0, 0, 0]])), np.zeros((2, 3)), rtol=0, atol=0)
+    assert_close(R.axis_angle_from_quat(np.array([[1.0, 0, 0, 0], [-1.0, 0, 0, 0]])), np.zeros((2, 3)), rtol=0, atol=0)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -455,7 +456,7 @@ def test_zero_length_bones_forward_kinematics():
 
 def test_zero_length_bones_offsets_from_dq():
     """spec/robustness.md §2.6: local offsets recovered from current DQs are exactly 0 for zero-length bones."""
-    from refimpl.skeleton import current_dq_from_local, offsets_from_current_dq, positions_from_current_dq
+    from refimpl.current_dq import current_dq_from_local, offsets_from_current_dq, positions_from_current_dq
 
     rot = _zb_rotations()
     cur = current_dq_from_local(rot, _ZB_OFFSETS, _ZB_PARENTS)
@@ -467,7 +468,7 @@ def test_zero_length_bones_offsets_from_dq():
 
 
 def _zb_dqs(seed, offsets=_ZB_OFFSETS):
-    from refimpl.skeleton import current_dq_from_local
+    from refimpl.current_dq import current_dq_from_local
 
     return current_dq_from_local(_zb_rotations(2, seed), offsets, _ZB_PARENTS)
 

@@ -12,7 +12,7 @@ import pytest
 
 from refimpl.bvh import read_bvh
 from refimpl.expmap import EXPMAP_LAYOUTS, read_expmap
-from refimpl.quat import matrix_from_quat, quat_from_axis_angle
+from refimpl.rotations import matrix_from_quat, quat_from_axis_angle
 from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
 from refimpl.testing import assert_close, assert_quat_close
 

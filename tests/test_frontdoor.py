@@ -8,11 +8,6 @@ import pytest
 from refimpl.cli import build_parser, main
 
 
-def test_blas_threads_default_is_one():
-    # spec/cli.md §1: two threads collapse when other jobs share the cores (benchmarks/bench_thread_default.py)
-    assert build_parser().get_default("blas_threads") == 1
-
-
 @pytest.mark.parametrize("model", ["qtg", "quaternet", "quaternet-cnn", "acrnn", "quaternet-long", "pace"])
 def test_a_set_typo_is_exit_2_before_the_data_is_read(model, tmp_path, capsys):
     # --data names a folder that does not exist: reading it first would be exit 3

@@ -39,7 +39,7 @@ def _udq(*shape):
 
 
 def _rotmats(n):
-    from refimpl.quat import matrix_from_quat
+    from refimpl.rotations import matrix_from_quat
 
     return matrix_from_quat(_uq(n))
 
@@ -405,7 +405,7 @@ def test_backward_gradient_wrong_shape(fwd, bwd):
 @pytest.mark.parametrize("order", ["xyzx", "xx", "xxy", "abc", "", 3, None, "zyz "])
 def test_bad_euler_order(order):
     """spec/robustness.md §3: an invalid Euler order → ValueError naming ``order``."""
-    from refimpl.quat import euler_from_quat, quat_from_euler
+    from refimpl.rotations import euler_from_quat, quat_from_euler
 
     with pytest.raises(ValueError, match="order"):
         quat_from_euler(np.zeros(3), order)
@@ -420,7 +420,7 @@ def test_bad_parents(parents):
     ValueError naming ``parents``, in every function that takes them."""
     from refimpl.losses import dq_offset_loss_forward
     from refimpl.nn.kinematics_layers import forward_kinematics_forward
-    from refimpl.skeleton import current_dq_from_local
+    from refimpl.current_dq import current_dq_from_local
 
     calls = [lambda: current_dq_from_local(_uq(2, J), np.ones((J, 3)), parents),
              lambda: forward_kinematics_forward(_uq(2, J), np.zeros((2, 3)), np.ones((J, 3)), parents),
@@ -436,7 +436,7 @@ def test_matrix_not_a_rotation():
     """spec/robustness.md §3: a scaled, sheared or reflecting matrix → ValueError naming ``m`` (no silent
     quaternion of a non-rotation)."""
     from refimpl.dualquat import dq_from_matrix
-    from refimpl.quat import euler_from_matrix, quat_from_matrix
+    from refimpl.rotations import euler_from_matrix, quat_from_matrix
 
     for m in (2 * np.eye(3), np.diag([1.0, 1, -1]), np.array([[1.0, 0.1, 0], [0, 1, 0], [0, 0, 1]])):
         with pytest.raises(ValueError, match=r"\bm\b"):
@@ -476,7 +476,7 @@ def test_skeleton_constructor_validation():
 
 def test_rotate_about_up_validation():
     """spec/robustness.md §3: rotate_about_up / random_rotate_about_up validate their arrays."""
-    from refimpl.skeleton import random_rotate_about_up, rotate_about_up
+    from refimpl.mirroring import random_rotate_about_up, rotate_about_up
 
     rot, pos = _uq(5, J), np.zeros((5, 3))
     with pytest.raises(ValueError):

@@ -9,8 +9,9 @@ import pytest
 from refimpl.motion import Motion
 from refimpl.protocols import locomotion as L
 from refimpl.protocols import locomotion_data as LD
-from refimpl.quat import euler_from_quat, quat_from_axis_angle, quat_from_euler, quat_mul, quat_rotate
-from refimpl.skeleton import mirror, rotate_about_up
+from refimpl.quat import quat_mul, quat_rotate
+from refimpl.rotations import euler_from_quat, quat_from_axis_angle, quat_from_euler
+from refimpl.mirroring import mirror, rotate_about_up
 from refimpl.skeletons import quaternet_locomotion_skeleton
 from refimpl.testing import assert_close
 

@@ -231,7 +231,7 @@ def test_export_parity(trained, tmp_path):
     from refimpl.services import export_onnx, load_trained, verify_onnx
     pose, pm = load_trained(trained / "pose" / "checkpoint.npz"), load_trained(trained / "pace" / "checkpoint.npz")
     written = export_onnx(pose, tmp_path)
-    assert set(written) == {"step", "h0"}
+    assert set(written) == {"step", "h0", "seed"}
     assert set(export_onnx(pm, tmp_path)) == {"pace"}
     check = verify_onnx(pose, tmp_path, seed=1)
     assert check["ok"] and check["step"] < 1e-4

@@ -12,8 +12,10 @@ from hypothesis import strategies as st
 
 import refimpl.losses as L
 from refimpl.gradcheck import check_gradients, check_vjp
-from refimpl.quat import euler_from_quat, quat_from_euler, quat_mul, quat_conj
-from refimpl.skeleton import Skeleton, current_dq_from_local, positions_from_current_dq
+from refimpl.quat import quat_mul, quat_conj
+from refimpl.rotations import euler_from_quat, quat_from_euler
+from refimpl.skeleton import Skeleton
+from refimpl.current_dq import current_dq_from_local, positions_from_current_dq
 from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
 
 PARENTS = [-1, 0, 1, 2, 0, 4, 0, 6, 6, 8]

@@ -10,7 +10,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from refimpl.bvh import read_bvh, read_bvh_header, write_bvh
+from refimpl.bvh import read_bvh, read_bvh_header
+from refimpl.bvh_write import write_bvh
 from refimpl.motion import (TRANSLATION_TOLERANCE, Motion, fold_constant_translations, reroot_at_child,
                             simplify_translations)
 from refimpl.quat import quat_normalize

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from conftest import load_golden
 from refimpl.gradcheck import check_gradients, check_vjp
-from refimpl.nn.gru import (gru_backward_naive, gru_forward_naive, gru_backward, gru_forward, gru_init,
-                            gru_step_backward, gru_step_forward)
+from refimpl.nn.gru import gru_backward, gru_forward, gru_init, gru_step_backward, gru_step_forward
+from refimpl.nn.gru_naive import gru_backward_naive, gru_forward_naive
 from refimpl.nn.params import count_parameters
 from refimpl.testing import TOL_EXACT, TOL_GOLDEN, assert_close
 

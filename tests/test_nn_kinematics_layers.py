@@ -27,13 +27,9 @@ from refimpl.nn.kinematics_layers import (
     positions_from_dq_backward,
     positions_from_dq_forward,
 )
-from refimpl.skeleton import (
-    Skeleton,
-    current_dq_from_local,
-    local_from_current_dq,
-    offsets_from_current_dq,
-    positions_from_current_dq,
-)
+from refimpl.skeleton import Skeleton
+from refimpl.current_dq import (current_dq_from_local, local_from_current_dq, offsets_from_current_dq,
+                                positions_from_current_dq)
 from refimpl.strategies import skeleton_arrays
 from refimpl.testing import TOL_EXACT, assert_close
 
@@ -158,7 +154,7 @@ def test_dq_from_quat_translation(lead, seed):
 
 @given(skeleton_arrays(max_joints=7), lead_shapes, seeds)
 def test_current_dq_matches_skeleton_and_fk(skel, lead, seed):
-    """spec/losses.md §3.3, §3.5: current DQs equal refimpl.skeleton.current_dq_from_local and the naive loop;
+    """spec/losses.md §3.3, §3.5: current DQs equal refimpl.current_dq.current_dq_from_local and the naive loop;
     their translations (Eq. 8) are the FK positions relative to the root."""
     parents, offsets = skel
     rng = np.random.default_rng([seed, 7])
@@ -178,7 +174,7 @@ def test_current_dq_matches_skeleton_and_fk(skel, lead, seed):
 @given(skeleton_arrays(max_joints=7), lead_shapes, seeds)
 def test_local_dq_and_offsets_invert_current(skel, lead, seed):
     """spec/losses.md §3.4, §3.6: local_dq_from_current inverts current_dq_from_local (Eq. 12), agrees with the
-    naive loop and refimpl.skeleton.local_from_current_dq; offsets_from_dq recovers the offsets (root 0)."""
+    naive loop and refimpl.current_dq.local_from_current_dq; offsets_from_dq recovers the offsets (root 0)."""
     parents, offsets = skel
     rng = np.random.default_rng([seed, 7])
     rot, _, _ = _motion(rng, lead, parents)

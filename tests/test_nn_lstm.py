@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 from conftest import load_golden
 from refimpl.gradcheck import check_gradients, check_vjp
-from refimpl.nn.lstm import (_lstm_backward_naive, _lstm_forward_naive, lstm_backward,
-                             lstm_forward, lstm_init, lstm_step_backward, lstm_step_forward)
+from refimpl.nn.lstm import lstm_backward, lstm_forward, lstm_init, lstm_step_backward, lstm_step_forward
+from refimpl.nn.lstm_naive import _lstm_backward_naive, _lstm_forward_naive
 from refimpl.nn.params import count_parameters
 from refimpl.testing import TOL_EXACT, TOL_GOLDEN, assert_close
 

@@ -28,7 +28,8 @@ from refimpl.nn.quat_layers import (
     quat_normalize_backward,
     quat_normalize_forward,
 )
-from refimpl.quat import euler_from_quat, quat_from_axis_angle, quat_from_euler, quat_mul, quat_normalize
+from refimpl.quat import quat_mul, quat_normalize
+from refimpl.rotations import euler_from_quat, quat_from_axis_angle, quat_from_euler
 from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
 
 lead_shapes = st.lists(st.integers(1, 3), min_size=0, max_size=3).map(tuple)
@@ -330,7 +331,7 @@ def _axis_quat(axis: int, angle: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("order", EULER_ORDERS)
 def test_euler_round_trip_all_orders(order):
     """spec/losses.md §2.5: for q = q_{o0}(·) ⊗ q_{o1}(·) ⊗ q_{o2}(·) (QuaterNet euler_to_quaternion), qeuler
-    returns the (x, y, z) angles; also against refimpl.quat.euler_from_quat (angles in `order`)."""
+    returns the (x, y, z) angles; also against refimpl.rotations.euler_from_quat (angles in `order`)."""
     rng = np.random.default_rng(5)
     e = rng.uniform(-1.2, 1.2, (50, 3))  # (x, y, z), away from gimbal lock
     q = None
@@ -393,7 +394,7 @@ def test_euler_float32():
 
 @pytest.mark.parametrize("order", ["xyz", "yzx"])
 def test_euler_to_quat_layer(order):
-    """spec/losses.md §2: the Euler ablation's conversion equals refimpl.quat.quat_from_euler; its backward =
+    """spec/losses.md §2: the Euler ablation's conversion equals refimpl.rotations.quat_from_euler; its backward =
     central differences; it inverts euler_from_quat (up to sign)."""
     rng = np.random.default_rng(1)
     a = rng.uniform(-3, 3, (6, 3))
@@ -407,7 +408,7 @@ def test_euler_to_quat_layer(order):
 
 
 def test_axis_angle_to_quat_layer():
-    """spec/losses.md §2: the axis-angle conversion equals refimpl.quat.quat_from_axis_angle (also below the series
+    """spec/losses.md §2: the axis-angle conversion equals refimpl.rotations.quat_from_axis_angle (also below the series
     threshold θ = 1e-4); its backward = central differences."""
     rng = np.random.default_rng(2)
     v = rng.standard_normal((6, 3)) * np.array([[1e-7], [1e-5], [0.3], [1.0], [2.5], [3.0]])

@@ -12,7 +12,7 @@ from hypothesis import given, strategies as st
 
 from refimpl.protocols import prediction as PP
 from refimpl.protocols import prediction_data as PD
-from refimpl.quat import quat_from_axis_angle
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.strategies import unit_quaternions
 from refimpl.tasks import prediction as P
 
@@ -284,7 +284,7 @@ def test_linear_ramp_errors_in_closed_form(h36m_dir):
 def test_running_average_is_the_euler_mean_of_the_last_frames():
     rng = np.random.default_rng(2)
     angles = rng.uniform(-1.2, 1.2, size=(2, 6, 4, 3))                                 # zyx, in range
-    from refimpl.quat import euler_from_quat, quat_from_euler
+    from refimpl.rotations import euler_from_quat, quat_from_euler
     prefix = quat_from_euler(angles, "zyx")
     for k in (1, 2, 4):
         out = PP.running_average(k)(prefix, 3)
@@ -436,7 +436,7 @@ def test_zyx_euler_of_the_negated_expmap_equals_the_srnn_euler_of_the_file_expma
     # Martinez et al. take Euler angles of the Rodrigues matrix R(e) of the file's exp-map; the published
     # QuaterNet evaluation takes zyx Euler angles of q = quat(−e). Both give the same (x, y, z), so averaging
     # (running-average baselines) and the error norm agree.
-    from refimpl.quat import euler_from_quat, matrix_from_quat
+    from refimpl.rotations import euler_from_quat, matrix_from_quat
     e = np.random.default_rng(3).normal(size=(500, 3)) * 1.5
     srnn = _rotmat2euler_srnn(matrix_from_quat(quat_from_axis_angle(e)))
     ours = euler_from_quat(quat_from_axis_angle(-e), "zyx")[..., ::-1]                # (z, y, x) → (x, y, z)

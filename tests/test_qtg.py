@@ -8,7 +8,8 @@ from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.models.qtg import (QTGConfig, QTGState, _rollout_backward_per_step, _rollout_naive, count_parameters,
                                 encode, init_params, init_state, macs_per_frame, param_shapes, rtn_macs_per_frame,
                                 step)
-from refimpl.models.qtg_fast import prepare_inference, rollout_backward, rollout_forward, rollout_inference
+from refimpl.models.qtg_fast import rollout_backward, rollout_forward
+from refimpl.models.qtg_fast_inference import prepare_inference, rollout_inference
 from refimpl.testing import TOL_EXACT, TOL_FD, assert_close
 
 TINY = QTGConfig(pose_size=11, encoder_sizes=(6, 4), gru_hidden=5, decoder_sizes=(6,), transition_length=4)

@@ -8,8 +8,9 @@ from hypothesis import strategies as st
 
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.losses import quat_norm_loss_backward, quat_norm_loss_forward
-from refimpl.models.quaternet import (QuaterNetConfig, _backward_per_step, _forward_per_step, backward, check_params, count_parameters,
-                                      forward, init_params, init_state, param_shapes, predict, step)
+from refimpl.models.quaternet import (QuaterNetConfig, check_params, count_parameters, init_params, init_state,
+                                      param_shapes, predict, step)
+from refimpl.models.quaternet_sequence import _backward_per_step, _forward_per_step, backward, forward
 from refimpl.dualquat import dq_from_quat_translation, dq_mul, dq_normalize
 from refimpl.quat import quat_mul, quat_normalize
 from refimpl.schedules import scheduled_sampling_mask

@@ -13,11 +13,13 @@ from refimpl import dq_prediction as dqp
 from refimpl.cli import EXIT_OK, main
 from refimpl.gradcheck import check_vjp, numerical_gradient
 from refimpl.models import quaternet as net
+from refimpl.models import quaternet_sequence
 from refimpl.protocols import prediction as PP
-from refimpl.quat import quat_from_axis_angle
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.recipes import quaternet as rnn_recipe
 from refimpl.services import load_trained
-from refimpl.skeleton import Skeleton, current_dq_from_local
+from refimpl.skeleton import Skeleton
+from refimpl.current_dq import current_dq_from_local
 from refimpl.tasks import prediction as pr
 from refimpl.testing import TOL_ORT_STEP, assert_close
 from refimpl.train import TrainContext
@@ -157,13 +159,13 @@ def test_full_loss_gradient_through_the_network(velocity):
     mask = np.array([True, False])
 
     def loss():
-        y, pre, _ = net.forward(params, x[:, :3], x[:, 3:], mask, ncfg)
+        y, pre, _ = quaternet_sequence.forward(params, x[:, :3], x[:, 3:], mask, ncfg)
         return rnn_recipe.dq_loss_terms(y, pre, q[:, 3:], cfg, PARENTS)[1]
 
-    y, pre, cache = net.forward(params, x[:, :3], x[:, 3:], mask, ncfg)
+    y, pre, cache = quaternet_sequence.forward(params, x[:, :3], x[:, 3:], mask, ncfg)
     _, total, dy, dpre = rnn_recipe.dq_loss_terms(y, pre, q[:, 3:], cfg, PARENTS)
     assert np.isclose(total, loss())
-    grads = net.backward(dy, dpre, cache)
+    grads = quaternet_sequence.backward(dy, dpre, cache)
     for name in ("fc.weight", "fc.bias", "rnn.weight_ih_l0", "rnn.weight_hh_l0", "h0"):
         idx = rng.choice(params[name].size, size=min(12, params[name].size), replace=False)
         num = numerical_gradient(loss, params[name], indices=idx)

@@ -8,7 +8,7 @@ import numpy as np
 from refimpl.dualquat import dq_conj, dq_mul, dq_normalize, translation_from_dq
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.losses import WEIGHTS_QUATERNET_DQ
-from refimpl.models import quaternet
+from refimpl.models import quaternet, quaternet_sequence
 from refimpl.quat import quat_conj, quat_mul, quat_normalize
 from refimpl.recipes import quaternet_long as recipe
 from refimpl.recipes import quaternet_long_dq as dqr
@@ -122,7 +122,7 @@ def _loop_loss(pre, y, target, dtr, parents):
 
 def test_loss_and_grads_against_the_slow_loop_oracles():
     """The value equals a per-(b, t, j) loop over the public DQ functions; the gradients equal the per-step
-    oracle of the network (``quaternet._backward_per_step``, no vectorised prefix) fed the same cotangents (the
+    oracle of the network (``quaternet_sequence._backward_per_step``, no vectorised prefix) fed the same cotangents (the
     loss's ``dpre`` and only translation cotangents in ``dy``)."""
     from refimpl.dq_output import dq_output_loss_backward, dq_output_loss_forward
     rng = np.random.default_rng(5)
@@ -131,7 +131,7 @@ def test_loss_and_grads_against_the_slow_loop_oracles():
     x, P = batch["inputs"], batch["prefix"]
     B, L, _ = x.shape
     T, J = L - P, net.num_joints
-    y, pre, _ = quaternet.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
+    y, pre, _ = quaternet_sequence.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
     target = x[:, P:, :8 * J].reshape(B, T, J, 8)
     dtr = y[..., 8 * J:] - batch["target_translations"]
     assert np.isclose(value, _loop_loss(pre.reshape(B, T, J, 8), y[..., :8 * J].reshape(B, T, J, 8), target, dtr,
@@ -140,7 +140,7 @@ def test_loss_and_grads_against_the_slow_loop_oracles():
     dpre = dq_output_loss_backward(1.0, dc).reshape(B, T, 8 * J)
     dy = np.zeros_like(y)
     dy[..., 8 * J:] = np.sign(dtr) / (B * T)
-    slow, _, _ = quaternet._backward_per_step(dy, dpre, params, x[:, :P], x[:, P:], batch["mask"], net)
+    slow, _, _ = quaternet_sequence._backward_per_step(dy, dpre, params, x[:, :P], x[:, P:], batch["mask"], net)
     assert set(slow) == set(grads)
     for k in grads:
         assert np.allclose(grads[k], slow[k], rtol=1e-10, atol=1e-13), k
@@ -239,13 +239,37 @@ def test_dq_bone_length_drift_is_zero_on_fk_positions():
     assert G.dq_bone_length_drift(p, sk)["max"] > 0.1
 
 
+@pytest.mark.parametrize("dq_scale", [None, "0.056444"])
+def test_deploy_run_walks_a_dq_export_like_refimpl_generate(trained, tmp_path, dq_scale):
+    """``python -m deploy run`` with an exported DQ step (the seed turned into current DQs with the metadata's
+    ``dq_scale``, the outputs decoded with Eq. 12) against ``refimpl generate`` on the same checkpoints."""
+    pytest.importorskip("onnxruntime")
+    from deploy.cli import main as deploy_main
+    pose = trained / "pose" / "checkpoint.npz"
+    if dq_scale is not None:  # DQ translations in metres: the walk must read dq_scale from the metadata
+        assert main(["train", "--model", "quaternet-long", *SMALL, "--set", f"dq_scale={dq_scale}", "--steps", "1",
+                     "--out", str(tmp_path / "pose_m")]) == 0
+        pose = tmp_path / "pose_m" / "checkpoint.npz"
+    for ck, folder in ((pose, "long"), (trained / "pace" / "checkpoint.npz", "pace")):
+        assert deploy_main(["export", str(ck), str(tmp_path / folder)]) == 0
+    assert main(["generate", "--model", "quaternet-long", "--checkpoint", str(pose),
+                 "--pace", str(trained / "pace" / "checkpoint.npz"), "--path", "circle:r=2", "--seconds", "1.5",
+                 "--out", str(tmp_path / "ref.bvh")]) == 0
+    assert deploy_main(["run", str(tmp_path / "long"), "circle:r=2", str(tmp_path / "walk.bvh"), "--pace",
+                        str(tmp_path / "pace"), "--seconds", "1.5"]) == 0
+    ref, got = read_bvh(tmp_path / "ref.bvh"), read_bvh(tmp_path / "walk.bvh")
+    assert got.num_frames == ref.num_frames == 45
+    scale = np.abs(ref.positions()).max()
+    assert np.abs(got.positions() - ref.positions()).max() <= 1e-4 * scale
+
+
 def test_export_step_with_eq13_in_the_graph(trained, tmp_path):
     """The exported DQ step (Eq. 13 per joint in the graph) against NumPy over 5 chained steps from h0; its
     outputs are unit dual quaternions; the task's ONNX rollout refuses a DQ step model (it takes DQ frames)."""
     pytest.importorskip("onnxruntime")
     from refimpl.services import export_onnx, load_trained, verify_onnx
     pose = load_trained(trained / "pose" / "checkpoint.npz")
-    assert set(export_onnx(pose, tmp_path)) == {"step", "h0"}
+    assert set(export_onnx(pose, tmp_path)) == {"step", "h0", "seed"}
     check = verify_onnx(pose, tmp_path, seed=1)
     assert check["ok"] and check["step"] < 1e-4
     from deploy.models import runtime_for_dir

@@ -14,10 +14,12 @@ from hypothesis import strategies as st
 
 from refimpl.bvh import read_bvh
 from refimpl.dualquat import dq_normalize
-from refimpl.quat import TAIT_BRYAN_ORDERS, euler_from_quat, quat_from_axis_angle, quat_normalize
+from refimpl.quat import quat_normalize
+from refimpl.rotations import TAIT_BRYAN_ORDERS, euler_from_quat, quat_from_axis_angle
 from refimpl.representations import (REPRESENTATIONS, decode, encode, fix_antipodal_frames, frame_size,
                                      positions_from_frames)
-from refimpl.skeleton import Skeleton, current_dq_from_local, remove_joints
+from refimpl.skeleton import Skeleton, remove_joints
+from refimpl.current_dq import current_dq_from_local
 from refimpl.skeletons import cmu_skeleton
 from refimpl.strategies import skeleton_arrays, unit_quaternions
 from refimpl.testing import assert_close, assert_quat_close
@@ -93,7 +95,7 @@ def test_per_joint_blocks_are_what_they_claim():
     assert_close(blocks["quaternions+positions"][..., 4:], rel, atol=1e-12)
     assert_close(blocks["ortho6d+positions"][..., :6], blocks["ortho6d"], atol=0)
     assert_close(blocks["ortho6d+positions"][..., 6:], rel, atol=1e-12)
-    from refimpl.quat import matrix_from_quat
+    from refimpl.rotations import matrix_from_quat
     m = matrix_from_quat(rot)
     assert_close(blocks["ortho6d"], np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1), atol=0)
 

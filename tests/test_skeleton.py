@@ -17,11 +17,12 @@ from hypothesis import strategies as st
 from refimpl.bvh import read_bvh
 from refimpl.dualquat import dq_from_quat_translation
 from refimpl.expmap import read_expmap
-from refimpl.quat import matrix_from_quat, quat_from_axis_angle, quat_mul, quat_normalize
-from refimpl.skeleton import (UNIT_TOLERANCE, Skeleton, _current_dq_from_local_naive, _forward_kinematics_naive,
-                              current_dq_from_local,
-                              local_from_current_dq, mirror, offsets_from_current_dq, positions_from_current_dq,
-                              random_rotate_about_up, remove_joints, rotate_about_up)
+from refimpl.quat import quat_mul, quat_normalize
+from refimpl.rotations import matrix_from_quat, quat_from_axis_angle
+from refimpl.skeleton import UNIT_TOLERANCE, Skeleton, _forward_kinematics_naive, remove_joints
+from refimpl.mirroring import mirror, random_rotate_about_up, rotate_about_up
+from refimpl.current_dq import (_current_dq_from_local_naive, current_dq_from_local, local_from_current_dq,
+                                offsets_from_current_dq, positions_from_current_dq)
 from refimpl.skeletons import (CMU_ASF_PARENTS, CMU_PARENTS, H36M_PARENTS, LOCOMOTION_REMOVED_JOINTS,
                                cmu_asf_skeleton, cmu_skeleton, h36m_skeleton, quaternet_locomotion_skeleton)
 from refimpl.strategies import skeleton_arrays, unit_quaternions

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from refimpl import strategies as S
-from refimpl.quat import EULER_ORDERS, TAIT_BRYAN_ORDERS, euler_from_quat, quat_from_euler
+from refimpl.rotations import EULER_ORDERS, TAIT_BRYAN_ORDERS, euler_from_quat, quat_from_euler
 from refimpl.strategies import (angles, euler_angles, euler_orders, quaternions, rotation_matrices, skeleton_arrays,
                                 small_shapes, tait_bryan_orders, translations, unit_dual_quaternions,
                                 unit_quaternions)

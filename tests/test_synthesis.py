@@ -6,7 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from refimpl.bvh import read_bvh, write_bvh
+from refimpl.bvh import read_bvh
+from refimpl.bvh_write import write_bvh
 from refimpl.representations import REPRESENTATIONS, positions_from_frames
 from refimpl.protocols import synthesis as S
 

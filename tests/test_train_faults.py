@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from refimpl.checkpoint import load_checkpoint
-from refimpl.train import (ModelAdapter, OptimConfig, OutputLocked, TrainConfig, TrainingDiverged, output_lock,
-                           remove_stale_temp_files, train)
+from refimpl.train import ModelAdapter, OptimConfig, TrainConfig, TrainingDiverged, train
+from refimpl.train_files import OutputLocked, output_lock, remove_stale_temp_files
 
 ROOT = Path(__file__).resolve().parents[1]
 WALK_BVH = ROOT / "refimpl" / "data" / "sample" / "bvh" / "02_01.bvh"

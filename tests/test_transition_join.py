@@ -6,7 +6,8 @@ import pytest
 
 from refimpl.protocols.transition_baselines import inertialize
 from refimpl.models.qtg import QTGConfig, init_params
-from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_normalize
+from refimpl.quat import quat_conj, quat_mul, quat_normalize
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.recipes.qtg import qtg_method
 from refimpl.testing import assert_close, assert_quat_close
 from refimpl.protocols.transition_join import (JOIN_BLEND_FRAMES, carry_offset, check_join, inertialize_joins,

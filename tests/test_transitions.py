@@ -8,7 +8,8 @@ import pytest
 
 from refimpl.bvh import read_bvh
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table, joint_position_errors, positions_from_poses
-from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_normalize, quat_rotate
+from refimpl.quat import quat_conj, quat_mul, quat_normalize, quat_rotate
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.testing import TOL_EXACT, assert_close, assert_quat_close
 from refimpl.protocols.transition import (CMU_22_JOINTS, CMU_UNIT_CM, SALSA_22_JOINTS, TransitionDataset, TransitionSource,
                                  build_transition_datasets, denormalize_poses, heading_from_root, join_pose,

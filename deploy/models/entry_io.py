@@ -9,13 +9,18 @@ checkpoints (the arrays and metadata, the parameters ``param.<name>``, a config 
 * :func:`config_from_meta` — ``config_type(**fields)`` from ``meta["model_config"]`` (unknown keys ignored), checked
   against the checkpoint schema and the task's fields (``ValueError`` only);
 * :func:`checked_params` — the parameters checked against the shapes the config implies;
-* :func:`write_models` — validate each model and write it as ``<name>_<role>.onnx``.
+* :func:`write_models` — validate each model and write it as ``<name>_<role>.onnx``;
+* :func:`write_npy` — an array written atomically as ``.npy`` (no pickle).
 """
 from __future__ import annotations
 
 import dataclasses
+import io
 from pathlib import Path
 
+import numpy as np
+
+from refimpl.atomic import atomic_write_bytes
 from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
 from refimpl.checkpoint_schema import expected_param_shapes, validate_model_config, validate_params
 from refimpl.task_schemas import validate_task_checkpoint
@@ -23,7 +28,8 @@ from refimpl.task_schemas import validate_task_checkpoint
 from deploy.graph import save_model
 from deploy.validate import validate_model
 
-__all__ = ["read_checkpoint", "checkpoint_params", "config_from_meta", "checked_params", "write_models"]
+__all__ = ["read_checkpoint", "checkpoint_params", "config_from_meta", "checked_params", "write_models",
+           "write_npy"]
 
 PARAM_PREFIX = "param."
 
@@ -89,3 +95,11 @@ def write_models(models: dict, out_dir, name: str) -> dict:
         paths[role] = out / f"{name}_{role}.onnx"
         save_model(m, paths[role])
     return paths
+
+
+def write_npy(path, array) -> Path:
+    """``array`` written atomically to ``path`` as ``.npy`` (``allow_pickle=False``); returns the Path."""
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(array), allow_pickle=False)
+    atomic_write_bytes(Path(path), buf.getvalue())
+    return Path(path)

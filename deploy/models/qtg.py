@@ -42,7 +42,7 @@ import onnx
 from typing import Mapping
 
 from refimpl.models.qtg import QTGConfig, param_shapes
-from refimpl.protocols.transition_join import check_join, join_blend_frames
+from refimpl.protocols.transition_join import check_export_join, join_blend_frames
 
 from deploy.activations import leaky_relu
 from deploy.features import destandardize, standardize
@@ -262,7 +262,7 @@ def qtg_metadata(config, role, io, normalization, in_graph, skeleton, frame_rate
 def join_blend(join, blend_frames, T, stats, norm):
     """Validate the join option (``join``, ``join_blend_frames`` of the rollout exporters); the blend in frames
     (None for ``"none"``)."""
-    if check_join(join) == "none":
+    if check_export_join(join) == "none":
         return None
     if stats is not None and norm is None:
         raise ValueError("join: the join works on raw poses; it needs normalize_in_graph=True")

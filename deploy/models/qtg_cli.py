@@ -88,7 +88,8 @@ def export_checkpoint(entry, args) -> dict:
 def run_command(runtime, args) -> int:
     """``python -m deploy run DIR IN.bvh OUT.bvh --start S``: frames ``S … S+T−1`` of the clip replaced by a
     transition generated from frames ``S−2, S−1`` and ``S+T, S+T+1``; prints the mean joint-position error."""
-    from refimpl.bvh import read_bvh_header, write_bvh
+    from refimpl.bvh import read_bvh_header
+    from refimpl.bvh_write import write_bvh
     from refimpl.motion import Motion
     from refimpl.protocols.transition import (TransitionSource, declared_rate, denormalize_poses,
                                               heading_from_root, load_source, make_windows, normalize_poses,

@@ -1,8 +1,8 @@
 """Deployment variant of the QTG rollout: rearranged weights, fewer nodes, optionally int8 or int4 weights.
 
 The plain export (``deploy/qtg.py``) translates ``refimpl.models.qtg.step`` node for node. This variant computes
-the same function (``spec/deploy.md`` §5.4) with the algebra of ``refimpl.models.qtg_fast.prepare_inference``
-(``spec/qtg.md`` §6), arranged for onnxruntime, where at batch 1 every node costs a dispatch on top of the
+the same function (``spec/deploy.md`` §5.4) with the algebra of
+``refimpl.models.qtg_fast_inference.prepare_inference`` (``spec/qtg.md`` §6), arranged for onnxruntime, where at batch 1 every node costs a dispatch on top of the
 weight bytes it reads (measured on the development VM: ~0.55 µs per element-wise node, ~1.4 µs per
 ``MatMulNBits`` plus ~0.044 µs per 1000 int8 weights):
 

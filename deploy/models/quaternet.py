@@ -171,7 +171,7 @@ def _gru_input(g, x, params, config, *, name):
 
 
 def _head(g, top, x, params, config, *, name):
-    """``y (B, G)`` from the top GRU output ``top (B, H)`` and the fed frame ``x (B, F)`` (``rnn._head_forward``):
+    """``y (B, G)`` from the top GRU output ``top (B, H)`` and the fed frame ``x (B, F)`` (``rnn.head_forward``):
     per joint block of width D, ``normalize(Δ ⊗ q_in)`` (velocity) or ``normalize(Δ)``; for dual quaternions
     (D = 8, spec/quaternet.md §9) the product is the dual-quaternion one and the normalisation Eq. 13."""
     J, R = config.num_joints, config.rotation_size

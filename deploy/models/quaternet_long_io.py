@@ -3,20 +3,20 @@ network's step and the pace network (spec/deploy.md §12).
 
 * :func:`load_checkpoint` — ``(params, config, meta)`` of a ``refimpl train`` checkpoint of ``quaternet-long``
   (config: :class:`~refimpl.models.quaternet.QuaterNetConfig`) or ``pace`` (:class:`~refimpl.models.pace.PaceConfig`);
-* :func:`export_dir` — ``quaternet-long_step.onnx`` (+ ``quaternet-long_h0.npy``, the learned initial state) for
-  a pose network, ``quaternet-long_pace.onnx`` for a pace network (validated, atomic);
-* :class:`Runtime` — ``step(x, state)`` and ``pace(x)`` in onnxruntime, and a ``rollout`` for evaluation.
+* :func:`export_dir` — ``quaternet-long_step.onnx`` (+ ``quaternet-long_h0.npy``, the learned initial state, and
+  ``quaternet-long_seed.npy``, the checkpoint's seed clip that starts a walk) for a pose network,
+  ``quaternet-long_pace.onnx`` for a pace network (validated, atomic);
+* :class:`Runtime` — ``step(x, state)`` and ``pace(x)`` in onnxruntime, a ``rollout`` for evaluation, and the
+  seed clip (``seed``).
 
 Shape legend: B batch, F input features, G outputs, L layers, H hidden, N points, P prefix, T frames.
 """
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
 
-from refimpl.atomic import atomic_write_bytes
 from refimpl.bounds import MAX_CONFIG_SIZE
 from refimpl.task_schemas import validate_task_checkpoint
 from refimpl.models import pace
@@ -24,16 +24,18 @@ from refimpl.models.quaternet import QuaterNetConfig
 
 from deploy.graph import save_model
 from deploy.models.arguments import count, frames_array
-from deploy.models.entry_io import checked_params, checkpoint_params, config_from_meta, read_checkpoint
+from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
+                                    write_npy as _write_npy)
 from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model
 
-__all__ = ["load_checkpoint", "export_dir", "Runtime", "STEP_FILE", "PACE_FILE", "H0_FILE"]
+__all__ = ["load_checkpoint", "export_dir", "Runtime", "STEP_FILE", "PACE_FILE", "H0_FILE", "SEED_FILE"]
 
 STEP_FILE = f"{NAME}_step.onnx"
 PACE_FILE = f"{NAME}_pace.onnx"
 H0_FILE = f"{NAME}_h0.npy"
+SEED_FILE = f"{NAME}_seed.npy"
 
 
 def load_checkpoint(path):
@@ -82,12 +84,13 @@ def _network(config):
     return config.network() if hasattr(config, "network") else config
 
 
-def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, skeleton=None,
+def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, skeleton=None, seed_clip=None,
                **_ignored) -> dict[str, Path]:
     """Export, validate and write the model(s) of ``config`` into ``out_dir``; returns role -> path.
 
-    A pose network writes ``step`` (and its ``h0`` as ``.npy``), a pace network ``pace``. Options of other
-    exporters (``mode``, ``T``) are ignored.
+    A pose network writes ``step`` (and its ``h0`` as ``.npy``; with ``seed_clip``, the checkpoint's
+    ``{"name", "rotations" (P, J, 4), "features" (P, 8)}``, the frames ``(P, 4J + 8)`` as ``seed``), a pace
+    network ``pace``. Options of other exporters (``mode``, ``T``) are ignored.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -96,49 +99,88 @@ def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, skel
         m = validate_model(export_pace(params, config, dtype=dtype, metadata=metadata))
         save_model(m, out / PACE_FILE)
         return {"pace": out / PACE_FILE}
+    seed = None if seed_clip is None else _seed_frames(seed_clip, config.num_joints)
+    if seed is not None:
+        metadata = {**dict(metadata or {}), "seed_clip": {
+            "file": SEED_FILE, "shape": list(seed.shape), "dtype": np.dtype(dtype).name, "format": "NumPy .npy (no "
+            "pickle)", "name": str(seed_clip.get("name", "")),
+            "meaning": "the training clip that starts a walk: P frames [rotations 4J (local quaternions, the "
+                       "root's absolute about +y) | offset, height | 6 controls] in the quaternion layout (a "
+                       "dual-quaternion step takes them as current DQs); turn it about +y to the path's facing "
+                       "and feed it through step"}}
     m = validate_model(export_pose_step(params, config, dtype=dtype, metadata=metadata, skeleton=skeleton,
                                         h0_file=H0_FILE))
     save_model(m, out / STEP_FILE)
-    buf = io.BytesIO()
-    np.save(buf, np.asarray(params["h0"], dtype=dtype), allow_pickle=False)
-    atomic_write_bytes(out / H0_FILE, buf.getvalue())
-    return {"step": out / STEP_FILE, "h0": out / H0_FILE}
+    paths = {"step": out / STEP_FILE, "h0": out / H0_FILE}
+    _write_npy(out / H0_FILE, np.asarray(params["h0"], dtype=dtype))
+    if seed is not None:
+        paths["seed"] = out / SEED_FILE
+        _write_npy(paths["seed"], seed.astype(dtype))
+    return paths
+
+
+def _seed_frames(seed_clip, J: int) -> np.ndarray:
+    """The checkpoint's seed clip as frames ``(P, 4J + 8)``; ``ValueError`` for another shape or non-finite
+    values."""
+    try:
+        rot = np.asarray(seed_clip["rotations"], np.float64)
+        feats = np.asarray(seed_clip["features"], np.float64)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"seed_clip: expected rotations and features arrays ({type(exc).__name__})") from None
+    if rot.ndim != 3 or rot.shape[1:] != (J, 4) or feats.shape != (rot.shape[0], 8) or rot.shape[0] < 1 or \
+            not (np.all(np.isfinite(rot)) and np.all(np.isfinite(feats))):
+        raise ValueError(f"seed_clip: expected finite rotations (P, {J}, 4) and features (P, 8), got "
+                         f"{rot.shape}, {feats.shape}")
+    return np.concatenate([rot.reshape(len(rot), 4 * J), feats], axis=1)
+
+
+def _read_array(path, ndim: int, what: str, ok=lambda a: True) -> np.ndarray:
+    """A finite float ``.npy`` array of rank ``ndim`` beside the models (``ok(a)`` further checks the shape); a
+    damaged or pickled file is refused with ``ValueError`` naming it and ``what`` was expected."""
+    try:
+        a = np.load(path, allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001 - np.load raises ValueError, OSError, EOFError, ... on junk
+        raise ValueError(f"{path}: not a readable .npy array ({type(exc).__name__})") from None
+    if not isinstance(a, np.ndarray) or a.dtype.kind != "f" or a.ndim != ndim or 0 in a.shape or not ok(a) or \
+            not np.all(np.isfinite(a)):
+        raise ValueError(f"{path}: expected a finite float array {what}, got {getattr(a, 'dtype', '?')} "
+                         f"{getattr(a, 'shape', '?')}")
+    return a
 
 
 def _read_h0(path) -> np.ndarray:
-    """The learned initial state ``(L, 1, H)`` beside a step model: a finite float array of rank 3 (a damaged or
-    pickled file is refused with ``ValueError``)."""
-    try:
-        h0 = np.load(path, allow_pickle=False)
-    except Exception as exc:  # noqa: BLE001 - np.load raises ValueError, OSError, EOFError, ... on junk
-        raise ValueError(f"{path}: not a readable .npy array ({type(exc).__name__})") from None
-    if not isinstance(h0, np.ndarray) or h0.dtype.kind != "f" or h0.ndim != 3 or h0.shape[1] != 1 or \
-            not np.all(np.isfinite(h0)):
-        raise ValueError(f"{path}: expected a finite float array (L, 1, H), got {getattr(h0, 'dtype', '?')} "
-                         f"{getattr(h0, 'shape', '?')}")
-    return h0
+    """The learned initial state ``(L, 1, H)`` beside a step model."""
+    return _read_array(path, 3, "(L, 1, H)", lambda a: a.shape[1] == 1)
+
+
+def _read_seed(path) -> np.ndarray:
+    """The seed clip ``(P, 4J + 8)`` beside a step model."""
+    return _read_array(path, 2, "(P, 4J + 8)", lambda a: a.shape[1] >= 12 and (a.shape[1] - 8) % 4 == 0)
 
 
 class Runtime:
     """The exported long-term models in onnxruntime (any of ``step`` and ``pace``)."""
 
-    def __init__(self, step=None, pace_model=None, h0=None, *, intra_op_threads: int = 1):
+    def __init__(self, step=None, pace_model=None, h0=None, seed=None, *, intra_op_threads: int = 1):
         def load(m):
             return m if m is None or isinstance(m, DeployedModel) else load_model(m, intra_op_threads=intra_op_threads)
 
         self.step_model, self.pace_model = load(step), load(pace_model)
         self.h0 = None if h0 is None else np.asarray(h0)
+        #: the checkpoint's seed clip (P, 4J + 8) that starts a walk, or None (exported before it was written)
+        self.seed = None if seed is None else np.asarray(seed)
         # the `refimpl export` check compares against these
         self.rollout_model = None
 
     @classmethod
     def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "Runtime":
         d = Path(directory)
-        step, pm, h0 = d / STEP_FILE, d / PACE_FILE, d / H0_FILE
+        step, pm, h0, seed = d / STEP_FILE, d / PACE_FILE, d / H0_FILE, d / SEED_FILE
         if not step.is_file() and not pm.is_file():
             raise ValueError(f"directory: no {STEP_FILE} or {PACE_FILE} in {str(d)!r}")
         return cls(step if step.is_file() else None, pm if pm.is_file() else None,
-                   _read_h0(h0) if h0.is_file() else None, intra_op_threads=intra_op_threads)
+                   _read_h0(h0) if h0.is_file() else None, _read_seed(seed) if seed.is_file() else None,
+                   intra_op_threads=intra_op_threads)
 
     def initial_state(self, batch: int) -> np.ndarray:
         """``h0`` repeated: ``(L, B, H)``."""
@@ -190,4 +232,5 @@ class Runtime:
         return y[..., :4 * J].reshape(B, -1, J, 4), y[..., 4 * J:]
 
 # ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
+from deploy.models.quaternet_long_walk import add_run_options  # noqa: E402,F401
 from deploy.models.run_commands import run_locomotion as run_command  # noqa: E402,F401

@@ -36,7 +36,7 @@ from deploy.graph import GraphBuilder
 
 __all__ = ["LOCK_TOL", "canonical_signs", "canonical_signs_graph", "RULE"]
 
-#: Gimbal-lock threshold of ``refimpl.quat.euler_from_quat`` for a unit quaternion (``sqrt(eps64)``).
+#: Gimbal-lock threshold of ``refimpl.rotations.euler_from_quat`` for a unit quaternion (``sqrt(eps64)``).
 LOCK_TOL = float(np.sqrt(np.finfo(np.float64).eps))
 
 #: The rule as metadata text (``input_transform`` of QuaterNet's models).

@@ -7,7 +7,8 @@ the exporter table (``run_command``, ``add_run_options``), and ``export`` of a `
   predicted joint quaternions ``(k, J, 4)``;
 * :func:`run_synthesis` — acRNN: 10 seed frames of a BVH take → ``N`` generated frames; a BVH in the take's own
   units (centimetres: the network's metres × 100), or ``.npy`` of the raw frames ``(N, F)`` (metres);
-* :func:`run_locomotion` — QuaterNet long-term: ``.npy`` inputs in, ``.npy`` outputs out (the step model:
+* :func:`run_locomotion` — QuaterNet long-term: a path in, a BVH (or ``.npy``) walk out
+  (:mod:`deploy.models.quaternet_long_walk`); or ``.npy`` inputs in, ``.npy`` outputs out (the step model:
   ``(B, P + T, F)`` frames with their controls → the free-running ``(B, T, G)`` after the P-frame prefix; the pace
   model: ``(B, N, 2)`` → ``(B, N, 4)``).
 
@@ -21,6 +22,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+from deploy.models.entry_io import write_npy as _write_npy
 
 __all__ = ["add_prediction_run_options", "run_prediction", "run_synthesis", "run_locomotion", "export_trained"]
 
@@ -36,16 +39,6 @@ def export_trained(entry, args) -> dict:
     if args.opset is not None:
         options["opset"] = args.opset
     return export_onnx(model, Path(args.out_dir), **options)
-
-
-def _write_npy(path, array) -> None:
-    import io
-
-    from refimpl.atomic import atomic_write_bytes
-
-    buf = io.BytesIO()
-    np.save(buf, np.ascontiguousarray(array), allow_pickle=False)
-    atomic_write_bytes(Path(path), buf.getvalue())
 
 
 def _read_npy(path) -> np.ndarray:
@@ -70,7 +63,7 @@ def add_prediction_run_options(group) -> None:
 def run_prediction(runtime, args) -> int:
     """QuaterNet: ``run DIR IN.txt OUT.bvh|OUT.npy --start S [--frames k] [--prefix P]``: the ``k`` frames after
     frame ``S`` (default: the last possible) predicted from the ``P`` frames ending at ``S``."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
     from refimpl.tasks import prediction
 
     model = runtime.predict_model if getattr(runtime, "predict_model", None) is not None else None
@@ -102,7 +95,7 @@ def run_prediction(runtime, args) -> int:
 def run_synthesis(runtime, args) -> int:
     """acRNN: ``run DIR TAKE.bvh OUT.bvh|OUT.npy [--start S] [--frames N]``: the 10 seed frames from ``S``
     continued for ``N`` frames (default 300)."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
     from refimpl.tasks import synthesis
     from refimpl.tasks.transition_generate import with_end_sites
 
@@ -135,9 +128,16 @@ def run_synthesis(runtime, args) -> int:
 
 
 def run_locomotion(runtime, args) -> int:
-    """QuaterNet long-term: ``run DIR IN.npy OUT.npy [--start P]``: the step model's free-running rollout after a
-    ``P``-frame prefix (``(B, P + T, F)`` frames with the controls of every frame) or, with only the pace model,
-    its raw outputs ``(B, N, 4)`` for ``(B, N, 2)`` inputs."""
+    """QuaterNet long-term: ``run DIR PATH OUT.bvh|OUT.npy [--pace DIR] ...``: a walk along a path
+    (:func:`deploy.models.quaternet_long_walk.run_walk`); or ``run DIR IN.npy OUT.npy [--start P]``: the step
+    model's free-running rollout after a ``P``-frame prefix (``(B, P + T, F)`` frames with the controls of every
+    frame) or, with only the pace model, its raw outputs ``(B, N, 4)`` for ``(B, N, 2)`` inputs."""
+    from deploy.models.quaternet_long_walk import run_walk, walk_options_given
+
+    if not str(args.input).lower().endswith(".npy"):
+        return run_walk(runtime, args)
+    if walk_options_given(args):
+        raise ValueError(f"{', '.join(walk_options_given(args))}: options of a walk along a path, not of .npy frames")
     x = _read_npy(args.input).astype(np.float32)
     if not str(args.output).lower().endswith(".npy"):
         raise ValueError(f"output: quaternet-long writes .npy arrays, got {args.output!r}")

@@ -5,8 +5,9 @@ Each module holds a frozen dataclass config (defaults = the paper's sizes or our
 forward/backward pair and a ``step`` for online use (the function the ONNX exporter translates).
 
 Modules: ``refimpl.models.qtg`` (Quaternion Transition Generator, Geleijn et al. 2021; spec/qtg.md) with its fast
-paths ``refimpl.models.qtg_fast`` (spec/architecture.md §Fast paths); ``refimpl.models.quaternet`` (QuaterNet
-recurrent pose network, short- and long-term; spec/quaternet.md §1-§4); ``refimpl.models.quaternet_cnn``
+paths ``refimpl.models.qtg_fast`` (training) and ``refimpl.models.qtg_fast_inference`` (spec/architecture.md §Fast
+paths); ``refimpl.models.quaternet`` (QuaterNet recurrent pose network, short- and long-term; spec/quaternet.md
+§1-§4) with its training sequence ``refimpl.models.quaternet_sequence``; ``refimpl.models.quaternet_cnn``
 (QuaterNet convolutional pose network, our reconstruction; spec/quaternet.md §5); ``refimpl.models.pace`` (the
 pace network of the long-term model; spec/locomotion.md); ``refimpl.models.acrnn`` (acRNN with the
 dual-quaternion paper's representations; spec/acrnn.md); ``refimpl.models._shared`` (helpers the modules share).

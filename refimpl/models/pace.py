@@ -26,7 +26,8 @@ Parameter names follow the published model's attribute names as far as the refer
 pose network's ``rnn`` / ``h0`` / ``fc``, and ``eos``), with PyTorch layouts (spec/architecture.md).
 Loss: L1 (mean absolute error over all outputs), :func:`loss_forward` / :func:`loss_backward`.
 Inference: :func:`predict` reparameterises the path, runs the network, clips ``A >= 0.1`` and ``ω >= 0``,
-normalises ``(cos Δ, sin Δ)`` and returns the facing track, the tangent rotated by Δ.
+normalises ``(cos Δ, sin Δ)`` and returns the facing track, the tangent rotated by Δ; :func:`predict_with` does
+the same around any implementation of the network (the exported graph in onnxruntime).
 
 Shape legend: B batch, N spline points, I = 2 inputs, H = 30 hidden, O = 4 outputs, D delay (points).
 """
@@ -45,7 +46,8 @@ from refimpl.nn.params import check_float_array, init_normal
 
 __all__ = [
     "PaceConfig", "init_params", "count_parameters", "param_shapes", "published_names", "forward", "backward",
-    "loss_forward", "loss_backward", "init_state", "delayed_step", "predict", "facing_from_outputs",
+    "loss_forward", "loss_backward", "init_state", "delayed_step", "predict", "predict_with",
+    "facing_from_outputs",
     "MIN_AMPLITUDE", "MIN_FREQUENCY", "INPUT_NAMES", "OUTPUT_NAMES",
 ]
 
@@ -291,7 +293,8 @@ def predict(params: Mapping[str, np.ndarray], config: PaceConfig, spline, averag
 
     The spline is reparameterised (``points_per_unit``, ``smoothing``); the network reads
     ``[turning_angle, average_speed]`` per point; then ``A = max(A, 0.1)``, ``ω = max(ω, 0)``, and the facing
-    direction is the tangent rotated by the normalised ``(cos Δ, sin Δ)``.
+    direction is the tangent rotated by the normalised ``(cos Δ, sin Δ)`` (:func:`predict_with` with
+    :func:`forward`).
 
     Parameters
     ----------
@@ -305,6 +308,24 @@ def predict(params: Mapping[str, np.ndarray], config: PaceConfig, spline, averag
         The reparameterised path with tracks ``amplitude`` (linear), ``frequency`` (linear) and ``direction``
         (circular: the facing, a unit 2-D vector in the path's coordinates).
     """
+    return predict_with(lambda x: forward(params, config, x)[0], spline, average_speed, points_per_unit,
+                        smoothing, dtype=np.asarray(params["h0"]).dtype)
+
+
+def predict_with(network, spline, average_speed: float, points_per_unit: float = 5.0, smoothing: float = 1.0,
+                 dtype=np.float64):
+    """:func:`predict` with any implementation of the network (e.g. the exported ``pace`` graph in onnxruntime).
+
+    Parameters
+    ----------
+    network : callable ``x (1, N, 2) -> y (1, N, 4)`` (raw outputs, before the clipping)
+    spline, average_speed, points_per_unit, smoothing : as :func:`predict`
+    dtype : the dtype of ``x``
+
+    Returns
+    -------
+    Spline — as :func:`predict`.
+    """
     from refimpl.splines import Spline
     if not isinstance(spline, Spline):
         raise ValueError(f"spline: expected a refimpl.splines.Spline, got {type(spline).__name__}")
@@ -312,11 +333,12 @@ def predict(params: Mapping[str, np.ndarray], config: PaceConfig, spline, averag
     if not np.isfinite(speed):
         raise ValueError(f"average_speed: expected a finite number, got {average_speed!r}")
     sp = spline.reparameterize(points_per_unit, smoothing)
-    dt = np.asarray(params["h0"]).dtype
-    x = np.empty((1, sp.num_points, 2), dtype=dt)
+    x = np.empty((1, sp.num_points, 2), dtype=dtype)
     x[0, :, 0] = sp.track("turning_angle")[:, 0]
     x[0, :, 1] = speed
-    y, _ = forward(params, config, x)
+    y = np.asarray(network(x))
+    if y.shape != (1, sp.num_points, 4):
+        raise ValueError(f"network: expected outputs (1, {sp.num_points}, 4), got {y.shape}")
     y = y[0].astype(np.float64)                                             # (N, 4)
     amplitude = np.maximum(y[:, 0], MIN_AMPLITUDE)
     frequency = np.maximum(y[:, 1], MIN_FREQUENCY)
@@ -331,7 +353,7 @@ def predict(params: Mapping[str, np.ndarray], config: PaceConfig, spline, averag
 
 def _forward_naive(params, config: PaceConfig, x: np.ndarray) -> np.ndarray:
     """Loop oracle for :func:`forward`: the GRU's per-gate loop and one ``W h + b`` per point."""
-    from refimpl.nn.gru import gru_forward_naive
+    from refimpl.nn.gru_naive import gru_forward_naive
     batch, n, _ = x.shape
     h0 = np.repeat(params["h0"], batch, axis=1)
     seq = x if config.bidirectional else np.concatenate(
@@ -348,7 +370,7 @@ def _forward_naive(params, config: PaceConfig, x: np.ndarray) -> np.ndarray:
 
 def _backward_naive(dy: np.ndarray, params, config: PaceConfig, x: np.ndarray):
     """Loop oracle for :func:`backward` (recomputes the forward): ``(dx, grads)``."""
-    from refimpl.nn.gru import gru_backward_naive, gru_forward_naive
+    from refimpl.nn.gru_naive import gru_backward_naive, gru_forward_naive
     batch, n, _ = x.shape
     h0 = np.repeat(params["h0"], batch, axis=1)
     seq = x if config.bidirectional else np.concatenate(

@@ -31,10 +31,10 @@ Rollout: ``z_{-1} = E(p_{-1})``, ``p_0`` the last past pose, ``s_0 = 0``; steps 
 This module is the readable reference: the config, the parameters, the encoder and decoder
 (:mod:`refimpl.nn.mlp`), :func:`init_state` and :func:`step` written with the layers' public functions, and the
 test oracles (``_rollout_naive``, a per-sample loop from the equations; ``_rollout_backward_per_step``, BPTT with
-per-step caches). The fast paths live beside it in :mod:`refimpl.models.qtg_fast` (the fused training rollout
-:func:`~refimpl.models.qtg_fast.rollout_forward` / :func:`~refimpl.models.qtg_fast.rollout_backward` and the
-in-place inference :func:`~refimpl.models.qtg_fast.rollout_inference`), tested equal to this reference
-(tests/test_qtg.py). ``check_params``, ``check_context`` and ``check_length`` are the boundary checks both use.
+per-step caches). The fast paths live beside it: :mod:`refimpl.models.qtg_fast` (the fused training rollout
+:func:`~refimpl.models.qtg_fast.rollout_forward` / :func:`~refimpl.models.qtg_fast.rollout_backward`) and
+:mod:`refimpl.models.qtg_fast_inference` (the in-place inference
+:func:`~refimpl.models.qtg_fast_inference.rollout_inference`), tested equal to this reference (tests/test_qtg.py). ``check_params``, ``check_context`` and ``check_length`` are the boundary checks both use.
 
 Shape legend: B batch, T transition frames, P pose size, Z latent size, H GRU hidden size, L GRU layers.
 """

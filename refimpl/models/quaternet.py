@@ -21,12 +21,8 @@ quaternion norm penalty (``refimpl.losses.quat_norm_loss_forward``). Parameters 
 published PyTorch code (``h0``, ``rnn.weight_ih_l0``…, ``fc.weight``, ``fc1.*``, ``fc2.*``) so a converted
 published state dict loads unchanged: 9,526,128 parameters short-term (J = 32), 9,529,246 long-term (J = 26).
 
-Training sequence (:func:`forward`, spec/quaternet.md §3): the ``P`` prefix frames are fed (teacher forced, one
-vectorised GRU pass), giving the first prediction; then ``T - 1`` steps, each fed either the ground-truth frame
-(``mask[i]`` True) or the previous prediction with the ground-truth controls of that frame (``mask[i]`` False).
-The mask is one Bernoulli draw per time step shared by the batch (``refimpl.schedules.scheduled_sampling_mask``).
-No detach: :func:`backward` back-propagates through the fed-back predictions (and, in velocity mode, through the
-QMul's input quaternion), i.e. full BPTT through the autoregressive loop.
+The training sequence (prefix, then scheduled sampling, full BPTT; spec/quaternet.md §3) is
+:func:`refimpl.models.quaternet_sequence.forward` / ``backward``, built on this module's blocks.
 
 Online use: :func:`init_state`, :func:`step` (one frame in, one prediction out; what the ONNX exporter
 translates) and :func:`predict` (prefix -> k frames, built on :func:`step`).
@@ -53,7 +49,7 @@ from refimpl.nn.quat_layers import (dq_normalize_backward, dq_normalize_forward,
 
 __all__ = [
     "JOINT_WIDTH", "QuaterNetConfig", "param_shapes", "published_names", "count_parameters", "init_params", "check_params",
-    "init_state", "step", "predict", "forward", "backward",
+    "init_state", "step", "predict",
 ]
 
 #: Hidden size of the controls block (two dense layers, hard-coded in the published code).
@@ -259,7 +255,7 @@ def check_params(params: Mapping[str, np.ndarray], config: QuaterNetConfig = Qua
     return check_param_dict(params, param_shapes(config))
 
 
-def _check_frames(x, name: str, config: QuaterNetConfig, dtype, batch=None, ndim: int = 3) -> np.ndarray:
+def check_frames(x, name: str, config: QuaterNetConfig, dtype, batch=None, ndim: int = 3) -> np.ndarray:
     F = config.input_size
     shape = (batch, None, F) if ndim == 3 else (batch, F)
     x = check_float_array(x, name, shape, context=f"F = DJ + O + C = {F} from the config")
@@ -268,7 +264,7 @@ def _check_frames(x, name: str, config: QuaterNetConfig, dtype, batch=None, ndim
     return x
 
 
-def _check_mask(mask, steps: int) -> np.ndarray:
+def check_mask(mask, steps: int) -> np.ndarray:
     m = np.asarray(mask)
     if m.dtype != np.bool_ or m.shape != (steps,):
         raise ValueError(f"mask: expected a bool array of shape ({steps},) (T - 1 decisions), "
@@ -280,7 +276,7 @@ def _check_mask(mask, steps: int) -> np.ndarray:
 # building blocks: controls block, output head, one frame
 # ----------------------------------------------------------------------------------------------------------------
 
-def _input_forward(params, x, config: QuaterNetConfig):
+def input_forward(params, x, config: QuaterNetConfig):
     """GRU input ``g = [x[..., :G] | controls block (x[..., G:])]`` over any leading axes (x (..., F))."""
     G = config.output_size
     if config.num_controls == 0:
@@ -293,7 +289,7 @@ def _input_forward(params, x, config: QuaterNetConfig):
     return np.concatenate([x[..., :G], a2], axis=-1), (l1, r1, l2, r2)
 
 
-def _input_backward(dg, cache, config: QuaterNetConfig, grads: dict) -> np.ndarray:
+def input_backward(dg, cache, config: QuaterNetConfig, grads: dict) -> np.ndarray:
     """Cotangent of the frame ``x (..., F)`` from that of the GRU input ``g``; adds the controls-block grads."""
     if cache is None:
         return dg.copy()
@@ -310,7 +306,7 @@ def _input_backward(dg, cache, config: QuaterNetConfig, grads: dict) -> np.ndarr
     return dx
 
 
-def _head_forward(params, top, x, config: QuaterNetConfig):
+def head_forward(params, top, x, config: QuaterNetConfig):
     """``o = fc(top)``, ``y = [normalize(Δ ⊗ q_in) or normalize(Δ) | τ]`` (Eq. 13 and the DQ product for
     dual quaternions).
 
@@ -331,7 +327,7 @@ def _head_forward(params, top, x, config: QuaterNetConfig):
     return y, pre.copy(), (lc, qc)
 
 
-def _head_backward(dy, dpre, cache, config: QuaterNetConfig, grads: dict):
+def head_backward(dy, dpre, cache, config: QuaterNetConfig, grads: dict):
     """Returns ``(dtop (B, H), dq_in (B, DJ) or None)``; adds the fc gradients into ``grads``."""
     lc, qc = cache
     B, R, J, D = dy.shape[0], config.rotation_size, config.num_joints, config.joint_width
@@ -351,48 +347,48 @@ def _head_backward(dy, dpre, cache, config: QuaterNetConfig, grads: dict):
     return dtop, dqin
 
 
-def _frame_forward(params, x, h, config: QuaterNetConfig):
+def frame_forward(params, x, h, config: QuaterNetConfig):
     """One step: frame ``x (B, F)``, state ``h (L, B, H)`` -> ``(y (B, G), pre (B, DJ), h_new, cache)``."""
-    g, ic = _input_forward(params, x, config)
+    g, ic = input_forward(params, x, config)
     top, h_new, gc = gru_step_forward(g, h, params, "rnn", config.num_layers)
-    y, pre, hc = _head_forward(params, top, x, config)
+    y, pre, hc = head_forward(params, top, x, config)
     return y, pre, h_new, (ic, gc, hc)
 
 
-def _run_forward(params, frames, h, config: QuaterNetConfig):
+def run_forward(params, frames, h, config: QuaterNetConfig):
     """Consecutive teacher-forced steps, vectorised: ``frames (B, n, F)`` fed from state ``h (L, B, H)`` through
     one sequence GRU pass (as the prefix) and the head on all ``n`` outputs at once (it works row by row).
 
     Returns ``(y (B, n, G), pre (B, n, DJ), h_new, cache)``: the same numbers as ``n`` calls of
-    :func:`_frame_forward` (up to the summation order of the products)."""
+    :func:`frame_forward` (up to the summation order of the products)."""
     B, n, F = frames.shape
-    g, ic = _input_forward(params, frames, config)  # (B, n, I)
+    g, ic = input_forward(params, frames, config)  # (B, n, I)
     tops, h_new, gc = gru_forward(g, h, params, "rnn", config.num_layers)  # (B, n, H)
-    y, pre, hc = _head_forward(params, tops.reshape(B * n, -1), frames.reshape(B * n, F), config)
+    y, pre, hc = head_forward(params, tops.reshape(B * n, -1), frames.reshape(B * n, F), config)
     return y.reshape(B, n, -1), pre.reshape(B, n, -1), h_new, (ic, gc, hc, n)
 
 
-def _run_backward(dy, dpre, dh_new, cache, config: QuaterNetConfig, grads: dict):
-    """Backward of :func:`_run_forward`: ``dy (B, n, G)``, ``dpre (B, n, DJ)`` or None, ``dh_new`` (L, B, H) or
+def run_backward(dy, dpre, dh_new, cache, config: QuaterNetConfig, grads: dict):
+    """Backward of :func:`run_forward`: ``dy (B, n, G)``, ``dpre (B, n, DJ)`` or None, ``dh_new`` (L, B, H) or
     None -> ``(dframes (B, n, F), dh (L, B, H))``; adds into ``grads``."""
     ic, gc, hc, n = cache
     B = dy.shape[0]
-    dtop, dqin = _head_backward(dy.reshape(B * n, -1), None if dpre is None else dpre.reshape(B * n, -1), hc,
+    dtop, dqin = head_backward(dy.reshape(B * n, -1), None if dpre is None else dpre.reshape(B * n, -1), hc,
                                 config, grads)
     dg, dh, g = gru_backward(dtop.reshape(B, n, -1), dh_new, gc)
     accumulate_grads(grads, g)
-    dx = _input_backward(dg, ic, config, grads)  # (B, n, F)
+    dx = input_backward(dg, ic, config, grads)  # (B, n, F)
     if dqin is not None:
         dx[..., :config.rotation_size] += dqin.reshape(B, n, -1)
     return dx, dh
 
 
-def _frame_backward(dy, dpre, dh_new, cache, config: QuaterNetConfig, grads: dict):
-    """Backward of :func:`_frame_forward`: returns ``(dx (B, F), dh (L, B, H))``; adds into ``grads``."""
+def frame_backward(dy, dpre, dh_new, cache, config: QuaterNetConfig, grads: dict):
+    """Backward of :func:`frame_forward`: returns ``(dx (B, F), dh (L, B, H))``; adds into ``grads``."""
     ic, gc, hc = cache
-    dtop, dqin = _head_backward(dy, dpre, hc, config, grads)
+    dtop, dqin = head_backward(dy, dpre, hc, config, grads)
     dg, dh, _ = gru_step_backward(dtop, dh_new, gc, accumulate_into=grads)
-    dx = _input_backward(dg, ic, config, grads)
+    dx = input_backward(dg, ic, config, grads)
     if dqin is not None:
         dx[:, :config.rotation_size] += dqin
     return dx, dh
@@ -433,14 +429,14 @@ def step(params: Mapping[str, np.ndarray], state, x,
     state : ndarray (L, B, H)
     """
     dtype = check_params(params, config)
-    x = _check_frames(x, "x", config, dtype, ndim=2)
+    x = check_frames(x, "x", config, dtype, ndim=2)
     B = x.shape[0]
     state = check_float_array(state, "state", (config.num_layers, B, config.hidden_size),
                               context=f"L = {config.num_layers}, H = {config.hidden_size} from the config, "
                                       f"B = {B} from x")
     if state.dtype != dtype:
         raise ValueError(f"state: expected dtype {dtype} (the parameters' dtype), got {state.dtype}")
-    y, _, h_new, _ = _frame_forward(params, x, state, config)
+    y, _, h_new, _ = frame_forward(params, x, state, config)
     return y, h_new
 
 
@@ -463,7 +459,7 @@ def predict(params: Mapping[str, np.ndarray], prefix, k: int, config: QuaterNetC
         Predictions of frames ``P … P + k - 1``. Equals :func:`forward` with an all-False mask.
     """
     dtype = check_params(params, config)
-    prefix = _check_frames(prefix, "prefix", config, dtype)
+    prefix = check_frames(prefix, "prefix", config, dtype)
     B, P, _ = prefix.shape
     if P < 1:
         raise ValueError(f"prefix: expected at least one frame (B, P >= 1, F), got {prefix.shape}")
@@ -489,193 +485,6 @@ def predict(params: Mapping[str, np.ndarray], prefix, k: int, config: QuaterNetC
     return np.stack(out, axis=1)  # (B, k, G)
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# training: sequence forward with scheduled sampling, and its backward
-# ----------------------------------------------------------------------------------------------------------------
-
-def forward(params: Mapping[str, np.ndarray], prefix, future, mask, config: QuaterNetConfig = QuaterNetConfig()):
-    """Training forward: prefix, then ``T - 1`` steps under scheduled sampling (spec/quaternet.md §3).
-
-    Step ``i`` (``0 <= i < T - 1``) produces the prediction of future frame ``i + 1`` from the fed frame
-    ``x = future[:, i]`` if ``mask[i]`` (teacher forcing) else ``x = [y_i | future[:, i, G:]]`` (the previous
-    prediction with the ground-truth controls of that frame). The hidden state is carried throughout.
-
-    Parameters
-    ----------
-    params : dict
-    prefix : ndarray (B, P, F), P >= 1
-        Ground-truth frames ``0 … P-1``; the GRU runs over them in one vectorised pass.
-    future : ndarray (B, T, F), T >= 1
-        Ground-truth frames ``P … P+T-1``; the targets are ``future[..., :G]``.
-    mask : ndarray of bool (T - 1,)
-        True = feed the ground truth at that step (one draw per step, shared by the batch;
-        ``refimpl.schedules.scheduled_sampling_mask(ratio, T - 1, rng)``).
-
-    Returns
-    -------
-    y : ndarray (B, T, G)
-        Predictions of frames ``P … P+T-1``: unit quaternions per joint, then the raw translations.
-    pre : ndarray (B, T, DJ)
-        The un-normalised head output ``Δ`` before the QMul (for the norm penalty).
-    cache : dict
-        For :func:`backward`.
-    """
-    dtype = check_params(params, config)
-    prefix = _check_frames(prefix, "prefix", config, dtype)
-    B, P, _ = prefix.shape
-    future = _check_frames(future, "future", config, dtype, batch=B)
-    T = future.shape[1]
-    if P < 1 or T < 1:
-        raise ValueError(f"prefix, future: expected at least one frame each, got {prefix.shape} and {future.shape}")
-    mask = _check_mask(mask, T - 1)
-    G, L = config.output_size, config.num_layers
-    h0 = np.repeat(params["h0"], B, axis=1)  # (L, B, H)
-    g, ic = _input_forward(params, prefix, config)  # (B, P, I)
-    tops, h, gc = gru_forward(g, h0, params, "rnn", L)
-    y, pre, hc = _head_forward(params, tops[:, -1], prefix[:, -1], config)
-    ys, pres, segments = [y[:, None]], [pre[:, None]], []
-    i = 0
-    while i < T - 1:
-        if mask[i]:  # a run of teacher-forced steps: its frames are known, one vectorised GRU pass as the prefix
-            j = i + 1
-            while j < T - 1 and mask[j]:
-                j += 1
-            y, pre, h, c = _run_forward(params, future[:, i:j], h, config)
-            ys.append(y)
-            pres.append(pre)
-            segments.append(("run", i, j, c))
-            y = y[:, -1]
-            i = j
-        else:
-            x = np.concatenate([y, future[:, i, G:]], axis=1)  # the prediction fed back, with its controls
-            y, pre, h, c = _frame_forward(params, x, h, config)
-            ys.append(y[:, None])
-            pres.append(pre[:, None])
-            segments.append(("step", i, i + 1, c))
-            i += 1
-    cache = dict(config=config, mask=mask, shape=(B, P, T), prefix=(ic, gc, hc), segments=segments, dtype=dtype)
-    return np.concatenate(ys, axis=1), np.concatenate(pres, axis=1), cache
-
-
-def backward(dy, dpre, cache, input_grads: bool = False):
-    """Back-propagation through the whole unrolled sequence of :func:`forward` (spec/quaternet.md §3.2).
-
-    The cotangent of each prediction is the loss's plus, when it was fed back (``mask[i]`` False), the cotangent
-    of the next step's input ``x[:, :G]`` (through the GRU input and, in velocity mode, the QMul's ``q_in``).
-
-    Parameters
-    ----------
-    dy : ndarray (B, T, G)
-        Cotangent of ``y``.
-    dpre : ndarray (B, T, DJ) or None
-        Cotangent of ``pre`` (the norm penalty's gradient), or None (zero).
-    cache : dict
-        From :func:`forward`.
-    input_grads : bool
-        Also return the cotangents of ``prefix`` and ``future``.
-
-    Returns
-    -------
-    grads : dict
-        Full parameter names -> gradients (every parameter, ``h0`` included).
-    dprefix : ndarray (B, P, F)
-        Only with ``input_grads``.
-    dfuture : ndarray (B, T, F)
-        Only with ``input_grads``. Zero at frames that were replaced by a fed-back prediction, except their
-        controls; zero at the last future frame (never fed).
-    """
-    config: QuaterNetConfig = cache["config"]
-    B, P, T = cache["shape"]
-    G, R = config.output_size, config.rotation_size
-    dy = check_float_array(dy, "dy", (B, T, G))
-    if dpre is not None:
-        dpre = check_float_array(dpre, "dpre", (B, T, R))
-    dtype = cache["dtype"]
-    grads: dict = {}
-    dfuture = np.zeros((B, T, config.input_size), dtype=dtype)
-    carry = None  # cotangent of the prediction fed back into the step after it
-    dh = None
-    for kind, i, j, c in reversed(cache["segments"]):  # steps i … j − 1 predict frames i + 1 … j
-        d = dy[:, i + 1:j + 1].copy()  # (B, j − i, G)
-        if carry is not None:  # step j fed back the prediction of frame j
-            d[:, -1] += carry
-        dp = None if dpre is None else dpre[:, i + 1:j + 1]
-        if kind == "run":
-            dfuture[:, i:j], dh = _run_backward(d, dp, dh, c, config, grads)
-            carry = None
-        else:
-            dx, dh = _frame_backward(d[:, 0], None if dp is None else dp[:, 0], dh, c, config, grads)
-            dfuture[:, i, G:] = dx[:, G:]
-            carry = dx[:, :G]
-    ic, gc, hc = cache["prefix"]
-    d = dy[:, 0] if carry is None else dy[:, 0] + carry
-    dtop, dqin = _head_backward(d, None if dpre is None else dpre[:, 0], hc, config, grads)
-    dtops = np.zeros((B, P, config.hidden_size), dtype=dtype)
-    dtops[:, -1] = dtop
-    dg, dh0, g = gru_backward(dtops, dh, gc)
-    accumulate_grads(grads, g)
-    grads["h0"] = dh0.sum(axis=1, keepdims=True)
-    dprefix = _input_backward(dg, ic, config, grads)
-    if dqin is not None:
-        dprefix[:, -1, :R] += dqin
-    if input_grads:
-        return grads, dprefix, dfuture
-    return grads
-
-
-def _forward_per_step(params, prefix, future, mask, config: QuaterNetConfig = QuaterNetConfig()):
-    """Slow oracle of :func:`forward`: every frame, prefix included, through the public :func:`step`."""
-    B, P, _ = prefix.shape
-    G = config.output_size
-    h = init_state(params, B, config)
-    for t in range(P):
-        y, h = step(params, h, prefix[:, t], config)
-    ys = [y]
-    for i in range(future.shape[1] - 1):
-        x = future[:, i] if mask[i] else np.concatenate([y, future[:, i, G:]], axis=1)
-        y, h = step(params, h, x, config)
-        ys.append(y)
-    return np.stack(ys, axis=1)
-
-
-def _backward_per_step(dy, dpre, params, prefix, future, mask, config: QuaterNetConfig = QuaterNetConfig()):
-    """Slow oracle of :func:`backward`: forward and backward of every frame, prefix included, one step at a time
-    (:func:`_frame_forward` / :func:`_frame_backward`, no vectorised prefix). Returns ``(grads, dprefix, dfuture)``."""
-    B, P, _ = prefix.shape
-    T = future.shape[1]
-    G = config.output_size
-    h = np.repeat(params["h0"], B, axis=1)
-    caches, fed_back = [], []
-    y = None
-    for s in range(P + T - 1):  # frame s of the fed sequence; from s = P - 1 on its output is a prediction
-        i = s - P
-        if s < P:
-            x = prefix[:, s]
-        elif mask[i]:
-            x = future[:, i]
-        else:
-            x = np.concatenate([y, future[:, i, G:]], axis=1)
-        y, _, h, c = _frame_forward(params, x, h, config)
-        caches.append(c)
-        fed_back.append(s >= P and not mask[i])
-    grads: dict = {}
-    dprefix = np.zeros_like(prefix)
-    dfuture = np.zeros_like(future)
-    dh, carry = None, None
-    for s in range(P + T - 2, -1, -1):
-        t = s - (P - 1)  # index of the prediction this frame makes (< 0: none)
-        d = np.zeros((B, G), dtype=prefix.dtype) if t < 0 else dy[:, t].copy()
-        if carry is not None:
-            d += carry
-        dp = None if (t < 0 or dpre is None) else dpre[:, t]
-        dx, dh = _frame_backward(d, dp, dh, caches[s], config, grads)
-        carry = None
-        if s < P:
-            dprefix[:, s] = dx
-        elif fed_back[s]:
-            carry = dx[:, :G]
-            dfuture[:, s - P, G:] = dx[:, G:]
-        else:
-            dfuture[:, s - P] = dx
-    grads["h0"] = dh.sum(axis=1, keepdims=True)
-    return grads, dprefix, dfuture
+# Kernel tier (spec/architecture.md; not in __all__, imported by refimpl.models.quaternet_sequence under these names):
+# check_frames, check_mask, frame_backward, frame_forward, head_backward, head_forward, input_backward, input_forward,
+# run_backward, run_forward.

@@ -14,7 +14,8 @@ Modules: :mod:`~refimpl.nn.params` (names, merging, initialisers, checks), :mod:
 :mod:`~refimpl.nn.gru`, :mod:`~refimpl.nn.lstm`, :mod:`~refimpl.nn.conv1d`,
 :mod:`~refimpl.nn.quat_layers` (quaternion / dual-quaternion layers), :mod:`~refimpl.nn.kinematics_layers`
 (forward kinematics and dual-quaternion skeleton layers); :mod:`~refimpl.nn.gru_fast` (kernels of QTG's reverse
-step; kernel tier, not re-exported).
+step; kernel tier, not re-exported); :mod:`~refimpl.nn.gru_naive`, :mod:`~refimpl.nn.lstm_naive` (the slow
+per-gate oracles of the two recurrent layers; not re-exported).
 """
 from refimpl.nn import activations, conv1d, gru, kinematics_layers, linear, lstm, params, quat_layers
 from refimpl.nn.activations import *  # noqa: F401,F403

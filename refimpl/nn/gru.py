@@ -26,7 +26,8 @@ The step kernels ``cell_forward`` (and its element-wise part ``cell_update``, fo
 ``W_hh h`` itself), ``input_gates`` and ``cell_backward`` form the kernel tier QTG's fused rollout builds on; the
 factored reverse step it also uses lives in :mod:`refimpl.nn.gru_fast`.
 Internally arrays are time-major ``(T, B, ...)`` so that each step reads contiguous rows.
-The per-step, per-gate loop versions ``gru_forward_naive`` / ``gru_backward_naive`` are the test oracles.
+The per-step, per-gate loop versions ``gru_forward_naive`` / ``gru_backward_naive`` (:mod:`refimpl.nn.gru_naive`)
+are the test oracles.
 
 Checks (spec/layers.md §4.5), once per public call, never inside the step loops: the sizes I and H are read
 from layer 0's parameters first, then ``x`` / ``x_t`` (dtype, shape ``(.., I)``, finite) and ``h0`` / ``h``
@@ -52,7 +53,8 @@ __all__ = ["gru_forward", "gru_backward", "gru_step_forward", "gru_step_backward
 # parameters
 
 
-def _suffix(layer: int, direction: int) -> str:
+def layer_suffix(layer: int, direction: int) -> str:
+    """The parameter-name suffix of a layer and direction: ``l{layer}``, ``_reverse`` appended for direction 1."""
     return f"l{layer}" + ("_reverse" if direction else "")
 
 
@@ -76,7 +78,7 @@ def _all_weights(params, prefix, num_layers, directions):
         in_k = in_size if k == 0 else directions * hid
         dirs = []
         for d in range(directions):
-            sfx = _suffix(k, d)
+            sfx = layer_suffix(k, d)
             first = k == 0 and d == 0
             dirs.append((w_ih0 if first else get_param(params, prefix, f"weight_ih_{sfx}", (3 * hid, in_k), dt),
                          w_hh0 if first else get_param(params, prefix, f"weight_hh_{sfx}", (3 * hid, hid), dt),
@@ -121,7 +123,7 @@ def gru_init(rng: np.random.Generator, input_size: int, hidden_size: int, num_la
     for k in range(num_layers):
         in_k = input_size if k == 0 else d_count * hidden_size
         for d in range(d_count):
-            sfx = _suffix(k, d)
+            sfx = layer_suffix(k, d)
             for name, shape in ((f"weight_ih_{sfx}", (3 * hidden_size, in_k)),
                                 (f"weight_hh_{sfx}", (3 * hidden_size, hidden_size)),
                                 (f"bias_ih_{sfx}", (3 * hidden_size,)),
@@ -372,7 +374,7 @@ def gru_backward(dy: np.ndarray | None, dh_n: np.ndarray | None, cache):
                 dys[:, :, d * hid:(d + 1) * hid], None if dh_n is None else dh_n[row],
                 xs, hs, g, n, w_ih, w_hh, reverse=d == 1)
             dxs = dxs_d if dxs is None else dxs + dxs_d
-            sfx = _suffix(k, d)
+            sfx = layer_suffix(k, d)
             grads[param_name(prefix, f"weight_ih_{sfx}")] = dw_ih
             grads[param_name(prefix, f"weight_hh_{sfx}")] = dw_hh
             grads[param_name(prefix, f"bias_ih_{sfx}")] = db_ih
@@ -493,7 +495,7 @@ def gru_step_backward(dy: np.ndarray | None, dh_new: np.ndarray | None, cache, a
         dgi = np.empty((batch, 3 * hid), dtype=dtype)
         dgh = np.empty((batch, 3 * hid), dtype=dtype)
         cell_backward(dh, h, g, n, w_hh, dgi, dgh, tmp)
-        sfx = _suffix(k, 0)
+        sfx = layer_suffix(k, 0)
         for name, value in ((f"weight_ih_{sfx}", dgi.T @ inp), (f"weight_hh_{sfx}", dgh.T @ h),
                             (f"bias_ih_{sfx}", dgi.sum(axis=0)), (f"bias_hh_{sfx}", dgh.sum(axis=0))):
             full = param_name(prefix, name)
@@ -505,122 +507,5 @@ def gru_step_backward(dy: np.ndarray | None, dh_new: np.ndarray | None, cache, a
     return d_out, dh_prev, grads
 
 
-# ----------------------------------------------------------------------------------------------------------
-# slow oracles: per time step, per gate, obvious code
-
-
-def _sig(a):
-    return 1.0 / (1.0 + np.exp(-a))
-
-
-def _gate_params(params, prefix, k, d, hid):
-    sfx = _suffix(k, d)
-    w_ih = params[param_name(prefix, f"weight_ih_{sfx}")]
-    w_hh = params[param_name(prefix, f"weight_hh_{sfx}")]
-    b_ih = params[param_name(prefix, f"bias_ih_{sfx}")]
-    b_hh = params[param_name(prefix, f"bias_hh_{sfx}")]
-    blocks = lambda a: (a[:hid], a[hid:2 * hid], a[2 * hid:])  # noqa: E731  r, z, n
-    return blocks(w_ih), blocks(w_hh), blocks(b_ih), blocks(b_hh)
-
-
-def _gru_naive_direction(inp, h, params, prefix, k, d):
-    """Per-step, per-gate forward of one direction; returns the per-step records in natural time order."""
-    batch, t_len, _ = inp.shape
-    hid = h.shape[-1]
-    (w_ir, w_iz, w_in), (w_hr, w_hz, w_hn), (b_ir, b_iz, b_in), (b_hr, b_hz, b_hn) = _gate_params(
-        params, prefix, k, d, hid)
-    steps = {}
-    order = range(t_len) if d == 0 else range(t_len - 1, -1, -1)
-    for t in order:
-        x_t = inp[:, t]
-        r = _sig(x_t @ w_ir.T + b_ir + h @ w_hr.T + b_hr)
-        z = _sig(x_t @ w_iz.T + b_iz + h @ w_hz.T + b_hz)
-        hn = h @ w_hn.T + b_hn
-        n = np.tanh(x_t @ w_in.T + b_in + r * hn)
-        h_new = (1 - z) * n + z * h
-        steps[t] = dict(x=x_t, h_prev=h, r=r, z=z, hn=hn, n=n, h=h_new)
-        h = h_new
-    return steps, h
-
-
-def gru_forward_naive(x, h0, params, prefix, num_layers=1, bidirectional=False):
-    """Slow oracle for :func:`gru_forward`: returns ``(y, h_n)``."""
-    d_count = 2 if bidirectional else 1
-    inp = x
-    h_n = []
-    for k in range(num_layers):
-        outs = []
-        for d in range(d_count):
-            steps, h_last = _gru_naive_direction(inp, h0[k * d_count + d], params, prefix, k, d)
-            outs.append(np.stack([steps[t]["h"] for t in range(inp.shape[1])], axis=1))
-            h_n.append(h_last)
-        inp = np.concatenate(outs, axis=-1)
-    return inp, np.stack(h_n)
-
-
-def gru_backward_naive(dy, dh_n, x, h0, params, prefix, num_layers=1, bidirectional=False):
-    """Slow oracle for :func:`gru_backward` (recomputes the forward): returns ``(dx, dh0, grads)``.
-
-    Per step and per gate, weight gradients accumulated step by step."""
-    d_count = 2 if bidirectional else 1
-    batch, t_len, _ = x.shape
-    hid = h0.shape[-1]
-    inputs, records = [], []
-    inp = x
-    for k in range(num_layers):
-        recs, outs = [], []
-        for d in range(d_count):
-            steps, _ = _gru_naive_direction(inp, h0[k * d_count + d], params, prefix, k, d)
-            recs.append(steps)
-            outs.append(np.stack([steps[t]["h"] for t in range(t_len)], axis=1))
-        inputs.append(inp)
-        records.append(recs)
-        inp = np.concatenate(outs, axis=-1)
-    grads = {}
-    dh0 = np.zeros_like(h0)
-    d_above = dy
-    for k in range(num_layers - 1, -1, -1):
-        d_inp = np.zeros_like(inputs[k])
-        for d in range(d_count):
-            (w_ir, w_iz, w_in), (w_hr, w_hz, w_hn), _, _ = _gate_params(params, prefix, k, d, hid)
-            g = {n: 0.0 for n in ("w_ir", "w_iz", "w_in", "w_hr", "w_hz", "w_hn",
-                                  "b_ir", "b_iz", "b_in", "b_hr", "b_hz", "b_hn")}
-            row = k * d_count + d
-            dh = np.zeros((batch, hid)) if dh_n is None else dh_n[row].copy()
-            order = range(t_len - 1, -1, -1) if d == 0 else range(t_len)
-            for t in order:
-                s = records[k][d][t]
-                dh = dh + d_above[:, t, d * hid:(d + 1) * hid]
-                dn = dh * (1 - s["z"])
-                dz = dh * (s["h_prev"] - s["n"])
-                da_n = dn * (1 - s["n"] ** 2)
-                da_z = dz * s["z"] * (1 - s["z"])
-                dr = da_n * s["hn"]
-                da_r = dr * s["r"] * (1 - s["r"])
-                dhn = da_n * s["r"]
-                g["w_ir"] = g["w_ir"] + da_r.T @ s["x"]
-                g["w_iz"] = g["w_iz"] + da_z.T @ s["x"]
-                g["w_in"] = g["w_in"] + da_n.T @ s["x"]
-                g["w_hr"] = g["w_hr"] + da_r.T @ s["h_prev"]
-                g["w_hz"] = g["w_hz"] + da_z.T @ s["h_prev"]
-                g["w_hn"] = g["w_hn"] + dhn.T @ s["h_prev"]
-                g["b_ir"] = g["b_ir"] + da_r.sum(0)
-                g["b_iz"] = g["b_iz"] + da_z.sum(0)
-                g["b_in"] = g["b_in"] + da_n.sum(0)
-                g["b_hr"] = g["b_hr"] + da_r.sum(0)
-                g["b_hz"] = g["b_hz"] + da_z.sum(0)
-                g["b_hn"] = g["b_hn"] + dhn.sum(0)
-                d_inp[:, t] += da_r @ w_ir + da_z @ w_iz + da_n @ w_in
-                dh = dh * s["z"] + da_r @ w_hr + da_z @ w_hz + dhn @ w_hn
-            dh0[row] = dh
-            sfx = _suffix(k, d)
-            grads[param_name(prefix, f"weight_ih_{sfx}")] = np.concatenate([g["w_ir"], g["w_iz"], g["w_in"]])
-            grads[param_name(prefix, f"weight_hh_{sfx}")] = np.concatenate([g["w_hr"], g["w_hz"], g["w_hn"]])
-            grads[param_name(prefix, f"bias_ih_{sfx}")] = np.concatenate([g["b_ir"], g["b_iz"], g["b_in"]])
-            grads[param_name(prefix, f"bias_hh_{sfx}")] = np.concatenate([g["b_hr"], g["b_hz"], g["b_hn"]])
-        d_above = d_inp
-    return d_above, dh0, grads
-
-
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
-# cell_forward, cell_update, cell_backward, input_gates, gru_forward_naive, gru_backward_naive.
+# cell_forward, cell_update, cell_backward, input_gates, layer_suffix.

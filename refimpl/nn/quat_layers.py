@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import quat_elementary_kernel, quat_mul_kernel  # Hamilton product (broadcasting, keeps float32)
+from refimpl.quat import quat_mul_kernel  # Hamilton product (broadcasting, keeps float32)
+from refimpl.rotations import quat_elementary_kernel
 
 __all__ = [
     "EULER_ORDERS",
@@ -526,7 +527,7 @@ _AXIS = {"x": 0, "y": 1, "z": 2}
 
 
 def euler_to_quat_forward(angles, order: str):
-    """``q = q_{o0}(a0) ⊗ q_{o1}(a1) ⊗ q_{o2}(a2)`` (:func:`refimpl.quat.quat_from_euler`), with a cache.
+    """``q = q_{o0}(a0) ⊗ q_{o1}(a1) ⊗ q_{o2}(a2)`` (:func:`refimpl.rotations.quat_from_euler`), with a cache.
 
     angles : (..., 3) radians, ``angles[..., i]`` about axis ``order[i]``; order : one of :data:`EULER_ORDERS`.
     Returns q (..., 4) and the cache for :func:`euler_to_quat_backward`."""
@@ -557,7 +558,7 @@ _SMALL_ANGLE = 1e-4
 
 
 def axis_angle_to_quat_forward(v):
-    """``q = (cos θ/2, sin(θ/2)/θ · v)``, θ = ‖v‖ (:func:`refimpl.quat.quat_from_axis_angle`); below θ = 1e-4
+    """``q = (cos θ/2, sin(θ/2)/θ · v)``, θ = ‖v‖ (:func:`refimpl.rotations.quat_from_axis_angle`); below θ = 1e-4
     the series ``sin(θ/2)/θ ≈ ½ − θ²/48``. v : (..., 3); returns q (..., 4) and the cache."""
     v = as_float_array(v, "v", 3)
     th = np.linalg.norm(v, axis=-1)

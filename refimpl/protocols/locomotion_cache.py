@@ -19,7 +19,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from refimpl import bvh, expmap, motion, quat, skeleton
+from refimpl import bvh, expmap, motion, quat, rotations, skeleton
 from refimpl.datacache import cached, fingerprint
 from refimpl.skeleton import Skeleton
 
@@ -36,7 +36,7 @@ def loader_version(sequence_type: type, *modules) -> str:
     defining ``sequence_type`` (the locomotion protocol's data module), ``modules`` (the caller's: the module
     of its ``build``) and the readers and kinematics below them."""
     h = hashlib.sha256(str(LOADER_VERSION).encode())
-    for mod in (sys.modules[sequence_type.__module__], *modules, bvh, expmap, motion, quat, skeleton):
+    for mod in (sys.modules[sequence_type.__module__], *modules, bvh, expmap, motion, quat, rotations, skeleton):
         h.update(Path(inspect.getsourcefile(mod)).read_bytes())
     return h.hexdigest()
 

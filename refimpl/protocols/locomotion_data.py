@@ -37,7 +37,8 @@ import numpy as np
 from refimpl.bvh import read_bvh, read_bvh_header
 from refimpl.expmap import read_expmap
 from refimpl.motion import TRANSLATION_TOLERANCE, Motion
-from refimpl.quat import matrix_from_quat, quat_fix, quat_from_matrix, quat_mul, quat_rotate
+from refimpl.quat import quat_fix, quat_mul, quat_rotate
+from refimpl.rotations import matrix_from_quat, quat_from_matrix
 from refimpl.skeleton import Skeleton, remove_joints
 from refimpl.splines import gaussian_filter1d
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from refimpl.atomic import atomic_write_text
 from refimpl.protocols.prediction_data import PredictionData
-from refimpl.quat import euler_from_quat, quat_from_euler
+from refimpl.rotations import euler_from_quat, quat_from_euler
 
 __all__ = [
     "SEED", "Protocol", "TABLE2_HORIZONS_MS", "table2_protocol", "make_protocol", "window_starts",

@@ -21,7 +21,8 @@ import numpy as np
 
 from refimpl.nn.params import check_float_array
 from refimpl.protocols.transition import join_pose, split_pose
-from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul, quat_slerp
+from refimpl.quat import quat_conj, quat_mul, quat_slerp
+from refimpl.rotations import quat_from_axis_angle
 
 __all__ = [
     "quintic_inertialization", "inertialize", "interpolate", "method_registry", "METHOD_NAMES", "check_context",

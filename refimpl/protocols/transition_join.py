@@ -5,7 +5,9 @@ leaves a jump at either end (spec/qtg.md §7.4). Games remove such jumps by *ine
 at the switch, the offset between where the old motion would be and where the new one is decays to zero over a
 short blend. ``join="inertialize"`` does that at both ends with the project's own decay curve,
 :func:`refimpl.protocols.transition_baselines.quintic_inertialization`; ``join="none"`` (the default
-everywhere) leaves the network's frames as they are (the paper's numbers).
+everywhere) leaves the network's frames as they are (the paper's numbers). ``join="inertialize+footlock"`` also
+pins the planted feet afterwards (:mod:`refimpl.protocols.transition_footlock`, a NumPy post-process that needs
+the skeleton; not in the exported graphs).
 
 With past ``p_{-1}, p_0``, generated ``G_1 … G_T`` and targets ``g1, g2``, frame time ``dt`` and blend time ``t1``
 (:func:`join_blend_frames` frames):
@@ -31,16 +33,21 @@ from typing import Callable
 
 import numpy as np
 
+from refimpl.protocols.transition_footlock import FootLocked
 from refimpl.protocols.transition_baselines import check_context, check_length, quintic_inertialization
 from refimpl.nn.params import check_float_array
-from refimpl.quat import quat_conj, quat_from_axis_angle, quat_mul
+from refimpl.quat import quat_conj, quat_mul
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.protocols.transition import join_pose, split_pose
 
-__all__ = ["JOIN_MODES", "JOIN_BLEND_FRAMES", "check_join", "join_blend_frames", "carry_offset",
-           "inertialize_joins", "with_join"]
+__all__ = ["JOIN_MODES", "EXPORT_JOIN_MODES", "JOIN_BLEND_FRAMES", "check_join", "check_export_join",
+           "join_blend_frames", "carry_offset", "inertialize_joins", "with_join"]
 
-#: The join options: ``"none"`` (the network's frames, the paper's numbers) or ``"inertialize"``.
-JOIN_MODES = ("none", "inertialize")
+#: The join options: ``"none"`` (the network's frames, the paper's numbers), ``"inertialize"``, or
+#: ``"inertialize+footlock"`` (then foot locking, :mod:`refimpl.protocols.transition_footlock`).
+JOIN_MODES = ("none", "inertialize", "inertialize+footlock")
+#: The join options the exported graphs can bake in (foot locking is a NumPy post-process of their output).
+EXPORT_JOIN_MODES = ("none", "inertialize")
 #: Blend length in frames (1/3 s at 30 fps), at most ``T // 2`` so that the two blends do not overlap.
 JOIN_BLEND_FRAMES = 10
 
@@ -51,6 +58,14 @@ def check_join(join) -> str:
     """Validate a join option (one of :data:`JOIN_MODES`); returns it."""
     if join not in JOIN_MODES:
         raise ValueError(f"join: expected one of {', '.join(JOIN_MODES)}, got {join!r}")
+    return join
+
+
+def check_export_join(join) -> str:
+    """Validate a join option of the exported graphs (one of :data:`EXPORT_JOIN_MODES`); returns it."""
+    if check_join(join) not in EXPORT_JOIN_MODES:
+        raise ValueError(f"join: the exported graphs take {' or '.join(EXPORT_JOIN_MODES)}; {join} is a NumPy "
+                         "post-process of their output (spec/qtg.md 7.5)")
     return join
 
 
@@ -154,9 +169,13 @@ def inertialize_joins(past, poses, target, dt: float = 1.0 / 30.0, blend_frames:
 def with_join(method: Callable, join: str = "inertialize", dt: float = 1.0 / 30.0,
               blend_frames: int | None = None) -> Callable:
     """``f(past, target, T) -> poses``: ``method``'s transition with :func:`inertialize_joins` applied (``join ==
-    "inertialize"``) or ``method`` itself (``"none"``)."""
+    "inertialize"``), then its feet locked (``"inertialize+footlock"``: a
+    :class:`~refimpl.protocols.transition_footlock.FootLocked`, called with ``skeleton=``), or ``method`` itself
+    (``"none"``)."""
     if check_join(join) == "none":
         return method
+    if join == "inertialize+footlock":
+        return FootLocked(with_join(method, "inertialize", dt, blend_frames), dt=dt)
 
     def joined(past, target, T):
         return inertialize_joins(past, method(past, target, T), target, dt=dt, blend_frames=blend_frames)

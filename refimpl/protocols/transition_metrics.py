@@ -134,6 +134,7 @@ def predict_transitions(dataset: TransitionDataset, method: Callable, name: str 
     ----------
     dataset : TransitionDataset
     method : f(past (B, 2, P), target (B, 2, P), T) -> poses (B, T, P), un-normalised
+        A method with ``needs_skeleton`` set (foot locking) is called per skeleton with ``skeleton=``.
     name : str
         For the error message.
     batch_size : int
@@ -145,6 +146,18 @@ def predict_transitions(dataset: TransitionDataset, method: Callable, name: str 
     _check_dataset(dataset)
     past, gt, target = dataset.context()
     T = dataset.transition_length
+    if getattr(method, "needs_skeleton", False):
+        pred = np.zeros(gt.shape)
+        for k in np.unique(dataset.skeleton_index):
+            sel = np.flatnonzero(dataset.skeleton_index == k)
+            for i in range(0, sel.size, batch_size):
+                idx = sel[i:i + batch_size]
+                out = np.asarray(method(past[idx], target[idx], T, skeleton=dataset.skeletons[int(k)]), np.float64)
+                if out.shape != (idx.size,) + gt.shape[1:]:
+                    raise ValueError(f"methods[{name!r}]: expected output shape {(idx.size,) + gt.shape[1:]}, "
+                                     f"got {out.shape}")
+                pred[idx] = out
+        return pred
     pred = np.concatenate([np.asarray(method(past[i:i + batch_size], target[i:i + batch_size], T), dtype=np.float64)
                            for i in range(0, dataset.num_windows, batch_size)])
     if pred.shape != gt.shape:

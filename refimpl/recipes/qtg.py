@@ -8,7 +8,7 @@ Everything the application layer needs to train, run and export QTG, and nothing
   normalised windows, the paper's loss); :func:`train_qtg` trains a :class:`~refimpl.protocols.transition.TransitionDataset`
   with the paper's optimiser (:data:`PAPER_OPTIM`);
 * :func:`qtg_method` / :func:`make_method` — NumPy inference ``f(past, target, T)`` on un-normalised poses
-  (:func:`refimpl.models.qtg_fast.rollout_inference`);
+  (:func:`refimpl.models.qtg_fast_inference.rollout_inference`);
 * :data:`EXPORTER` — the key of QTG's exporter in ``deploy``'s table, and :func:`export_inputs`, what it needs
   (pose normalisation, frame rate, training metadata).
 
@@ -24,7 +24,8 @@ import numpy as np
 from refimpl.options import config_with_overrides, parse_overrides  # noqa: F401 (re-exported)
 from refimpl.losses import mae_loss_backward, mae_loss_forward
 from refimpl.models.qtg import QTGConfig, init_params
-from refimpl.models.qtg_fast import prepare_inference, rollout_backward, rollout_forward, rollout_inference
+from refimpl.models.qtg_fast import rollout_backward, rollout_forward
+from refimpl.models.qtg_fast_inference import prepare_inference, rollout_inference
 from refimpl.optim import QTG_ADAM
 from refimpl.train import ModelAdapter, OptimConfig, StepInfo, TrainConfig, TrainResult, default_progress, train
 from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, pose_statistics, split_pose
@@ -157,8 +158,8 @@ def qtg_method(params: Mapping[str, np.ndarray], config: QTGConfig, root_mean, r
     """Wrap a trained QTG as ``f(past, target, T) -> poses`` in un-normalised pose space.
 
     ``f`` z-normalises the root translation of the inputs with ``root_mean``/``root_std`` (the training
-    statistics), runs the network (:func:`refimpl.models.qtg_fast.rollout_inference` in the parameters' dtype),
-    de-normalises the output's root translation and normalises its joint quaternions to unit length.
+    statistics), runs the network (:func:`refimpl.models.qtg_fast_inference.rollout_inference` in the parameters'
+    dtype), de-normalises the output's root translation and normalises its joint quaternions to unit length.
     """
     from refimpl.protocols.transition_baselines import check_context, check_length
 

@@ -35,6 +35,7 @@ from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, euler_l1_loss_backward, eu
 from refimpl.dq_prediction import (dq_frames_from_rotations, dq_rotation_loss_backward, dq_rotation_loss_forward,
                                    rotations_from_dq_frames)
 from refimpl.models import quaternet as net
+from refimpl.models import quaternet_sequence
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
 from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
@@ -240,8 +241,18 @@ def _dq_tracks(data, skeleton) -> list:
     return [dq_frames_from_rotations(s.rotations, skeleton) for s in data.train]
 
 
+class _RecurrentTraining:
+    """The recurrent network's training interface (``forward(params, prefix, future, mask, config)``,
+    ``backward(dy, dpre, cache)``, ``init_params``): :mod:`refimpl.models.quaternet_sequence` and
+    :func:`refimpl.models.quaternet.init_params`."""
+
+    forward = staticmethod(quaternet_sequence.forward)
+    backward = staticmethod(quaternet_sequence.backward)
+    init_params = staticmethod(net.init_params)
+
+
 def make_adapter(train_ds, val_ds, config: ShortTermConfig, dtype, extra: Mapping, *, name: str = NAME,
-                 model_module=net) -> ModelAdapter:
+                 model_module=_RecurrentTraining) -> ModelAdapter:
     """The trainer's adapter on ``train_ds`` (a :class:`~refimpl.protocols.prediction_data.PredictionData`).
 
     Examples are the training sequences (long enough for a window); ``get_batch`` draws one window start per

@@ -6,7 +6,7 @@
 * :func:`loss_and_grads` — the paper's loss on one :class:`~refimpl.protocols.locomotion.PoseBatch`: FK positions
   with the longitudinal-offset term (:func:`refimpl.losses.fk_position_loss_forward`, through
   :mod:`refimpl.nn.kinematics_layers`) + 0.01 · the quaternion norm penalty (:func:`refimpl.losses.quat_norm_loss_forward`),
-  backward through the scheduled-sampling unroll (:func:`refimpl.models.quaternet.backward`);
+  backward through the scheduled-sampling unroll (:func:`refimpl.models.quaternet_sequence.backward`);
 * :func:`make_adapter` — windows drawn by :func:`refimpl.protocols.locomotion.pose_batch` (random rotation about +Y),
   teacher-forcing ratio ``0.995^epoch`` (:func:`refimpl.schedules.teacher_forcing_ratio`, from the trainer's
   epoch), one mask per batch, ground-truth controls in free-running steps;
@@ -30,11 +30,11 @@ from refimpl.errors import UsageError
 from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, fk_position_loss_backward, fk_position_loss_forward,
                             quat_norm_loss_backward, quat_norm_loss_forward)
 from refimpl.losses import euclidean_loss_backward, euclidean_loss_forward
-from refimpl.models import quaternet
+from refimpl.models import quaternet, quaternet_sequence
 from refimpl.recipes import quaternet_long_dq
 from refimpl.nn.quat_layers import (axis_angle_to_quat_backward, axis_angle_to_quat_forward, euler_to_quat_backward,
                                     euler_to_quat_forward)
-from refimpl.quat import axis_angle_from_quat, euler_from_quat
+from refimpl.rotations import axis_angle_from_quat, euler_from_quat
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
 from refimpl.options import config_with_overrides
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
@@ -205,7 +205,7 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     T, R = L - P, 4 * net.num_joints
     tpos, ttr = batch["target_positions"], batch["target_translations"]
     J = tpos.shape[-2]
-    y, pre, cache = quaternet.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
+    y, pre, cache = quaternet_sequence.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
     pen, pc = quat_norm_loss_forward(pre.reshape(B, T, net.num_joints, 4))
     dy = np.zeros(y.shape, dtype=np.float64)
     if output == "quaternion":
@@ -226,7 +226,7 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
         dy[..., R:R + 3 * J] = quat_from_rotations_backward(dq, qc, output).reshape(B, T, 3 * J)
         dy[..., R + 3 * J:] = dtr
     dpre = (penalty * quat_norm_loss_backward(1.0, pc)).reshape(B, T, R).astype(y.dtype, copy=False)
-    grads = quaternet.backward(dy.astype(y.dtype, copy=False), dpre, cache)
+    grads = quaternet_sequence.backward(dy.astype(y.dtype, copy=False), dpre, cache)
     return value + penalty * pen, grads
 
 
@@ -345,16 +345,19 @@ def extra_methods(model) -> dict:
 
 
 def export_inputs(model) -> dict:
-    """Keyword arguments of the exporter (``deploy.models.quaternet_long_io.export_dir``); quaternion and
-    dual-quaternion models (the step graph normalises each joint's 8 numbers with Eq. 13)."""
+    """Keyword arguments of the exporter (``deploy.models.quaternet_long_io.export_dir``): metadata, skeleton and
+    the seed clip that starts a walk; quaternion and dual-quaternion models (the step graph normalises each
+    joint's 8 numbers with Eq. 13; ``dq_scale`` in the metadata)."""
     if model.config.output not in ("quaternion", "dual_quaternion"):
         raise UsageError(f"export: only quaternion- and dual-quaternion-output models are exported (this one: "
                          f"{model.config.output})")
     from refimpl.tasks.locomotion import skeleton_of
 
-    return {"metadata": {"frame_rate": float(model.fps or 30.0),
-                         "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}},
-            "skeleton": skeleton_of(model.extra)}
+    metadata = {"frame_rate": float(model.fps or 30.0),
+                "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}}
+    if model.config.output == "dual_quaternion":  # the DQs' translation unit, for a walk from the exported step
+        metadata["dq_scale"] = float(model.config.dq_scale)
+    return {"metadata": metadata, "skeleton": skeleton_of(model.extra), "seed_clip": model.extra.get("seed_clip")}
 
 
 def reference_outputs(model, x, state=None):

@@ -2,7 +2,7 @@
 §11): ``refimpl train --model quaternet-long --set output=dual_quaternion``.
 
 * :func:`dq_inputs` — windows ``[q (4J) | offset, height | controls]`` → ``[C (8J) | offset, height | controls]``:
-  each joint's current (root-relative) unit dual quaternion (Eq. 9-11, :func:`refimpl.skeleton.current_dq_from_local`,
+  each joint's current (root-relative) unit dual quaternion (Eq. 9-11, :func:`refimpl.current_dq.current_dq_from_local`,
   from the window's local quaternions after the augmentation's rotation and the skeleton's offsets), made
   antipodally continuous over the window's frames (:func:`refimpl.dualquat.dq_fix`, §5.1);
 * :func:`loss_and_grads` — ``L_pos + L_offset + L_quat + 0.01 · L_reg`` of the raw head output through
@@ -24,9 +24,9 @@ import numpy as np
 from refimpl.dq_output_fast import dq_output_loss_backward, dq_output_loss_forward
 from refimpl.dualquat import dq_fix, translation_from_dq
 from refimpl.losses import WEIGHTS_QUATERNET_DQ
-from refimpl.models import quaternet
+from refimpl.models import quaternet, quaternet_sequence
 from refimpl.quat import quat_normalize
-from refimpl.skeleton import current_dq_from_local, local_from_current_dq
+from refimpl.current_dq import current_dq_from_local, local_from_current_dq
 
 __all__ = ["dq_inputs", "loss_and_grads", "rollout", "decode", "bone_lengths"]
 
@@ -80,7 +80,7 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     B, L, _ = x.shape
     T, J, R = L - P, net.num_joints, net.rotation_size
     ttr = batch["target_translations"]
-    y, pre, cache = quaternet.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
+    y, pre, cache = quaternet_sequence.forward(params, x[:, :P], x[:, P:], batch["mask"], net)
     target = np.asarray(x[:, P:, :R], np.float64).reshape(B, T, J, 8)                      # (B, T, J, 8)
     w = {k: (v / float(scale) if k in ("pos", "offset") else v) for k, v in weights.items()}
     value, parts, dc = dq_output_loss_forward(pre.reshape(B, T, J, 8), target, parents, w, net.eps)
@@ -89,7 +89,7 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     tr_value = float(np.abs(d).mean(axis=(0, 1)).sum())
     dy = np.zeros(y.shape, dtype=np.float64)
     dy[..., R:] = np.sign(d) / (B * T)
-    grads = quaternet.backward(dy.astype(y.dtype, copy=False), dpre.astype(y.dtype, copy=False), cache)
+    grads = quaternet_sequence.backward(dy.astype(y.dtype, copy=False), dpre.astype(y.dtype, copy=False), cache)
     parts = dict(parts, translations=tr_value)
     return value + tr_value, grads, parts
 

@@ -33,7 +33,7 @@ __all__ = [
     "add_export_options", "add_generate_options", "resolve_files", "train_datasets", "num_examples",
     "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of", "rig_of",
     "onnx_method", "methods", "evaluate", "load_eval_data", "eval_command", "walk_options", "walk_from_checkpoints",
-    "generate_command", "export_options", "verify_inputs",
+    "describe_walk", "short_walk_warning", "generate_command", "export_options", "verify_inputs",
 ]
 
 NAME = "locomotion"
@@ -316,6 +316,24 @@ def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: st
                          path, speed, frames, dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
 
 
+def describe_walk(walk) -> str:
+    """``"300 frames at 30 fps (10.0 s), 26 joints, centimetres; root travelled 11.6 m along a 18.8 m path"``
+    (the BVH of :func:`~refimpl.tasks.locomotion_generate.write_outputs` is in centimetres)."""
+    m = walk.motion
+    dist = np.linalg.norm(np.diff(m.root_positions[:, [0, 2]], axis=0), axis=-1).sum() * QUATERNET_UNIT_CM / 100
+    return (f"{m.num_frames} frames at {FPS:g} fps ({m.num_frames / FPS:.1f} s), {m.num_joints} joints, "
+            f"centimetres; root travelled {dist:.1f} m along a {walk.path.length * QUATERNET_UNIT_CM / 100:.1f} m path")
+
+
+def short_walk_warning(walk, seconds: float) -> str | None:
+    """The warning when an open path ended before ``seconds`` (the motion is shorter than asked), else None."""
+    asked, n = int(round(seconds * FPS)), walk.motion.num_frames
+    if n >= asked:
+        return None
+    return (f"the path ends after {n / FPS:.1f} s at this speed; --seconds {seconds:g} asked for {asked} frames, "
+            f"the motion has {n}")
+
+
 def generate_command(args, model) -> int:
     """``refimpl generate --model quaternet-long``: load the two checkpoints, walk the path, write BVH / pictures /
     controls, and print the stability numbers (spec/cli.md, spec/locomotion.md §9)."""
@@ -325,29 +343,31 @@ def generate_command(args, model) -> int:
     if not args.checkpoint or not args.pace:
         raise UsageError("--model quaternet-long needs --checkpoint POSE.npz and --pace PACE.npz")
     if args.backend != "numpy":
-        raise UsageError("--model quaternet-long runs in NumPy (use `python -m deploy` for the exported models)")
+        raise UsageError("--model quaternet-long runs in NumPy (the exported models walk a path with `python -m "
+                         "deploy run ONNX_DIR PATH walk.bvh --pace PACE_DIR`)")
     walk_options(args.path, args.speed, args.seconds)  # option values and the path file before any work
     pose_model, pace_model = load_trained(args.checkpoint), load_trained(args.pace)
-    walk = walk_from_checkpoints(pose_model, pace_model, args.path, args.speed, args.seconds)
+    try:
+        walk = walk_from_checkpoints(pose_model, pace_model, args.path, args.speed, args.seconds)
+    except ValueError as exc:  # the path cannot be walked (too short for a frame): a bad file (CSV) or option
+        from refimpl.errors import BadInputError
+        raise (BadInputError if str(args.path).lower().endswith(".csv") else UsageError)(
+            f"--path {args.path}: {exc}") from None
     out = args.out or "walk.bvh"
     if not str(out).lower().endswith(".bvh"):
         raise UsageError(f"--out {out}: expected a .bvh file name")
     m = walk.motion
     write_outputs(walk, bvh=out, gif=args.gif, png=args.png, controls=args.controls,
                   title=f"quaternet-long, {args.path}, {args.speed}")
-    asked = int(round(args.seconds * FPS))
-    if m.num_frames < asked:  # an open path ended before --seconds: say so (the motion is shorter)
-        print(f"refimpl generate: warning: the path ends after {m.num_frames / FPS:.1f} s at this speed; "
-              f"--seconds {args.seconds:g} asked for {asked} frames, the motion has {m.num_frames}",
-              file=sys.stderr, flush=True)
+    warning = short_walk_warning(walk, args.seconds)
+    if warning:  # an open path ended before --seconds: say so (the motion is shorter)
+        print(f"refimpl generate: warning: {warning}", file=sys.stderr, flush=True)
     rig = rig_of(pose_model.extra)
     feet = [m.skeleton.index(rig.left_foot), m.skeleton.index(rig.right_foot)]
     skate = foot_skating(m.positions(), feet)
     face = facing_of(walk, rig)
     agree = np.sum(face * walk.controls[:, 4:6], axis=-1)
-    dist = np.linalg.norm(np.diff(m.root_positions[:, [0, 2]], axis=0), axis=-1).sum() * QUATERNET_UNIT_CM / 100
-    _say(f"wrote {out}: {m.num_frames} frames at {FPS:g} fps ({m.num_frames / FPS:.1f} s), {m.num_joints} joints, "
-        f"centimetres; root travelled {dist:.1f} m along a {walk.path.length * QUATERNET_UNIT_CM / 100:.1f} m path")
+    _say(f"wrote {out}: {describe_walk(walk)}")
     _say(f"facing vs the pace network: median angle {math.degrees(np.median(np.arccos(np.clip(agree, -1, 1)))):.1f}°;"
         f" foot skating {skate['speed_cm_s']:.1f} cm/s in contact ({100 * skate['contact_fraction']:.0f} % of "
         f"foot-frames); bone-length drift {bone_length_drift(m) * QUATERNET_UNIT_CM:.2g} cm")

@@ -1,6 +1,7 @@
 """Locomotion along a path: the pace network and the long-term pose network run online, the character placed on
 the path (QN §3.7, ref §7.6; spec/locomotion.md §9). ``refimpl generate --model quaternet-long`` calls
-:func:`generate_walk`, then :func:`write_outputs`.
+:func:`generate_walk`, then :func:`write_outputs`; ``python -m deploy run`` calls the same loop,
+:func:`walk_path`, with the exported step and pace graphs in onnxruntime.
 
 Loop (per generated frame, from the reference's ``generate_motion``)::
 
@@ -38,7 +39,7 @@ from refimpl.recipes import quaternet_long_dq
 from refimpl.skeleton import Skeleton
 from refimpl.splines import Spline, circle_path, figure_eight_path, line_with_turn_path, read_path_csv
 
-__all__ = ["GeneratedWalk", "parse_path", "read_path_file", "parse_speed", "align_seed", "generate_walk",
+__all__ = ["GeneratedWalk", "parse_path", "read_path_file", "parse_speed", "align_seed", "generate_walk", "walk_path",
            "foot_skating", "bone_length_drift", "dq_bone_length_drift", "facing_of", "write_outputs", "BUILTIN_PATHS",
            "SPEEDS"]
 
@@ -185,21 +186,49 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
     -------
     GeneratedWalk
     """
-    J, R, dual = net.num_joints, net.rotation_size, net.representation == "dual_quaternion"
+    J, dual = net.num_joints, net.representation == "dual_quaternion"
     if net.num_controls != 6 or net.num_outputs != 2 or skeleton.num_joints != J:
         raise ValueError(f"net: expected a long-term network of {skeleton.num_joints} joints with 2 translations and "
                          f"6 controls, got {net}")
     tracks = pace.predict(pace_params, pace_config, path, speed)
-    dtype = np.asarray(pose_params["h0"]).dtype
+    return walk_path(lambda x, h: quaternet.step(pose_params, h, x, net), quaternet.init_state(pose_params, 1, net),
+                     tracks, skeleton, seed_rotations, seed_features, num_frames, dual=dual, dq_scale=dq_scale,
+                     dtype=np.asarray(pose_params["h0"]).dtype)
+
+
+def walk_path(step, state, tracks: Spline, skeleton: Skeleton, seed_rotations, seed_features, num_frames: int, *,
+              dual: bool = False, dq_scale: float = 1.0, dtype=np.float64) -> GeneratedWalk:
+    """The walk loop of the module docstring with any implementation of the pose network's step (NumPy in
+    :func:`generate_walk`, the exported step graph in onnxruntime in ``python -m deploy run``).
+
+    Parameters
+    ----------
+    step : callable ``(x (1, F), state) -> (y (1, G), state)``, F = R + 8, G = R + 2, R = 4J (8J: dual quaternions)
+    state : the initial state (the learned ``h0``)
+    tracks : the pace network's reparameterised path with its tracks (:func:`refimpl.models.pace.predict`)
+    skeleton, seed_rotations, seed_features, num_frames, dq_scale : as :func:`generate_walk`
+    dual : the step reads and writes current dual quaternions
+    dtype : the dtype of the frames fed to ``step``
+
+    Returns
+    -------
+    GeneratedWalk
+    """
+    J = skeleton.num_joints
+    R = (8 if dual else 4) * J
     rot, feats = align_seed(seed_rotations, seed_features, tracks.interpolate(0.0, "direction"))
     P = rot.shape[0]
+    if P < 1 or rot.shape[1:] != (J, 4) or feats.shape != (P, 8):
+        raise ValueError(f"seed: expected rotations (P, {J}, 4) and features (P, 8), got {rot.shape}, {feats.shape}")
     seed = np.concatenate([rot.reshape(P, 4 * J), feats], axis=1)                  # (P, 4J + 8)
     if dual:  # current DQs of the seed (Andreou et al. §6.2)
         seed = quaternet_long_dq.dq_inputs(seed[None], skeleton, dq_scale)[0]               # (P, 8J + 8)
     seed = seed.astype(dtype)
-    h = quaternet.init_state(pose_params, 1, net)
+    h = state
     for t in range(P):
-        y, h = quaternet.step(pose_params, h, seed[t:t + 1], net)
+        y, h = step(seed[t:t + 1], h)
+    if np.shape(y) != (1, R + 2):
+        raise ValueError(f"step: expected outputs (1, {R + 2}) for {J} joints, got {np.shape(y)}")
     phi = math.atan2(feats[-1, 3], feats[-1, 2])
     s = 0.0
     rots, roots, ctrls, dists, phases, arcs, dqs = [], [], [], [], [], [], []
@@ -210,7 +239,7 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
         amp = float(tracks.interpolate(s, "amplitude")[0])
         freq = float(tracks.interpolate(s, "frequency")[0])
         c = np.array([amp * math.cos(phi), amp * math.sin(phi), amp * tan[0], amp * tan[1], face[0], face[1]])
-        y, h = quaternet.step(pose_params, h, np.concatenate([y, c[None].astype(dtype)], axis=1), net)
+        y, h = step(np.concatenate([y, c[None]], axis=1).astype(dtype), h)
         arc = s
         phi = (phi + freq) % (2 * math.pi)
         s += amp
@@ -311,7 +340,7 @@ def write_outputs(walk: GeneratedWalk, *, bvh=None, gif=None, png=None, controls
                   gif_stride: int = 2) -> list:
     """Write the BVH (centimetres, End Sites added below leaves), the pictures (the path drawn under the
     character) and the per-frame controls JSON."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
     from refimpl.tasks.transition_generate import with_end_sites
 
     written = []

@@ -333,7 +333,7 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
 def check_prefixes(model, rng: np.random.Generator, batch: int = 8) -> np.ndarray:
     """``prefix (B, P, J, 4)`` for ``refimpl export``'s check: real CMU test windows of the embedded sample
     (prefix of the model's training length) for a CMU model, small random rotations otherwise."""
-    from refimpl.quat import quat_from_axis_angle
+    from refimpl.rotations import quat_from_axis_angle
 
     P = int(getattr(model.config, "prefix_length", 50))
     if model.extra.get("dataset") == "cmu":
@@ -392,7 +392,7 @@ def eval_command(args, model) -> int:
 
 def generate_command(args, model) -> int:
     """``refimpl generate`` on the prediction task: a prefix of ``--source`` -> ``--length`` frames, BVH out."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
 
     require_source(args)
     if args.backend == "numpy":

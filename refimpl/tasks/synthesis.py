@@ -369,7 +369,7 @@ def eval_command(args, model) -> int:
 
 def generate_command(args, model) -> int:
     """``refimpl generate --model acrnn``: seed frames of ``--source`` continued for ``--length`` frames, BVH out."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
 
     require_source(args)
     if model is None and not args.checkpoint:

@@ -39,11 +39,11 @@ from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE
                                           build_transition_datasets, declared_rate, join_pose, load_source,
                                           sample_sources, shared_sources, split_pose)
 from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
-from refimpl.protocols.transition_join import JOIN_MODES, check_join, with_join
+from refimpl.protocols.transition_join import EXPORT_JOIN_MODES, JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_locomotion import build_datasets as build_bandai_namco, is_bandai_namco_folder
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table
 from refimpl.protocols.transition_quality import evaluate_quality, format_quality
-from refimpl.quat import quat_from_axis_angle
+from refimpl.rotations import quat_from_axis_angle
 from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
 from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
@@ -83,12 +83,13 @@ def add_eval_options(parser) -> None:
     parser.add_argument("--csv", default=None, help="write the per-frame curve as CSV")
     parser.add_argument("--join", default="none", choices=JOIN_MODES,
                         help="inertialize: also evaluate each network with its joins inertialised (spec/qtg.md "
-                             "7.4), as <name>+join beside the paper-faithful row (default none)")
+                             "7.4), as <name>+join beside the paper-faithful row; inertialize+footlock: also "
+                             "<name>+join+footlock, planted feet pinned by two-bone IK (7.5) (default none)")
 
 
 def add_export_options(parser) -> None:
     """The task's options of ``refimpl export``: ``--join``."""
-    parser.add_argument("--join", default="none", choices=JOIN_MODES,
+    parser.add_argument("--join", default="none", choices=EXPORT_JOIN_MODES,
                         help="transition models: inertialize = bake the join option into the rollout graph "
                              "(spec/qtg.md 7.4; the C example gets it too); default none")
 
@@ -102,7 +103,8 @@ def add_generate_options(parser) -> None:
     parser.add_argument("--context", type=bounded_int("context"), default=10,
                         help="frames kept on each side (default 10)")
     parser.add_argument("--join", default="none", choices=JOIN_MODES,
-                        help="inertialize: carry the jump at each end of the transition away (spec/qtg.md 7.4)")
+                        help="inertialize: carry the jump at each end of the transition away (spec/qtg.md 7.4); "
+                             "inertialize+footlock: then pin the planted feet by two-bone IK (7.5)")
     parser.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
                         help="place the target clip: none = as in its file, continue = after the source (default: "
                              "none for one file, continue for two)")
@@ -274,14 +276,17 @@ def onnx_method(runtime) -> Callable:
 def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0, join: str = "none") -> dict:
     """``name -> f(past, target, T)``: the given networks' methods (in order; an exported model with the join option
     as ``<name>+join``; with ``join="inertialize"`` each followed by ``<name>+join``,
-    :func:`refimpl.protocols.transition_join.with_join`), then both baselines
+    :func:`refimpl.protocols.transition_join.with_join`; with ``"inertialize+footlock"`` also by
+    ``<name>+join+footlock``), then both baselines
     (:func:`refimpl.protocols.transition_baselines.method_registry` with ``dt = 1 / fps``)."""
     out = {}
     for name, f in dict(networks or {}).items():
         key = f"{name}+join" if isinstance(f, JoinedOnnxMethod) else name
         out[key] = f
         if check_join(join) != "none":
-            out[f"{key}+join"] = with_join(f, join, dt=1.0 / fps)
+            out[f"{key}+join"] = with_join(f, "inertialize", dt=1.0 / fps)
+        if join == "inertialize+footlock":
+            out[f"{key}+join+footlock"] = with_join(f, join, dt=1.0 / fps)
     return {**out, **method_registry(dt=1.0 / fps)}
 
 
@@ -429,7 +434,7 @@ def _onnx_rate_and_length(onnx_dir, default_T: int) -> tuple[float, int]:
 def generate_command(args, model) -> int:
     """``refimpl generate`` on the transition task: frames s-1, s of ``--source`` and g, g+1 of ``--target``, the
     T frames between them from the network (``--method qtg``, NumPy or onnxruntime) or a baseline, BVH out."""
-    from refimpl.bvh import write_bvh
+    from refimpl.bvh_write import write_bvh
 
     require_source(args)
     if args.source_frame is None:
@@ -467,7 +472,7 @@ def generate_command(args, model) -> int:
     out = args.out or "transition.bvh"
     tr = make_transition(method, skel, src_clip, args.source_frame, tgt_clip, target_frame, T,
                          frame_time=1.0 / fps, context=args.context, align=args.align, same_clip=same,
-                         method_name=args.method + ("" if args.join == "none" else "+join"), name=Path(out).stem)
+                         method_name=args.method + _JOIN_SUFFIX[args.join], name=Path(out).stem)
     write_bvh(out, with_end_sites(tr.motion))
     _say(f"wrote {out}: {tr.motion.num_frames} frames at {fps:g} fps, {tr.motion.num_joints} joints (centimetres); "
          f"generated frames {tr.start}..{tr.stop - 1} ({tr.method}, {args.backend})")
@@ -482,6 +487,9 @@ def generate_command(args, model) -> int:
     if args.png or args.gif:
         render_transition(tr, png=args.png, gif=args.gif)
     return 0
+
+
+_JOIN_SUFFIX = {"none": "", "inertialize": "+join", "inertialize+footlock": "+join+footlock"}
 
 
 def export_options(args) -> dict:

@@ -150,7 +150,8 @@ def make_transition(method: Callable, skeleton, source_clip, source_frame: int, 
     rot4 = np.stack([src_rot[s - 1], src_rot[s], tgt_rot[g], tgt_rot[g + 1]])  # (4, J, 4)
     pos4 = np.stack([src_pos[s - 1], src_pos[s], tgt_pos[g], tgt_pos[g + 1]])  # (4, 3)
     window = make_windows(rot4, pos4, length=4)  # (1, 4, P) relative to source frame s - 1
-    pred = np.asarray(method(window[:, :2], window[:, 2:], T), dtype=np.float64)[0]  # (T, P)
+    extra = {"skeleton": skeleton} if getattr(method, "needs_skeleton", False) else {}  # foot locking
+    pred = np.asarray(method(window[:, :2], window[:, 2:], T, **extra), dtype=np.float64)[0]  # (T, P)
     gen_pos, gen_rot = window_to_world(pred, _heading(src_rot[s - 1, 0]), src_pos[s - 1])  # (T, 3), (T, J, 4)
 
     a = max(0, s - context + 1)

@@ -1,7 +1,8 @@
 """Fuzz campaign for the math API (spec/robustness.md §8).
 
-Calls every public function of ``refimpl.quat``, ``refimpl.dualquat`` and ``refimpl.skeleton`` (the
-``Skeleton`` constructor and methods included) with hostile arguments and checks the contract:
+Calls every public function of ``refimpl.quat``, ``refimpl.rotations``, ``refimpl.dualquat``, ``refimpl.skeleton``,
+``refimpl.current_dq`` and ``refimpl.mirroring`` (the ``Skeleton`` constructor and methods included) with hostile
+arguments and checks the contract:
 
 * the only exception that escapes is ``ValueError``;
 * nothing takes longer than ``--limit`` seconds (1 s; a ``SIGALRM`` at 5 × the limit stops a real hang);
@@ -52,8 +53,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 
+from refimpl import current_dq as CD  # noqa: E402
 from refimpl import dualquat as DQ  # noqa: E402
+from refimpl import mirroring as MI  # noqa: E402
 from refimpl import quat as Q  # noqa: E402
+from refimpl import rotations as R  # noqa: E402
 from refimpl import skeleton as S  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 
@@ -77,7 +81,7 @@ def _udq(g, lead):
 
 
 def _rot(g, lead):
-    return Q.matrix_from_quat(_uq(g, lead))
+    return R.matrix_from_quat(_uq(g, lead))
 
 
 def _homog(g, lead):
@@ -137,8 +141,10 @@ def _targets():
     t = {}
     q1 = [("q", "q")]
     for n in ("quat_conj", "quat_inv", "quat_norm", "quat_exp", "quat_log", "quat_canonical", "quat_xyzw_from_wxyz",
-              "quat_wxyz_from_xyzw", "axis_angle_from_quat", "matrix_from_quat", "quat_angle"):
+              "quat_wxyz_from_xyzw", "quat_angle"):
         t[n] = (getattr(Q, n), q1)
+    for n in ("axis_angle_from_quat", "matrix_from_quat"):
+        t[n] = (getattr(R, n), q1)
     t["quat_normalize"] = (Q.quat_normalize, q1 + [("eps", "eps")])
     for n in ("quat_mul", "quat_dot"):
         t[n] = (getattr(Q, n), [("q", "q"), ("r", "q")])
@@ -146,14 +152,14 @@ def _targets():
     t["quat_rotate"] = (Q.quat_rotate, [("q", "q"), ("v", "v")])
     t["quat_slerp"] = (Q.quat_slerp, [("q0", "q"), ("q1", "q"), ("t", "t")])
     t["quat_fix"] = (Q.quat_fix, [("q", "qT")])
-    t["quat_from_axis_angle"] = (Q.quat_from_axis_angle, [("v", "v")])
-    t["quat_from_euler"] = (Q.quat_from_euler, [("angles", "v"), ("order", "order")])
-    t["matrix_from_euler"] = (Q.matrix_from_euler, [("angles", "v"), ("order", "order")])
-    t["euler_from_quat"] = (Q.euler_from_quat, [("q", "q"), ("order", "order")])
-    t["euler_from_matrix"] = (Q.euler_from_matrix, [("m", "m3"), ("order", "order")])
-    t["quat_from_matrix"] = (Q.quat_from_matrix, [("m", "m3")])
-    t["ortho6d_from_matrix"] = (Q.ortho6d_from_matrix, [("m", "m3")])
-    t["matrix_from_ortho6d"] = (Q.matrix_from_ortho6d, [("x", "x6")])
+    t["quat_from_axis_angle"] = (R.quat_from_axis_angle, [("v", "v")])
+    t["quat_from_euler"] = (R.quat_from_euler, [("angles", "v"), ("order", "order")])
+    t["matrix_from_euler"] = (R.matrix_from_euler, [("angles", "v"), ("order", "order")])
+    t["euler_from_quat"] = (R.euler_from_quat, [("q", "q"), ("order", "order")])
+    t["euler_from_matrix"] = (R.euler_from_matrix, [("m", "m3"), ("order", "order")])
+    t["quat_from_matrix"] = (R.quat_from_matrix, [("m", "m3")])
+    t["ortho6d_from_matrix"] = (R.ortho6d_from_matrix, [("m", "m3")])
+    t["matrix_from_ortho6d"] = (R.matrix_from_ortho6d, [("x", "x6")])
     t["quat_identity"] = (Q.quat_identity, [("shape", "shape"), ("dtype", "dtype")])
     t["dq_identity"] = (DQ.dq_identity, [("shape", "shape"), ("dtype", "dtype")])
     a1 = [("a", "dq")]
@@ -180,17 +186,17 @@ def _targets():
                                    [("joints", "joints"), ("offsets", "offmode")])
     t["remove_joints"] = (lambda rotations, joints, offsets: S.remove_joints(_skeleton(), rotations, joints, offsets),
                           [("rotations", "rotJ"), ("joints", "joints"), ("offsets", "offmode")])
-    t["current_dq_from_local"] = (S.current_dq_from_local, [("rotations", "rotJ"), ("offsets", "offJ"),
+    t["current_dq_from_local"] = (CD.current_dq_from_local, [("rotations", "rotJ"), ("offsets", "offJ"),
                                                             ("parents", "parents")])
-    t["local_from_current_dq"] = (S.local_from_current_dq, [("dqs", "dqJ"), ("parents", "parents")])
-    t["offsets_from_current_dq"] = (S.offsets_from_current_dq, [("dqs", "dqJ"), ("parents", "parents")])
-    t["positions_from_current_dq"] = (S.positions_from_current_dq, [("dqs", "dqJ")])
-    t["mirror"] = (lambda rotations, root_positions, axis, mirror_offsets: S.mirror(
+    t["local_from_current_dq"] = (CD.local_from_current_dq, [("dqs", "dqJ"), ("parents", "parents")])
+    t["offsets_from_current_dq"] = (CD.offsets_from_current_dq, [("dqs", "dqJ"), ("parents", "parents")])
+    t["positions_from_current_dq"] = (CD.positions_from_current_dq, [("dqs", "dqJ")])
+    t["mirror"] = (lambda rotations, root_positions, axis, mirror_offsets: MI.mirror(
         _skeleton(), rotations, root_positions, axis, mirror_offsets),
         [("rotations", "rotJ"), ("root_positions", "root"), ("axis", "axis"), ("mirror_offsets", "mirror_offsets")])
-    t["rotate_about_up"] = (S.rotate_about_up, [("rotations", "rotJ"), ("root_positions", "root"),
+    t["rotate_about_up"] = (MI.rotate_about_up, [("rotations", "rotJ"), ("root_positions", "root"),
                                                 ("angle", "angle"), ("up", "axis")])
-    t["random_rotate_about_up"] = (lambda rotations, root_positions, low, high: S.random_rotate_about_up(
+    t["random_rotate_about_up"] = (lambda rotations, root_positions, low, high: MI.random_rotate_about_up(
         rotations, root_positions, np.random.default_rng(0), low, high),
         [("rotations", "rotJ"), ("root_positions", "root"), ("low", "lowhigh"), ("high", "lowhigh")])
     return t
