@@ -27,12 +27,14 @@ from refimpl.protocols.transition import TransitionSource, join_pose, normalize_
 CONTENTS = ("walk", "walk-turn-left", "walk-turn-right", "run")
 STYLES = ("active", "elderly", "exhausted", "feminine", "masculine", "normal")
 
+
 @pytest.fixture(scope="module")
 def bn_dir(shared_data) -> Path:
     d = shared_data / FOLDER
     if not d.is_dir():
         pytest.skip(f"../shared/data/{FOLDER} is not available")
     return d
+
 
 @pytest.fixture(scope="module")
 def few_takes(bn_dir, tmp_path_factory) -> Path:
@@ -45,6 +47,7 @@ def few_takes(bn_dir, tmp_path_factory) -> Path:
             shutil.copy(f, out / f.name)
     return out
 
+
 def _fake_names(tmp_path: Path, ids=range(1, 23)) -> Path:
     for c in CONTENTS:
         for s in STYLES:
@@ -52,11 +55,13 @@ def _fake_names(tmp_path: Path, ids=range(1, 23)) -> Path:
                 (tmp_path / f"dataset-2_{c}_{s}_{i:03d}.bvh").write_text("")
     return tmp_path
 
+
 def test_take_facts_reads_the_name():
     f = take_facts("x/dataset-2_walk-turn-left_elderly_017.bvh")
     assert (f.content, f.style, f.id) == ("walk-turn-left", "elderly", 17)
     with pytest.raises(ValueError, match="dataset-2_"):
         take_facts("walk_01.bvh")
+
 
 def test_split_holds_out_whole_takes_of_every_style_and_content(tmp_path):
     """Ids ending in 1 are held out; no take on both sides; every content x style on both sides."""
@@ -70,6 +75,7 @@ def test_split_holds_out_whole_takes_of_every_style_and_content(tmp_path):
     assert {(take_facts(p).content, take_facts(p).style) for p in tr} == groups
     assert all(s.kind == KIND and s.fps == 30.0 and s.label == take_facts(s.path).content for s in train + test)
 
+
 def test_split_of_the_real_folder_covers_every_group(bn_dir):
     train, test = bandai_namco_sources(bn_dir)
     assert len(train) + len(test) == 830 and not {s.path for s in train} & {s.path for s in test}
@@ -78,12 +84,14 @@ def test_split_of_the_real_folder_covers_every_group(bn_dir):
         assert {(take_facts(s.path).content, take_facts(s.path).style) for s in side} == groups
     assert 0.08 < len(test) / 830 < 0.15
 
+
 def test_folder_detection(tmp_path, shared_data):
     assert not is_bandai_namco_folder(tmp_path)
     assert not is_bandai_namco_folder(shared_data)  # ../shared/data itself stays the CMU set
     _fake_names(tmp_path, ids=(1, 2))
     assert is_bandai_namco_folder(tmp_path)
     assert not is_bandai_namco_folder(tmp_path / "dataset-2_walk_normal_001.bvh")
+
 
 def test_loader_keeps_21_joints_and_the_fk_positions(bn_dir):
     """The 21 kept joints are where the full re-rooted take puts them (End Sites dropped: exact), in cm."""
@@ -99,6 +107,7 @@ def test_loader_keeps_21_joints_and_the_fk_positions(bn_dir):
         load_bandai_namco_source(TransitionSource(str(path), "cmu_bvh", 30.0, "walk"))
     with pytest.raises(ValueError, match="30 fps"):
         load_bandai_namco_source(TransitionSource(str(path), KIND, 30.0, "walk"), fps=15.0)
+
 
 def test_windows_on_real_takes(few_takes):
     """Shapes, root relative to the first pose, training statistics, normalisation identity, FK = rigid motion."""
@@ -128,6 +137,7 @@ def test_windows_on_real_takes(few_takes):
     assert_close(np.linalg.norm(local - local[:1, :1], axis=-1), np.linalg.norm(world - world[:1, :1], axis=-1),
                  rtol=0, atol=1e-8)
 
+
 def test_transition_task_reads_the_folder(few_takes):
     """``refimpl train/eval --data <folder of takes>`` go through this data source."""
     train, test = transition.build_datasets(str(few_takes), 30, 8)
@@ -135,6 +145,7 @@ def test_transition_task_reads_the_folder(few_takes):
     assert set(window_styles(test)) == {"normal", "elderly", "active", "feminine"}
     with pytest.raises(BadInputError, match="--data"):
         transition.build_datasets(str(few_takes), 400, 8)  # no training window of 404 frames
+
 
 def _synthetic(speeds, turn_deg, W=34):
     """Windows moving along +z at ``speeds[k]`` cm/s (k = first/second half), heading turned by ``turn_deg``."""
@@ -148,6 +159,7 @@ def _synthetic(speeds, turn_deg, W=34):
     q[:, :, 0] = quat_from_axis_angle(angles[..., None] * np.array([0.0, 1.0, 0.0]))
     return join_pose(root, q)
 
+
 def test_window_kinds_from_root_motion():
     w = _synthetic([(0, 120), (120, 120), (120, 400), (400, 120), (400, 0), (120, 120)], [0, 0, 0, 0, 0, 90])
     start, end, turn = window_speeds(w)
@@ -159,17 +171,18 @@ def test_window_kinds_from_root_motion():
     yaw = quat_from_axis_angle(np.array([0.0, 1.3, 0.0]))
     r, q = split_pose(w)
     q2 = q.copy()
-
     q2[:, :, 0] = quat_mul(yaw, q[:, :, 0])
     w2 = join_pose(quat_rotate(yaw, r), q2)
     assert list(window_kinds(w2)) == list(window_kinds(w))
     assert STAND_MAX_CM_S < 120 < RUN_MIN_CM_S < 400
+
 
 def test_heldout_dataset_is_the_test_half(few_takes):
     train, test = build_datasets(few_takes, T=30, stride=8)
     held = heldout_dataset(few_takes, train.root_mean, train.root_std, T=30, stride=8)
     assert np.array_equal(held.poses, test.poses) and np.array_equal(held.root_std, train.root_std)
     assert [s.path for s in held.sources] == [s.path for s in test.sources]
+
 
 def test_grouped_errors_metric_and_groups(few_takes):
     """Ground truth scores 0; a root shifted by (3, 0, 4) cm scores exactly 5 cm on every joint, in every group;
@@ -197,6 +210,7 @@ def test_grouped_errors_metric_and_groups(few_takes):
         assert all(abs(v["mean_cm"] - 5.0) < 1e-9 for v in by.values())
     with pytest.raises(ValueError, match="groups"):
         grouped_errors(test, {"truth": truth}, {"style": np.array(["a"])})
+
 
 def test_train_and_eval_commands_on_takes(few_takes, tmp_path, capsys):
     """``refimpl train --model qtg --data <takes>`` trains at the paper's settings; ``eval`` reads the same split."""
