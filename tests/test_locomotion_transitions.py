@@ -243,3 +243,38 @@ def test_train_and_eval_commands_on_takes(few_takes, tmp_path, capsys):
                           "--json", str(tmp_path / "e.json")]) == 0
     ends = json.loads((tmp_path / "e.json").read_text())[ck]
     assert len(ends["per_frame_cm"]) == 30 and set(ends["autoencoder_cm"]) == {"frame_1", "frame_30", "g1"}
+
+
+def test_generate_between_two_takes_of_the_rig(few_takes, tmp_path, capsys):
+    """``refimpl generate`` takes Bandai Namco BVH takes (two actors: the source's bone lengths are used, with a
+    note), writes a 21-joint BVH whose context frames are the takes' own; a network of another rig is exit 3."""
+    from refimpl.bvh import read_bvh
+    from refimpl.cli import EXIT_BAD_INPUT, EXIT_OK, main
+
+    out = tmp_path / "run"
+    assert main(["train", "--model", "qtg", "--data", str(few_takes), "--out", str(out), "--steps", "1",
+                 "--stride", "8", "--set", "encoder_sizes=16,8", "--set", "gru_hidden=8",
+                 "--set", "decoder_sizes=16"]) == EXIT_OK
+    src, tgt = few_takes / "dataset-2_walk_normal_001.bvh", few_takes / "dataset-2_run_elderly_001.bvh"
+    bvh = tmp_path / "t.bvh"
+    code = main(["generate", "--checkpoint", str(out / "checkpoint.npz"), "--join", "inertialize",
+                 "--source", str(src), "--source-frame", "30", "--target", str(tgt), "--target-frame", "20",
+                 "--out", str(bvh)])
+    text = capsys.readouterr().out
+    assert code == EXIT_OK, text
+    m = read_bvh(bvh)
+    joints = [n for n in m.skeleton.names if n not in set(m.skeleton.end_sites)] if m.skeleton.end_sites else \
+        list(m.skeleton.names)
+    assert m.num_frames == 10 + 30 + 10 and abs(m.frame_time - 1 / 30) < 1e-6
+    assert set(joints) >= {"Hips", "Foot_L", "Foot_R", "Hand_L", "Hand_R"} and "LeftFoot" not in joints
+    assert "other bone lengths" in text  # two actors of the rig
+    # a CMU-rig network cannot run on this rig
+    cmu = tmp_path / "cmu"
+    assert main(["train", "--out", str(cmu), "--steps", "1", "--set", "encoder_sizes=16,8", "--set", "gru_hidden=8",
+                 "--set", "decoder_sizes=16"]) == EXIT_OK
+    capsys.readouterr()
+    code = main(["generate", "--checkpoint", str(cmu / "checkpoint.npz"), "--source", str(src), "--source-frame",
+                 "30", "--out", str(tmp_path / "x.bvh")])
+    err = capsys.readouterr().err.strip()
+    assert code == EXIT_BAD_INPUT and "21 joints" in err and err.count("\n") == 0, err
+    assert not (tmp_path / "x.bvh").exists()

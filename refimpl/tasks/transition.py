@@ -40,7 +40,9 @@ from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE
                                           sample_sources, shared_sources, split_pose)
 from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
 from refimpl.protocols.transition_join import EXPORT_JOIN_MODES, JOIN_MODES, check_join, with_join
+from refimpl.protocols.transition_locomotion import JOINTS as BANDAI_NAMCO_JOINTS, KIND as BANDAI_NAMCO_KIND
 from refimpl.protocols.transition_locomotion import build_datasets as build_bandai_namco, is_bandai_namco_folder
+from refimpl.protocols.transition_locomotion import load_bandai_namco_source
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table
 from refimpl.protocols.transition_quality import evaluate_quality, format_quality
 from refimpl.rotations import quat_from_axis_angle
@@ -115,9 +117,10 @@ def source_for_file(path, *, fps: float | None = None, label: str | None = None,
     """A :class:`~refimpl.protocols.transition.TransitionSource` for one BVH / exp-map file, its kind found from its joints.
 
     ``.txt`` files are CMU exp-map files (117 values per row, 120 fps unless ``fps``). ``.bvh`` files must have
-    the CMU cgspeed joints (:data:`~refimpl.protocols.transition.CMU_22_JOINTS`) or the DAZ salsa joints
-    (:data:`~refimpl.protocols.transition.SALSA_22_JOINTS`); their rate is the declared ``Frame Time`` unless ``fps``
-    (the CMU salsa files declare 120 fps but are 60 fps).
+    the CMU cgspeed joints (:data:`~refimpl.protocols.transition.CMU_22_JOINTS`), the DAZ salsa joints
+    (:data:`~refimpl.protocols.transition.SALSA_22_JOINTS`) or the Bandai Namco locomotion rig's 21
+    (:data:`~refimpl.protocols.transition_locomotion.JOINTS`, spec/qtg.md §8.4); their rate is the declared
+    ``Frame Time`` unless ``fps`` (the CMU salsa files declare 120 fps but are 60 fps).
     """
     p = existing_file(path)
     label = label or p.parent.name or p.stem
@@ -128,12 +131,14 @@ def source_for_file(path, *, fps: float | None = None, label: str | None = None,
     with reading(p):
         header = read_bvh_header(p)
     names = set(header.skeleton.names)
-    for kind, keep in (("cmu_bvh", CMU_22_JOINTS), ("salsa_bvh", SALSA_22_JOINTS)):
+    for kind, keep in (("cmu_bvh", CMU_22_JOINTS), ("salsa_bvh", SALSA_22_JOINTS),
+                       (BANDAI_NAMCO_KIND, BANDAI_NAMCO_JOINTS)):
         if names.issuperset(keep):
             return TransitionSource(str(p), kind, float(fps or declared_rate(header.frame_time)), label, frames)
     missing = sorted(set(CMU_22_JOINTS) - names)
     raise BadInputError(f"{p}: skeleton not supported for transitions: needs the 22 CMU joints "
-                        f"({', '.join(CMU_22_JOINTS[:4])}, ...) or the salsa ones; missing e.g. {missing[:5]}")
+                        f"({', '.join(CMU_22_JOINTS[:4])}, ...), the salsa or the Bandai Namco ones; missing e.g. "
+                        f"{missing[:5]}")
 
 
 def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 0.2):
@@ -375,8 +380,9 @@ def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=N
 def clip_for(path, model_fps: float, fps_override):
     """(skeleton, (rotations, root_positions)) of a file at the model's rate (phase 0 of the resampling)."""
     src = source_for_file(path, fps=fps_override)
+    load = load_bandai_namco_source if src.kind == BANDAI_NAMCO_KIND else load_source
     try:
-        skel, clips = load_source(src, fps=model_fps)
+        skel, clips = load(src, fps=model_fps)
     except (OSError, ValueError) as exc:
         raise file_error(path, exc) from exc
     return skel, clips[0], src
@@ -456,9 +462,15 @@ def generate_command(args, model) -> int:
     target_path = args.target or args.source
     skel, src_clip, src = clip_for(args.source, fps, args.fps)
     skel2, tgt_clip, tgt = clip_for(target_path, fps, args.fps)
-    if skel != skel2:
-        raise BadInputError(f"{target_path}: its 22-joint skeleton differs from {args.source}'s "
+    if tuple(skel.names) != tuple(skel2.names) or tuple(skel.parents) != tuple(skel2.parents):
+        raise BadInputError(f"{target_path}: its {skel2.num_joints}-joint skeleton differs from {args.source}'s "
                             "(both clips must come from the same skeleton)")
+    if skel != skel2:  # the same joints, other bone lengths (another actor of the same rig)
+        _say(f"note: {target_path} has other bone lengths than {args.source}; the transition and the BVH use "
+             "the source's skeleton")
+    if network is not None and 3 + 4 * skel.num_joints != network.config.pose_size:
+        raise BadInputError(f"{args.source}: {skel.num_joints} joints, but the network was trained on "
+                            f"{(network.config.pose_size - 3) // 4} (a take of the rig it was trained on is needed)")
     if args.method == METHOD_NAMES[0]:
         networks = network_methods(None if args.backend == "onnx" else network,
                                    onnx_dir=args.onnx if args.backend == "onnx" else None, expect=network)
