@@ -62,7 +62,7 @@ from refimpl.services import (blas_threads, export_onnx, load_trained, onnx_meta
                               verify_onnx)
 from refimpl.train_files import check_resumable, output_lock
 
-__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
+__all__ = ["main", "build_parser", "blas_threads_for", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_BAD_INPUT"]
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -171,6 +171,12 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
     if result.interrupted:
         return 128 + int(getattr(result, "signal", None) or 2)  # 130 for SIGINT / Ctrl-C, 143 for SIGTERM
     return EXIT_OK
+
+
+def blas_threads_for(args):
+    """The BLAS thread setting of a parsed command line: ``--blas-threads`` when given, else the command's default
+    (``auto``; ``demo``: 1, so that its numbers are the same on every machine, spec/cli.md §1)."""
+    return args.blas_threads if args.blas_threads is not None else getattr(args, "default_blas_threads", AUTO)
 
 
 def _thread_poll(args):
@@ -342,8 +348,9 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
     parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
     parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=threads_option, default=AUTO, metavar="{auto,N}",
-                        help="BLAS threads for NumPy (default auto: the cores other processes leave free, measured "
+    parser.add_argument("--blas-threads", type=threads_option, default=None, metavar="{auto,N}",
+                        help="BLAS threads for NumPy (default auto, except demo: 1, so that its numbers are the "
+                             "same on every machine; auto = the cores other processes leave free, measured "
                              "from /proc at the start and every ~2 s of training; 1 without /proc. A fixed count "
                              "N forces it: 2 threads are faster on an idle 2-core machine but 8-31x slower when "
                              "other jobs share the cores, benchmarks/bench_thread_default.py; 0 = library default; "
@@ -483,7 +490,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=positive_int, default=None, help="override the number of training steps")
     p.add_argument("--no-onnx", action="store_true", help="skip export and verification")
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
-    p.set_defaults(func=cmd_demo)
+    p.set_defaults(func=cmd_demo, default_blas_threads=1)  # reproducible numbers: BLAS rounding depends on threads
 
     weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
     return parser
@@ -513,7 +520,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.malloc == "retain":
         retain_freed_memory()
     try:
-        with blas_threads(args.blas_threads) as auto:
+        with blas_threads(blas_threads_for(args)) as auto:
             args.blas_auto = auto  # train polls it every step (refimpl/threads.py)
             return int(args.func(args) or EXIT_OK)
     except BadInputError as exc:

@@ -116,9 +116,17 @@ def test_blas_threads_option_parses(text, want):
     assert build_parser().parse_args(["--blas-threads", text, "info", "x"]).blas_threads == want
 
 
-def test_blas_threads_default_is_auto():
-    assert build_parser().get_default("blas_threads") == AUTO
-    assert build_parser().parse_args(["info", "x"]).blas_threads == AUTO
+def test_blas_threads_default_is_auto_but_one_for_the_demo():
+    """Every command defaults to auto; the demo to one thread (its README numbers on every machine), unless
+    --blas-threads is given."""
+    from refimpl.cli import blas_threads_for
+
+    parser = build_parser()
+    assert blas_threads_for(parser.parse_args(["info", "x"])) == AUTO
+    assert blas_threads_for(parser.parse_args(["train", "--out", "r"])) == AUTO
+    assert blas_threads_for(parser.parse_args(["demo"])) == 1
+    assert blas_threads_for(parser.parse_args(["--blas-threads", "auto", "demo"])) == AUTO
+    assert blas_threads_for(parser.parse_args(["--blas-threads", "2", "demo"])) == 2
 
 
 @pytest.mark.parametrize("bad", ["-1", "1025", "two", "auto2", "1.5", ""])
