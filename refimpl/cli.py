@@ -58,7 +58,8 @@ from refimpl.threads import AUTO, threads_option
 from refimpl.options import add_data_options, beta, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
 from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
-from refimpl.services import (blas_threads, export_onnx, load_trained, onnx_metadata, read_motion, train_model,
+from refimpl.threads import blas_thread_pool
+from refimpl.services import (export_onnx, load_trained, onnx_metadata, read_motion, train_model,
                               verify_onnx)
 from refimpl.train_files import check_resumable, output_lock
 
@@ -520,7 +521,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.malloc == "retain":
         retain_freed_memory()
     try:
-        with blas_threads(blas_threads_for(args)) as auto:
+        with blas_thread_pool(blas_threads_for(args)) as auto:
             args.blas_auto = auto  # train polls it every step (refimpl/threads.py)
             return int(args.func(args) or EXIT_OK)
     except BadInputError as exc:

@@ -38,7 +38,8 @@ import numpy as np
 from refimpl.protocols.transition import SAMPLE_DIR
 from refimpl.protocols.transition_join import with_join
 from refimpl.registry import MODELS
-from refimpl.services import (blas_threads, evaluate_model, export_onnx, load_trained, network_methods, train_model,
+from refimpl.threads import blas_thread_pool
+from refimpl.services import (evaluate_model, export_onnx, load_trained, network_methods, train_model,
                               verify_onnx)
 from refimpl.tasks.transition import print_results, write_results
 from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
@@ -145,7 +146,7 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
     if not overwrite:
         _refuse_to_replace_a_fuller_run(Path(out_dir), steps if steps is not None else
                                         (QUICK_STEPS if quick else DEMO_STEPS))
-    with blas_threads(threads) as auto:
+    with blas_thread_pool(threads) as auto:
         return _run(Path(out_dir), seed, quick, steps, onnx, render, say, on_step or (auto and auto.poll))
 
 

@@ -17,13 +17,9 @@ import numpy as np
 
 from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
-from refimpl.threads import blas_thread_pool
 
-__all__ = ["blas_threads", "read_motion", "load_trained", "checkpoint_for", "train_model", "network_methods",
+__all__ = ["read_motion", "load_trained", "checkpoint_for", "train_model", "network_methods",
            "evaluate_model", "onnx_method", "export_onnx", "verify_onnx", "onnx_metadata", "onnx_frame_rate"]
-
-
-blas_threads = blas_thread_pool  # the BLAS pool of one command: "auto", n threads, or 0 (refimpl/threads.py)
 
 
 def read_motion(path, *, fps: float | None = None, layout: str = "cmu"):

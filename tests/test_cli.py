@@ -394,10 +394,10 @@ def test_with_end_sites_keeps_joints_and_round_trips(tmp_path):
 def test_blas_threads_limits_the_pool():
     """spec/cli.md §1: --blas-threads N limits OpenBLAS inside the command and restores it after."""
     threadpoolctl = pytest.importorskip("threadpoolctl")
-    from refimpl.services import blas_threads
+    from refimpl.threads import blas_thread_pool
 
     before = [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
-    with blas_threads(1):
+    with blas_thread_pool(1):
         inside = [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
     after = [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
     assert all(n == 1 for n in inside) and after == before
