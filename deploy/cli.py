@@ -171,7 +171,7 @@ def _parser():
     r.add_argument("output")
     r.add_argument("--start", type=int, default=None,
                    help="qtg: first generated frame (required); quaternet: last prefix frame (default: the "
-                        "clip's last); acrnn: first seed frame (default 0); quaternet-long: prefix length P")
+                        "clip's last); acrnn: first seed frame (default 1: frame 0 is the T-pose); quaternet-long: prefix length P")
     r.add_argument("--frames", type=int, default=None, help="frames to generate (default: the model's)")
     r.add_argument("--fps", type=float, default=None, help="qtg: frame rate of the transition (default 30)")
     r.add_argument("--threads", type=int, default=1)

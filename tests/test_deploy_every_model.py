@@ -246,17 +246,18 @@ def test_sign_rule_numpy_and_graph_match_the_euler_round_trip():
 
 
 def test_acrnn_bvh_keeps_the_take_units(exported, tmp_path):
-    """``refimpl generate --model acrnn`` and ``python -m deploy run`` write the take's centimetres."""
+    """``refimpl generate --model acrnn`` and ``python -m deploy run`` write the take's centimetres, and both seed
+    from frame 1 by default (frame 0 of a salsa take is its reference T-pose)."""
     from refimpl.bvh import read_bvh
 
     ck, folder = exported["acrnn"]
     a, b = tmp_path / "numpy.bvh", tmp_path / "onnx.bvh"
     assert refimpl_main(["generate", "--model", "acrnn", "--checkpoint", str(ck), "--source", str(SALSA),
-                         "--source-frame", "0", "--length", "12", "--out", str(a)]) == EXIT_OK  # as run's --start
+                         "--length", "12", "--out", str(a)]) == EXIT_OK
     assert deploy_main(["run", str(folder), str(SALSA), str(b), "--frames", "12"]) == 0
     src = read_bvh(SALSA)
     for path in (a, b):
         m = read_bvh(path)
         j = m.skeleton.names.index(src.skeleton.names[2])
         assert np.allclose(m.skeleton.offsets[j], src.skeleton.offsets[j], atol=1e-3)
-        assert np.allclose(m.root_positions[0], src.root_positions[0], atol=1.0)   # the seed's start, cm
+        assert np.allclose(m.root_positions[0], src.root_positions[2], atol=1.0)  # seed frame 1 (30 fps) = frame 2 (60 fps)

@@ -102,7 +102,7 @@ QTG_INPUT_TRANSFORM = {
         "5. pose_k = [r'_k (3) | q'_0,k (4) | q_1,k (4) | ... | q_J-1,k (4)] (representation); with "
         "normalization.in_graph false, normalise it: (pose - normalization.mean) / normalization.std.",
     ],
-    "reference": "refimpl.transitions.make_windows(rotations (4, J, 4), root_positions (4, 3), length=4)",
+    "reference": "refimpl.protocols.transition.make_windows(rotations (4, J, 4), root_positions (4, 3), length=4)",
 }
 
 #: How a consumer maps QTG's outputs back to world space (``metadata["output_transform"]``).
@@ -117,7 +117,7 @@ QTG_OUTPUT_TRANSFORM = {
         "4. divide every joint quaternion by its norm (the network's are not unit).",
     ],
     "frames": "poses[:, t] is frame p_t+1, t = 0 ... T-1: the frames between p_0 and g1",
-    "reference": "refimpl.transitions.window_to_world(poses, h, r_first)",
+    "reference": "refimpl.protocols.transition.window_to_world(poses, h, r_first)",
 }
 
 

@@ -93,8 +93,8 @@ def run_prediction(runtime, args) -> int:
 
 
 def run_synthesis(runtime, args) -> int:
-    """acRNN: ``run DIR TAKE.bvh OUT.bvh|OUT.npy [--start S] [--frames N]``: the 10 seed frames from ``S``
-    continued for ``N`` frames (default 300)."""
+    """acRNN: ``run DIR TAKE.bvh OUT.bvh|OUT.npy [--start S] [--frames N]``: the 10 seed frames from ``S`` (default 1,
+    as ``refimpl generate``: frame 0 is the take's reference T-pose) continued for ``N`` frames (default 300)."""
     from refimpl.bvh_write import write_bvh
     from refimpl.tasks import synthesis
     from refimpl.tasks.transition_generate import with_end_sites
@@ -115,7 +115,8 @@ def run_synthesis(runtime, args) -> int:
         frames.append(out[0])
         return out
 
-    motion, seeds = synthesis.continue_seed(method, config, args.input, int(args.start or 0), n)
+    start = 1 if args.start is None else int(args.start)  # frame 0 of a salsa take is its reference T-pose
+    motion, seeds = synthesis.continue_seed(method, config, args.input, start, n)
     if str(args.output).lower().endswith(".npy"):
         _write_npy(args.output, frames[0])
         what = f"raw frames ({n}, {frames[0].shape[1]}), metres"
