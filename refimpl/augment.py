@@ -16,28 +16,15 @@ from typing import Sequence
 
 import numpy as np
 
+from refimpl.mirroring import rotate_about_up
 from refimpl.motion import Motion
-from refimpl.quat import quat_mul, quat_rotate
 
-__all__ = ["UP_AXES", "heading_quaternion", "rotate_heading", "random_heading_windows"]
-
-#: Vertical axis name -> its index in ``(x, y, z)``.
-UP_AXES = {"x": 0, "y": 1, "z": 2}
-
-
-def heading_quaternion(angle, up: str = "y") -> np.ndarray:
-    """The rotation by ``angle`` (radians, scalar or ``(B,)``) about the axis ``up``: ``(..., 4)`` (w, x, y, z)."""
-    if up not in UP_AXES:
-        raise ValueError(f"up: expected one of {list(UP_AXES)}, got {up!r}")
-    a = np.asarray(angle, dtype=np.float64)
-    q = np.zeros(a.shape + (4,))
-    q[..., 0] = np.cos(a / 2)
-    q[..., 1 + UP_AXES[up]] = np.sin(a / 2)
-    return q
+__all__ = ["rotate_heading", "random_heading_windows"]
 
 
 def rotate_heading(motion: Motion, angle: float, up: str = "y") -> Motion:
-    """``motion`` turned by ``angle`` radians about the vertical axis ``up`` through the origin.
+    """``motion`` turned by ``angle`` radians about the vertical axis ``up`` through the origin
+    (:func:`refimpl.mirroring.rotate_about_up` on a :class:`~refimpl.motion.Motion`).
 
     Parameters
     ----------
@@ -53,10 +40,7 @@ def rotate_heading(motion: Motion, angle: float, up: str = "y") -> Motion:
     """
     if not np.isfinite(angle):
         raise ValueError(f"angle: expected a finite number, got {angle!r}")
-    r = heading_quaternion(float(angle), up)
-    rot = np.array(motion.rotations, copy=True)
-    rot[:, 0] = quat_mul(np.broadcast_to(r, rot[:, 0].shape), rot[:, 0])
-    pos = quat_rotate(np.broadcast_to(r, motion.root_positions.shape[:-1] + (4,)), motion.root_positions)
+    rot, pos = rotate_about_up(motion.rotations, motion.root_positions, float(angle), up)
     return Motion(motion.skeleton, rot, pos, motion.frame_time, motion.name)
 
 
