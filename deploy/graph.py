@@ -41,8 +41,9 @@ OPSET = 17
 IR_VERSION = 8
 """IR version stamped on models at :data:`OPSET` (the lowest the opset allows, ``spec/deploy.md`` §1)."""
 
-MIN_OPSET = 17
-"""The oldest opset the builders support (``Squeeze``/``Split`` take inputs from 13; GRU ``layout`` from 14)."""
+MIN_OPSET = 15
+"""The oldest opset the builders support (``Squeeze``/``Split`` take inputs from 13; GRU ``layout`` from 14; 15 is
+the portable target's, ``deploy/portable.py``, with ``Shape``'s ``start``/``end``)."""
 
 
 def ir_version_for(opset: int) -> int:

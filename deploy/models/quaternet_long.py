@@ -28,7 +28,7 @@ from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries, skelet
 from deploy.quat import dq_normalize, quat_normalize
 from deploy.recurrent import tiled_state
 
-__all__ = ["NAME", "QUATERNET_PAPER", "export_pose_step", "export_pace"]
+__all__ = ["NAME", "QUATERNET_PAPER", "export_pose_step", "export_pace", "export_pace_step"]
 
 NAME = "quaternet-long"
 QUATERNET_PAPER = ("Pavllo, Feichtenhofer, Auli, Grangier: Modeling Human Motion with Quaternion-based Neural "
@@ -125,6 +125,23 @@ def export_pose_step(params: Mapping[str, np.ndarray], config: QuaterNetConfig, 
                    producer_version=EXPORTER_VERSION)
 
 
+def _pace_config(config) -> dict:
+    return {"bidirectional": True, "hidden_size": int(config.hidden_size), "input_size": int(config.input_size),
+            "output_size": int(config.output_size)}
+
+
+#: The pace models' ``representation``, ``input_transform`` and ``output_transform`` metadata.
+PACE_REPRESENTATION = {"kind": "pace", "name": "pace", "points_per_unit": 5.0, "units": UNITS,
+                       "inputs": ["turning_angle (radians between consecutive tangents of the reparameterised path)",
+                                  "average_speed (units per frame at 30 fps)"],
+                       "outputs": ["amplitude", "frequency", "cos_delta", "sin_delta"]}
+PACE_INPUT_TRANSFORM = {"summary": "the path reparameterised to points_per_unit points per unit of length (smoothing "
+                                   "1.0); per point its turning angle and the target speed", "steps": []}
+PACE_OUTPUT_TRANSFORM = {"summary": "A = max(A, 0.1), omega = max(omega, 0); facing = the unit tangent (tx, tz) "
+                                    "rotated by (c, s) = (cos Δ, sin Δ) / (|(cos Δ, sin Δ)| + 1e-9): (tx c - tz s, "
+                                    "tz c + tx s)", "steps": []}
+
+
 def export_pace(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, dtype=np.float32, opset: int = OPSET,
                 primitive: bool | None = None, frame_rate: float = 30.0,
                 metadata: Mapping | None = None) -> onnx.ModelProto:
@@ -148,21 +165,74 @@ def export_pace(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, dt
           "outputs": io_entries(("y", ["B", "N", 4], "[amplitude A (units per frame), frequency omega "
                                  "(radians of gait phase per frame), cos Δ, sin Δ] per point (before "
                                  "output_transform)"))}
-    meta = build_metadata(g, name=NAME, role="pace", config={"bidirectional": True, "hidden_size": int(H),
-                                                             "input_size": int(config.input_size),
-                                                             "output_size": int(config.output_size)},
-                          io=io, representation={"kind": "pace", "name": "pace", "points_per_unit": 5.0,
-                                                 "units": UNITS, "inputs": ["turning_angle (radians between "
-                                                 "consecutive tangents of the reparameterised path)",
-                                                 "average_speed (units per frame at 30 fps)"],
-                                                 "outputs": ["amplitude", "frequency", "cos_delta", "sin_delta"]},
-                          frame_rate=frame_rate, source_paper=QUATERNET_PAPER, variant="float",
-                          extra=dict(metadata or {}),
-                          input_transform={"summary": "the path reparameterised to points_per_unit points per unit "
-                                           "of length (smoothing 1.0); per point its turning angle and the target "
-                                           "speed", "steps": []},
-                          output_transform={"summary": "A = max(A, 0.1), omega = max(omega, 0); facing = the unit "
-                                            "tangent (tx, tz) rotated by (c, s) = (cos Δ, sin Δ) / (|(cos Δ, "
-                                            "sin Δ)| + 1e-9): (tx c - tz s, tz c + tx s)", "steps": []})
+    meta = build_metadata(g, name=NAME, role="pace", config=_pace_config(config), io=io,
+                          representation=PACE_REPRESENTATION, frame_rate=frame_rate, source_paper=QUATERNET_PAPER,
+                          variant="float", extra=dict(metadata or {}), input_transform=PACE_INPUT_TRANSFORM,
+                          output_transform=PACE_OUTPUT_TRANSFORM)
     return g.model(metadata=meta, doc_string="QuaterNet pace network (bidirectional GRU + linear)",
+                   producer_version=EXPORTER_VERSION)
+
+
+def _direction_params(params: Mapping[str, np.ndarray], H: int) -> dict:
+    """The pace network's GRU directions and head as one-direction layers: ``fwd``/``bwd`` (``rnn``'s forward and
+    ``_reverse`` parameters as layer 0), ``head_f`` (``fc.weight[:, :H]``, no bias), ``head_b`` (``fc.weight[:, H:]``
+    and ``fc.bias``)."""
+    out = {}
+    for key in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"):
+        for d, sfx in (("fwd", ""), ("bwd", "_reverse")):
+            if f"rnn.{key}_l0{sfx}" in params:
+                out[f"{d}.{key}_l0"] = np.asarray(params[f"rnn.{key}_l0{sfx}"])
+    w = np.asarray(params["fc.weight"])                                           # (4, 2H)
+    out["head_f.weight"], out["head_b.weight"] = w[:, :H], w[:, H:]
+    if "fc.bias" in params:
+        out["head_b.bias"] = np.asarray(params["fc.bias"])
+    return out
+
+
+def export_pace_step(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, dtype=np.float32,
+                     opset: int = OPSET, primitive: bool | None = None, frame_rate: float = 30.0,
+                     metadata: Mapping | None = None, h0_file: str | None = None) -> onnx.ModelProto:
+    """The ``pace_step`` model: one step of each direction of the pace network, for a host that runs the path
+    point by point (the portable target, ``deploy/portable.py``).
+
+    At call ``t`` of ``N`` the forward direction reads point ``t`` and the backward direction point ``N − 1 − t``;
+    the pace output of point ``n`` is ``y_forward`` of call ``n`` plus ``y_backward`` of call ``N − 1 − n``
+    (``fc([h_f | h_b]) = W_f h_f + (W_b h_b + b)``), equal to :func:`export_pace`'s ``y``.
+
+    Returns
+    -------
+    onnx.ModelProto
+        Inputs ``x_forward (B, 2)``, ``h_forward (1, B, H)``, ``x_backward (B, 2)``, ``h_backward (1, B, H)``;
+        outputs ``y_forward (B, 4)``, ``h_forward_next (1, B, H)``, ``y_backward (B, 4)``, ``h_backward_next``.
+    """
+    if not config.bidirectional:
+        raise ValueError("config: only the bidirectional pace network is exported (the delayed one runs in NumPy)")
+    H, I, G = int(config.hidden_size), int(config.input_size), int(config.output_size)
+    p = _direction_params(params, H)
+    g = GraphBuilder(f"{NAME}_pace_step", dtype=dtype, opset=opset, primitive=primitive)
+    ins = {d: (g.input(f"x_{d}", ["B", I]), g.input(f"h_{d}", [1, "B", H])) for d in ("forward", "backward")}
+    for d, tag in (("forward", "f"), ("backward", "b")):
+        top, h_new = gru_step(g, ins[d][0], ins[d][1], p, "fwd" if tag == "f" else "bwd", name=f"rnn_{tag}")
+        g.output(linear(g, top, p, f"head_{tag}", name=f"head_{tag}", rank2=True), f"y_{d}", ["B", G])
+        g.output(h_new, f"h_{d}_next", [1, "B", H])
+    io = {"inputs": io_entries(("x_forward", ["B", I], "[turning_angle, average_speed] of point t"),
+                               ("h_forward", [1, "B", H], "forward GRU state (initial_state[0], then h_forward_next)"),
+                               ("x_backward", ["B", I], "the same of point N - 1 - t"),
+                               ("h_backward", [1, "B", H], "backward GRU state (initial_state[1], then "
+                                                           "h_backward_next)")),
+          "outputs": io_entries(("y_forward", ["B", G], "forward part of the pace output of point t"),
+                                ("h_forward_next", [1, "B", H], "forward state after point t"),
+                                ("y_backward", ["B", G], "backward part of the pace output of point N - 1 - t "
+                                                         "(with the bias)"),
+                                ("h_backward_next", [1, "B", H], "backward state after point N - 1 - t"))}
+    extra = dict(metadata or {})
+    extra["initial_state"] = {"file": h0_file, "shape": [2, 1, H], "dtype": np.dtype(dtype).name,
+                              "format": "NumPy .npy (no pickle)",
+                              "meaning": "the learned initial states: [0] forward, [1] backward"}
+    meta = build_metadata(g, name=NAME, role="pace_step", config=_pace_config(config), io=io,
+                          representation=PACE_REPRESENTATION, frame_rate=frame_rate, source_paper=QUATERNET_PAPER,
+                          variant="float", extra=extra, input_transform=PACE_INPUT_TRANSFORM,
+                          output_transform={**PACE_OUTPUT_TRANSFORM, "combine": "y[n] = y_forward of call n + "
+                                            "y_backward of call N - 1 - n, then the output transform"})
+    return g.model(metadata=meta, doc_string="QuaterNet pace network: one step of each GRU direction",
                    producer_version=EXPORTER_VERSION)

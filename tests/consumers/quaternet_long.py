@@ -1,5 +1,6 @@
 """QuaterNet long-term from ``quaternet-long_step.onnx`` + the initial state file its metadata names, fed by
-controls; and the pace network ``quaternet-long_pace.onnx`` with its output transform (deploy/README.md)."""
+controls; and the pace network ``quaternet-long_pace.onnx`` (or the portable ``quaternet-long_pace_step.onnx``) with its
+output transform (deploy/README.md)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -34,7 +35,29 @@ def pace(folder, turning_angle: np.ndarray, speed: float, tangent: np.ndarray) -
     s = session(Path(folder) / "quaternet-long_pace.onnx")
     x = np.stack([turning_angle, np.full_like(turning_angle, speed)], axis=-1)[None].astype(np.float32)
     (y,) = s.run(None, {"x": x})
-    y = y[0].astype(np.float64)
+    return _pace_output(y[0].astype(np.float64), tangent)
+
+
+def pace_steps(folder, turning_angle: np.ndarray, speed: float, tangent: np.ndarray) -> dict:
+    """As :func:`pace` from the portable graph ``quaternet-long_pace_step.onnx``: its metadata's host loop (one
+    point per call, both GRU directions at once, the initial states from the file its metadata names)."""
+    s = session(Path(folder) / "quaternet-long_pace_step.onnx")
+    meta = metadata(s)
+    h0 = np.load(Path(folder) / meta["initial_state"]["file"], allow_pickle=False)        # (2, 1, H)
+    x = np.stack([turning_angle, np.full_like(turning_angle, speed)], axis=-1).astype(np.float32)
+    names = [o.name for o in s.get_outputs()]
+    N, hf, hb = len(x), h0[0:1], h0[1:2]
+    yf, yb = [None] * N, [None] * N
+    for t in range(N):
+        out = dict(zip(names, s.run(None, {"x_forward": x[t:t + 1], "h_forward": hf, "x_backward": x[N - 1 - t:N - t],
+                                           "h_backward": hb})))
+        yf[t], yb[N - 1 - t] = out["y_forward"][0], out["y_backward"][0]
+        hf, hb = out["h_forward_next"], out["h_backward_next"]
+    return _pace_output(np.stack(yf).astype(np.float64) + np.stack(yb), tangent)
+
+
+def _pace_output(y: np.ndarray, tangent: np.ndarray) -> dict:
+    """The pace output transform of the metadata on ``y (N, 4)``."""
     cs = y[:, 2:4] / (np.linalg.norm(y[:, 2:4], axis=-1, keepdims=True) + 1e-9)
     facing = np.stack([tangent[:, 0] * cs[:, 0] - tangent[:, 1] * cs[:, 1],
                        tangent[:, 1] * cs[:, 0] + tangent[:, 0] * cs[:, 1]], axis=-1)
