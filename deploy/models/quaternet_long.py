@@ -22,7 +22,7 @@ from refimpl.models.quaternet import QuaterNetConfig, check_params
 
 from deploy.activations import leaky_relu
 from deploy.graph import OPSET, GraphBuilder
-from deploy.gru import gru, gru_step
+from deploy.gru import gru, gru_step, gru_unrolled
 from deploy.linear import linear
 from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries, skeleton_metadata
 from deploy.quat import dq_normalize, quat_normalize
@@ -34,6 +34,9 @@ NAME = "quaternet-long"
 QUATERNET_PAPER = ("Pavllo, Feichtenhofer, Auli, Grangier: Modeling Human Motion with Quaternion-based Neural "
                    "Networks, IJCV 2019 (long-term locomotion, §3.7)")
 
+
+#: Points per call of the portable pace graph (:func:`export_pace_step`).
+PACE_CHUNK = 16
 
 #: Length unit of the long-term networks (QuaterNet's locomotion data; spec/locomotion.md).
 UNITS = "QuaterNet units (1 unit = 5.6444 cm)"
@@ -189,50 +192,59 @@ def _direction_params(params: Mapping[str, np.ndarray], H: int) -> dict:
     return out
 
 
-def export_pace_step(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, dtype=np.float32,
-                     opset: int = OPSET, primitive: bool | None = None, frame_rate: float = 30.0,
-                     metadata: Mapping | None = None, h0_file: str | None = None) -> onnx.ModelProto:
-    """The ``pace_step`` model: one step of each direction of the pace network, for a host that runs the path
-    point by point (the portable target, ``deploy/portable.py``).
+def export_pace_step(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, points: int = PACE_CHUNK,
+                     dtype=np.float32, opset: int = OPSET, primitive: bool | str | None = None,
+                     frame_rate: float = 30.0, metadata: Mapping | None = None,
+                     h0_file: str | None = None) -> onnx.ModelProto:
+    """The ``pace_step`` model: ``points`` points of each direction of the pace network per call, for a host that
+    runs a path chunk by chunk (the portable target, ``deploy/portable.py``; no ``GRU`` node, no ``Scan``).
 
-    At call ``t`` of ``N`` the forward direction reads point ``t`` and the backward direction point ``N − 1 − t``;
-    the pace output of point ``n`` is ``y_forward`` of call ``n`` plus ``y_backward`` of call ``N − 1 − n``
-    (``fc([h_f | h_b]) = W_f h_f + (W_b h_b + b)``), equal to :func:`export_pace`'s ``y``.
+    The forward direction reads the path in order, the backward direction the reversed path, each padded at its
+    end to a multiple of ``points`` (padding comes after the real points in both orders, so it changes nothing
+    before it). The pace output of point ``n`` of ``N`` is ``y_forward[n] + y_backward[N − 1 − n]`` over the
+    concatenated calls (``fc([h_f | h_b]) = W_f h_f + (W_b h_b + b)``), equal to :func:`export_pace`'s ``y``.
 
     Returns
     -------
     onnx.ModelProto
-        Inputs ``x_forward (B, 2)``, ``h_forward (1, B, H)``, ``x_backward (B, 2)``, ``h_backward (1, B, H)``;
-        outputs ``y_forward (B, 4)``, ``h_forward_next (1, B, H)``, ``y_backward (B, 4)``, ``h_backward_next``.
+        Inputs ``x_forward (B, K, 2)``, ``h_forward (1, B, H)``, ``x_backward (B, K, 2)``, ``h_backward (1, B, H)``
+        with ``K = points``; outputs ``y_forward (B, K, 4)``, ``h_forward_next (1, B, H)``, ``y_backward (B, K, 4)``,
+        ``h_backward_next``.
     """
     if not config.bidirectional:
         raise ValueError("config: only the bidirectional pace network is exported (the delayed one runs in NumPy)")
-    H, I, G = int(config.hidden_size), int(config.input_size), int(config.output_size)
+    if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or points < 1:
+        raise ValueError(f"points: expected a positive integer, got {points!r}")
+    K, H, I, G = int(points), int(config.hidden_size), int(config.input_size), int(config.output_size)
     p = _direction_params(params, H)
     g = GraphBuilder(f"{NAME}_pace_step", dtype=dtype, opset=opset, primitive=primitive)
-    ins = {d: (g.input(f"x_{d}", ["B", I]), g.input(f"h_{d}", [1, "B", H])) for d in ("forward", "backward")}
+    ins = {d: (g.input(f"x_{d}", ["B", K, I]), g.input(f"h_{d}", [1, "B", H])) for d in ("forward", "backward")}
     for d, tag in (("forward", "f"), ("backward", "b")):
-        top, h_new = gru_step(g, ins[d][0], ins[d][1], p, "fwd" if tag == "f" else "bwd", name=f"rnn_{tag}")
-        g.output(linear(g, top, p, f"head_{tag}", name=f"head_{tag}", rank2=True), f"y_{d}", ["B", G])
+        y, h_new = gru_unrolled(g, ins[d][0], ins[d][1], p, "fwd" if tag == "f" else "bwd", name=f"rnn_{tag}",
+                                steps=K)                                                 # (B, K, H), (1, B, H)
+        g.output(linear(g, y, p, f"head_{tag}", name=f"head_{tag}"), f"y_{d}", ["B", K, G])
         g.output(h_new, f"h_{d}_next", [1, "B", H])
-    io = {"inputs": io_entries(("x_forward", ["B", I], "[turning_angle, average_speed] of point t"),
+    io = {"inputs": io_entries(("x_forward", ["B", K, I], f"[turning_angle, average_speed] of points c K ... c K + "
+                                f"{K - 1} (call c; zeros past the path's end)"),
                                ("h_forward", [1, "B", H], "forward GRU state (initial_state[0], then h_forward_next)"),
-                               ("x_backward", ["B", I], "the same of point N - 1 - t"),
+                               ("x_backward", ["B", K, I], "the same of the reversed path: points N-1-cK down to "
+                                f"N-{K}-cK (zeros past its end)"),
                                ("h_backward", [1, "B", H], "backward GRU state (initial_state[1], then "
                                                            "h_backward_next)")),
-          "outputs": io_entries(("y_forward", ["B", G], "forward part of the pace output of point t"),
-                                ("h_forward_next", [1, "B", H], "forward state after point t"),
-                                ("y_backward", ["B", G], "backward part of the pace output of point N - 1 - t "
-                                                         "(with the bias)"),
-                                ("h_backward_next", [1, "B", H], "backward state after point N - 1 - t"))}
-    extra = dict(metadata or {})
+          "outputs": io_entries(("y_forward", ["B", K, G], "forward parts of the pace outputs of those points"),
+                                ("h_forward_next", [1, "B", H], "forward state after them"),
+                                ("y_backward", ["B", K, G], "backward parts (with the bias) of the reversed path's "
+                                                            "points"),
+                                ("h_backward_next", [1, "B", H], "backward state after them"))}
+    extra = dict(metadata or {}, points_per_call=K)
     extra["initial_state"] = {"file": h0_file, "shape": [2, 1, H], "dtype": np.dtype(dtype).name,
                               "format": "NumPy .npy (no pickle)",
                               "meaning": "the learned initial states: [0] forward, [1] backward"}
     meta = build_metadata(g, name=NAME, role="pace_step", config=_pace_config(config), io=io,
                           representation=PACE_REPRESENTATION, frame_rate=frame_rate, source_paper=QUATERNET_PAPER,
                           variant="float", extra=extra, input_transform=PACE_INPUT_TRANSFORM,
-                          output_transform={**PACE_OUTPUT_TRANSFORM, "combine": "y[n] = y_forward of call n + "
-                                            "y_backward of call N - 1 - n, then the output transform"})
-    return g.model(metadata=meta, doc_string="QuaterNet pace network: one step of each GRU direction",
+                          output_transform={**PACE_OUTPUT_TRANSFORM, "combine": "y[n] = y_forward[n] + "
+                                            "y_backward[N - 1 - n] over the concatenated calls, then the output "
+                                            "transform"})
+    return g.model(metadata=meta, doc_string=f"QuaterNet pace network: {K} points of each GRU direction",
                    producer_version=EXPORTER_VERSION)

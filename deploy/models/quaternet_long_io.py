@@ -26,7 +26,7 @@ from deploy.graph import save_model
 from deploy.models.arguments import count, frames_array
 from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
                                     write_npy as _write_npy)
-from deploy.models.quaternet_long import NAME, export_pace, export_pace_step, export_pose_step
+from deploy.models.quaternet_long import NAME, PACE_CHUNK, export_pace, export_pace_step, export_pose_step
 from deploy.portable import builder_options, check_target, portable_model
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model
@@ -107,7 +107,7 @@ def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, skel
     dtype = kw["dtype"]
     if isinstance(config, pace.PaceConfig) and portable:
         m = portable_model(export_pace_step(params, config, metadata=metadata, h0_file=PACE_H0_FILE, **kw),
-                           host_loop=pace_portable_loop(config))
+                           host_loop=pace_portable_loop(config, PACE_CHUNK))
         save_model(validate_model(m), out / PACE_STEP_FILE)
         _write_npy(out / PACE_H0_FILE, np.asarray(params["h0"], dtype=dtype).reshape(2, 1, -1))
         return {"pace_step": out / PACE_STEP_FILE, "pace_h0": out / PACE_H0_FILE}
@@ -149,22 +149,23 @@ def step_portable_loop(config, seed: bool) -> dict:
                      "each next frame: y, state = step(x=concat(y, controls of the frame), state=state)"]}
 
 
-def pace_portable_loop(config) -> dict:
-    """The host loop of the portable pace graph: both GRU directions in one pass over the N points."""
-    H = int(config.hidden_size)
-    return {"summary": "N calls for a path of N points: call t steps the forward direction on point t and the "
-                       "backward direction on point N-1-t; the output of point n is y_forward of call n plus "
-                       "y_backward of call N-1-n",
+def pace_portable_loop(config, points: int) -> dict:
+    """The host loop of the portable pace graph: both GRU directions, ``points`` path points per call."""
+    H, K = int(config.hidden_size), int(points)
+    return {"summary": f"a path of N points in ceil(N / {K}) calls: the forward direction reads the path, the "
+                       "backward direction the reversed path, each zero-padded at its end to a multiple of "
+                       f"{K}; the output of point n is y_forward[n] + y_backward[N-1-n] over the concatenated calls",
             "graphs": [PACE_STEP_FILE],
             "state": [{"input": "h_forward", "output": "h_forward_next", "shape": [1, 1, H],
                        "initial": f"{PACE_H0_FILE}[0:1]"},
                       {"input": "h_backward", "output": "h_backward_next", "shape": [1, 1, H],
                        "initial": f"{PACE_H0_FILE}[1:2]"}],
             "loop": [f"h0 = load({PACE_H0_FILE}); h_forward, h_backward = h0[0:1], h0[1:2]",
-                     "for t in 0 .. N-1: out = pace_step(x_forward=x[t], h_forward=h_forward, x_backward=x[N-1-t], "
-                     "h_backward=h_backward); yf[t] = out.y_forward; yb[N-1-t] = out.y_backward; "
-                     "h_forward, h_backward = out.h_forward_next, out.h_backward_next",
-                     "y = yf + yb   # (N, 4), then output_transform"]}
+                     f"C = ceil(N / {K}); xf = pad(x, C*{K}); xb = pad(x[::-1], C*{K})   # zeros at the end",
+                     f"for c in 0 .. C-1: out = pace_step(x_forward=xf[c*{K}:(c+1)*{K}], h_forward=h_forward, "
+                     f"x_backward=xb[c*{K}:(c+1)*{K}], h_backward=h_backward); yf += out.y_forward; "
+                     "yb += out.y_backward; h_forward, h_backward = out.h_forward_next, out.h_backward_next",
+                     "y[n] = yf[n] + yb[N-1-n] for n in 0 .. N-1   # (N, 4), then output_transform"]}
 
 
 def _seed_frames(seed_clip, J: int) -> np.ndarray:
@@ -271,15 +272,19 @@ class Runtime:
 
     def _pace_steps(self, x: np.ndarray) -> np.ndarray:
         """The portable pace graph's host loop (``pace_portable_loop``) on one path ``x (N, 2)`` → ``(N, 4)``."""
-        N = len(x)
+        N, K = len(x), int(self.pace_step_model.metadata["points_per_call"])
+        C = -(-N // K)
+        pad = np.zeros((C * K - N, x.shape[1]), np.float32)
+        xf, xb = np.concatenate([x, pad]), np.concatenate([x[::-1], pad])
         hf, hb = self.pace_h0[0:1], self.pace_h0[1:2]
-        yf, yb = [None] * N, [None] * N
-        for t in range(N):
-            out = self.pace_step_model.run(x_forward=x[t:t + 1], h_forward=hf, x_backward=x[N - 1 - t:N - t],
-                                           h_backward=hb)
-            yf[t], yb[N - 1 - t] = out["y_forward"][0], out["y_backward"][0]
+        yf, yb = [], []
+        for c in range(C):
+            out = self.pace_step_model.run(x_forward=xf[None, c * K:(c + 1) * K], h_forward=hf,
+                                           x_backward=xb[None, c * K:(c + 1) * K], h_backward=hb)
+            yf.append(out["y_forward"][0])
+            yb.append(out["y_backward"][0])
             hf, hb = out["h_forward_next"], out["h_backward_next"]
-        return np.stack(yf) + np.stack(yb)
+        return np.concatenate(yf)[:N] + np.concatenate(yb)[:N][::-1]
 
     def rollout(self, inputs, prefix: int):
         """Free-running prediction with the ground-truth controls (the task's method interface):

@@ -39,21 +39,28 @@ def pace(folder, turning_angle: np.ndarray, speed: float, tangent: np.ndarray) -
 
 
 def pace_steps(folder, turning_angle: np.ndarray, speed: float, tangent: np.ndarray) -> dict:
-    """As :func:`pace` from the portable graph ``quaternet-long_pace_step.onnx``: its metadata's host loop (one
-    point per call, both GRU directions at once, the initial states from the file its metadata names)."""
+    """As :func:`pace` from the portable graph ``quaternet-long_pace_step.onnx``: its metadata's host loop (K points
+    per call, both GRU directions at once, the reversed path for the backward one, zero padding at the ends, the
+    initial states from the file its metadata names)."""
     s = session(Path(folder) / "quaternet-long_pace_step.onnx")
     meta = metadata(s)
     h0 = np.load(Path(folder) / meta["initial_state"]["file"], allow_pickle=False)        # (2, 1, H)
+    K = meta["points_per_call"]
     x = np.stack([turning_angle, np.full_like(turning_angle, speed)], axis=-1).astype(np.float32)
+    N = len(x)
+    C = -(-N // K)
+    pad = np.zeros((C * K - N, 2), np.float32)
+    xf, xb = np.concatenate([x, pad]), np.concatenate([x[::-1], pad])
     names = [o.name for o in s.get_outputs()]
-    N, hf, hb = len(x), h0[0:1], h0[1:2]
-    yf, yb = [None] * N, [None] * N
-    for t in range(N):
-        out = dict(zip(names, s.run(None, {"x_forward": x[t:t + 1], "h_forward": hf, "x_backward": x[N - 1 - t:N - t],
-                                           "h_backward": hb})))
-        yf[t], yb[N - 1 - t] = out["y_forward"][0], out["y_backward"][0]
+    hf, hb, yf, yb = h0[0:1], h0[1:2], [], []
+    for c in range(C):
+        out = dict(zip(names, s.run(None, {"x_forward": xf[None, c * K:(c + 1) * K], "h_forward": hf,
+                                           "x_backward": xb[None, c * K:(c + 1) * K], "h_backward": hb})))
+        yf.append(out["y_forward"][0])
+        yb.append(out["y_backward"][0])
         hf, hb = out["h_forward_next"], out["h_backward_next"]
-    return _pace_output(np.stack(yf).astype(np.float64) + np.stack(yb), tangent)
+    y = np.concatenate(yf)[:N].astype(np.float64) + np.concatenate(yb)[:N][::-1]
+    return _pace_output(y, tangent)
 
 
 def _pace_output(y: np.ndarray, tangent: np.ndarray) -> dict:
