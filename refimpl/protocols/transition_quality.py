@@ -29,7 +29,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from refimpl.protocols.transition_metrics import positions_from_poses, predict_transitions
+from refimpl.protocols.transition_metrics import check_groups, positions_from_poses, predict_transitions
 from refimpl.nn.params import check_float_array
 from refimpl.protocols.transition import TransitionDataset
 
@@ -243,12 +243,13 @@ def _summarise(a: dict, sel=None) -> dict:
     err = a["err"].mean(axis=0)  # (T,)
     res.update(join_in_ratio=_ratio(res["join_in_cm"], median), join_out_ratio=_ratio(res["join_out_cm"], median),
                first_frame_cm=float(err[0]), last_frame_cm=float(err[-1]),
-               ground_truth=dict(measures("gt_"), median_step_cm=median))
+               ground_truth=dict(measures("gt_"), median_step_cm=median), num_windows=int(a["err"].shape[0]))
     return res
 
 
 def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable], batch_size: int = 1024,
-                     height: float = CONTACT_HEIGHT_CM, labels: bool = True) -> dict:
+                     height: float = CONTACT_HEIGHT_CM, labels: bool = True,
+                     groups: Mapping[str, np.ndarray] | None = None) -> dict:
     """:func:`window_quality` of every method on all windows of ``dataset`` (windows of every skeleton pooled:
     means over windows, the median step and the skating over all of them) and, with ``labels``, per source label.
 
@@ -262,12 +263,15 @@ def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable]
         Contact threshold (cm).
     labels : bool
         Also ``by_label``: ``{label: window_quality's dict}`` (walk, run, ... or a locomotion set's styles).
+    groups : mapping grouping name -> ndarray (N,) of str, optional
+        More breakdowns (:func:`refimpl.protocols.transition_metrics.evaluate_methods`): ``by_<name>``.
 
     Returns
     -------
-    dict name -> :func:`window_quality`'s dict, plus ``contact_rule`` (threshold, floor, foot joints) and
-    ``by_label``.
+    dict name -> :func:`window_quality`'s dict, plus ``contact_rule`` (threshold, floor, foot joints),
+    ``by_label`` and ``by_<group>``.
     """
+    groups = check_groups(groups, dataset.num_windows) if isinstance(dataset, TransitionDataset) else {}
     past, _, target = dataset.context() if isinstance(dataset, TransitionDataset) else (None, None, None)
     out = {}
     for name, f in methods.items():
@@ -290,6 +294,8 @@ def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable]
         if labels:
             label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
             res["by_label"] = {lab: _summarise(arrays, label_of == lab) for lab in sorted(set(label_of))}
+        for g, v in groups.items():
+            res[f"by_{g}"] = {lab: _summarise(arrays, v == lab) for lab in sorted(set(v.tolist()))}
         out[name] = res
     return out
 
