@@ -288,3 +288,25 @@ def test_every_exporter_entry_implements_the_entry_interface():
     with pytest.raises(TypeError, match="add_run_options"):
         check_entry(broken)
     assert "export_checkpoint" in OPTIONAL_MEMBERS
+
+
+def test_every_recipe_implements_the_recipe_interface_and_a_broken_one_is_refused():
+    """refimpl.recipe_api: the registry checks each recipe and reads its optional names once into the ModelSpec."""
+    from refimpl.recipe_api import OPTIONAL_MEMBERS, RECIPE_MEMBERS, Recipe, check_recipe, optional_members
+
+    for name, spec in registry.MODELS.items():
+        assert isinstance(spec.recipe, Recipe) and check_recipe(spec.recipe, spec.task) is spec.recipe
+        opt = optional_members(spec.recipe)
+        assert spec.exporter == opt["EXPORTER"] and spec.published_names is opt["published_names"], name
+        assert spec.published_settings == tuple(opt["PUBLISHED_SETTINGS"]) and set(opt) == set(OPTIONAL_MEMBERS)
+    recipe = _toy_recipe_module()
+    assert optional_members(recipe)["IMPORT_HINT"] == "" and optional_members(recipe)["param_shapes"] is not None
+    with pytest.raises(ValueError, match="registered as"):
+        check_recipe(recipe, "transition")
+    recipe.verify_onnx = "not callable"
+    with pytest.raises(TypeError, match="verify_onnx"):
+        check_recipe(recipe)
+    del recipe.make_method
+    with pytest.raises(TypeError, match="make_method"):
+        registry.ModelSpec.from_recipe(recipe, "toy")
+    assert "make_adapter" in RECIPE_MEMBERS and "PAPER_BATCH" in RECIPE_MEMBERS
