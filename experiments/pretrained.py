@@ -73,6 +73,7 @@ MODELS = {
         "train": ["--model", "qtg", "--data", BN, "--stride", "2", "--steps", "100000", "--seed", "0",
                   "--checkpoint-every", "2000", "--validate-every", "2000", "--progress-every", "500"],
         "eval": ["--data", BN, "--join", "inertialize+footlock"], "eval_sample": None,
+        "per_frame": ("qtg_step.onnx", 1),
         "data": _BN_DATA, "weights": _WEIGHTS_BN,
         "use": "transitions of 30 frames between two Bandai Namco-rig clips (21 joints, cm, 30 fps): "
                "`refimpl generate --checkpoint pretrained:qtg-locomotion --source A.bvh --target B.bvh ...`",
@@ -84,6 +85,7 @@ MODELS = {
         "train": ["--model", "quaternet", "--data", CMU, "--set", "hidden_size=512", "--steps", "2000",
                   "--seed", "0", "--checkpoint-every", "200"],
         "eval": ["--data", CMU, "--horizons", "table2"], "eval_sample": ["--data", "sample"],
+        "per_frame": ("quaternet_step.onnx", 1),
         "data": _CMU_DATA, "weights": _WEIGHTS_CMU,
         "use": "continue a CMU exp-map clip from a 50-frame prefix: `refimpl generate --checkpoint "
                "pretrained:quaternet-cmu --source clip.txt --source-frame 80 --length 25 --out pred.bvh`",
@@ -95,6 +97,7 @@ MODELS = {
         "train": ["--model", "quaternet-cnn", "--data", CMU, "--set", "channels=512", "--steps", "1500",
                   "--seed", "0", "--checkpoint-every", "200"],
         "eval": ["--data", CMU, "--horizons", "table2"], "eval_sample": ["--data", "sample"],
+        "per_frame": ("quaternet-cnn_window.onnx", 1),
         "data": _CMU_DATA, "weights": _WEIGHTS_CMU,
         "use": "continue a CMU exp-map clip from a 32-frame window (`refimpl generate --checkpoint "
                "pretrained:quaternet-cnn-cmu ...`)",
@@ -127,7 +130,7 @@ MODELS = {
         "model": "acrnn", "run": "acrnn_dq",
         "train": ["--model", "acrnn", "--representation", "dq-all", "--data", SALSA, "--set", "hidden_size=128",
                   "--steps", "600", "--seed", "0", "--checkpoint-every", "100"],
-        "eval": ["--data", SALSA], "eval_sample": None,
+        "eval": ["--data", SALSA], "eval_sample": ["--data", "sample"], "per_frame": ("acrnn_step.onnx", 1),
         "data": _SALSA_DATA, "weights": _WEIGHTS_CMU,
         "use": "long-term salsa from a 10-frame seed: `refimpl generate --checkpoint pretrained:acrnn-dq-salsa "
                "--source take.bvh --length 300 --out salsa.bvh`",
@@ -138,7 +141,7 @@ MODELS = {
         "model": "acrnn", "run": "acrnn_pos",
         "train": ["--model", "acrnn", "--representation", "positions-published", "--data", SALSA, "--set",
                   "hidden_size=128", "--steps", "600", "--seed", "0", "--checkpoint-every", "100"],
-        "eval": ["--data", SALSA], "eval_sample": None,
+        "eval": ["--data", SALSA], "eval_sample": ["--data", "sample"], "per_frame": ("acrnn_step.onnx", 1),
         "data": _SALSA_DATA, "weights": _WEIGHTS_CMU,
         "use": "long-term salsa from a 10-frame seed, as joint positions (`refimpl generate` writes BVH)",
     },
@@ -246,7 +249,10 @@ def _time_graphs(onnx_dir: Path, sizes: dict, repeats: int = 50) -> dict:
         for i in sess.get_inputs():
             shape = [d if isinstance(d, int) else int(sizes.get(d, 1)) for d in i.shape]
             dtype = np.float64 if "double" in i.type else (np.int64 if "int64" in i.type else np.float32)
-            feeds[i.name] = (rng.standard_normal(shape) * 0.1).astype(dtype)
+            if dtype is np.int64:   # a count (frames to generate): ``sizes[name]``, else 1
+                feeds[i.name] = np.full(shape, int(sizes.get(i.name, 1)), dtype=np.int64)
+            else:
+                feeds[i.name] = np.asarray(rng.standard_normal(shape) * 0.1, dtype=dtype)
         for _ in range(3):
             sess.run(None, feeds)
         times = []

@@ -350,6 +350,7 @@ def cmd_demo(args) -> int:
 
 
 def _add_pretrained_parser(sub) -> None:
+    """``refimpl pretrained [NAME]``: the shipped trained models and their cards (spec/cli.md §10)."""
     p = sub.add_parser("pretrained", help="list the shipped trained models (pretrained:<name>) and their cards",
                        description="List the shipped trained models, or show one's card. Each is used by name "
                                    "wherever a checkpoint is accepted: --checkpoint pretrained:<name> (eval, "
@@ -360,32 +361,8 @@ def _add_pretrained_parser(sub) -> None:
     p.set_defaults(func=cmd_pretrained)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``refimpl`` (see spec/cli.md)."""
-    import refimpl
-
-    what = refimpl.__doc__.splitlines()[0].partition(": ")[2].rstrip(".")  # the package's one-line summary
-    parser = argparse.ArgumentParser(
-        prog="refimpl",
-        description=f"{what[0].upper()}{what[1:]}: inspect files, train, evaluate, export to ONNX, generate "
-                    "motion, render. Start with `refimpl demo`.",
-        epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
-    parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
-    parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=threads_option, default=None, metavar="{auto,N}",
-                        help="BLAS threads for NumPy (default auto, except demo: 1, so that its numbers are the "
-                             "same on every machine; auto = the cores other processes leave free, measured "
-                             "from /proc at the start and every ~2 s of training; 1 without /proc. A fixed count "
-                             "N forces it: 2 threads are faster on an idle 2-core machine but 8-31x slower when "
-                             "other jobs share the cores, benchmarks/bench_thread_default.py; 0 = library default; "
-                             "needs threadpoolctl)")
-    parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
-                        help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
-                             "training step instead of faulting it in again (step time 0.76-0.99x of glibc's defaults, "
-                             "benchmarks/bench_allocator.py); 'system' leaves glibc's defaults")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    _add_pretrained_parser(sub)
-
+def _add_info_parser(sub) -> None:
+    """``refimpl info FILE``: what a motion file, checkpoint or ONNX model holds."""
     p = sub.add_parser("info", help="what a .bvh, exp-map .txt, checkpoint .npz or .onnx file holds",
                        description="Print joints, frames, frame rate and channel layout of a motion file; "
                                    "parameters, shapes and metadata of a checkpoint or ONNX model.")
@@ -395,6 +372,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
+
+def _add_train_parser(sub) -> None:
+    """``refimpl train``: the run's options (``--model``, data, length, optimiser, files) and every task's group."""
     p = sub.add_parser("train", help=f"train a network ({', '.join(sorted(MODELS))}) on motion files",
                        description="Train a network with Adam; checkpoint.npz (resumable), loss.csv and "
                                    "loss_val.csv go to --out. Progress lines (rate, ETA) go to stderr. "
@@ -433,6 +413,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--progress-every", type=bounded_int("every"), default=50)
     p.set_defaults(func=cmd_train, option_defaults={a.dest: a.default for a in p._actions})
 
+
+def _add_eval_parser(sub) -> None:
+    """``refimpl eval``: ``--checkpoint`` / ``--onnx``, data, outputs and every task's group."""
     p = sub.add_parser("eval", help="a network against its task's baselines, under its task's protocol",
                        description="Evaluate a network (--checkpoint, --onnx) or, without one, the baselines of "
                                    "--model's task, under the task's protocol. "
@@ -449,6 +432,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_options(p, lambda task, group: task.add_eval_options(group))
     p.set_defaults(func=cmd_eval)
 
+
+def _add_export_parser(sub) -> None:
+    """``refimpl export``: ``--checkpoint``, the graph form and check, and every task's group."""
     p = sub.add_parser("export", help="export a checkpoint of any model to ONNX, verified (needs the deploy extra)",
                        description="Write the model's ONNX files <model>_<role>.onnx (validated; the exporter's "
                                    "roles); the graphs standardise inside (raw poses in and out) and carry their "
@@ -466,6 +452,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_options(p, lambda task, group: task.add_export_options(group))
     p.set_defaults(func=cmd_export)
 
+
+def _add_generate_parser(sub) -> None:
+    """``refimpl generate``: the source, backend, outputs and every task's group."""
     p = sub.add_parser("generate", help="generate motion with a network or a baseline, BVH out (every model: "
                                         "`refimpl generate --help` lists each task's form)",
                        description="Generate motion with the task of --model (else of --checkpoint's model, else "
@@ -489,6 +478,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_options(p, lambda task, group: task.add_generate_options(group))
     p.set_defaults(func=cmd_generate)
 
+
+def _add_render_parser(sub) -> None:
+    """``refimpl render``: a motion (and a second one to compare) to PNG / GIF."""
     p = sub.add_parser("render", help="draw a motion as a PNG strip or GIF (matplotlib)",
                        description="Draw a .bvh / exp-map motion, optionally beside a second one (--compare) on "
                                    "the same skeleton, as a PNG strip of frames or an animated GIF.")
@@ -505,6 +497,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
     p.set_defaults(func=cmd_render)
 
+
+def _add_demo_parser(sub) -> None:
+    """``refimpl demo``: the tour's folder, seed and switches."""
     p = sub.add_parser("demo", help="train, evaluate, export, verify, generate and render on the sample",
                        description="The whole tour on the embedded CMU sample in a few minutes on 2 cores.")
     p.add_argument("--out", default="demo_out", help="output folder (default ./demo_out)")
@@ -517,7 +512,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
     p.set_defaults(func=cmd_demo, default_blas_threads=1)  # reproducible numbers: BLAS rounding depends on threads
 
+
+def _add_global_options(parser) -> None:
+    """The options before the command: ``--traceback``, ``--blas-threads``, ``--malloc``."""
+    parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
+    parser.add_argument("--blas-threads", type=threads_option, default=None, metavar="{auto,N}",
+                        help="BLAS threads for NumPy (default auto, except demo: 1, so that its numbers are the "
+                             "same on every machine; auto = the cores other processes leave free, measured "
+                             "from /proc at the start and every ~2 s of training; 1 without /proc. A fixed count "
+                             "N forces it: 2 threads are faster on an idle 2-core machine but 8-31x slower when "
+                             "other jobs share the cores, benchmarks/bench_thread_default.py; 0 = library default; "
+                             "needs threadpoolctl)")
+    parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
+                        help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
+                             "training step instead of faulting it in again (step time 0.76-0.99x of glibc's defaults, "
+                             "benchmarks/bench_allocator.py); 'system' leaves glibc's defaults")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``refimpl`` (see spec/cli.md)."""
+    import refimpl
+
+    what = refimpl.__doc__.splitlines()[0].partition(": ")[2].rstrip(".")  # the package's one-line summary
+    parser = argparse.ArgumentParser(
+        prog="refimpl",
+        description=f"{what[0].upper()}{what[1:]}: inspect files, train, evaluate, export to ONNX, generate "
+                    "motion, render. Start with `refimpl demo`.",
+        epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
+    parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
+    _add_global_options(parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    _add_info_parser(sub)
+    _add_train_parser(sub)
+    _add_eval_parser(sub)
+    _add_export_parser(sub)
+    _add_generate_parser(sub)
+    _add_render_parser(sub)
+    _add_demo_parser(sub)
     weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
+    _add_pretrained_parser(sub)
     return parser
 
 

@@ -24,8 +24,8 @@ LAYERS = {
         "refimpl.protocols.*"],
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
-        "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.run_options", "refimpl.threads",
-        "refimpl.pretrained"],
+        "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.recipe_api", "refimpl.run_options",
+        "refimpl.threads", "refimpl.pretrained"],
     8: ["refimpl.cli", "refimpl.cli_info", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).
