@@ -99,3 +99,19 @@ def test_bandai_namco_folders(tmp_path, capsys):
     assert set(ra["qtg"]["by_style"]) == set(q["by_style"]) and q["by_kind"]
     for v in q["by_style"].values():
         assert 0.0 <= v["contact_share"] <= 1.0 and v["num_windows"] > 0
+
+
+def test_format_groups_and_check_groups():
+    import numpy as np
+
+    from refimpl.protocols.transition_metrics import check_groups
+    from refimpl.protocols.transition_quality import format_groups
+
+    q = {"skate_cm_s": 12.0, "contact_share": 0.5, "num_windows": 3, "ground_truth": {"skate_cm_s": 9.0,
+                                                                                      "contact_share": 0.6}}
+    res = {"m": {"mean_cm": 1.0, "by_label": {"a": 1.0}, "by_style": {"x": 2.5}, "quality": {"by_style": {"x": q}}}}
+    (name, table), = format_groups(res)
+    assert name == "style" and "2.50 | 12.0@0.50" in table and "9.0@0.60 [3]" in table
+    assert check_groups({"g": ["a", "b"]}, 2)["g"].tolist() == ["a", "b"]
+    with pytest.raises(ValueError, match="groups"):
+        check_groups({"g": ["a"]}, 2)

@@ -34,7 +34,7 @@ from refimpl.nn.params import check_float_array
 from refimpl.protocols.transition import TransitionDataset
 
 __all__ = ["CONTACT_HEIGHT_CM", "FOOT_WORDS", "foot_joints", "step_displacement", "join_displacement",
-           "contact_floor", "foot_contacts", "skate_speed", "window_quality", "evaluate_quality",
+           "contact_floor", "foot_contacts", "skate_speed", "window_quality", "evaluate_quality", "format_groups",
            "format_quality"]
 
 #: A foot joint is in contact when it is within this height (cm) of its floor (its lowest height over the
@@ -330,3 +330,36 @@ def format_quality(quality: Mapping[str, dict]) -> str:
             "window, in both frames of a step")
     return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
                      for r in rows) + "\n" + note
+
+
+def format_groups(results: Mapping[str, dict]) -> list[tuple[str, str]]:
+    """``[(grouping, table)]`` for every ``by_<grouping>`` breakdown of evaluation results (``by_label`` aside;
+    e.g. ``style``, ``kind``): per label, each method's mean error (cm) and its foot skating (cm/s) at its contact
+    share, then the ground truth's skating, contact share and number of windows."""
+    first = next(iter(results.values()), {})
+    names = [k[3:] for k in first if k.startswith("by_") and k != "by_label" and isinstance(first[k], dict)]
+    return [(g, _group_table(results, g)) for g in names]
+
+
+def _group_table(results: Mapping[str, dict], group: str) -> str:
+    """Rows: the group's labels; columns: each method's mean error and skating at its contact share."""
+    names = list(results)
+    key = f"by_{group}"
+    labels = list(results[names[0]][key])
+
+    def cell(q):
+        skate = "-" if q["skate_cm_s"] is None or not np.isfinite(q["skate_cm_s"]) else f"{q['skate_cm_s']:.1f}"
+        return f"{skate}@{q['contact_share']:.2f}"
+
+    rows = [[group] + names + ["ground truth"]]
+    for lab in labels:
+        row = [lab]
+        for n in names:
+            q = results[n].get("quality", {}).get(key, {}).get(lab)
+            row.append(f"{results[n][key][lab]:.2f} | {cell(q)}" if q else f"{results[n][key][lab]:.2f}")
+        gt = results[names[0]].get("quality", {}).get(key, {}).get(lab)
+        row.append(f"{cell(gt['ground_truth'])} [{gt['num_windows']}]" if gt else "")
+        rows.append(row)
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.ljust(w) if not i else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+                     for r in rows)

@@ -43,10 +43,10 @@ from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
 from refimpl.protocols.transition_join import EXPORT_JOIN_MODES, JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_locomotion import JOINTS as BANDAI_NAMCO_JOINTS, KIND as BANDAI_NAMCO_KIND
 from refimpl.protocols.transition_locomotion import build_datasets as build_bandai_namco, is_bandai_namco_folder
-from refimpl.protocols.transition_locomotion import find_takes, scored_takes, window_groups
+from refimpl.protocols.transition_locomotion import find_takes, scored_takes, take_facts, window_groups
 from refimpl.protocols.transition_locomotion import load_bandai_namco_source
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table
-from refimpl.protocols.transition_quality import evaluate_quality, format_quality
+from refimpl.protocols.transition_quality import evaluate_quality, format_groups, format_quality
 from refimpl.rotations import quat_from_axis_angle
 from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
@@ -204,6 +204,14 @@ def _load_any(source, fps: float = 30.0):
     return load_source(source, fps)
 
 
+def _take_content(path) -> str | None:
+    """A Bandai Namco take's content (walk, run, ...: its label, as in training), else None (the folder's name)."""
+    try:
+        return take_facts(path).content
+    except ValueError:
+        return None
+
+
 def eval_dataset(args, model, T: int):
     """The windows ``refimpl eval`` scores and one line saying which (spec/cli.md §4): ``--takes`` exactly;
     a Bandai Namco folder its held-out takes or all of them (:func:`~refimpl.protocols.transition_locomotion.scored_takes`);
@@ -225,7 +233,7 @@ def eval_dataset(args, model, T: int):
     if not takes:
         _, test_ds = build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
         return test_ds, f"the held-out windows of --data {args.data}"
-    sources = [source_for_file(t, fps=args.fps) for t in takes]   # each a regular .bvh / .txt, its rig known
+    sources = [source_for_file(t, fps=args.fps, label=_take_content(t)) for t in takes]   # .bvh / .txt, rig known
     stats = (model.fields["root_mean"], model.fields["root_std"]) if model is not None else (np.zeros(3), np.ones(3))
     try:
         ds, _ = build_transition_datasets(sources, [], T=T, stride=args.stride, loader=_load_any)
@@ -420,44 +428,15 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
         _say("Joins (mean joint displacement into frame 1 and out of frame T), foot skating (horizontal speed of "
              "the foot joints in contact) and the error at the first and last frames:")
         _say(format_quality({k: r["quality"] for k, r in results.items()}))
-    for g in _group_names(results):
+    for g, table in format_groups(results):
         _say("")
         _say(f"By {g}: mean error cm | foot skating cm/s at contact share (the ground truth's in the last column; "
              "windows per group in brackets):")
-        _say(_group_table(results, g))
+        _say(table)
     if curve:
         _say("")
         _say("Per-frame curve (cm):")
         _say(_curve_table(results, 1.0 / test_ds.fps))
-
-
-def _group_names(results: Mapping[str, dict]) -> list[str]:
-    first = next(iter(results.values()), {})
-    return [k[3:] for k in first if k.startswith("by_") and k != "by_label" and isinstance(first[k], dict)]
-
-
-def _group_table(results: Mapping[str, dict], group: str) -> str:
-    """Rows: the group's labels; columns: each method's mean error and skating at its contact share."""
-    names = list(results)
-    key = f"by_{group}"
-    labels = list(results[names[0]][key])
-
-    def cell(q):
-        skate = "-" if q["skate_cm_s"] is None or not np.isfinite(q["skate_cm_s"]) else f"{q['skate_cm_s']:.1f}"
-        return f"{skate}@{q['contact_share']:.2f}"
-
-    rows = [[group] + names + ["ground truth"]]
-    for lab in labels:
-        row = [lab]
-        for n in names:
-            q = results[n].get("quality", {}).get(key, {}).get(lab)
-            row.append(f"{results[n][key][lab]:.2f} | {cell(q)}" if q else f"{results[n][key][lab]:.2f}")
-        gt = results[names[0]].get("quality", {}).get(key, {}).get(lab)
-        row.append(f"{cell(gt['ground_truth'])} [{gt['num_windows']}]" if gt else "")
-        rows.append(row)
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(c.ljust(w) if not i else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
-                     for r in rows)
 
 
 def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=None, csv_path=None) -> None:
