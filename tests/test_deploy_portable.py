@@ -248,7 +248,7 @@ def _unit(poses):
 
 @pytest.mark.parametrize("name", ["qtg", "qtg-join"])
 def test_qtg_numerics(exported, portable, monkeypatch, name):
-    from deploy.models.qtg_io import QTGRuntime
+    from deploy.models.qtg_io import Runtime as QTGRuntime
     from refimpl.protocols.transition_join import inertialize_joins
 
     ck, today = exported["qtg"]
