@@ -441,3 +441,18 @@ def test_consumers_on_portable_graphs(exported, portable):
     ref = pace_method(path, 0.5)
     assert np.abs(got["amplitude"] - ref.track("amplitude")[:, 0]).max() <= 1e-5
     assert np.abs(got["facing"] - ref.track("direction")).max() <= 1e-5
+
+
+def test_bench_portable_helpers():
+    """benchmarks/bench_portable.py's importable pieces (no timing asserted): both targets of a tiny model, one
+    per-frame call each, a row with the ratio, and the table."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_portable.py"
+    spec = importlib.util.spec_from_file_location("bench_portable", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    result = bench.bench(rounds=1, min_time=0.001, quick=True, models=("quaternet", "pace"))
+    assert set(result["rows"]) == {"quaternet.frame", "pace.point"}
+    assert all(r["ratio_median"] > 0 for r in result["rows"].values())
+    assert "quaternet.frame" in bench.table(result)
