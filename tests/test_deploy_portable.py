@@ -383,6 +383,15 @@ def test_deploy_run_and_info_on_portable_folders(exported, portable, tmp_path, c
     assert '"name": "portable"' in text and "hidden (2, 1," in text or "hidden (" in text
 
 
+def test_portable_window_needs_the_receptive_field(portable):
+    from deploy.models import runtime_for_dir
+
+    rt = runtime_for_dir(portable["quaternet-cnn"])
+    short = _prefix()[:1, :rt.receptive_field - 1]
+    with pytest.raises(ValueError, match="at least"):
+        rt.predict(short, 2)
+
+
 def test_default_target_is_unchanged(exported, tmp_path):
     """``--target default`` writes exactly what no option writes."""
     ck = exported["quaternet"][0]
