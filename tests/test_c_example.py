@@ -20,6 +20,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT / "deploy" / "examples" / "qtg_rollout.c"
+FOOTLOCK_SOURCE = ROOT / "deploy" / "examples" / "qtg_footlock.c"  # compiled with it (--footlock)
 
 
 def test_source_reads_sizes_from_the_model():
@@ -74,8 +75,8 @@ def _wheel_library():
     return (libs[0], onnxruntime.__version__) if libs else None
 
 
-def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
-    """Build ``source`` with ``-Wall -Wextra`` (+ ``extra``) against ``$ORT_C_DIR``'s headers and its ``lib/`` (or
+def build_example(tmp_path_factory, source, name: str, extra=()) -> Path:
+    """Build ``source`` (a path or a tuple of paths) with ``-Wall -Wextra`` (+ ``extra``) against ``$ORT_C_DIR``'s headers and its ``lib/`` (or
     the wheel's library); ``pytest.skip`` when the compiler, headers or a fitting library are missing."""
     cc = _compiler()
     if cc is None:
@@ -109,7 +110,8 @@ def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
         pytest.skip(f"header ORT_API_VERSION {api.group(1)} is newer than the library {version}: "
                     "use headers of the library's release")
     exe = work / name
-    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", *extra, str(source), f"-I{header.parent}", f"-L{lib_dir}",
+    sources = [str(s) for s in (source if isinstance(source, (tuple, list)) else (source,))]
+    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", *extra, *sources, f"-I{header.parent}", f"-L{lib_dir}",
                             "-lonnxruntime", "-lm", f"-Wl,-rpath,{lib_dir}", "-o", str(exe)],
                            capture_output=True, text=True, timeout=120)
     assert build.returncode == 0, build.stderr
@@ -119,7 +121,7 @@ def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
 
 @pytest.fixture(scope="module")
 def binary(tmp_path_factory):
-    return build_example(tmp_path_factory, SOURCE, "qtg_rollout")
+    return build_example(tmp_path_factory, (SOURCE, FOOTLOCK_SOURCE), "qtg_rollout", extra=("-Werror",))
 
 
 def _python_rollout(model: Path, past: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -1,9 +1,9 @@
 /* Minimal C client of an exported QTG rollout model through onnxruntime's C API (spec/deploy.md §10).
  *
  * Build (onnxruntime's C package unpacked in $ORT, see deploy/README.md "Embedded use"):
- *   cc -O2 -Wall -Wextra qtg_rollout.c -I$ORT/include -L$ORT/lib -lonnxruntime -o qtg_rollout
+ *   cc -O2 -Wall -Wextra qtg_rollout.c qtg_footlock.c -I$ORT/include -L$ORT/lib -lonnxruntime -lm -o qtg_rollout
  * Run:
- *   LD_LIBRARY_PATH=$ORT/lib ./qtg_rollout qtg_rollout.onnx [inputs.f32 [poses.f32]]
+ *   LD_LIBRARY_PATH=$ORT/lib ./qtg_rollout [--footlock] qtg_rollout.onnx [inputs.f32 [poses.f32]]
  *
  * Contract of the model (its "io" metadata): inputs "past" and "target", float32 (B, C, P) row-major (C = 2: the
  * two poses before and the two after the transition); output "poses" float32 (B, T, P). A pose is
@@ -17,14 +17,22 @@
  * inertialised inside the graph (spec/qtg.md 7.4): nothing to do here, the poses it returns are already joined;
  * this program prints the metadata entry so that the user sees which variant runs.
  *
+ * --footlock: after the rollout, pin the planted feet by two-bone IK (spec/qtg.md 7.5, qtg_footlock.c): with a
+ * model exported with the join option this is `join="inertialize+footlock"`. It needs raw poses in centimetres
+ * (metadata "normalization" with "in_graph": true) and the skeleton (metadata "skeleton": names, parents,
+ * offsets) and frame rate ("frame_rate") the model was exported with; it works on p_-1, p_0 | poses | g1, g2.
+ *
  * Without inputs.f32 every joint is at the identity rotation and the root at the origin. With it, the file holds
  * 2 * C * P little-endian float32 values: past then target, row-major. With poses.f32 the whole output (T * P
  * float32) is written there too.
  */
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include <onnxruntime_c_api.h>
+
+#include "qtg_footlock.h"
 
 static const OrtApi* ort;
 
@@ -61,9 +69,49 @@ static void declared_shape(OrtSession* session, int is_input, size_t index, int6
   ort->ReleaseTypeInfo(type_info);
 }
 
+/* the metadata entry `key` as a string to free() (NULL when absent) */
+static char* metadata_entry(OrtModelMetadata* metadata, OrtAllocator* allocator, const char* key) {
+  char* value = NULL;
+  check(ort->ModelMetadataLookupCustomMetadataMap(metadata, allocator, key, &value));
+  if (value == NULL) return NULL;
+  const size_t n = strlen(value) + 1;
+  char* copy = malloc(n);
+  if (copy == NULL) fail("out of memory");
+  memcpy(copy, value, n);
+  check(ort->AllocatorFree(allocator, value));
+  return copy;
+}
+
+/* --footlock: p_-1, p_0 | poses (T frames) | g1, g2 in double, foot locking, the T frames written back */
+static void footlock(const char* skeleton_json, const char* rate_json, const char* norm_json, const float* past,
+                     float* poses, const float* target, int64_t C, int64_t T, int64_t P) {
+  if (norm_json == NULL || strstr(norm_json, "\"in_graph\": true") == NULL)
+    fail("--footlock needs raw poses in centimetres: a model with metadata normalization.in_graph true");
+  qtg_skeleton skeleton;
+  if (qtg_skeleton_from_json(skeleton_json, &skeleton) != 0 || 3 + 4 * (int64_t)skeleton.joints != P)
+    fail("--footlock needs the metadata entry skeleton (names, parents, offsets) of the pose's joints");
+  const double rate = rate_json != NULL ? strtod(rate_json, NULL) : 30.0;
+  const int64_t F = 2 * C + T;
+  double* seq = malloc(sizeof *seq * (size_t)(F * P));
+  if (seq == NULL) fail("out of memory");
+  for (int64_t i = 0; i < C * P; ++i) seq[i] = past[i], seq[(C + T) * P + i] = target[i];
+  for (int64_t i = 0; i < T * P; ++i) seq[C * P + i] = poses[i];
+  const qtg_footlock_options options = qtg_footlock_defaults(rate);
+  const int changed = qtg_footlock(&skeleton, &options, seq, (int)F, (int)C, (int)(C + T));
+  if (changed < 0) fail(qtg_footlock_error(changed));
+  for (int64_t i = 0; i < T * P; ++i) poses[i] = (float)seq[C * P + i];
+  printf("footlock: %d of %lld frames changed (%d joints, %.6g fps)\n", changed, (long long)T, skeleton.joints,
+         rate);
+  free(seq);
+  qtg_skeleton_free(&skeleton);
+}
+
 int main(int argc, char** argv) {
+  const char* program = argv[0];
+  const int lock = argc >= 2 && strcmp(argv[1], "--footlock") == 0; /* then argv[1] is the model */
+  if (lock) --argc, ++argv;
   if (argc < 2 || argc > 4) {
-    fprintf(stderr, "usage: %s qtg_rollout.onnx [inputs.f32 [poses.f32]]\n", argv[0]);
+    fprintf(stderr, "usage: %s [--footlock] qtg_rollout.onnx [inputs.f32 [poses.f32]]\n", program);
     return 2;
   }
   ort = OrtGetApiBase()->GetApi(ORT_API_VERSION);
@@ -106,6 +154,9 @@ int main(int argc, char** argv) {
   } else {
     printf("join: none\n");
   }
+  char* skeleton_json = lock ? metadata_entry(metadata, allocator, "skeleton") : NULL;
+  char* rate_json = lock ? metadata_entry(metadata, allocator, "frame_rate") : NULL;
+  char* norm_json = lock ? metadata_entry(metadata, allocator, "normalization") : NULL;
   ort->ReleaseModelMetadata(metadata);
 
   /* sizes from the model's declared shapes: past/target (B, C, P), poses (B, T, P) */
@@ -165,6 +216,7 @@ int main(int argc, char** argv) {
   float* poses;
   check(ort->GetTensorMutableData(output, (void**)&poses)); /* (1, T, P), valid until ReleaseValue */
   const int64_t T = dims[1];
+  if (lock) footlock(skeleton_json, rate_json, norm_json, past, poses, target, C, T, P);
   printf("poses: rank %zu, shape (%lld, %lld, %lld)\n", rank, (long long)dims[0], (long long)T, (long long)dims[2]);
   const int64_t shown[2] = {0, T - 1}; /* first and last frame (once when T = 1) */
   for (int k = 0; k < (T > 1 ? 2 : 1); ++k) {
@@ -188,5 +240,6 @@ int main(int argc, char** argv) {
   ort->ReleaseEnv(env);
   free(past);
   free(target);
+  free(skeleton_json), free(rate_json), free(norm_json);
   return 0;
 }
