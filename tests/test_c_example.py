@@ -2,7 +2,9 @@
 Python's onnxruntime (deploy/README.md "Embedded use").
 
 Needs a C compiler (``$CC``, ``cc``, ``gcc`` or ``clang``) and onnxruntime's C headers: set ``ORT_C_DIR`` to an
-unpacked ``onnxruntime-linux-x64-<version>.tgz`` (``include/onnxruntime_c_api.h``, ``lib/libonnxruntime.so*``).
+unpacked ``onnxruntime-linux-x64-<version>.tgz`` (``include/onnxruntime_c_api.h``, ``lib/libonnxruntime.so*``), or
+to the root of Debian's ``libonnxruntime-dev`` files (``include/onnxruntime/onnxruntime_c_api.h``; ``/usr`` once
+installed).
 Without ``lib/`` the shared library of the installed ``onnxruntime`` wheel is used (it ships the library, not the
 headers). The header's ``ORT_API_VERSION`` must not exceed the library's version (1.N provides API versions
 <= N). Skips cleanly when any of this is missing.
@@ -86,8 +88,10 @@ def build_example(tmp_path_factory, source, name: str, extra=()) -> Path:
         pytest.skip("ORT_C_DIR not set: point it at an unpacked onnxruntime-linux-x64-<version>.tgz "
                     "(include/onnxruntime_c_api.h; see deploy/README.md)")
     header = Path(ort) / "include" / "onnxruntime_c_api.h"
+    if not header.is_file():  # Debian's libonnxruntime-dev: ORT_C_DIR=/usr, /usr/include/onnxruntime/
+        header = Path(ort) / "include" / "onnxruntime" / "onnxruntime_c_api.h"
     if not header.is_file():
-        pytest.skip(f"{header} not found")
+        pytest.skip(f"{Path(ort) / 'include' / 'onnxruntime_c_api.h'} not found")
     api = re.search(r"#define\s+ORT_API_VERSION\s+(\d+)", header.read_text(errors="replace"))
     if api is None:
         pytest.skip(f"{header}: no ORT_API_VERSION")

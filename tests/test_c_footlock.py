@@ -27,14 +27,15 @@ FOOTLOCK = ROOT / "deploy" / "examples" / "qtg_footlock.c"
 DT = 1.0 / 30.0
 TOL_CM = 1e-4
 
-# reads skeleton.json, seq.f64 (F x P doubles), writes out.f64; argv: skeleton seq out F start stop fps [up]
+# reads skeleton.json, seq.f64 (N sequences of F x P doubles), writes out.f64 and one line per sequence;
+# argv: skeleton seq out F start stop fps N [up]
 _DRIVER = r"""
 #include <stdio.h>
 #include <stdlib.h>
 #include "qtg_footlock.h"
 
 int main(int argc, char** argv) {
-  if (argc < 8) return 2;
+  if (argc < 9) return 2;
   FILE* f = fopen(argv[1], "rb");
   if (f == NULL) return 3;
   static char json[1 << 20];
@@ -43,17 +44,20 @@ int main(int argc, char** argv) {
   fclose(f);
   qtg_skeleton sk;
   if (qtg_skeleton_from_json(json, &sk) != 0) { printf("bad skeleton\n"); return 4; }
-  const int F = atoi(argv[4]), P = 3 + 4 * sk.joints;
-  double* seq = malloc(sizeof(double) * (size_t)(F * P));
+  const int F = atoi(argv[4]), P = 3 + 4 * sk.joints, N = atoi(argv[8]);
+  const size_t count = (size_t)N * (size_t)(F * P);
+  double* seq = malloc(sizeof(double) * count);
   f = fopen(argv[2], "rb");
-  if (f == NULL || fread(seq, sizeof(double), (size_t)(F * P), f) != (size_t)(F * P)) return 5;
+  if (seq == NULL || f == NULL || fread(seq, sizeof(double), count, f) != count) return 5;
   fclose(f);
   qtg_footlock_options o = qtg_footlock_defaults(atof(argv[7]));
-  if (argc > 8) o.up = atoi(argv[8]);
-  const int rc = qtg_footlock(&sk, &o, seq, F, atoi(argv[5]), atoi(argv[6]));
-  printf("%d %s\n", rc, qtg_footlock_error(rc));
+  if (argc > 9) o.up = atoi(argv[9]);
+  for (int i = 0; i < N; ++i) {
+    const int rc = qtg_footlock(&sk, &o, seq + (size_t)i * (size_t)(F * P), F, atoi(argv[5]), atoi(argv[6]));
+    printf("%d %s\n", rc, qtg_footlock_error(rc));
+  }
   f = fopen(argv[3], "wb");
-  fwrite(seq, sizeof(double), (size_t)(F * P), f);
+  fwrite(seq, sizeof(double), count, f);
   fclose(f);
   free(seq);
   qtg_skeleton_free(&sk);
@@ -85,14 +89,18 @@ def _skeleton_json(skeleton) -> str:
 
 
 def _c_lock(driver, tmp_path, skeleton, seq, start, stop, fps=30.0, up=None):
-    """(return code line, locked sequence) of the C function on one sequence (F, P)."""
+    """(return code lines, locked sequences) of the C function on sequences (N, F, P) (or one line and one
+    sequence for seq (F, P))."""
+    one = seq.ndim == 2
+    seqs = seq[None] if one else seq
     (tmp_path / "sk.json").write_text(_skeleton_json(skeleton))
-    np.ascontiguousarray(seq, "<f8").tofile(tmp_path / "seq.f64")
-    argv = [str(driver), tmp_path / "sk.json", tmp_path / "seq.f64", tmp_path / "out.f64", len(seq), start, stop,
-            fps] + ([] if up is None else [up])
-    run = subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=60)
+    np.ascontiguousarray(seqs, "<f8").tofile(tmp_path / "seq.f64")
+    argv = [str(driver), tmp_path / "sk.json", tmp_path / "seq.f64", tmp_path / "out.f64", seqs.shape[1], start,
+            stop, fps, len(seqs)] + ([] if up is None else [up])
+    run = subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, (run.stdout, run.stderr)
-    return run.stdout.strip(), np.fromfile(tmp_path / "out.f64", "<f8").reshape(seq.shape)
+    lines, out = run.stdout.strip().splitlines(), np.fromfile(tmp_path / "out.f64", "<f8").reshape(seqs.shape)
+    return (lines[0], out[0]) if one else (lines, out)
 
 
 def _positions(skeleton, seq):
@@ -127,20 +135,23 @@ def test_c_footlock_equals_numpy_on_real_windows(driver, tmp_path, sample_window
     test, past, gt, target, joined = sample_windows
     T = test.transition_length
     changed_total, worst = 0, 0.0
-    for i in range(test.num_windows):
-        sk = test.skeletons[int(test.skeleton_index[i])]
-        for frames in (joined[i], gt[i]):
-            seq = np.concatenate([past[i], frames, target[i]])
-            want = lock_feet(seq[None], sk, 2, T + 2, DT)[0]
-            line, got = _c_lock(driver, tmp_path, sk, seq, 2, T + 2)
-            changed = int(np.any(want != seq, axis=-1).sum())
-            assert line.startswith(f"{changed} "), (i, line, changed)
-            _assert_same(sk, got, want)
-            assert np.array_equal(got[np.all(want == seq, axis=-1)], seq[np.all(want == seq, axis=-1)])
-            worst = max(worst, float(np.abs(_positions(sk, got) - _positions(sk, want)).max()))
-            changed_total += changed
+    for k in np.unique(test.skeleton_index):
+        sel = np.flatnonzero(test.skeleton_index == k)
+        sk = test.skeletons[int(k)]
+        for frames in (joined[sel], gt[sel]):
+            seqs = np.concatenate([past[sel], frames, target[sel]], axis=1)  # (N, F, P)
+            lines, got = _c_lock(driver, tmp_path, sk, seqs, 2, T + 2)
+            wants = lock_feet(seqs, sk, 2, T + 2, DT)  # (N, F, P)
+            _assert_same(sk, got, wants)
+            worst = max(worst, float(np.abs(_positions(sk, got) - _positions(sk, wants)).max()))
+            for i, want in enumerate(wants):
+                changed = int(np.any(want != seqs[i], axis=-1).sum())
+                assert lines[i].startswith(f"{changed} "), (sel[i], lines[i], changed)
+                same = np.all(want == seqs[i], axis=-1)
+                assert np.array_equal(got[i][same], seqs[i][same])
+                changed_total += changed
     assert changed_total > test.num_windows * 10, changed_total  # the function had work to do
-    assert len(set(test.skeleton_index.tolist())) >= 2
+    assert len(set(test.skeleton_index.tolist())) == 3
     print(f"c footlock vs numpy: worst {worst:.3g} cm over {test.num_windows} windows, {changed_total} frames")
 
 
