@@ -117,9 +117,10 @@ def export_checkpoint(entry, args) -> dict:
     cfg = meta.get("model_config") if isinstance(meta.get("model_config"), dict) else {}
     if isinstance(cfg.get("fps"), (int, float)) and not isinstance(cfg.get("fps"), bool):
         extra["frame_rate"] = float(cfg["fps"])
+    target = getattr(args, "target", "default")
     return entry.export_dir(params, config, args.out_dir, normalization=normalization, skeleton=skeleton,
                             opset=args.opset, dtype=dtype, mode=args.mode or "scan", T=args.frames,
-                            compact=args.compact, metadata=extra)
+                            compact=args.compact, metadata=extra, **({"target": target} if target != "default" else {}))
 
 
 def run_command(runtime, args) -> int:

@@ -28,6 +28,7 @@ from deploy.models.entry_io import (checked_params, checkpoint_params, config_fr
                                     write_models)
 from deploy.models.quaternet import (export_quaternet_cnn_window, export_quaternet_init, export_quaternet_predict,
                                      export_quaternet_step)
+from deploy.portable import builder_options, check_target, portable_model
 from deploy.runtime import DeployedModel, load_model
 
 __all__ = ["load_quaternet_checkpoint", "export_quaternet_dir", "QuaterNetRuntime", "load_cnn_checkpoint",
@@ -74,28 +75,72 @@ def _frame_rate(metadata):
 
 
 def export_quaternet_dir(params, config, out_dir, *, dtype=np.float32, opset=None, k: int = 10, T: int | None = None,
-                         skeleton=None, metadata=None, mode: str = "unrolled") -> dict:
+                         skeleton=None, metadata=None, mode: str = "unrolled", target: str = "default") -> dict:
     """Export, validate and atomically write ``quaternet_init/step/predict.onnx`` into ``out_dir``.
 
     ``k`` (or ``T``, its name in ``refimpl export``) is the predictor's number of frames; ``mode`` is accepted for
-    the table's contract (the predictor is always unrolled).
+    the table's contract (the predictor is always unrolled). ``target="portable"`` (``deploy/portable.py``) writes
+    the init and step graphs only, at batch 1 in primitive operators, with the host loop in their metadata
+    (:func:`portable_loop`); ``dtype`` and ``opset`` are then the portable target's.
     """
     cfg = _network(config)
     k = int(T or k)
     kw = dict(dtype=dtype, opset=OPSET if opset is None else opset, skeleton=skeleton,
               frame_rate=_frame_rate(metadata), metadata=metadata)
+    if check_target(target) == "portable":
+        kw.update(builder_options())
+        loop = portable_loop(cfg)
+        models = {role: portable_model(f(params, cfg, **kw), host_loop=loop)
+                  for role, f in (("init", export_quaternet_init), ("step", export_quaternet_step))}
+        return write_models(models, out_dir, "quaternet")
     models = {"init": export_quaternet_init(params, cfg, **kw), "step": export_quaternet_step(params, cfg, **kw)}
     if cfg.num_controls == 0:
         models["predict"] = export_quaternet_predict(params, cfg, k=k, **kw)
     return write_models(models, out_dir, "quaternet")
 
 
+def portable_loop(config) -> dict:
+    """The host loop of QuaterNet's portable init + step graphs (``metadata["target"]["host_loop"]``)."""
+    L, H = config.num_layers, config.hidden_size
+    return {"summary": "init once per sequence, then one step per frame: the prefix frames, then each prediction "
+                       "fed back (with the frame's controls appended when the config has controls)",
+            "graphs": ["quaternet_init.onnx", "quaternet_step.onnx"],
+            "state": [{"input": "hidden", "output": "hidden_next", "shape": [L, 1, H],
+                       "initial": "output hidden of quaternet_init.onnx (the learned h0)"}],
+            "loop": ["x[0..P-1] = the prefix frames (1, F) after input_transform (the sign rule)",
+                     "hidden = init(x=x[0]).hidden",
+                     "for t in 0 .. P-1: y, hidden = step(x=x[t], hidden=hidden)",
+                     "repeat k-1 times: y, hidden = step(x=y, hidden=hidden)   # y: each predicted frame"]}
+
+
+def cnn_portable_loop(config) -> dict:
+    """The host loop of the portable window graph of the convolutional QuaterNet."""
+    R = int(config.receptive_field)
+    return {"summary": f"no recurrent state: the window of the last {R} frames is the state; append each "
+                       "prediction and drop the oldest frame",
+            "graphs": ["quaternet-cnn_window.onnx"],
+            "state": [{"input": "window", "output": None, "shape": [1, R, int(config.rotation_size)],
+                       "initial": f"the last {R} prefix frames after input_transform (the sign rule); a prefix "
+                                  f"needs at least {R} frames",
+                       "update": "window = concat(window[:, 1:], pose_next[:, None])"}],
+            "loop": [f"window = the last {R} prefix frames (1, {R}, 4J), canonicalised",
+                     "repeat k times: pose_next = window_model(window=window); "
+                     "window = concat(window[:, 1:], pose_next[:, None], axis=1)"]}
+
+
 def export_cnn_dir(params, config, out_dir, *, dtype=np.float32, opset=None, skeleton=None, metadata=None,
-                   k: int = 10, T: int | None = None, mode: str = "unrolled") -> dict:
+                   k: int = 10, T: int | None = None, mode: str = "unrolled", target: str = "default") -> dict:
     """Export, validate and atomically write ``quaternet-cnn_window.onnx`` into ``out_dir`` (``k``, ``T`` and
-    ``mode`` accepted for the table's contract; the window model has no fixed length)."""
-    m = export_quaternet_cnn_window(params, _network(config), dtype=dtype, opset=OPSET if opset is None else opset,
-                                   skeleton=skeleton, frame_rate=_frame_rate(metadata), metadata=metadata)
+    ``mode`` accepted for the table's contract; the window model has no fixed length). ``target="portable"``:
+    the window fixed at the receptive field R, batch 1, primitive operators (``deploy/portable.py``)."""
+    net = _network(config)
+    kw = dict(dtype=dtype, opset=OPSET if opset is None else opset)
+    if check_target(target) == "portable":
+        kw = builder_options()
+    m = export_quaternet_cnn_window(params, net, **kw, skeleton=skeleton, frame_rate=_frame_rate(metadata),
+                                   metadata=metadata)
+    if target == "portable":
+        m = portable_model(m, host_loop=cnn_portable_loop(net), static={"W": int(net.receptive_field)})
     return write_models({"window": m}, out_dir, "quaternet-cnn")
 
 
