@@ -22,8 +22,11 @@ side in one run with the ratios.
   larger of the two times (``bound``: which one). Weights that fit in the 32 MiB L3 can beat the DRAM term.
 * **Timing** (:func:`time_variants`): one process, interleaved rounds (every variant once per round, so load
   hits all alike), each a block of ≈ ``--min-time`` seconds, 0.15 s of settling after each block (spinning
-  BLAS/OpenMP threads), NumPy's BLAS limited with threadpoolctl; medians over rounds, minima beside them.
-  Sessions: ``deploy.session.make_session`` (sequential, full optimisation, no spinning).
+  BLAS/OpenMP threads), NumPy's BLAS limited with threadpoolctl; medians over rounds, minima beside them; wall
+  time and the calling thread's CPU time of every block. The table gives one thread in CPU time (the cost on one
+  core, whatever else runs: the 1-thread probes are timed so too) and two threads in wall time (which needs both
+  cores free: on a loaded machine it shows the contention, not the graph). Sessions:
+  ``deploy.session.make_session`` (sequential, full optimisation, no spinning).
 
 The JSON records numpy, BLAS (threadpoolctl: library, version, kernel architecture, threads), onnxruntime, onnx,
 python, machine (CPU model), and the load average before and after: the machine is shared with trainings, so
@@ -31,6 +34,7 @@ absolute times drift; compare within one run and read the ratios. Nothing assert
 and JSON written atomically to ``benchmarks/results/bench_cost.json``.
 
     python benchmarks/bench_cost.py [--rounds 5] [--min-time 0.2] [--models qtg ...] [--quick] [--out FILE]
+    python benchmarks/bench_cost.py --markdown benchmarks/results/bench_cost.json   # deploy/README.md's table
 """
 from __future__ import annotations
 
@@ -41,6 +45,7 @@ import json
 import os
 import platform
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -146,19 +151,20 @@ def _limits(threads: int):
     return threadpool_limits(threads) if threadpool_limits is not None else contextlib.nullcontext()
 
 
-def _best(fn, repeats: int) -> float:
+def _best(fn, repeats: int, clock=time.perf_counter) -> float:
     fn()
     best = float("inf")
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = clock()
         fn()
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, clock() - t0)
     return best
 
 
 def probe_machine(quick: bool = False) -> dict:
     """``{threads: {"stream_gb_s", "gemm_gflop_s"}}`` for 1 and 2 BLAS threads: a float32 ``W @ x`` over
-    256 MB (``quick``: 32 MB) and a float32 1024² ``A @ B`` (``quick``: 256²), best of a few calls."""
+    256 MB (``quick``: 32 MB) and a float32 1024² ``A @ B`` (``quick``: 256²), best of a few calls; 1 thread
+    timed in the calling thread's CPU time (robust to other processes' load), 2 threads in wall time."""
     rng = np.random.default_rng(0)
     rows = 2048 if quick else 8192
     w = rng.standard_normal((rows, 4096 if quick else 8192), dtype=np.float32)
@@ -167,11 +173,13 @@ def probe_machine(quick: bool = False) -> dict:
     a, b = rng.standard_normal((n, n), dtype=np.float32), rng.standard_normal((n, n), dtype=np.float32)
     out = {}
     for threads in (1, 2):
+        clock = time.thread_time if threads == 1 else time.perf_counter
         with _limits(threads):
-            t_stream = _best(lambda: w @ x, 3 if quick else 7)
-            t_gemm = _best(lambda: a @ b, 3 if quick else 9)
+            t_stream = _best(lambda: w @ x, 3 if quick else 7, clock)
+            t_gemm = _best(lambda: a @ b, 3 if quick else 9, clock)
         out[str(threads)] = {"stream_gb_s": w.nbytes / t_stream / 1e9, "gemm_gflop_s": 2 * n ** 3 / t_gemm / 1e9,
-                             "stream_bytes": int(w.nbytes), "gemm_n": n}
+                             "stream_bytes": int(w.nbytes), "gemm_n": n,
+                             "clock": "cpu" if threads == 1 else "wall"}
         time.sleep(SETTLE_S)
     return out
 
@@ -223,7 +231,9 @@ def numpy_frame(name: str, params: dict, cfg, window: int = 1):
 
 def time_variants(variants: dict, rounds: int, min_time: float) -> dict:
     """``{key: (callable, frames per call, blas threads or None)}`` timed in interleaved rounds (module
-    docstring): ``{key: {"median_us", "min_us", "calls"}}`` per frame."""
+    docstring): ``{key: {"median_us", "min_us", "cpu_median_us", "cpu_min_us", "calls"}}`` per frame (wall
+    time, and the calling thread's CPU time: for one thread, the cost on a core whatever else the machine
+    runs; onnxruntime with one intra-op thread and NumPy with one BLAS thread compute in the calling thread)."""
     reps = {}
     for k, (fn, _, threads) in variants.items():
         with _limits(threads) if threads else contextlib.nullcontext():
@@ -232,15 +242,18 @@ def time_variants(variants: dict, rounds: int, min_time: float) -> dict:
             fn()
             reps[k] = max(1, int(min_time / max(time.perf_counter() - t0, 1e-7)))
     per = {k: [] for k in variants}
+    cpu = {k: [] for k in variants}
     for _ in range(rounds):
         for k, (fn, frames, threads) in variants.items():
             with _limits(threads) if threads else contextlib.nullcontext():
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.thread_time()
                 for _ in range(reps[k]):
                     fn()
                 per[k].append((time.perf_counter() - t0) / reps[k] / frames * 1e6)
+                cpu[k].append((time.thread_time() - c0) / reps[k] / frames * 1e6)
             time.sleep(SETTLE_S)
-    return {k: {"median_us": statistics.median(v), "min_us": min(v), "calls": reps[k]} for k, v in per.items()}
+    return {k: {"median_us": statistics.median(v), "min_us": min(v), "cpu_median_us": statistics.median(cpu[k]),
+                "cpu_min_us": min(cpu[k]), "calls": reps[k]} for k, v in per.items()}
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -311,7 +324,8 @@ def measure_model(bp, name: str, tmp: Path, probe: dict, rounds: int, min_time: 
 
 
 def _ratios(times: dict, limits: dict) -> dict:
-    med = {k: v["median_us"] for k, v in times.items()}
+    """Ratios of medians: one thread in CPU time (as its probes), two threads in wall time."""
+    med = {k: v["cpu_median_us" if k.endswith("_1thr") else "median_us"] for k, v in times.items()}
     out = {"numpy_1thr/ort_default_1thr": med["numpy_1thr"] / med["ort_default_1thr"],
            "ort_default_1thr/limit_1thr": med["ort_default_1thr"] / limits["1"]["limit_us"],
            "ort_default_2thr/limit_2thr": med["ort_default_2thr"] / limits["2"]["limit_us"],
@@ -334,7 +348,11 @@ def environment() -> dict:
                     if ln.startswith("model name")), "")
     blas = [{k: d.get(k) for k in ("internal_api", "version", "architecture", "num_threads", "threading_layer")}
             for d in (threadpool_info() if threadpool_info is not None else [])]
-    return {"numpy": np.__version__, "onnxruntime": ort.__version__, "onnx": onnx.__version__,
+    commit = ""
+    with contextlib.suppress(OSError, subprocess.SubprocessError):
+        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                timeout=10).stdout.strip()
+    return {"commit": commit, "numpy": np.__version__, "onnxruntime": ort.__version__, "onnx": onnx.__version__,
             "python": platform.python_version(), "machine": platform.machine(), "cpu": cpu,
             "platform": platform.platform(), "cpu_count": os.cpu_count(), "blas": blas,
             "threadpoolctl": threadpool_limits is not None}
@@ -355,6 +373,16 @@ def bench(models=tuple(LABELS), rounds: int = 5, min_time: float = 0.2, quick: b
             "command": "python benchmarks/bench_cost.py" + (" --quick" if quick else "")}
 
 
+def _rows(result: dict) -> list:
+    """The rows in the table's order (:data:`LABELS`; the JSON's keys are sorted)."""
+    return [result["rows"][k] for k in LABELS if k in result["rows"]]
+
+
+def _medians(row: dict) -> dict:
+    """µs per frame of the table: one thread in CPU time, two threads in wall time (medians)."""
+    return {k: v["cpu_median_us" if k.endswith("_1thr") else "median_us"] for k, v in row["times"].items()}
+
+
 def _us(v) -> str:
     return "-" if v is None else (f"{v:.0f}" if v >= 100 else f"{v:.1f}")
 
@@ -364,11 +392,12 @@ def table(result: dict) -> str:
     head = (f"{'model':15s} {'params':>10s} {'MB f32':>7s} {'MB int8':>7s} {'MACs/frame':>11s} "
             f"{'ORT 1t':>7s} {'ORT 2t':>7s} {'port 1t':>7s} {'port 2t':>7s} {'NumPy 1t':>8s} {'NumPy 2t':>8s} "
             f"{'limit 1t':>8s} {'limit 2t':>8s} {'bound':>7s} {'port/ORT':>8s} {'ORT/lim':>7s}")
-    lines = [f"cost per frame at batch 1 (µs, medians of {result['rounds']} interleaved rounds; "
+    lines = [f"cost per frame at batch 1 (µs, medians of {result['rounds']} interleaved rounds, 1 thread: CPU time, "
+             f"2 threads: wall time; "
              f"load {result['env']['load_average_before'][0]:.1f} → {result['env']['load_average_after'][0]:.1f})",
              head]
-    for r in result["rows"].values():
-        t = {k: v["median_us"] for k, v in r["times"].items()}
+    for r in _rows(result):
+        t = _medians(r)
         int8 = r["int8_file_bytes"]
         lines.append(
             f"{r['label']:15s} {r['parameters']:10,d} {r['file_bytes']['default'] / 1e6:7.2f} "
@@ -385,6 +414,27 @@ def table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def markdown(result: dict) -> str:
+    """The cost table as the Markdown of deploy/README.md ("Cost per model"), every number from ``result``."""
+    lines = ["| model | parameters | file MB float32 (int8) | MACs per frame | onnxruntime today, 1 / 2 thr | "
+             "portable, 1 / 2 thr | NumPy, 1 / 2 thr | limit, 1 / 2 thr (bound) | portable / today, 1 thr | "
+             "today / limit, 1 thr | NumPy / today, 1 thr |", "|" + "---|" * 11]
+    for r in _rows(result):
+        t = {k: _us(v) for k, v in _medians(r).items()}
+        q = r["ratios"]
+        int8 = "" if r["int8_file_bytes"] is None else f" ({r['int8_file_bytes'] / 1e6:.2f})"
+        port = q.get("ort_portable_1thr/ort_default_1thr")
+        lines.append(
+            f"| {r['label']} | {r['parameters']:,d} | {r['file_bytes']['default'] / 1e6:.2f}{int8} | "
+            f"{r['macs_per_frame']:,d} | {t['ort_default_1thr']} / {t['ort_default_2thr']} | "
+            f"{t.get('ort_portable_1thr', '-')} / {t.get('ort_portable_2thr', '-')} | "
+            f"{t['numpy_1thr']} / {t['numpy_2thr']} | {_us(r['limit']['1']['limit_us'])} / "
+            f"{_us(r['limit']['2']['limit_us'])} ({r['limit']['1']['bound']}) | "
+            f"{'-' if port is None else f'{port:.2f}'} | {q['ort_default_1thr/limit_1thr']:.1f} | "
+            f"{q['numpy_1thr/ort_default_1thr']:.2f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--rounds", type=int, default=5)
@@ -392,7 +442,13 @@ def main(argv=None) -> dict:
     p.add_argument("--quick", action="store_true", help="tiny sizes and small probes (a smoke run)")
     p.add_argument("--models", nargs="*", default=list(LABELS), choices=list(LABELS))
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_cost.json"))
+    p.add_argument("--markdown", metavar="JSON", default=None,
+                   help="print the Markdown table of a results file (deploy/README.md) and stop")
     a = p.parse_args(argv)
+    if a.markdown:
+        result = json.loads(Path(a.markdown).read_text())
+        print(markdown(result))
+        return result
     result = bench(tuple(a.models), a.rounds, a.min_time, a.quick)
     print(table(result))
     atomic_write_text(Path(a.out), json.dumps(result, indent=1, sort_keys=True) + "\n")
