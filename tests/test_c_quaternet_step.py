@@ -39,7 +39,7 @@ def model(tmp_path_factory, request):
     """A small exported QuaterNet (random weights), today's graphs and the portable ones (spec/deploy.md §13: the
     same names, batch 1, primitive GRU cells): ``(folder, params, config)``."""
     pytest.importorskip("onnxruntime")
-    from deploy.models.quaternet_io import export_quaternet_dir
+    from deploy.models.quaternet_io import export_dir as export_quaternet_dir
     from refimpl.models.quaternet import QuaterNetConfig, init_params
 
     config = QuaterNetConfig(num_joints=J, hidden_size=H, num_layers=L)
@@ -59,7 +59,7 @@ def _prefix(P=9):
 
 
 def test_c_loop_matches_python(binary, model, tmp_path):
-    from deploy.models.quaternet_io import QuaterNetRuntime
+    from deploy.models.quaternet_io import Runtime as QuaterNetRuntime
     from refimpl.models import quaternet as rnn
     from refimpl.protocols.prediction import canonical_prefix
 

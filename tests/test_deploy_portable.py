@@ -97,6 +97,45 @@ def test_engine_problems_can_fail(exported):
     assert any("GRU" in p for p in problems) and any("opset 17" in p for p in problems)
 
 
+def test_portable_model_refuses_what_it_cannot_make_portable():
+    """``portable_model`` refuses a GRU node, another opset and a symbolic dimension without a size; it fixes the
+    batch, records its axes and leaves the input model alone; ``check_target`` refuses an unknown target."""
+    from deploy.graph import GraphBuilder
+    from deploy.gru import gru_step
+    from deploy.metadata import build_metadata, io_entries
+    from deploy.portable import builder_options, check_target, is_portable, portable_model
+    from refimpl.nn import gru_init
+
+    params = gru_init(np.random.default_rng(0), input_size=3, hidden_size=4, num_layers=1, prefix="rnn")
+
+    def model(**kw):
+        g = GraphBuilder("t", **kw)
+        x, h = g.input("x", ["B", 3]), g.input("h", [1, "B", 4])
+        y, h_new = gru_step(g, x, h, params, "rnn", name="rnn")
+        g.output(y, "y", ["B", 4])
+        g.output(h_new, "h_new", [1, "B", 4])
+        io = {"inputs": io_entries(("x", ["B", 3], "x"), ("h", [1, "B", 4], "h")),
+              "outputs": io_entries(("y", ["B", 4], "y"), ("h_new", [1, "B", 4], "h"))}
+        return g.model(metadata=build_metadata(g, name="t", role="step", config={}, io=io, representation={}))
+
+    with pytest.raises(ValueError, match="forbidden"):
+        portable_model(model(opset=PORTABLE_OPSET), host_loop={})              # fused GRU node
+    with pytest.raises(ValueError, match="opset"):
+        portable_model(model(primitive=True), host_loop={})                   # opset 17
+    m = model(**builder_options())
+    p = portable_model(m, host_loop={"loop": ["y, h = step(x, h)"]})
+    meta = {q.key: json.loads(q.value) for q in p.metadata_props}
+    assert is_portable(meta) and meta["target"]["batch_axes"] == {"x": 0, "h": 1, "y": 0, "h_new": 1}
+    assert meta["io"]["inputs"][1]["shape"] == [1, 1, 4] and _shape(p.graph.input[1]) == [1, 1, 4]
+    assert _shape(m.graph.input[1]) == [1, "B", 4] and not is_portable({})
+    g = GraphBuilder("w", **builder_options())
+    g.output(g.node("Relu", [g.input("x", ["B", "W"])], "r"), "y", ["B", "W"])
+    with pytest.raises(ValueError, match="'W'"):
+        portable_model(g.model(metadata={"io": {"inputs": [], "outputs": []}, "exporter": {}}), host_loop={})
+    with pytest.raises(ValueError, match="target"):
+        check_target("unity")
+
+
 #: What the portable graphs use outside onnxruntime-web's WebGPU kernel table (deploy/engines/), by design:
 #: Max and Min (primitive LeakyRelu, the eps of the normalisations, QTG's join), And (the join's masks).
 WEBGPU_GAPS = {"Max", "Min", "And"}
@@ -147,7 +186,8 @@ class _Recorder:
         def run(model, feeds=None, **kw):
             given = {**dict(feeds or {}), **kw}
             out = original(model, given)
-            if len(self.calls.setdefault(model.metadata["model"]["role"], [])) < 4:
+            batch1 = model._portable_batch(given) == 1      # (a batch is run sample by sample: those are recorded)
+            if batch1 and len(self.calls.setdefault(model.metadata["model"]["role"], [])) < 4:
                 self.calls[model.metadata["model"]["role"]].append(({k: np.asarray(v) for k, v in given.items()},
                                                                     out))
             return out
@@ -208,7 +248,7 @@ def _unit(poses):
 
 @pytest.mark.parametrize("name", ["qtg", "qtg-join"])
 def test_qtg_numerics(exported, portable, monkeypatch, name):
-    from deploy.models.qtg_io import QTGRuntime
+    from deploy.models.qtg_io import Runtime as QTGRuntime
     from refimpl.protocols.transition_join import inertialize_joins
 
     ck, today = exported["qtg"]
@@ -318,7 +358,7 @@ def test_pace_numerics(exported, portable, monkeypatch):
     assert np.abs(got - runtime_for_dir(today).pace(x)).max() <= TOL
     ref = method(circle_path(6.0), 0.5)
     assert np.abs(np.maximum(got[0, :, 0], 0.1) - ref.track("amplitude")[:, 0]).max() <= TOL
-    _check_calls({k: v for k, v in rec.calls.items()}, portable["pace"], today, "quaternet-long")
+    _check_calls(rec.calls, portable["pace"], today, "quaternet-long")
 
 
 # ----------------------------------------------------------------------------------------- command line
@@ -364,13 +404,27 @@ def test_bad_target_and_portable_compact(exported, tmp_path, capsys):
 # -------------------------------------------------------------------------------------------- consumers
 def test_consumers_on_portable_graphs(exported, portable):
     """The metadata-only consumers (tests/consumers/) on the portable graphs, one sequence per call (batch 1)."""
-    from tests.consumers import acrnn, quaternet, quaternet_cnn, quaternet_long
+    from tests.consumers import acrnn, quaternet, quaternet_cnn, quaternet_dq, quaternet_long
 
     x = _prefix()
     for name, mod in (("quaternet", quaternet), ("quaternet-cnn", quaternet_cnn)):
         _, method = _numpy(exported[name][0])
         got = np.concatenate([mod.predict(portable[name], x[b:b + 1], 5) for b in range(len(x))])
         assert np.abs(got - method(x, 5)).max() <= 1e-4, name
+    _, method = _numpy(exported["quaternet-dq"][0])
+    got = np.concatenate([quaternet_dq.predict_steps(portable["quaternet-dq"], x[b:b + 1], 5) for b in range(len(x))])
+    today = quaternet_dq.predict_steps(exported["quaternet-dq"][1], x, 5)
+    assert np.abs(got - today).max() <= TOL and np.abs(got - method(x, 5)).max() <= 5e-3
+    from refimpl.protocols.locomotion import evaluation_windows
+    from refimpl.tasks import locomotion
+
+    model, method = _numpy(exported["quaternet-long"][0])
+    ds = locomotion.load_eval_data("sample", model.extra)
+    w = np.asarray(evaluation_windows(ds)[0][:2])
+    rot, tr = method(w, ds.prefix)
+    ref = np.concatenate([np.asarray(rot).reshape(rot.shape[0], rot.shape[1], -1), tr], axis=-1)
+    got = np.concatenate([quaternet_long.rollout(portable["quaternet-long"], w[b:b + 1], ds.prefix) for b in range(2)])
+    assert got.shape == ref.shape and np.abs(got - ref).max() <= 1e-3
     from refimpl.protocols import synthesis
 
     model, method = _numpy(exported["acrnn"][0])
