@@ -104,3 +104,10 @@ def test_smoke_run_writes_the_table_and_its_json(bc, tmp_path, capsys):
     assert all(v["median_us"] > 0 for v in q["times"].values())
     assert q["limit"]["1"]["limit_us"] > 0 and q["ratios"]["ort_portable_1thr/ort_default_1thr"] > 0
     assert r["rows"]["pace"]["frames_per_call"] == {"default": 200, "portable": 16}
+
+
+def test_the_readme_table_is_the_results_file(bc):
+    """deploy/README.md's cost table is ``--markdown`` of benchmarks/results/bench_cost.json, number for number."""
+    result = json.loads((ROOT / "benchmarks" / "results" / "bench_cost.json").read_text())
+    assert result["sizes"] == "paper"
+    assert bc.markdown(result) in (ROOT / "deploy" / "README.md").read_text()
