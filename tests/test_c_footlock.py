@@ -259,3 +259,40 @@ def test_c_example_footlock_refuses_normalised_poses(rollout_binary, tmp_path, s
     onnx.save(export_qtg_rollout(init_params(config, np.random.default_rng(0)), config, skeleton=sk), str(path))
     run = subprocess.run([str(rollout_binary), "--footlock", str(path)], capture_output=True, text=True, timeout=60)
     assert run.returncode == 1 and "in_graph" in run.stderr
+
+
+def test_c_example_runs_the_portable_graphs_with_footlock(rollout_binary, tmp_path, sample_windows):
+    """A portable folder (``--target portable`` with the join: qtg_init, qtg_step, qtg_join; no rollout graph):
+    ``qtg_rollout qtg_init.onnx`` runs the host loop of its metadata and equals ``Runtime.transition`` (qtg) on the
+    folder (the same host loop in Python) to float32 rounding; with ``--footlock`` it equals refimpl's lock_feet on
+    those frames to 1e-4 cm."""
+    pytest.importorskip("onnxruntime")
+    from deploy.models.qtg_io import Runtime, export_dir
+    from refimpl.models.qtg import QTGConfig, init_params
+
+    test, past, _, target, _ = sample_windows
+    T = test.transition_length
+    i = test.num_windows // 3
+    sk = test.skeletons[int(test.skeleton_index[i])]
+    config = QTGConfig(pose_size=3 + 4 * sk.num_joints, encoder_sizes=(16, 8), gru_hidden=8, gru_layers=2,
+                       decoder_sizes=(16,), negative_slope=0.05, transition_length=T)
+    folder = tmp_path / "portable"
+    export_dir(init_params(config, np.random.default_rng(5)), config, folder, skeleton=sk, join="inertialize",
+                   normalization=(np.asarray(test.root_mean), np.asarray(test.root_std)), target="portable")
+    assert not (folder / "qtg_rollout.onnx").exists() and (folder / "qtg_join.onnx").is_file()
+    p32, t32 = past[i:i + 1].astype(np.float32), target[i:i + 1].astype(np.float32)
+    inputs = tmp_path / "inputs.f32"
+    np.concatenate([p32.ravel(), t32.ravel()]).astype("<f4").tofile(inputs)
+    want = Runtime.from_dir(folder).transition(p32, t32, T)[0].astype(np.float64)
+    outs = {}
+    for flag in ((), ("--footlock",)):
+        out = tmp_path / f"poses{len(flag)}.f32"
+        run = subprocess.run([str(rollout_binary), *flag, str(folder / "qtg_init.onnx"), str(inputs), str(out)],
+                             capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0, run.stderr
+        assert f"host loop: init, {T} steps, qtg_join.onnx" in run.stdout
+        outs[flag] = np.fromfile(out, "<f4").reshape(T, -1).astype(np.float64)
+    np.testing.assert_allclose(outs[()], want, atol=1e-5)
+    ctx = (p32[0].astype(np.float64), t32[0].astype(np.float64))
+    locked = lock_feet(np.concatenate([ctx[0], outs[()], ctx[1]])[None], sk, 2, T + 2, DT)[0, 2:T + 2]
+    _assert_same(sk, outs[("--footlock",)], locked, tol=TOL_CM)

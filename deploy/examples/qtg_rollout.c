@@ -17,6 +17,10 @@
  * inertialised inside the graph (spec/qtg.md 7.4): nothing to do here, the poses it returns are already joined;
  * this program prints the metadata entry so that the user sees which variant runs.
  *
+ * The portable target (`--target portable`, spec/deploy.md 13) has no rollout graph: give its qtg_init.onnx
+ * (metadata model.role "init") and the program runs the host loop of its metadata over qtg_init.onnx,
+ * qtg_step.onnx and, when present, qtg_join.onnx of the same folder (host_loop below).
+ *
  * --footlock: after the rollout, pin the planted feet by two-bone IK (spec/qtg.md 7.5, qtg_footlock.c): with a
  * model exported with the join option this is `join="inertialize+footlock"`. It needs raw poses in centimetres
  * (metadata "normalization" with "in_graph": true) and the skeleton (metadata "skeleton": names, parents,
@@ -106,12 +110,77 @@ static void footlock(const char* skeleton_json, const char* rate_json, const cha
   qtg_skeleton_free(&skeleton);
 }
 
+/* `name` in the folder of `path` (malloc'd) */
+static char* sibling(const char* path, const char* name) {
+  const char* slash = strrchr(path, '/');
+  const size_t dir = slash == NULL ? 0 : (size_t)(slash - path + 1);
+  char* out = malloc(dir + strlen(name) + 1);
+  if (out == NULL) fail("out of memory");
+  memcpy(out, path, dir);
+  strcpy(out + dir, name);
+  return out;
+}
+
+/* The host loop of the portable graphs (their metadata "target": "host_loop"; spec/deploy.md 13): `init` on
+ * past/target, T calls of qtg_step.onnx carrying pose, latent_prev and hidden (target_latent fixed; the outputs
+ * of one Run are the inputs of the next), then qtg_join.onnx when the folder has one. Returns T * P floats. */
+static float* host_loop(OrtEnv* env, OrtSessionOptions* options, const char* init_path, OrtSession* init,
+                        OrtValue* const inputs[2], OrtMemoryInfo* memory, int64_t T, int64_t P) {
+  char* step_path = sibling(init_path, "qtg_step.onnx");
+  char* join_path = sibling(init_path, "qtg_join.onnx");
+  OrtSession *step, *join = NULL;
+  check(ort->CreateSession(env, step_path, options, &step));
+  FILE* probe = fopen(join_path, "rb");
+  if (probe != NULL) {
+    fclose(probe);
+    check(ort->CreateSession(env, join_path, options, &join));
+  }
+  const char* context_names[2] = {"past", "target"};
+  const char* state_names[4] = {"pose", "latent_prev", "hidden", "target_latent"};
+  const char* step_names[3] = {"pose_next", "latent_prev_next", "hidden_next"};
+  OrtValue* state[4] = {NULL, NULL, NULL, NULL};
+  check(ort->Run(init, NULL, context_names, (const OrtValue* const*)inputs, 2, state_names, 4, state));
+  float* poses = malloc(sizeof *poses * (size_t)(T * P));
+  if (poses == NULL) fail("out of memory");
+  for (int64_t t = 0; t < T; ++t) {
+    OrtValue* next[3] = {NULL, NULL, NULL};
+    check(ort->Run(step, NULL, state_names, (const OrtValue* const*)state, 4, step_names, 3, next));
+    float* pose;
+    check(ort->GetTensorMutableData(next[0], (void**)&pose)); /* (1, P) */
+    memcpy(poses + t * P, pose, sizeof *poses * (size_t)P);
+    for (int i = 0; i < 3; ++i) ort->ReleaseValue(state[i]), state[i] = next[i];
+  }
+  for (int i = 0; i < 4; ++i) ort->ReleaseValue(state[i]);
+  if (join != NULL) { /* the join option as its own graph: past, poses (1, T, P), target -> poses_joined */
+    const int64_t shape[3] = {1, T, P};
+    OrtValue* join_inputs[3] = {inputs[0], NULL, inputs[1]};
+    check(ort->CreateTensorWithDataAsOrtValue(memory, poses, sizeof *poses * (size_t)(T * P), shape, 3,
+                                              ONNX_TENSOR_ELEMENT_DATA_TYPE_FLOAT, &join_inputs[1]));
+    const char* join_names[3] = {"past", "poses", "target"};
+    const char* joined_name[1] = {"poses_joined"};
+    OrtValue* joined = NULL;
+    check(ort->Run(join, NULL, join_names, (const OrtValue* const*)join_inputs, 3, joined_name, 1, &joined));
+    float* values;
+    check(ort->GetTensorMutableData(joined, (void**)&values));
+    memcpy(poses, values, sizeof *poses * (size_t)(T * P));
+    ort->ReleaseValue(joined);
+    ort->ReleaseValue(join_inputs[1]);
+    ort->ReleaseSession(join);
+    printf("host loop: init, %lld steps, qtg_join.onnx\n", (long long)T);
+  } else {
+    printf("host loop: init, %lld steps\n", (long long)T);
+  }
+  ort->ReleaseSession(step);
+  free(step_path), free(join_path);
+  return poses;
+}
+
 int main(int argc, char** argv) {
   const char* program = argv[0];
   const int lock = argc >= 2 && strcmp(argv[1], "--footlock") == 0; /* then argv[1] is the model */
   if (lock) --argc, ++argv;
   if (argc < 2 || argc > 4) {
-    fprintf(stderr, "usage: %s [--footlock] qtg_rollout.onnx [inputs.f32 [poses.f32]]\n", program);
+    fprintf(stderr, "usage: %s [--footlock] qtg_rollout.onnx|qtg_init.onnx [inputs.f32 [poses.f32]]\n", program);
     return 2;
   }
   ort = OrtGetApiBase()->GetApi(ORT_API_VERSION);
@@ -140,12 +209,10 @@ int main(int argc, char** argv) {
   check(ort->GetAllocatorWithDefaultOptions(&allocator));
   OrtModelMetadata* metadata;
   check(ort->SessionGetModelMetadata(session, &metadata));
-  char* model_json = NULL;
-  check(ort->ModelMetadataLookupCustomMetadataMap(metadata, allocator, "model", &model_json));
-  if (model_json != NULL) {
-    printf("model: %s\n", model_json);
-    check(ort->AllocatorFree(allocator, model_json));
-  }
+  char* model_json = metadata_entry(metadata, allocator, "model");
+  if (model_json != NULL) printf("model: %s\n", model_json);
+  /* role "init" (the portable target: no rollout graph): the host loop over qtg_init/step(/join).onnx */
+  const int host = model_json != NULL && strstr(model_json, "\"role\": \"init\"") != NULL;
   char* join_json = NULL; /* absent: the network's frames as they are (join "none") */
   check(ort->ModelMetadataLookupCustomMetadataMap(metadata, allocator, "join", &join_json));
   if (join_json != NULL) {
@@ -163,11 +230,19 @@ int main(int argc, char** argv) {
   size_t n_inputs, n_outputs;
   check(ort->SessionGetInputCount(session, &n_inputs));
   check(ort->SessionGetOutputCount(session, &n_outputs));
-  if (n_inputs != 2 || n_outputs != 1) fail("expected a rollout model: inputs past, target; output poses");
-  int64_t past_dims[3], target_dims[3], out_dims[3];
+  if (n_inputs != 2 || n_outputs != (host ? 4 : 1))
+    fail("expected a rollout model (inputs past, target; output poses) or an init model (4 outputs)");
+  int64_t past_dims[3], target_dims[3], out_dims[3] = {1, -1, -1};
   declared_shape(session, 1, 0, past_dims);
   declared_shape(session, 1, 1, target_dims);
-  declared_shape(session, 0, 0, out_dims);
+  if (host) { /* T from the metadata's model.config.transition_length */
+    const char* t = strstr(model_json, "\"transition_length\": ");
+    out_dims[1] = t != NULL ? strtoll(t + strlen("\"transition_length\": "), NULL, 10) : -1;
+    out_dims[2] = past_dims[2];
+    if (out_dims[1] < 1) fail("the init model's metadata has no model.config.transition_length");
+  } else {
+    declared_shape(session, 0, 0, out_dims);
+  }
   const int64_t C = past_dims[1], P = past_dims[2];
   if (C < 1 || P < 3 || target_dims[1] != C || target_dims[2] != P || (out_dims[2] != P && out_dims[2] != -1))
     fail("inconsistent or symbolic context/pose sizes in the model's inputs");
@@ -198,23 +273,26 @@ int main(int argc, char** argv) {
   check(ort->CreateTensorWithDataAsOrtValue(memory, target, count * sizeof *target, shape, 3,
                                             ONNX_TENSOR_ELEMENT_DATA_TYPE_FLOAT, &inputs[1]));
 
-  /* one call generates the whole transition */
+  /* one call generates the whole transition (or the host loop of the portable graphs) */
   const char* input_names[2] = {"past", "target"};
   const char* output_names[1] = {"poses"};
   OrtValue* output = NULL;
-  check(ort->Run(session, NULL, input_names, (const OrtValue* const*)inputs, 2, output_names, 1, &output));
-
-  OrtTensorTypeAndShapeInfo* info;
-  check(ort->GetTensorTypeAndShape(output, &info));
-  int64_t dims[3];
-  size_t rank;
-  check(ort->GetDimensionsCount(info, &rank));
-  if (rank != 3) fail("expected an output of rank 3");
-  check(ort->GetDimensions(info, dims, 3));
-  ort->ReleaseTensorTypeAndShapeInfo(info);
-  if (dims[0] != 1 || dims[2] != P || dims[1] < 1) fail("unexpected output shape");
+  int64_t dims[3] = {1, out_dims[1], P};
+  size_t rank = 3;
   float* poses;
-  check(ort->GetTensorMutableData(output, (void**)&poses)); /* (1, T, P), valid until ReleaseValue */
+  if (host) {
+    poses = host_loop(env, options, argv[1], session, inputs, memory, dims[1], P);
+  } else {
+    check(ort->Run(session, NULL, input_names, (const OrtValue* const*)inputs, 2, output_names, 1, &output));
+    OrtTensorTypeAndShapeInfo* info;
+    check(ort->GetTensorTypeAndShape(output, &info));
+    check(ort->GetDimensionsCount(info, &rank));
+    if (rank != 3) fail("expected an output of rank 3");
+    check(ort->GetDimensions(info, dims, 3));
+    ort->ReleaseTensorTypeAndShapeInfo(info);
+    if (dims[0] != 1 || dims[2] != P || dims[1] < 1) fail("unexpected output shape");
+    check(ort->GetTensorMutableData(output, (void**)&poses)); /* (1, T, P), valid until ReleaseValue */
+  }
   const int64_t T = dims[1];
   if (lock) footlock(skeleton_json, rate_json, norm_json, past, poses, target, C, T, P);
   printf("poses: rank %zu, shape (%lld, %lld, %lld)\n", rank, (long long)dims[0], (long long)T, (long long)dims[2]);
@@ -231,7 +309,10 @@ int main(int argc, char** argv) {
       fail("cannot write the poses file");
   }
 
-  ort->ReleaseValue(output);
+  if (host)
+    free(poses);
+  else
+    ort->ReleaseValue(output);
   ort->ReleaseValue(inputs[0]);
   ort->ReleaseValue(inputs[1]);
   ort->ReleaseMemoryInfo(memory);
@@ -240,6 +321,6 @@ int main(int argc, char** argv) {
   ort->ReleaseEnv(env);
   free(past);
   free(target);
-  free(skeleton_json), free(rate_json), free(norm_json);
+  free(skeleton_json), free(rate_json), free(norm_json), free(model_json);
   return 0;
 }

@@ -46,7 +46,7 @@ def apply_join(join, runtime, past, poses, target, skeleton, fps: float) -> np.n
 
     ``None``: ``poses`` as they are. ``"inertialize"``: :func:`~refimpl.protocols.transition_join.inertialize_joins`
     at frame time ``1 / fps`` unless the models' metadata ``join`` says they already apply it (the rollout graph
-    or ``QTGRuntime.transition``'s step path). ``"inertialize+footlock"``: that, then
+    or the runtime's step path). ``"inertialize+footlock"``: that, then
     :func:`~refimpl.protocols.transition_footlock.footlock` with ``skeleton`` (spec/qtg.md §7.5): the numbers
     of ``refimpl generate --join inertialize+footlock`` on the same frames.
 
