@@ -2,7 +2,6 @@
 arithmetic, and a smoke run of the whole table at tiny sizes (the JSON's fields, versions, load and ratios)."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import tempfile
 from pathlib import Path
@@ -14,14 +13,9 @@ pytest.importorskip("onnxruntime")
 
 import onnx  # noqa: E402
 
+from tests.test_bench_all import _load  # noqa: E402  (benchmarks/ is not a package)
+
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _load(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.fixture(scope="module")
