@@ -383,6 +383,15 @@ def test_deploy_run_and_info_on_portable_folders(exported, portable, tmp_path, c
     assert '"name": "portable"' in text and "hidden (2, 1," in text or "hidden (" in text
 
 
+def test_portable_window_needs_the_receptive_field(portable):
+    from deploy.models import runtime_for_dir
+
+    rt = runtime_for_dir(portable["quaternet-cnn"])
+    short = _prefix()[:1, :rt.receptive_field - 1]
+    with pytest.raises(ValueError, match="at least"):
+        rt.predict(short, 2)
+
+
 def test_default_target_is_unchanged(exported, tmp_path):
     """``--target default`` writes exactly what no option writes."""
     ck = exported["quaternet"][0]
@@ -441,3 +450,18 @@ def test_consumers_on_portable_graphs(exported, portable):
     ref = pace_method(path, 0.5)
     assert np.abs(got["amplitude"] - ref.track("amplitude")[:, 0]).max() <= 1e-5
     assert np.abs(got["facing"] - ref.track("direction")).max() <= 1e-5
+
+
+def test_bench_portable_helpers():
+    """benchmarks/bench_portable.py's importable pieces (no timing asserted): both targets of a tiny model, one
+    per-frame call each, a row with the ratio, and the table."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_portable.py"
+    spec = importlib.util.spec_from_file_location("bench_portable", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    result = bench.bench(rounds=1, min_time=0.001, quick=True, models=("quaternet", "pace"))
+    assert set(result["rows"]) == {"quaternet.frame", "pace.point"}
+    assert all(r["ratio_median"] > 0 for r in result["rows"].values())
+    assert "quaternet.frame" in bench.table(result)

@@ -15,12 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
+from refimpl.protocols.prediction_data import CHECKPOINT_SCHEMA
 
 from deploy.graph import OPSET
 from deploy.models.arguments import count, metadata_int
 from deploy.models.entry_io import checked_params, config_from_meta, write_models
 from deploy.models.quaternet import export_quaternet_cnn_window
-from deploy.portable import builder_options, check_target, portable_model
+from deploy.portable import builder_options, check_target, is_portable, portable_model
 from deploy.models.quaternet_io import (add_run_options, canonical_frames, frame_rate_of, load_role, network_config,
                                         prefix_frames, read_entry_checkpoint, run_command)
 
@@ -37,7 +38,7 @@ def load_checkpoint(path):
         return cfg
 
     params, meta = read_entry_checkpoint(path)
-    config = config_from_meta(QuaterNetCNNConfig, meta, convert, task="prediction" if meta else None, where=str(path))
+    config = config_from_meta(QuaterNetCNNConfig, meta, convert, schema=CHECKPOINT_SCHEMA if meta else None, where=str(path))
     return checked_params(params, config, str(path)), config, meta
 
 
@@ -91,9 +92,14 @@ class Runtime:
         return cls(p, intra_op_threads=intra_op_threads)
 
     def step(self, window) -> np.ndarray:
-        """``pose_next (B, 4J)`` from ``window (B, W, 4J)`` (the last R frames are sent)."""
+        """``pose_next (B, 4J)`` from ``window (B, W, 4J)`` (the last R frames are sent; a portable window graph
+        takes exactly R, so fewer are refused)."""
         w, _ = prefix_frames(window, "window")
-        return self.window_model.run(window=w[:, -self.receptive_field:])["pose_next"]
+        R = self.receptive_field
+        if w.shape[1] < R and is_portable(self.window_model.metadata):
+            raise ValueError(f"window: the portable window graph takes the last R = {R} frames; got {w.shape[1]} "
+                             f"(give a prefix of at least {R} frames)")
+        return self.window_model.run(window=w[:, -R:])["pose_next"]
 
     def predict(self, prefix, k: int, *, use_graph: bool = True) -> np.ndarray:
         """``k`` frames after ``prefix (B, P, J, 4)`` (or ``(B, P, 4J)``) in the prefix's trailing shape."""

@@ -35,7 +35,7 @@ def export_trained(entry, args) -> dict:
 
     model = load_trained(args.checkpoint)
     options = {"mode": args.mode or "unrolled", "dtype": {"float32": np.float32, "float64": np.float64}[args.dtype],
-               "T": args.frames}
+               "T": args.frames or None}
     if getattr(args, "target", "default") != "default":
         options["target"] = args.target
     if args.opset is not None:
