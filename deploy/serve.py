@@ -178,21 +178,19 @@ def build_page(web_dir: Path = WEB_DIR, *, quiet: bool = False) -> None:
         raise MissingDependency(f"npm ci failed in {web_dir}: {last}")
 
 
-def serve(folders, port: int = 8000, *, ready=None, web_dir: Path = WEB_DIR) -> None:
-    """Serve the page for ``folders`` on ``http://127.0.0.1:port/`` until interrupted (``port`` 0: any free port).
-
-    ``ready(url)`` is called once the socket listens (default: print the URL). Raises ``ValueError`` for a bad
-    folder, ``OSError`` when the port is taken.
-    """
-    man = manifest(folders)
-    table = routes(man, web_dir)
+def serve(folders_manifest: dict, port: int = 8000, *, ready=None, web_dir: Path = WEB_DIR) -> None:
+    """Serve the page for a :func:`manifest` on ``http://127.0.0.1:port/`` until interrupted (``port`` 0: any
+    free port). ``ready(url)`` is called once the socket listens (default: print the URL); ``OSError`` when the
+    port cannot be bound."""
+    table = routes(folders_manifest, web_dir)
     csp = _csp((web_dir / "index.html").read_text(encoding="utf-8"))
-    body = json.dumps(man, separators=(",", ":")).encode()
+    body = json.dumps(folders_manifest, separators=(",", ":")).encode()
     server = http.server.ThreadingHTTPServer(("127.0.0.1", int(port)), _handler(table, body, csp))
     server.daemon_threads = True
     server.request_queue_size = 16
     url = f"http://127.0.0.1:{server.server_address[1]}/"
-    (ready or (lambda u: print(f"serving {u} for {len(man['folders'])} folder(s) (Ctrl-C to stop)", flush=True)))(url)
+    n = len(folders_manifest["folders"])
+    (ready or (lambda u: print(f"serving {u} for {n} folder(s) (Ctrl-C to stop)", flush=True)))(url)
     try:
         server.serve_forever(poll_interval=0.2)
     except KeyboardInterrupt:
@@ -207,15 +205,13 @@ def main_web(args) -> int:
 
     if not 0 <= args.port <= 65535:
         raise UsageError(f"--port: expected 0 ... 65535, got {args.port}")
-    for d in args.folders:
-        if not Path(d).is_dir():
-            raise BadInputError(f"{d}: no such folder of exported models")
-    build_page()
     try:
-        serve(args.folders, args.port)
+        man = manifest(args.folders)                    # every folder checked before npm runs
     except ValueError as exc:
         raise BadInputError(str(exc)) from None
+    build_page()
+    try:
+        serve(man, args.port)
     except OSError as exc:
         raise UsageError(f"--port {args.port}: cannot listen on 127.0.0.1 ({exc.strerror or exc})") from None
     return 0
-
