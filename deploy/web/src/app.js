@@ -31,6 +31,7 @@ async function guarded(button, work) {
 }
 
 const stage = new Stage($("stage"));
+api.stage = stage;
 let frames = [];
 const player = new Player({ play: $("play"), scrub: $("scrub"), label: $("frame-label"), bar: $("bar") }, (i) => stage.show(frames[i]));
 function load(newFrames, fps, marks) { frames = newFrames; player.load(frames.length, fps, marks); }

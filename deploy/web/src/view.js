@@ -14,6 +14,25 @@ export function sideOf(name) {
   return 0;
 }
 
+// The floor: a 200 m square at y = 0 with a 1 m grid (a repeated canvas texture: long grid lines crossing the near
+// plane are not drawn by every WebGL rasteriser).
+function floorMesh() {
+  const c = document.createElement("canvas");
+  c.width = c.height = 128;
+  const g = c.getContext("2d");
+  g.fillStyle = "#ecece6"; g.fillRect(0, 0, 128, 128);
+  g.strokeStyle = "#d2d2c8"; g.lineWidth = 2; g.strokeRect(64, 64, 64, 64); g.strokeRect(0, 0, 64, 64);
+  g.strokeStyle = "#a9a99e"; g.lineWidth = 3; g.strokeRect(0, 0, 128, 128);
+  const tex = new THREE.CanvasTexture(c);
+  tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
+  tex.repeat.set(200, 200);
+  tex.anisotropy = 8;
+  tex.colorSpace = THREE.SRGBColorSpace;
+  const floor = new THREE.Mesh(new THREE.PlaneGeometry(20000, 20000), new THREE.MeshBasicMaterial({ map: tex }));
+  floor.rotation.x = -Math.PI / 2;
+  return floor;
+}
+
 export class Stage {
   constructor(container) {
     this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
@@ -25,11 +44,7 @@ export class Stage {
     this.camera.position.set(230, 190, 300);
     this.controls = new OrbitControls(this.camera, this.renderer.domElement);
     this.controls.target.set(0, 90, 0);
-    const grid = new THREE.GridHelper(20000, 200, 0x8a8a8a, 0xc4c4c4);   // 1 m cells, fixed in the world
-    this.scene.add(grid);
-    const floor = new THREE.Mesh(new THREE.PlaneGeometry(20000, 20000), new THREE.MeshBasicMaterial({ color: 0xe9e9e2 }));
-    floor.rotation.x = -Math.PI / 2; floor.position.y = -0.5;
-    this.scene.add(floor);
+    this.scene.add(floorMesh());
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x888888, 2.2));
     const sun = new THREE.DirectionalLight(0xffffff, 1.2); sun.position.set(300, 800, 200); this.scene.add(sun);
     this.figures = [];
