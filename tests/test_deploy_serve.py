@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("onnxruntime")
 
-from deploy.models.qtg_io import export_qtg_dir  # noqa: E402
+from deploy.models.qtg_io import export_dir  # noqa: E402
 from deploy.serve import NPM_FILES, WEB_DIR, build_page, manifest, routes, serve  # noqa: E402
 from refimpl.errors import MissingDependency  # noqa: E402
 from refimpl.models.qtg import QTGConfig, init_params  # noqa: E402
@@ -24,7 +24,7 @@ SMALL = QTGConfig(pose_size=91, encoder_sizes=(8,), gru_hidden=8, decoder_sizes=
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     d = tmp_path_factory.mktemp("qtg_export")
-    export_qtg_dir(init_params(SMALL, np.random.default_rng(0), dtype=np.float32), SMALL, d)
+    export_dir(init_params(SMALL, np.random.default_rng(0), dtype=np.float32), SMALL, d)
     return d
 
 

@@ -189,11 +189,11 @@ async function runWalk() {
     out.push([...f.rot.flat(), ...f.root]);
     const root = f.root.map((v) => v * cm);
     shown.push([{ pos: forwardKinematics(sk.parents, sk.offsets, f.rot, root), generated: true }]);
-    player.load(shown.length, FPS, [[0, shown.length]]);
-    player.go(shown.length - 1);
+    if (shown.length % 5 === 1 || shown.length === N) { player.load(shown.length, FPS, [[0, shown.length]]); player.go(shown.length - 1); }
     const wait = (out.length * 1000) / FPS - (performance.now() - t0);   // live: at most real time
     await new Promise((r) => setTimeout(r, Math.max(0, wait)));
   }
+  player.load(shown.length, FPS, [[0, shown.length]]); player.go(shown.length - 1);
   api.results.walk = { frames: out, points, speed, seconds };
   message(`walked ${out.length} frames (${(out.length / FPS).toFixed(1)} s) along a ${(path.length * cm / 100).toFixed(1)} m path at ${speed} units per frame`, true);
 }

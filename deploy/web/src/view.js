@@ -53,7 +53,14 @@ export class Stage {
     this.follow = true;
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
-    const loop = () => { this.controls.update(); this.renderer.render(this.scene, this.camera); requestAnimationFrame(loop); };
+    // draw only when something moved (a software WebGL costs a core per continuous redraw)
+    this.dirty = true;
+    this.controls.addEventListener("change", () => { this.dirty = true; });
+    const loop = () => {
+      this.controls.update();
+      if (this.dirty) { this.dirty = false; this.renderer.render(this.scene, this.camera); }
+      requestAnimationFrame(loop);
+    };
     requestAnimationFrame(loop);
   }
 
@@ -61,6 +68,7 @@ export class Stage {
     const w = Math.max(200, this.container.clientWidth), h = Math.max(200, this.container.clientHeight);
     this.renderer.setSize(w, h, false);
     this.camera.aspect = w / h; this.camera.updateProjectionMatrix();
+    this.dirty = true;
   }
 
   // Figures for skeletons [{names, parents}], replacing the old ones.
@@ -87,6 +95,7 @@ export class Stage {
 
   // Pose the figures: frame = [{pos, generated}] in the order of setFigures.
   show(frame) {
+    this.dirty = true;
     const up = new THREE.Vector3(0, 1, 0);
     frame.forEach((f, i) => {
       const fig = this.figures[i];
@@ -122,11 +131,13 @@ export class Stage {
       this.ghosts.add(new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: 0x555555, transparent: true, opacity: 0.45 })));
     }
     this.scene.add(this.ghosts);
+    this.dirty = true;
   }
 
   // A polyline on the floor (points [x, z] in cm).
   setPath(points, colour = 0x1a9e55) {
     this.extras.clear();
+    this.dirty = true;
     if (!points || points.length < 2) return;
     const g = new THREE.BufferGeometry().setFromPoints(points.map((p) => new THREE.Vector3(p[0], 0.5, p[1])));
     this.extras.add(new THREE.Line(g, new THREE.LineBasicMaterial({ color: colour })));
