@@ -18,7 +18,7 @@ const page = await context.newPage();
 page.on("request", (r) => out.requests.push(r.url()));
 page.on("console", (m) => { if (m.type() === "error") out.console.push(m.text()); });
 page.on("pageerror", (e) => out.console.push(String(e)));
-page.setDefaultTimeout(60000);
+page.setDefaultTimeout(180000);
 
 const last = () => page.evaluate(() => { const m = window.refimplWeb.messages; return m.length ? m[m.length - 1] : null; });
 const count = () => page.evaluate(() => window.refimplWeb.messages.length);

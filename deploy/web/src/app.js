@@ -221,6 +221,7 @@ async function runQn() {
   const truth = [...r.prefix, ...r.truth], pred = [...r.prefix, ...r.pred];
   stage.setFigures([sk, sk]); stage.setPath(null); stage.setGhosts(sk.parents, []);
   stage.follow = false;
+  stage.lookAt(0, lift, 0);
   load(pred.map((q, i) => [{ pos: fk(truth[Math.min(i, truth.length - 1)], -80), generated: false }, { pos: fk(q, 80), generated: i >= P }]), meta.frame_rate, [[P, pred.length]]);
   player.go(P - 1);
   api.results.qn = { pred: r.pred, frame, P };

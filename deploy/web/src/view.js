@@ -134,6 +134,13 @@ export class Stage {
     this.dirty = true;
   }
 
+  // Point the camera at (x, y, z) from the default offset.
+  lookAt(x, y, z) {
+    this.controls.target.set(x, y, z);
+    this.camera.position.set(x + 230, y + 100, z + 300);
+    this.dirty = true;
+  }
+
   // A polyline on the floor (points [x, z] in cm).
   setPath(points, colour = 0x1a9e55) {
     this.extras.clear();
