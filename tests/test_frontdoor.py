@@ -150,7 +150,7 @@ def test_resume_reuses_the_stored_options(tmp_path, capsys):
     cap = capsys.readouterr()
     assert rc == 2
     assert "--set hidden_size: the checkpoint has 8, the command line 16" in cap.err
-    assert "--lr: the checkpoint has None, the command line 0.5" in cap.err
+    assert "--lr: the checkpoint has 0.0001, the command line 0.5" in cap.err  # #35: the default's value, not None
     assert "num_layers" not in cap.err and "mean" not in cap.err and len(cap.err) < 600
     assert "reading" not in cap.out  # before any data is read
     assert load_checkpoint(out / "checkpoint.npz")[1]["step"] == 4
