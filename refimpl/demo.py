@@ -39,6 +39,7 @@ from refimpl.protocols.transition import SAMPLE_DIR
 from refimpl.protocols.transition_join import with_join
 from refimpl.registry import MODELS
 from refimpl.threads import blas_thread_pool
+from refimpl.versions import library_versions
 from refimpl.services import (evaluate_model, export_onnx, load_trained, network_methods, train_model,
                               verify_onnx)
 from refimpl.tasks.transition import print_results, write_results
@@ -209,7 +210,8 @@ def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResul
     print_results(results, test_ds, model, curve=False)
     files["eval_json"] = out / "eval.json"
     files["eval_curve_csv"] = out / "eval_per_frame.csv"
-    write_results(results, 1.0 / test_ds.fps, json_path=files["eval_json"], csv_path=files["eval_curve_csv"])
+    write_results(results, 1.0 / test_ds.fps, json_path=files["eval_json"], csv_path=files["eval_curve_csv"],
+                  extra={"versions": library_versions(), "run": {"steps": n_steps, "seed": seed, "quick": quick}})
     q = results["qtg"]["mean_cm"]
     best = min((k for k in results if not k.startswith("qtg")), key=lambda k: results[k]["mean_cm"])
     b = results[best]["mean_cm"]

@@ -43,7 +43,7 @@ class _ClosedPipe:
             raise BrokenPipeError(32, "Broken pipe")
 
 
-def test_deploy_info_into_a_closed_pipe_stops_quietly(monkeypatch, capsys):
+def test_deploy_info_into_a_closed_pipe_stops_quietly(monkeypatch, capsys, tmp_path):
     import deploy.cli
     import deploy.runtime
 
@@ -55,7 +55,8 @@ def test_deploy_info_into_a_closed_pipe_stops_quietly(monkeypatch, capsys):
     deploy.cli._parser()  # imports every exporter's module first, so none of them binds the stand-in below
     monkeypatch.setattr(deploy.runtime, "load_model", lambda path: _Model())
     monkeypatch.setattr("sys.stdout", _ClosedPipe())
-    assert deploy.cli.main(["info", "model.onnx"]) == 1  # old: BrokenPipeError traceback
+    (tmp_path / "model.onnx").write_bytes(b"")  # info checks that the file exists (#35) before loading it
+    assert deploy.cli.main(["info", str(tmp_path / "model.onnx")]) == 1  # old: BrokenPipeError traceback
 
 
 # ------------------------------------------------------------------------------------------------ the defects

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from refimpl.checkpoint import load_checkpoint
@@ -94,3 +95,86 @@ def test_an_old_checkpoint_without_the_new_fields_still_resumes(qtg_run, capsys)
     # the flags as given fill what the checkpoint lacks (here the run's own)
     assert main(["train", "--out", str(qtg_run), "--resume", "--steps", "3", "--stride", "8", "--test-fraction", "0.5"]) == 0
     assert load_checkpoint(qtg_run / "checkpoint.npz")[1]["step"] == 3
+
+
+# ------------------------------------------------------------------------------------------------------------
+# refimpl import: the layout before the data; the joint-count hint
+
+
+def test_import_qtg_with_the_published_layout_is_refused_before_the_data_is_read(tmp_path, capsys):
+    np.savez(tmp_path / "w.npz", x=np.zeros(2, np.float32))
+    rc = main(["import", str(tmp_path / "w.npz"), "--model", "qtg", "--layout", "published", "--data",
+               str(tmp_path / "nowhere"), "--out", str(tmp_path / "c.npz")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "no published code" in err and "nowhere" not in err  # old: read the data first
+
+
+def test_import_qtg_defaults_to_the_refimpl_layout(tmp_path, capsys):
+    np.savez(tmp_path / "w.npz", x=np.zeros(2, np.float32))  # not QTG's names: a bad input file, exit 3
+    rc = main(["import", str(tmp_path / "w.npz"), "--model", "qtg", "--out", str(tmp_path / "c.npz"),
+               "--data", str(WALK_BVH)])
+    err = capsys.readouterr().err
+    assert rc == 3 and "layout 'refimpl'" in err  # old: exit 2, "--layout published: ... no published code"
+
+
+def test_import_with_the_right_names_and_another_skeleton_names_the_joint_count(tmp_path, capsys):
+    from refimpl.registry import MODELS, task_of
+    from refimpl.weights import layout_names
+
+    spec = MODELS["quaternet"]
+    # the published names, with the input and output sizes of another skeleton than the sample's
+    args = build_parser().parse_args(["train", "--model", "quaternet", "--set", "hidden_size=8"])
+    train_ds, _ = task_of(spec).train_datasets(args)
+    config = spec.make_config(train_ds, ("hidden_size=8",))
+    rng = np.random.default_rng(0)
+    state = {n: rng.uniform(-0.1, 0.1, tuple(d - 20 if d > 100 else d for d in s)).astype(np.float32)
+             for n, s in layout_names(spec, config, "published").values()}
+    np.savez(tmp_path / "w.npz", **state)
+    rc = main(["import", str(tmp_path / "w.npz"), "--model", "quaternet", "--set", "hidden_size=8",
+               "--out", str(tmp_path / "c.npz")])
+    err = capsys.readouterr().err
+    assert rc == 3, err
+    assert "joint count of --data's skeleton" in err and "names of --layout refimpl" not in err  # old: the hint
+
+
+# ------------------------------------------------------------------------------------------------------------
+# python -m deploy: info of a folder, exit 3 for a missing or undecodable model, messages of run
+
+
+def test_deploy_info_of_a_folder_a_missing_and_an_undecodable_model(qtg_run, tmp_path, capsys):
+    from deploy.cli import main as deploy_main
+
+    models = tmp_path / "models"
+    assert deploy_main(["export", str(qtg_run / "checkpoint.npz"), str(models)]) == 0
+    capsys.readouterr()
+    assert deploy_main(["info", str(models)]) == 0  # old: "model: no such file 'models'", exit 2
+    out = capsys.readouterr().out
+    assert "== qtg_init.onnx ==" in out and "== qtg_rollout.onnx ==" in out and out.count("inputs:") >= 3
+    assert deploy_main(["info", str(tmp_path / "none.onnx")]) == 3  # old: 2
+    (tmp_path / "junk.onnx").write_bytes(b"\x00not a model" * 10)
+    assert deploy_main(["info", str(tmp_path / "junk.onnx")]) == 3  # old: 2
+    err = capsys.readouterr().err
+    assert "none.onnx: no such file" in err and "junk.onnx: not a valid ONNX model" in err
+    (tmp_path / "empty").mkdir()
+    assert deploy_main(["info", str(tmp_path / "empty")]) == 3
+
+
+def test_a_quaternet_start_out_of_range_names_start():
+    from refimpl.errors import UsageError
+    from refimpl.skeletons import cmu_skeleton
+    from refimpl.tasks.prediction import make_prediction
+
+    rot = np.tile(np.array([1.0, 0, 0, 0]), (60, 38, 1))
+    with pytest.raises(UsageError, match=r"^--start must lie in \[49, 59\]"):  # old: "--source-frame"
+        make_prediction(lambda p, k: None, rot, 30, 50, 10, skeleton=cmu_skeleton(), frame_time=0.04, flag="--start")
+
+
+def test_the_short_walk_warning_names_the_default_length_when_seconds_was_not_given():
+    from types import SimpleNamespace
+
+    from refimpl.tasks.locomotion import short_walk_warning
+
+    walk = SimpleNamespace(motion=SimpleNamespace(num_frames=100))
+    assert "--seconds 10 asked for 300 frames" in short_walk_warning(walk, 10.0)
+    text = short_walk_warning(walk, 10.0, given=False)
+    assert "--seconds" not in text and "the default length (10 s) is 300 frames" in text  # old: "--seconds 10"

@@ -325,13 +325,14 @@ def describe_walk(walk) -> str:
             f"centimetres; root travelled {dist:.1f} m along a {walk.path.length * QUATERNET_UNIT_CM / 100:.1f} m path")
 
 
-def short_walk_warning(walk, seconds: float) -> str | None:
-    """The warning when an open path ended before ``seconds`` (the motion is shorter than asked), else None."""
+def short_walk_warning(walk, seconds: float, given: bool = True) -> str | None:
+    """The warning when an open path ended before ``seconds`` (the motion is shorter than asked), else None;
+    ``given=False``: ``seconds`` is the default length, not a ``--seconds`` of the command line."""
     asked, n = int(round(seconds * FPS)), walk.motion.num_frames
     if n >= asked:
         return None
-    return (f"the path ends after {n / FPS:.1f} s at this speed; --seconds {seconds:g} asked for {asked} frames, "
-            f"the motion has {n}")
+    what = f"--seconds {seconds:g} asked for" if given else f"the default length ({seconds:g} s) is"
+    return f"the path ends after {n / FPS:.1f} s at this speed; {what} {asked} frames, the motion has {n}"
 
 
 def generate_command(args, model) -> int:

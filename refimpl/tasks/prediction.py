@@ -271,9 +271,11 @@ class Prediction:
 
 
 def make_prediction(method: Callable, rotations, frame: int, prefix_length: int, k: int, *, skeleton: Skeleton,
-                    frame_time: float, method_name: str = "network", name: str = "prediction") -> Prediction:
+                    frame_time: float, method_name: str = "network", name: str = "prediction",
+                    flag: str = "--source-frame") -> Prediction:
     """Predict ``k`` frames after frame ``frame`` of ``rotations (F, J, 4)`` from the ``prefix_length`` frames
-    ending there (``method(prefix (1, P, J, 4), k)``).
+    ending there (``method(prefix (1, P, J, 4), k)``); ``flag`` names the option of ``frame`` in the error
+    (``python -m deploy run``: ``--start``).
 
     Raises
     ------
@@ -286,7 +288,7 @@ def make_prediction(method: Callable, rotations, frame: int, prefix_length: int,
     rot = np.asarray(rotations, dtype=np.float64)
     F = rot.shape[0]
     if not prefix_length - 1 <= frame <= F - 1:
-        raise UsageError(f"--source-frame must lie in [{prefix_length - 1}, {F - 1}] (a {prefix_length}-frame "
+        raise UsageError(f"{flag} must lie in [{prefix_length - 1}, {F - 1}] (a {prefix_length}-frame "
                          f"prefix ending there, frames at the model's rate), got {frame}")
     prefix = rot[frame - prefix_length + 1:frame + 1]  # (P, J, 4)
     pred = np.asarray(method(prefix[None], int(k)), dtype=np.float64)[0]  # (k, J, 4)

@@ -368,11 +368,12 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
         _say(_curve_table(results, 1.0 / test_ds.fps))
 
 
-def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=None, csv_path=None) -> None:
-    """Write :func:`refimpl.services.evaluate_model` results as JSON (everything) and / or CSV (the per-frame
-    curves)."""
+def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=None, csv_path=None,
+                  extra: Mapping | None = None) -> None:
+    """Write :func:`refimpl.services.evaluate_model` results as JSON (everything, and the keys of ``extra``, e.g.
+    the demo's ``versions``) and / or CSV (the per-frame curves)."""
     if json_path:
-        atomic_write_text(Path(json_path), _results_json(results), make_parents=True)
+        atomic_write_text(Path(json_path), _results_json({**results, **(extra or {})}), make_parents=True)
     if csv_path:
         atomic_write_text(Path(csv_path), _curve_csv(results, frame_time), make_parents=True)
 
