@@ -17,6 +17,7 @@ render      a BVH / exp-map motion (optionally against a second one) to a PNG st
 demo        the whole tour on the embedded sample (:mod:`refimpl.demo`)
 import      a PyTorch state dict (.npz, .safetensors, .pt) as a checkpoint; ``export-weights`` the reverse
             (:mod:`refimpl.weights_cli`, spec/import.md)
+cache       the data cache's entries and size; ``--clear`` empties it (:mod:`refimpl.cache_cli`)
 ==========  ==============================================================================================
 
 Exit codes (scripts may rely on them): 0 success; 1 runtime failure (including a missing optional dependency
@@ -49,7 +50,7 @@ from typing import Sequence
 
 import numpy as np
 
-from refimpl import weights_cli
+from refimpl import cache_cli, weights_cli
 from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
@@ -317,7 +318,7 @@ def _parse_slice(text: str | None, n: int) -> slice:
 
 def cmd_render(args) -> int:
     """``refimpl render``."""
-    from refimpl.render import render_gif
+    from refimpl.render import render_gif, stderr_progress
     from refimpl.render_strip import limb_sides, render_strip
 
     motion = read_motion(args.file, fps=args.fps, layout=args.layout)
@@ -343,6 +344,7 @@ def cmd_render(args) -> int:
                          up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title, sides=sides)
         elif suffix == ".gif":
             render_gif(out, pos, parents, prediction=pred, fps=motion.fps / step, stride=args.stride, labels=labels,
+                       progress=stderr_progress,
                        up=args.up, frame_numbers=idx, title=args.title, sides=sides)
         else:
             raise UsageError(f"--out {out}: expected a .png or .gif file name")
@@ -523,6 +525,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_demo, default_blas_threads=1)  # reproducible numbers: BLAS rounding depends on threads
 
     weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
+    cache_cli.add_parser(sub)  # cache [--clear] (spec/cli.md §10)
     return _global_options_after_the_command(parser)
 
 

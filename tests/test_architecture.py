@@ -25,7 +25,7 @@ LAYERS = {
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
         "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.run_options", "refimpl.threads"],
-    8: ["refimpl.cli", "refimpl.cli_info", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
+    8: ["refimpl.cli", "refimpl.cli_info", "refimpl.weights_cli", "refimpl.cache_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).
 DEPLOY_IMPORTERS = {"refimpl.cli", "refimpl.demo", "refimpl.services"}

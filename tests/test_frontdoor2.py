@@ -178,3 +178,83 @@ def test_the_short_walk_warning_names_the_default_length_when_seconds_was_not_gi
     assert "--seconds 10 asked for 300 frames" in short_walk_warning(walk, 10.0)
     text = short_walk_warning(walk, 10.0, given=False)
     assert "--seconds" not in text and "the default length (10 s) is 300 frames" in text  # old: "--seconds 10"
+
+
+def test_foot_skating_without_a_contact_is_said_not_nan():
+    from refimpl.tasks.locomotion import skating_phrase
+    from refimpl.tasks.locomotion_generate import foot_skating
+
+    flying = np.zeros((20, 3, 3))
+    flying[:, 2, 1] = np.linspace(0.0, 10.0, 20)  # the foot only rises: at most one frame near its lowest height
+    skate = foot_skating(flying, [2])
+    assert not np.isfinite(skate["speed_cm_s"])
+    text = skating_phrase(skate)
+    assert "nan" not in text and "no foot in contact" in text  # old: "foot skating nan cm/s"
+    assert skating_phrase({"speed_cm_s": 3.25, "contact_fraction": 0.41}) == \
+        "foot skating 3.2 cm/s in contact (41 % of foot-frames)"
+
+
+def test_refimpl_cache_lists_and_clears_only_its_entries(tmp_path, monkeypatch, capsys):
+    from refimpl.datacache import save_entry
+
+    monkeypatch.setenv("REFIMPL_CACHE", str(tmp_path / "c"))
+    save_entry("loco", "ab" * 32, {"x": np.zeros((100, 3))})
+    (tmp_path / "c" / "notes.txt").write_text("mine")
+    assert main(["cache"]) == 0  # old: not a command (exit 2)
+    out = capsys.readouterr().out
+    assert "1 entries" in out and f"loco-{'ab' * 12}.npz" in out
+    assert main(["cache", "--clear"]) == 0
+    assert "cleared: 1 entries" in capsys.readouterr().out
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["notes.txt"]
+    monkeypatch.setenv("REFIMPL_CACHE", "off")
+    assert main(["cache"]) == 0 and "off" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------------------------------------------
+# progress on the steps of a minute: the locomotion files read for transitions, GIF frames, acRNN's seeds
+
+
+class _Clock:
+    """A perf_counter that advances 6 s per call: every progress check is due."""
+
+    def __init__(self):
+        self.t = 0.0
+
+    def perf_counter(self):
+        self.t += 6.0
+        return self.t
+
+
+def test_reading_the_locomotion_files_reports_progress():
+    from refimpl.protocols.transition_locomotion import _counting
+
+    lines = []
+    load = _counting(lambda src, **kw: (src, kw), 3, lines.append, every_s=-1.0)
+    assert [load(i, fps=30) for i in range(3)] == [(i, {"fps": 30}) for i in range(3)]
+    assert lines[0].startswith("read 1 of 3 files") and lines[-1].startswith("read 3 of 3 files")
+
+
+def test_a_gif_reports_progress(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    import refimpl.render as render
+
+    monkeypatch.setattr(render, "time", _Clock())
+    pos = np.zeros((4, 2, 3))
+    pos[:, 1, 1] = 1.0
+    lines = []
+    render.render_gif(tmp_path / "a.gif", pos, np.array([-1, 0]), progress=lines.append)
+    assert lines and lines[0].startswith("a.gif: frame ") and "of 4" in lines[0]  # old: no progress at all
+
+
+def test_the_acrnn_evaluation_reports_progress(monkeypatch):
+    import refimpl.protocols.synthesis as P
+    from refimpl.tasks import synthesis
+
+    monkeypatch.setattr(P, "time", _Clock())
+    monkeypatch.setattr(synthesis, "evaluate_generator",
+                        lambda gen, data, max_seeds, progress: (progress("64/128 seeds, 6 s"), {"num_seeds": 128})[1])
+    lines = []
+    out = synthesis.evaluate(None, {"network": None, "hold": None}, progress=lines.append)
+    assert set(out) == {"network", "hold"}
+    assert lines[0] == "evaluating network (1 of 2) ..." and "  network: 64/128 seeds, 6 s" in lines
+    assert any(line.startswith("  hold: 128 seeds in") for line in lines)

@@ -307,7 +307,7 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
     """Draw a :class:`Prediction` (against its ground truth when it has one): the last ``context`` prefix frames
     and the predicted ones, as a PNG strip and / or a GIF, numbered as in the BVH the prediction is written to,
     with a title (default: the method and the predicted frames)."""
-    from refimpl.render import render_gif
+    from refimpl.render import render_gif, stderr_progress
     from refimpl.render_strip import render_strip
 
     a = max(0, pr.start - context)
@@ -327,6 +327,7 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
                                     frame_time=pr.motion.frame_time, frame_numbers=numbers))
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred if pr.truth is not None else None,
+                                  progress=stderr_progress,
                                   fps=pr.motion.fps, highlight=hl, labels=labels, title=title,
                                   frame_numbers=numbers))
     return written

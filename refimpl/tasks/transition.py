@@ -24,6 +24,7 @@ Shape legend: N windows, T transition frames, F frames of a clip, J joints, P po
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -195,7 +196,8 @@ def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.
     spec/qtg.md §8.4)."""
     if data != "sample" and is_bandai_namco_folder(data):
         try:
-            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride)
+            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride,
+                                      progress=lambda line: print(f"  {line}", file=sys.stderr, flush=True))
         except (OSError, ValueError) as exc:
             raise BadInputError(f"--data {data}: {exc}") from exc
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
