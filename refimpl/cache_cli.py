@@ -1,4 +1,4 @@
-"""``refimpl cache [--clear]``: what the data cache holds, and emptying it (spec/cli.md §10, spec/data.md §7).
+"""``refimpl cache [--clear]``: what the data cache holds, and emptying it (spec/cli.md §11, spec/data.md §7).
 
 The cache (:mod:`refimpl.datacache`) keeps prepared data sets, e.g. the Bandai Namco locomotion sequences
 (~0.5 GB for the whole set), so that the next command on unchanged files starts in seconds. ``refimpl cache``

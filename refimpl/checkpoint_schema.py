@@ -149,20 +149,22 @@ def _config_module(config_type):
     return sys.modules.get(getattr(config_type, "__module__", ""), None)
 
 
-def expected_param_shapes(recipe, config_type: type, config) -> dict[str, tuple[int, ...]]:
+def expected_param_shapes(owner, config_type: type, config) -> dict[str, tuple[int, ...]]:
     """Name -> shape of every parameter of the model ``config`` describes.
 
-    Looked up in order: ``recipe.param_shapes(config)``, the config module's ``param_shapes(config)``, its
-    ``init_params(config, rng, dtype=float32)`` on a tiny generator (only for configs whose integers are at most
-    :data:`MAX_FALLBACK_SIZE`, so that a crafted config cannot make it allocate without bound).
+    ``owner``: what may know the shapes — a :class:`~refimpl.registry.ModelSpec` (its ``param_shapes``, the
+    recipe's), a model module, or None. Looked up in order: ``owner.param_shapes(config)``, the config module's
+    ``param_shapes(config)``, its ``init_params(config, rng, dtype=float32)`` on a tiny generator (only for
+    configs whose integers are at most :data:`MAX_FALLBACK_SIZE`, so that a crafted config cannot make it
+    allocate without bound).
     """
     module = _config_module(config_type)
-    for owner in (recipe, module):
-        fn = getattr(owner, "param_shapes", None)
+    for where in (owner, module):
+        fn = getattr(where, "param_shapes", None)
         if callable(fn):
             return {str(k): tuple(int(d) for d in v) for k, v in fn(config).items()}
-    for owner in (recipe, module):
-        fn = getattr(owner, "init_params", None)
+    for where in (owner, module):
+        fn = getattr(where, "init_params", None)
         if callable(fn):
             for f in dataclasses.fields(config):
                 v = getattr(config, f.name)
@@ -285,7 +287,7 @@ def validate_checkpoint_config(spec, model_config, where: str = "checkpoint", ta
     config = validate_model_config(spec.config_type, model_config, where)
     validate_task_checkpoint(getattr(spec, "task", None), model_config, config, where, task)
     try:
-        shapes = expected_param_shapes(spec.recipe, spec.config_type, config)
+        shapes = expected_param_shapes(spec, spec.config_type, config)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
     return config, shapes

@@ -131,10 +131,10 @@ def layout_names(spec: ModelSpec, config, layout: str) -> dict[str, tuple[str, t
         An unknown layout, or ``"published"`` for a model without published code (QTG, the convolutional QuaterNet).
     """
     if layout == "refimpl":
-        return {k: (k, s) for k, s in expected_param_shapes(spec.recipe, spec.config_type, config).items()}
+        return {k: (k, s) for k, s in expected_param_shapes(spec, spec.config_type, config).items()}
     if layout != "published":
         raise UsageError(f"--layout {layout!r}: expected one of {list(LAYOUTS)}")
-    fn = getattr(spec.recipe, "published_names", None)
+    fn = spec.published_names
     if fn is None:
         raise UsageError(f"--layout published: model {spec.name!r} has no published code to take names from; "
                          f"use --layout refimpl (spec/import.md)")
@@ -227,11 +227,11 @@ def import_checkpoint(spec: ModelSpec, state: Mapping[str, np.ndarray], layout: 
         A bad layout, ``--set`` value or dtype.
     """
     where = str(source) if source is not None else "state dict"
-    settings = tuple(getattr(spec.recipe, "PUBLISHED_SETTINGS", ())) if layout == "published" else ()
+    settings = spec.published_settings if layout == "published" else ()
     config = spec.make_config(train_ds, (*settings, *overrides))
     names = layout_names(spec, config, layout)
     try:
-        params = to_refimpl(state, names, expected_param_shapes(spec.recipe, spec.config_type, config), where)
+        params = to_refimpl(state, names, expected_param_shapes(spec, spec.config_type, config), where)
     except ValueError as exc:
         other = next((o for o in LAYOUTS if o != layout), None)
         try:
@@ -241,7 +241,7 @@ def import_checkpoint(spec: ModelSpec, state: Mapping[str, np.ndarray], layout: 
         except UsageError:
             pass
         fields = ", ".join(f.name for f in getattr(config, "__dataclass_fields__", {}).values())
-        hint = getattr(spec.recipe, "IMPORT_HINT", "")
+        hint = spec.import_hint
         sizes = ("the names are right, the shapes another network's: the frame size follows the joint count of "
                  "--data's skeleton, so pass the data the weights were trained on (H3.6M weights: H3.6M data); "
                  if set(state) == {n for n, _ in names.values()} else "")

@@ -65,7 +65,7 @@ def cmd_import(args) -> int:
 def _import_layout(spec, layout):
     """``--layout`` of ``refimpl import``: as given, or the model's default (published when the model has
     published code); ``published`` for a model without it is a UsageError."""
-    has_published = getattr(spec.recipe, "published_names", None) is not None
+    has_published = spec.published_names is not None
     if layout is None:
         return "published" if has_published else "refimpl"
     if layout == "published" and not has_published:

@@ -1,4 +1,5 @@
-"""QuaterNet long-term's entry of the exporter table (``deploy.models.EXPORTERS["quaternet-long"]``): the pose
+"""QuaterNet long-term's entry of the exporter table (``deploy.models.EXPORTERS["quaternet-long"]``; protocol
+:class:`deploy.models.entry_api.ExporterEntry`): the pose
 network's step and the pace network (spec/deploy.md §12).
 
 * :func:`load_checkpoint` — ``(params, config, meta)`` of a ``refimpl train`` checkpoint of ``quaternet-long``
@@ -7,7 +8,9 @@ network's step and the pace network (spec/deploy.md §12).
   ``quaternet-long_seed.npy``, the checkpoint's seed clip that starts a walk) for a pose network,
   ``quaternet-long_pace.onnx`` for a pace network (validated, atomic);
 * :class:`Runtime` — ``step(x, state)`` and ``pace(x)`` in onnxruntime, a ``rollout`` for evaluation, and the
-  seed clip (``seed``).
+  seed clip (``seed``);
+* :func:`run_command`, :func:`add_run_options` — ``python -m deploy run`` (a walk along a path,
+  :mod:`deploy.models.quaternet_long_walk`, or ``.npy`` frames).
 
 Shape legend: B batch, F input features, G outputs, L layers, H hidden, N points, P prefix, T frames.
 """
@@ -30,7 +33,8 @@ from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model
 
-__all__ = ["load_checkpoint", "export_dir", "Runtime", "STEP_FILE", "PACE_FILE", "H0_FILE", "SEED_FILE"]
+__all__ = ["load_checkpoint", "export_dir", "Runtime", "run_command", "add_run_options", "STEP_FILE", "PACE_FILE",
+           "H0_FILE", "SEED_FILE"]
 
 STEP_FILE = f"{NAME}_step.onnx"
 PACE_FILE = f"{NAME}_pace.onnx"
@@ -231,6 +235,19 @@ class Runtime:
         y = np.stack(ys, axis=1)
         return y[..., :4 * J].reshape(B, -1, J, 4), y[..., 4 * J:]
 
-# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.quaternet_long_walk import add_run_options  # noqa: E402,F401
-from deploy.models.run_commands import run_locomotion as run_command  # noqa: E402,F401
+
+def add_run_options(group) -> None:
+    """quaternet-long's options of ``python -m deploy run`` (a walk; ``refimpl generate``'s names)."""
+    group.add_argument("--pace", default=None, metavar="DIR", help="quaternet-long: folder of the exported pace "
+                                                                    "network (default: MODEL_DIR)")
+    group.add_argument("--speed", default=None, help="quaternet-long: walk, jog, run or units per frame "
+                                                     "(default walk)")
+    group.add_argument("--seconds", default=None, help="quaternet-long: length of the walk (default 10)")
+    group.add_argument("--controls", default=None, help="quaternet-long: also write the per-frame controls as JSON")
+
+
+def run_command(runtime, args) -> int:
+    """``python -m deploy run`` for QuaterNet long-term (:func:`deploy.models.run_commands.run_locomotion`)."""
+    from deploy.models.run_commands import run_locomotion
+
+    return run_locomotion(runtime, args)

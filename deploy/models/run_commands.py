@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from deploy.models.entry_io import write_npy as _write_npy
+from deploy.models.entry_io import write_npy
 
 __all__ = ["add_prediction_run_options", "run_prediction", "run_synthesis", "run_locomotion", "export_trained"]
 
@@ -83,7 +83,7 @@ def run_prediction(runtime, args) -> int:
                                     method_name=f"{meta['model']['name']}_onnx", name=Path(args.output).stem,
                                     flag="--start")
     if str(args.output).lower().endswith(".npy"):
-        _write_npy(args.output, pr.motion.rotations[pr.start:pr.stop])
+        write_npy(args.output, pr.motion.rotations[pr.start:pr.stop])
     else:
         write_bvh(args.output, pr.motion)
     err = pr.euler_error()
@@ -119,7 +119,7 @@ def run_synthesis(runtime, args) -> int:
     start = 1 if args.start is None else int(args.start)  # frame 0 of a salsa take is its reference T-pose
     motion, seeds = synthesis.continue_seed(method, config, args.input, start, n)
     if str(args.output).lower().endswith(".npy"):
-        _write_npy(args.output, frames[0])
+        write_npy(args.output, frames[0])
         what = f"raw frames ({n}, {frames[0].shape[1]}), metres"
     else:
         motion = synthesis.in_source_units(motion)
@@ -157,6 +157,6 @@ def run_locomotion(runtime, args) -> int:
         what = "pace outputs [A, omega, cos, sin] per point (before clipping)"
     else:
         raise ValueError(f"{args.model_dir}: no step model for frames (B, P + T, F)")
-    _write_npy(args.output, y)
+    write_npy(args.output, y)
     print(f"wrote {args.output}: {tuple(y.shape)} {what}")
     return 0
