@@ -4,7 +4,7 @@ a failing test.
 Each ```bash / ```sh block of the two pages is split into commands (``\\`` continues a line, ``#`` starts a
 comment, ``&&`` separates commands). Every command is parsed by its own parser (``refimpl``'s, ``python -m
 deploy``'s), and then run, in the order of the page, in one scratch folder per page that holds ``refimpl/``
-(the embedded sample), ``examples/`` and ``deploy/`` and has ``../shared`` beside it (a link to the real one), so
+(the embedded sample), ``examples/``, ``deploy/`` and ``pretrained/`` and has ``../shared`` beside it (a link to the real one), so
 the relative paths of the pages resolve as in a clone. Blocks that need earlier outputs get them from the
 commands before them; the few inputs a page names without making them are made first (:data:`SETUP`).
 
@@ -172,11 +172,12 @@ def _not_run(cmd: Command) -> str | None:
 
 
 def _workspace(tmp: Path) -> Path:
-    """A folder laid out as a clone: refimpl/, examples/, deploy/ linked; ../shared beside it."""
+    """A folder laid out as a clone: refimpl/, examples/, deploy/, pretrained/ linked; ../shared beside it."""
     work = tmp / "repo"
     work.mkdir()
-    for name in ("refimpl", "examples", "deploy"):
-        (work / name).symlink_to(ROOT / name)
+    for name in ("refimpl", "examples", "deploy", "pretrained", "constraints.txt"):
+        if (ROOT / name).exists():
+            (work / name).symlink_to(ROOT / name)
     if SHARED.is_dir():
         (tmp / "shared").symlink_to(SHARED)
     return work
