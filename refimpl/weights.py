@@ -242,10 +242,11 @@ def import_checkpoint(spec: ModelSpec, state: Mapping[str, np.ndarray], layout: 
             pass
         fields = ", ".join(f.name for f in getattr(config, "__dataclass_fields__", {}).values())
         hint = spec.import_hint
-        sizes = ("the names are right, the shapes another network's: the frame size follows the joint count of "
+        sizes = ("the names are right, the sizes another network's: its frame size follows the joint count of "
                  "--data's skeleton, so pass the data the weights were trained on (H3.6M weights: H3.6M data); "
                  if set(state) == {n for n, _ in names.values()} else "")
-        raise ValueError(f"{exc} (model {spec.name!r}, layout {layout!r}; {sizes}other sizes: --set one of {fields}"
+        raise ValueError(f"{exc} (model {spec.name!r}, layout {layout!r}; {sizes}other layer sizes: --set one of "
+                         f"{fields}"
                          + (f"; {hint}" if hint else "") + ")") from None
     kinds = sorted({a.dtype.name for a in params.values()})
     if dtype is None:

@@ -135,6 +135,7 @@ def test_import_with_the_right_names_and_another_skeleton_names_the_joint_count(
     err = capsys.readouterr().err
     assert rc == 3, err
     assert "joint count of --data's skeleton" in err and "names of --layout refimpl" not in err  # old: the hint
+    assert "other layer sizes: --set one of" in err
 
 
 # ------------------------------------------------------------------------------------------------------------

@@ -28,6 +28,7 @@ import re
 import shlex
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,6 +39,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
 PAGES = ("README.md", "deploy/README.md")
 FENCE = re.compile(r"^```(bash|sh)\s*$")
+
+#: Seconds one command may take (the slowest, the first read of the locomotion set, takes ~1 min idle).
+TIMEOUT_S = 1200
 
 #: (regular expression, replacement) applied to every command's text: the budgets, nothing else.
 BUDGETS = [
@@ -67,8 +71,8 @@ _TINY_QTG = ["--set", "encoder_sizes=16,8", "--set", "gru_hidden=8", "--set", "d
 #: Inputs a page names without making them: made before the page's first command (refimpl argv lists).
 SETUP = {
     "README.md": [
-        ["train", "--model", "acrnn", "--data", "../shared/data", "--set", "hidden_size=16", "--steps", "1",
-         "--out", "setup/acrnn", "--blas-threads", "1"],
+        # the README imports the published network at its paper sizes: a 1-step run of them gives its names
+        ["train", "--model", "acrnn", "--data", "../shared/data", "--steps", "1", "--out", "setup/acrnn"],
         ["export-weights", "setup/acrnn/checkpoint.npz", "--out", "weights.npz"],
     ],
     "deploy/README.md": [
@@ -190,7 +194,11 @@ def _run(cmd: Command, cwd: Path) -> tuple[int, str]:
         argv = [sys.executable, "-m", "refimpl", *argv[1:]]
     elif argv[0] == "python":
         argv = [sys.executable, *argv[1:]]
-    p = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
+    try:
+        p = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+    except subprocess.TimeoutExpired as exc:
+        out = (exc.stdout or b"").decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+        return -9, f"timed out after {TIMEOUT_S} s (a loaded machine?)\n{out[-1500:]}"
     return p.returncode, (p.stdout[-1500:] + p.stderr[-1500:])
 
 
@@ -265,7 +273,9 @@ def test_every_documented_command_runs(page, tmp_path):
         for name, make in PREPARE.items():
             if name in cmd.argv and not (work / name).exists():
                 make(work)
+        t0 = time.perf_counter()
         rc, log = _run(cmd, work)
+        print(f"{cmd.id}: exit {rc} in {time.perf_counter() - t0:.0f} s: {cmd.text[:90]}", flush=True)  # with -s
         ran += 1
         if rc != 0:
             failed.append(f"{cmd.id}: `{' '.join(cmd.argv)}` exit {rc}\n{log}")
