@@ -58,7 +58,7 @@ from refimpl.cli_info import cmd_info, cmd_pretrained
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
 from refimpl.bounds import bounded_int
 from refimpl.threads import AUTO, threads_option
-from refimpl.options import add_data_options, beta, check_overrides, nonneg_int, positive_float, positive_int
+from refimpl.options import add_data_options, add_export_length_option, beta, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
 from refimpl.pretrained import shipped_name
 from refimpl.run_options import RUN_OPTIONS, reconcile, restore_intervals, run_options
@@ -248,8 +248,7 @@ def cmd_export(args) -> int:
     out = Path(args.out) if args.out else _default_export_dir(args.checkpoint, model)
     task = task_of(model.spec)
     _refuse_other_tasks_options(args, model.spec.task, model.spec.name)
-    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length,
-                          **task.export_options(args))
+    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, **task.export_options(args))
     for role, path in written.items():
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
@@ -478,8 +477,7 @@ def _add_export_parser(sub) -> None:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="skip the onnxruntime-vs-NumPy check on the task's check inputs")
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random inputs")
-    p.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
-                   help="frames of the rollout / predict model (default: the model's)")
+    add_export_length_option(p)
     _add_task_options(p, lambda task, group: task.add_export_options(group))
     p.set_defaults(func=cmd_export)
 

@@ -216,7 +216,8 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     ``<name>_<role>.onnx`` in ``out_dir`` (the roles are the exporter's; standardisation inside the graphs).
 
     ``options``: ``mode`` (rollout graph: ``unrolled``, ``loop``, ``scan``; default ``unrolled``), ``dtype``
-    (default float32), and the task's ``export_options`` (e.g. ``T``, default: the model's).
+    (default float32), and the task's ``export_options`` (the exporter's keywords); an option given as None leaves
+    the recipe's value (its ``export_inputs``).
 
     Returns
     -------
@@ -227,10 +228,9 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     entry = _deploy_models("ONNX export").exporter(model.spec.exporter)
     _check_export_dir(Path(out_dir), model.spec.exporter)
     kw = dict(model.spec.export_inputs(model)) if model.spec.export_inputs is not None else {}
-    mode, dtype, T = options.pop("mode", "unrolled"), options.pop("dtype", np.float32), options.pop("T", None)
-    if T:
-        kw["T"] = T
-    return entry.export_dir(model.params, model.config, Path(out_dir), dtype=dtype, mode=mode, **kw, **options)
+    mode, dtype = options.pop("mode", "unrolled"), options.pop("dtype", np.float32)
+    kw.update({k: v for k, v in options.items() if v is not None})
+    return entry.export_dir(model.params, model.config, Path(out_dir), dtype=dtype, mode=mode, **kw)
 
 
 def _check_export_dir(out_dir: Path, name: str) -> None:

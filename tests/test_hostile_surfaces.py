@@ -1,6 +1,6 @@
 """Issue #28: hostile inputs on the surfaces QuaterNet, locomotion and acRNN added — one test per cause found at
 36aec31 (each fails on that commit), plus the size bounds (refimpl/bounds.py) and the per-task checkpoint schemas
-(refimpl/task_schemas.py). spec/cli.md §1.1, spec/robustness.md §9.1, §11.1."""
+(each task's CHECKPOINT_SCHEMA, refimpl/checkpoint_fields.py). spec/cli.md §1.1, spec/robustness.md §9.1, §11.1."""
 from __future__ import annotations
 
 import copy

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from refimpl import registry
+from refimpl.checkpoint_fields import TaskSchema, positive_int
 from refimpl.cli import main
 from refimpl.task_api import TASK_MEMBERS, Task, check_task
 from refimpl.train import ModelAdapter, OptimConfig
@@ -50,6 +51,7 @@ def _toy_task_module() -> types.ModuleType:
     t.NAME = "toy"
     t.EVAL_SUMMARY = "toy: mean |f(x) - y| on held-out rows, against zero"
     t.GENERATE_USAGE = "refimpl generate --model toy-linear (toy)"
+    t.CHECKPOINT_SCHEMA = TaskSchema("toy", fields={"rows": positive_int})
     t.add_train_options = lambda parser: parser.add_argument("--toy-rows", type=int, default=64)
     t.add_eval_options = lambda parser: None
     t.add_export_options = lambda parser: None

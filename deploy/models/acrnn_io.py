@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.models.acrnn import ACRNNConfig
+from refimpl.protocols.synthesis import CHECKPOINT_SCHEMA
 
 from deploy.graph import OPSET
 from deploy.models.arguments import count, frames_array
@@ -31,7 +32,7 @@ def load_checkpoint(path):
     """``(params, config, meta)`` of an acRNN training checkpoint (parameters ``param.<name>``, config from
     ``meta["model_config"]``; the statistics, representation and skeleton are in ``meta["model_config"]`` too)."""
     arrays, meta = read_checkpoint(path)
-    config = config_from_meta(ACRNNConfig, meta, task="synthesis", where=str(path))
+    config = config_from_meta(ACRNNConfig, meta, schema=CHECKPOINT_SCHEMA, where=str(path))
     return checked_params(checkpoint_params(arrays), config, str(path)), config, meta
 
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from refimpl.bounds import MAX_TRANSITION_FRAMES as _BOUND_T
 from refimpl.models.qtg import QTGConfig
+from refimpl.protocols.transition import CHECKPOINT_SCHEMA
 from refimpl.protocols.transition_join import inertialize_joins, join_blend_frames as default_blend
 
 from deploy.graph import OPSET
@@ -61,10 +62,10 @@ def load_checkpoint(path):
     arrays, meta = read_checkpoint(path, state_dict_ok=True)
     cfg = meta.get("model_config", {})
     cfg = {} if cfg is None else cfg
-    validate_task_fields(meta, where=where)  # top-level root_mean / root_std, when a caller stored them there
+    validate_task_fields(meta, CHECKPOINT_SCHEMA, where)  # top-level root_mean / root_std, when a caller stored them there
     if not isinstance(cfg, dict):
         raise ValueError(f"{where}: model_config: expected a JSON object, got {type(cfg).__name__}")
-    validate_task_fields(cfg, where=where)
+    validate_task_fields(cfg, CHECKPOINT_SCHEMA, where)
     config = validate_model_config(QTGConfig, cfg, where)
     params = checkpoint_params(arrays, state_dict_ok=True)
     validate_params(params, expected_param_shapes(qtg_model, QTGConfig, config), where, dtype=cfg.get("dtype"),

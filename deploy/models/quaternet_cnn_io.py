@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
+from refimpl.protocols.prediction_data import CHECKPOINT_SCHEMA
 
 from deploy.graph import OPSET
 from deploy.models.arguments import count, metadata_int
@@ -36,7 +37,7 @@ def load_checkpoint(path):
         return cfg
 
     params, meta = read_entry_checkpoint(path)
-    config = config_from_meta(QuaterNetCNNConfig, meta, convert, task="prediction" if meta else None, where=str(path))
+    config = config_from_meta(QuaterNetCNNConfig, meta, convert, schema=CHECKPOINT_SCHEMA if meta else None, where=str(path))
     return checked_params(params, config, str(path)), config, meta
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.models.quaternet import QuaterNetConfig
+from refimpl.protocols.prediction_data import CHECKPOINT_SCHEMA
 
 from deploy.graph import OPSET
 from deploy.models.arguments import count, frames_array, metadata_int
@@ -40,7 +41,7 @@ def load_checkpoint(path):
     legacy = {"quat": "quaternion"}  # the registry's representation name, stored by checkpoints before §9
     config = config_from_meta(QuaterNetConfig, meta, lambda c: {
         **c, **({"representation": legacy[c["representation"]]} if c.get("representation") in legacy else {})},
-        task="prediction" if meta else None, where=str(path))
+        schema=CHECKPOINT_SCHEMA if meta else None, where=str(path))
     return checked_params(params, config, str(path)), config, meta
 
 

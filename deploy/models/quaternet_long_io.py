@@ -21,9 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.bounds import MAX_CONFIG_SIZE
-from refimpl.task_schemas import validate_task_checkpoint
+from refimpl.checkpoint_schema import validate_task_schema
 from refimpl.models import pace
 from refimpl.models.quaternet import QuaterNetConfig
+from refimpl.protocols.locomotion_data import CHECKPOINT_SCHEMA
 
 from deploy.graph import save_model
 from deploy.models.arguments import count, frames_array
@@ -49,7 +50,7 @@ def load_checkpoint(path):
     params = checkpoint_params(arrays)
     where = str(path)
     if meta.get("model") == "pace":
-        config = config_from_meta(pace.PaceConfig, meta, task="locomotion", where=where)
+        config = config_from_meta(pace.PaceConfig, meta, schema=CHECKPOINT_SCHEMA, where=where)
         return checked_params(params, config, where), config, meta
     if meta.get("model") != NAME:
         raise ValueError(f"{path}: expected a quaternet-long or pace checkpoint, got model {meta.get('model')!r}")
@@ -67,7 +68,7 @@ def load_checkpoint(path):
                                         if cfg.get("output") == "dual_quaternion" else "quaternion")
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: model_config: {exc}") from None
-    validate_task_checkpoint("locomotion", cfg, net, where)
+    validate_task_schema(CHECKPOINT_SCHEMA, cfg, net, where)
     return checked_params(params, net, where), net, meta
 
 

@@ -35,7 +35,7 @@ def export_trained(entry, args) -> dict:
 
     model = load_trained(args.checkpoint)
     options = {"mode": args.mode or "unrolled", "dtype": {"float32": np.float32, "float64": np.float64}[args.dtype],
-               "T": args.frames}
+               "T": args.frames or None}
     if args.opset is not None:
         options["opset"] = args.opset
     return export_onnx(model, Path(args.out_dir), **options)

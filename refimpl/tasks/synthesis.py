@@ -15,8 +15,10 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.options import export_length
 from refimpl.errors import UsageError
 from refimpl.models import acrnn
+from refimpl.protocols.synthesis import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
 from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS,
                                          SALSA_TEST, SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE,
                                          TABLE1_ROWS, SynthesisData, evaluate_generator, frames_to_motion,
@@ -420,8 +422,8 @@ def generate_command(args, model) -> int:
 
 
 def export_options(args) -> dict:
-    """The exporter's options of ``refimpl export``: none."""
-    return {}
+    """The exporter's options of ``refimpl export``: ``T`` (``--transition-length``, when given)."""
+    return export_length(args)
 
 
 def verify_inputs(args, model) -> tuple:

@@ -36,7 +36,8 @@ from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
 from refimpl.bounds import bounded_int
-from refimpl.options import nonneg_int, positive_float
+from refimpl.options import export_length, nonneg_int, positive_float
+from refimpl.protocols.transition import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
 from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                           build_transition_datasets, declared_rate, join_pose, load_source,
                                           sample_sources, shared_sources, split_pose)
@@ -580,8 +581,9 @@ _JOIN_SUFFIX = {"none": "", "inertialize": "+join", "inertialize+footlock": "+jo
 
 
 def export_options(args) -> dict:
-    """The exporter's options of ``refimpl export``: ``join`` (``--join``, when not ``none``)."""
-    return {} if args.join == "none" else {"join": args.join}
+    """The exporter's options of ``refimpl export``: ``T`` (``--transition-length``, when given), ``join``
+    (``--join``, when not ``none``)."""
+    return {**export_length(args), **({} if args.join == "none" else {"join": args.join})}
 
 
 def verify_inputs(args, model) -> tuple:
