@@ -15,7 +15,7 @@ What changes, declared here (nothing else is touched):
   option are the page's.
 * :data:`NOT_RUN`: the install (this environment is it; ``test_ci_installs_as_the_readme_says`` checks that
   ``.ci/run`` runs the README's line), ``refimpl demo`` (``.ci/run`` runs it as written before the tests), the
-  test suite itself, and the C build without ``ORT_C_DIR`` (``tests/test_c_example.py`` builds it).
+  test suite itself, and the C build and run (``tests/test_c_example.py`` builds and runs it with ``ORT_C_DIR``).
 * Commands that need ``../shared`` are skipped when it is absent (they are still parsed).
 * ``SLOW``: the README's QTG-on-Bandai-Namco commands read the 830 locomotion files for transition windows,
   which is not cached (60 s on an idle machine, 250 s at load 9): they are parsed, and run only with
@@ -69,8 +69,8 @@ NOT_RUN = {
     "python -m pytest": "the test suite itself",
     "refimpl demo": ".ci/run runs it as written before the tests (tests/test_versions.py compares its numbers with "
                     "benchmarks/results/demo_eval.json); tests/test_demo.py runs demo --quick",
-    "cc ": "the C example; tests/test_c_example.py builds it with ORT_C_DIR",
-    "LD_LIBRARY_PATH=": "the C example; tests/test_c_example.py runs it with ORT_C_DIR",
+    "cc ": "the C example (shell variables, a C compiler): tests/test_c_example.py builds it with ORT_C_DIR",
+    "LD_LIBRARY_PATH=": "the C example: tests/test_c_example.py runs it with ORT_C_DIR",
 }
 
 #: Commands that read the Bandai Namco set for transitions (uncached, > 1 min): run with REFIMPL_README_SLOW=1.
@@ -179,8 +179,6 @@ def _parse(cmd: Command) -> None:
 def _not_run(cmd: Command) -> str | None:
     for prefix, why in NOT_RUN.items():
         if cmd.text.startswith(prefix):
-            if prefix in ("cc ", "LD_LIBRARY_PATH=") and os.environ.get("ORT_C_DIR"):
-                return None
             return why
     return None
 
