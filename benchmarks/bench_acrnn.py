@@ -28,6 +28,7 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.models import acrnn  # noqa: E402
@@ -141,7 +142,7 @@ def main():
         t = res["train_iteration"]
         print(f"training iteration (B 32, T 100, 3 x {a.train_hidden}): median {t['median_s']:.2f} s")
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(res, indent=2) + "\n")
+    Path(a.out).write_text(json.dumps(with_versions(res), indent=2) + "\n")
     print(f"wrote {a.out}")
 
 

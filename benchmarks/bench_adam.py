@@ -43,6 +43,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 import refimpl.optim as optim  # noqa: E402
 from refimpl.allocator import retain_freed_memory  # noqa: E402
@@ -235,7 +236,7 @@ def main(argv=None) -> int:
               "torch": None if torch is None else torch.__version__, "torch_threads": args.threads,
               "n_params": n, "block": optim._BLOCK, "bytes_per_param": BYTES_PER_PARAM, "checks": chk,
               "rounds": rounds, "summary": summary}
-    atomic_write_text(args.out, json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(args.out, json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {args.out}")
     return 0
 

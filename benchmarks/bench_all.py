@@ -43,6 +43,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.atomic import atomic_write_text  # noqa: E402
 
@@ -502,7 +503,7 @@ def main(argv=None) -> dict:
     result = {"benchmark": "bench_all", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "rounds": args.rounds,
               "threads": args.threads, "peaks_before": before, "peaks_after": after, "peaks": peaks,
               "load_average": loads, "runs": runs, "rows": rows, "results_folder": str(results)}
-    atomic_write_text(Path(args.out), json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(Path(args.out), json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {args.out}")
     return result
 

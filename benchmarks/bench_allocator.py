@@ -27,6 +27,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 MODELS = "qtg,quaternet,quaternet-cnn,acrnn,quaternet-long,pace"
 
@@ -99,7 +100,7 @@ def main(argv=None) -> dict:
     print("\nmodel             retain / system (min / median / max)")
     for name, case in result["cases"].items():
         print(f"{name:15s}   {case['ratio_min']:.2f} / {case['ratio_median']:.2f} / {case['ratio_max']:.2f}")
-    atomic_write_text(Path(args.out), json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(Path(args.out), json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {args.out}")
     return result
 

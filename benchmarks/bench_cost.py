@@ -60,6 +60,7 @@ import onnx  # noqa: E402
 import onnxruntime as ort  # noqa: E402
 
 from refimpl.atomic import atomic_write_text  # noqa: E402
+from refimpl.versions import with_versions  # noqa: E402
 
 try:
     from threadpoolctl import threadpool_info, threadpool_limits
@@ -451,7 +452,7 @@ def main(argv=None) -> dict:
         return result
     result = bench(tuple(a.models), a.rounds, a.min_time, a.quick)
     print(table(result))
-    atomic_write_text(Path(a.out), json.dumps(result, indent=1, sort_keys=True) + "\n")
+    atomic_write_text(Path(a.out), json.dumps(with_versions(result), indent=1, sort_keys=True) + "\n")
     print(f"wrote {a.out}")
     return result
 

@@ -30,6 +30,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl import dq_output, dq_output_fast  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
@@ -119,7 +120,7 @@ def main():
               "check": {"rel_grad_diff": gdiff, "rel_dpred_diff": ldiff},
               "load_average": os.getloadavg(), "platform": platform.platform(), "numpy": np.__version__,
               "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS")}
-    atomic_write_text(a.out, json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(a.out, json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {a.out}")
 
 

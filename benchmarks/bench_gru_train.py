@@ -39,6 +39,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init  # noqa: E402
@@ -219,7 +220,7 @@ def bench_torch(iters: int, threads: int | None) -> dict | None:
 
 
 def write_json_atomic(path: Path, obj) -> None:
-    atomic_write_text(path, json.dumps(obj, indent=2), make_parents=True)
+    atomic_write_text(path, json.dumps(with_versions(obj), indent=2), make_parents=True)
 
 
 def main(argv=None) -> int:

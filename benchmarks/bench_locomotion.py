@@ -31,6 +31,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.models import pace, quaternet  # noqa: E402
@@ -106,7 +107,7 @@ def main(argv=None) -> int:
     print("reference: 900 FPS on a P100 GPU (published code, paper size, batch 1)")
     doc = {"machine": platform.platform(), "load_average": load, "pace_ms_per_path": pace_ms,
            "results": results, "reference_fps_p100": 900}
-    atomic_write_text(Path(args.out), json.dumps(doc, indent=2) + "\n", make_parents=True)
+    atomic_write_text(Path(args.out), json.dumps(with_versions(doc), indent=2) + "\n", make_parents=True)
     return 0
 
 

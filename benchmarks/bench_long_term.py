@@ -45,6 +45,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -308,7 +309,7 @@ def main(argv=None) -> dict:
         print(f"{case:25s} {s['min']:.2f} / {s['median']:.2f} / {s['max']:.2f}"
               + (f"   NumPy / onnxruntime {res['summary']['numpy_over_onnxruntime']['median']:.2f}"
                  if "numpy_over_onnxruntime" in res["summary"] else ""))
-    atomic_write_text(Path(args.out), json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(Path(args.out), json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {args.out}")
     return result
 

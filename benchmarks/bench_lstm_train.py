@@ -53,6 +53,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
@@ -426,7 +427,7 @@ def main(argv=None) -> int:
                                                                    matmul_gflop=aflop / 1e9)),
               "n_params": count_parameters(params), "matmul_gflop_per_iteration": flop / 1e9,
               "checks_relative_error": checks, "check_tolerance": CHECK_TOL, "rounds": rounds, "summary": summary}
-    atomic_write_text(args.out, json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(args.out, json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {args.out}")
     return 0
 

@@ -54,6 +54,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 import onnxruntime as ort  # noqa: E402
 
@@ -460,7 +461,7 @@ def main(argv=None) -> dict:
     print(_table(result))
     print(f"load average before {load_before}, after {result['load_average_after']}; model: {desc}")
     out = Path(args.out)
-    atomic_write_text(out, json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(out, json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {out}")
     return result
 

@@ -47,6 +47,7 @@ import onnxruntime as ort  # noqa: E402
 from deploy.models import exporter  # noqa: E402
 from deploy.session import make_session  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
+from refimpl.versions import with_versions  # noqa: E402
 
 #: Model -> (exporter key, file prefix).
 MODELS = {"qtg": ("qtg", "qtg"), "quaternet": ("quaternet", "quaternet"),
@@ -218,7 +219,7 @@ def main(argv=None) -> dict:
     a = p.parse_args(argv)
     result = bench(a.threads, a.rounds, a.min_time, a.quick, tuple(a.models))
     print(table(result))
-    atomic_write_text(Path(a.out), json.dumps(result, indent=1, sort_keys=True) + "\n")
+    atomic_write_text(Path(a.out), json.dumps(with_versions(result), indent=1, sort_keys=True) + "\n")
     print(f"wrote {a.out}")
     return result
 

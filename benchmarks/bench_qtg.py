@@ -47,6 +47,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.models.qtg import (QTGConfig, count_parameters, init_params, macs_per_frame,  # noqa: E402
@@ -432,7 +433,7 @@ def main(argv=None) -> dict:
                                                        "numpy": np.__version__, "blas": _blas(),
                                                        "loadavg_start": os.getloadavg()},
                   "ort": bench_ort(args, cfg)}
-        atomic_write_text(out, json.dumps(result, indent=2), make_parents=True)
+        atomic_write_text(out, json.dumps(with_versions(result), indent=2), make_parents=True)
         print(f"wrote {out}")
         return result
     if args.train:
@@ -447,7 +448,7 @@ def main(argv=None) -> dict:
         else:
             result["numpy_blas_threads"] = "default (threadpoolctl absent)"
             result["train"] = bench_train(args, cfg)
-        atomic_write_text(out, json.dumps(result, indent=2), make_parents=True)
+        atomic_write_text(out, json.dumps(with_versions(result), indent=2), make_parents=True)
         print(f"wrote {out}")
         return result
 
@@ -497,7 +498,7 @@ def main(argv=None) -> dict:
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".json.tmp")
     with open(tmp, "w") as f:
-        json.dump(result, f, indent=2)
+        json.dump(with_versions(result), f, indent=2)
         f.flush()
         os.fsync(f.fileno())
     os.replace(tmp, out)

@@ -31,6 +31,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from deploy.graph import save_model  # noqa: E402
 from deploy.models.quaternet import export_quaternet_predict, export_quaternet_step  # noqa: E402
@@ -188,9 +189,9 @@ def main(argv=None) -> int:
     for n, med, mn in rows:
         print(f"{n.ljust(width)}  {med:9.2f} {mn:9.2f}")
     out = ROOT / "benchmarks" / "results" / "bench_quaternet.json"
-    atomic_write_text(out, json.dumps({"hidden_size": config.hidden_size, "threads": args.threads,
+    atomic_write_text(out, json.dumps(with_versions({"hidden_size": config.hidden_size, "threads": args.threads,
                                        "rounds": rounds, "loadavg": os.getloadavg(),
-                                       "results_ms": {n: {"median": med, "min": mn} for n, med, mn in rows}},
+                                       "results_ms": {n: {"median": med, "min": mn} for n, med, mn in rows}}),
                                       indent=1) + "\n", make_parents=True)
     print(f"wrote {out}")
     return 0

@@ -41,6 +41,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.allocator import retain_freed_memory  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
@@ -254,7 +255,7 @@ def main(argv=None) -> dict:
           f"numpy {s['numpy_ms']['median']:.0f} ms, torch {s['torch_ms']['median']:.0f} ms, numpy/torch "
           f"{s['numpy_over_torch']['min']:.2f} / {s['numpy_over_torch']['median']:.2f} / "
           f"{s['numpy_over_torch']['max']:.2f} (min/median/max; goal ≤ 0.67)")
-    atomic_write_text(Path(args.out), json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(Path(args.out), json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {args.out}")
     return result
 

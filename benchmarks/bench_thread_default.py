@@ -38,6 +38,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.atomic import atomic_write_text  # noqa: E402
 
@@ -153,7 +154,7 @@ def main(argv=None) -> int:
                default_blas_threads=default, conditions=conditions, rounds=a.rounds, steps=a.steps, skip=a.skip,
                cpu_count=os.cpu_count(), time_utc=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                summary=summary, runs=runs)
-    atomic_write_text(a.out, json.dumps(out, indent=1) + "\n", make_parents=True)
+    atomic_write_text(a.out, json.dumps(with_versions(out), indent=1) + "\n", make_parents=True)
     print(f"wrote {a.out}")
     return 0
 

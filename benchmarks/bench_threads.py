@@ -32,6 +32,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from threadpoolctl import threadpool_info, threadpool_limits  # noqa: E402
 
@@ -170,7 +171,7 @@ def main(argv=None) -> dict:
                   f"({what})", flush=True)
     result["load_average_after"] = os.getloadavg()
     print(f"load average before {result['load_average_before']}, after {result['load_average_after']}")
-    atomic_write_text(Path(args.out), json.dumps(result, indent=2), make_parents=True)
+    atomic_write_text(Path(args.out), json.dumps(with_versions(result), indent=2), make_parents=True)
     print(f"wrote {args.out}")
     return result
 

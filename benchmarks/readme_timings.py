@@ -32,6 +32,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from refimpl.versions import with_versions  # noqa: E402
 
 from refimpl.atomic import atomic_write_text  # noqa: E402
 
@@ -162,7 +163,7 @@ def main(argv=None) -> int:
                  "--pace", str(tmp / "pace" / "checkpoint.npz"), "--path", "circle:r=3", "--speed", "walk",
                  "--seconds", "120", "--out", str(tmp / "walk.bvh")], a.timeout, env)
     finally:
-        atomic_write_text(a.out, json.dumps(out, indent=1) + "\n", make_parents=True)
+        atomic_write_text(a.out, json.dumps(with_versions(out), indent=1) + "\n", make_parents=True)
         shutil.rmtree(tmp, ignore_errors=True)
     print(f"wrote {a.out}")
     bad = [k for k, v in R.items() if v.get("rc") != 0]

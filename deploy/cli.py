@@ -12,8 +12,9 @@ Every model goes through its entry of the exporter table ``deploy.models.EXPORTE
     Open the folder's models with the runtime of the model named in their metadata
     (``deploy.models.runtime_for_dir``) and call the entry's ``run_command(runtime, args)``: the model's natural
     input (a BVH clip, an exp-map prefix, a seed take, ``.npy`` frames) to its natural output (BVH or ``.npy``).
-``info MODEL.onnx``
-    Validate a model and print its inputs, outputs and metadata.
+``info MODEL.onnx`` | ``info MODEL_DIR``
+    Validate a model (or every ``.onnx`` file of a folder, in name order) and print its inputs, outputs and
+    metadata; a missing, empty or undecodable model is exit 3.
 ``web DIR [DIR ...] [--port N]``
     Serve the models of the folders in a web page on 127.0.0.1 (``deploy.serve``: onnxruntime-web and three.js,
     installed once with ``npm ci``).
@@ -109,9 +110,41 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_info(args) -> int:
+    """``info FILE.onnx`` or ``info DIR``: the contract of one model, or of every ``.onnx`` file in a folder (in
+    name order, each under a ``== name ==`` line). A missing, empty or undecodable model is exit 3."""
+    from pathlib import Path
+
+    path = Path(args.model)
+    if path.is_dir():
+        files = sorted(path.glob("*.onnx"))
+        if not files:
+            raise _BadInput(f"{path}: a folder without .onnx files")
+        for k, file in enumerate(files):
+            print(f"{'' if k == 0 else chr(10)}== {file.name} ==")
+            _print_contract(_load_for_info(file))
+        return 0
+    _print_contract(_load_for_info(path))
+    return 0
+
+
+def _load_for_info(path):
+    """The :class:`deploy.runtime.DeployedModel` of ``path``; a file that is missing or cannot be read as a valid
+    ONNX model is :class:`_BadInput` (exit 3)."""
+    from refimpl.errors import MissingDependency
+
     from deploy.runtime import load_model
 
-    m = load_model(args.model)
+    if not path.is_file():
+        raise _BadInput(f"{path}: no such file")
+    try:
+        return load_model(path)
+    except (MissingDependency, BrokenPipeError):
+        raise
+    except Exception as exc:  # noqa: BLE001 - whatever the decoder or the checker says: the file is bad
+        raise _BadInput(f"{path}: not a valid ONNX model ({' '.join(str(exc).split())[:300]})") from None
+
+
+def _print_contract(m) -> None:
     for title, entries in (("inputs", m.inputs), ("outputs", m.outputs)):
         print(f"{title}:")
         for n, shape, t in entries:
@@ -131,7 +164,6 @@ def _cmd_info(args) -> int:
         elif key == "io":
             continue
         print(f"  {key}: {json.dumps(value)}")
-    return 0
 
 
 def _cmd_web(args) -> int:
@@ -194,8 +226,8 @@ def _parser():
     run_owners: dict = {}
     _add_model_options(r, "add_run_options", run_owners)
     r.set_defaults(func=_cmd_run, _owners=run_owners)
-    i = sub.add_parser("info", help="validate a model and print its contract")
-    i.add_argument("model")
+    i = sub.add_parser("info", help="validate a model (or every .onnx file of a folder) and print its contract")
+    i.add_argument("model", help="an .onnx file or a folder of exported models")
     i.set_defaults(func=_cmd_info, _owners={})
     w = sub.add_parser("web", help="serve the models of folders in a web page on 127.0.0.1 (onnxruntime-web)")
     w.add_argument("folders", nargs="+", metavar="DIR", help="folders written by python -m deploy export")

@@ -17,6 +17,7 @@ render      a BVH / exp-map motion (optionally against a second one) to a PNG st
 demo        the whole tour on the embedded sample (:mod:`refimpl.demo`)
 import      a PyTorch state dict (.npz, .safetensors, .pt) as a checkpoint; ``export-weights`` the reverse
             (:mod:`refimpl.weights_cli`, spec/import.md)
+cache       the data cache's entries and size; ``--clear`` empties it (:mod:`refimpl.cache_cli`)
 pretrained  the shipped trained models and their cards; ``--checkpoint pretrained:<name>`` everywhere
             (:mod:`refimpl.pretrained`)
 ==========  ==============================================================================================
@@ -51,7 +52,7 @@ from typing import Sequence
 
 import numpy as np
 
-from refimpl import weights_cli
+from refimpl import cache_cli, weights_cli
 from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info, cmd_pretrained
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
@@ -60,7 +61,7 @@ from refimpl.threads import AUTO, threads_option
 from refimpl.options import add_data_options, add_export_length_option, beta, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
 from refimpl.pretrained import shipped_name
-from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
+from refimpl.run_options import RUN_OPTIONS, reconcile, restore_intervals, run_options
 from refimpl.threads import blas_thread_pool
 from refimpl.services import (export_onnx, load_trained, onnx_metadata, read_motion, train_model,
                               verify_onnx)
@@ -72,6 +73,7 @@ EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
 EXIT_BAD_INPUT = 3
+DEFAULT_EPOCHS = 10  # `train` without --steps / --epochs
 
 
 def _say(*parts) -> None:
@@ -89,20 +91,42 @@ def _progress_line(line: str) -> None:
 
 def _reuse_run_options(args, ckpt: Path) -> None:
     """``--resume``: the options stored in the checkpoint fill those not given; a given option that differs is a
-    usage error listing only the differing fields, before any data is read (spec/cli.md §4)."""
+    usage error listing only the differing fields, before any data is read (spec/cli.md §4). The run's budget
+    and its checkpoint / validation / progress intervals come from its stored ``train_config`` when not given."""
     from refimpl.checkpoint import load_checkpoint
 
     with reading(ckpt):
         _, meta = load_checkpoint(ckpt)
-    stored = (meta.get("train_config") or {}).get("run_options") if isinstance(meta, dict) else None
-    if not isinstance(stored, dict):  # a checkpoint written before the options were stored: the flags as given
+    if not isinstance(meta, dict):
         return
-    if stored.get("model") not in MODELS:
-        raise BadInputError(f"{ckpt}: run option model {stored.get('model')!r} is not one of {sorted(MODELS)}")
-    conflicts = reconcile(args, stored, args.option_defaults)
-    if conflicts:
-        raise UsageError(f"--resume: {ckpt} was trained with other options:\n  " + "\n  ".join(conflicts)
-                         + "\n(leave them out to continue with the checkpoint's, or start again with --overwrite)")
+    train_config = meta.get("train_config") if isinstance(meta.get("train_config"), dict) else {}
+    stored = train_config.get("run_options")
+    if isinstance(stored, dict):  # else a checkpoint written before the options were stored: the flags as given
+        if stored.get("model") not in MODELS:
+            raise BadInputError(f"{ckpt}: run option model {stored.get('model')!r} is not one of {sorted(MODELS)}")
+        conflicts = reconcile(args, _resolved_defaults(stored), args.option_defaults)
+        if conflicts:
+            raise UsageError(f"--resume: {ckpt} was trained with other options:\n  " + "\n  ".join(conflicts)
+                             + "\n(leave them out to continue with the checkpoint's, or start again with --overwrite)")
+    restore_intervals(args, train_config, args.option_defaults)
+    if args.steps is None and args.epochs is None and isinstance(train_config.get("steps"), int):
+        args.steps = train_config["steps"]  # the stored budget (old: the default 10 epochs)
+    args.resume_step = meta.get("step")  # a finished run is refused once the output folder is locked
+
+
+def _resolved_defaults(stored: dict) -> dict:
+    """The stored options with an unset ``lr`` / ``betas`` / ``batch_size`` (None: the model's default, as
+    checkpoints before #35 stored them) replaced by the model's value, so that a conflict names a number."""
+    spec = MODELS[stored["model"]]
+    filled = {"lr": spec.optim.lr, "betas": list(spec.optim.betas), "batch_size": spec.batch_size}
+    return {k: (filled[k] if v is None and k in filled else v) for k, v in stored.items()}
+
+
+def _refuse_finished(done, steps, ckpt: Path) -> None:
+    """UsageError when the checkpoint is already at (or beyond) the budget ``steps``: nothing would be trained."""
+    if isinstance(done, int) and isinstance(steps, int) and done >= steps:
+        raise UsageError(f"--resume: {ckpt} is at step {done} of a {steps}-step budget: nothing to train "
+                         f"(pass --steps N with N > {done} to train further)")
 
 
 def _resumable(args) -> tuple:
@@ -143,6 +167,8 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
                 (out / f).unlink()
     if args.batch_size is None:
         args.batch_size = spec.batch_size
+    if args.resume:
+        _refuse_finished(getattr(args, "resume_step", None), args.steps, ckpt)  # before the data is read
     t0 = time.perf_counter()
     _say(f"reading {args.data} ...")
     train_ds, test_ds = task.train_datasets(args)
@@ -151,13 +177,16 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
         args.batch_size = spec.batch_size
     n = task.num_examples(train_ds)
     per_epoch = max(1, n // min(args.batch_size, n))
-    steps = args.steps if args.steps is not None else args.epochs * per_epoch
+    steps = args.steps if args.steps is not None else (args.epochs or DEFAULT_EPOCHS) * per_epoch
+    if args.resume:
+        _refuse_finished(getattr(args, "resume_step", None), steps, ckpt)  # --epochs E: the budget is known once the data is read
     _say(f"data: {task.describe_data(train_ds, test_ds)} in {time.perf_counter() - t0:.1f} s; "
          f"{per_epoch} steps per epoch")
     described = config.to_dict() if hasattr(config, "to_dict") else dataclasses.asdict(config)
     _say(f"model: {spec.name} {json.dumps(described)}")
     lr = spec.optim.lr if args.lr is None else args.lr
     betas = tuple(spec.optim.betas if args.betas is None else args.betas)
+    args.lr, args.betas = lr, betas  # stored as numbers (spec/cli.md §4)
     _say(f"training {steps} steps (batch {args.batch_size}, Adam lr {lr:g}, betas {betas}) -> {out}/")
     result = train_model(spec, config, train_ds, test_ds, out, steps=steps, batch_size=args.batch_size,
                          lr=lr, betas=betas, clip_norm=args.clip_norm, seed=args.seed,
@@ -302,7 +331,7 @@ def _parse_slice(text: str | None, n: int) -> slice:
 
 def cmd_render(args) -> int:
     """``refimpl render``."""
-    from refimpl.render import render_gif
+    from refimpl.render import render_gif, stderr_progress
     from refimpl.render_strip import limb_sides, render_strip
 
     motion = read_motion(args.file, fps=args.fps, layout=args.layout)
@@ -328,6 +357,7 @@ def cmd_render(args) -> int:
                          up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title, sides=sides)
         elif suffix == ".gif":
             render_gif(out, pos, parents, prediction=pred, fps=motion.fps / step, stride=args.stride, labels=labels,
+                       progress=stderr_progress,
                        up=args.up, frame_numbers=idx, title=args.title, sides=sides)
         else:
             raise UsageError(f"--out {out}: expected a .png or .gif file name")
@@ -351,7 +381,7 @@ def cmd_demo(args) -> int:
 
 
 def _add_pretrained_parser(sub) -> None:
-    """``refimpl pretrained [NAME]``: the shipped trained models and their cards (spec/cli.md §10)."""
+    """``refimpl pretrained [NAME]``: the shipped trained models and their cards (spec/cli.md §11)."""
     p = sub.add_parser("pretrained", help="list the shipped trained models (pretrained:<name>) and their cards",
                        description="List the shipped trained models, or show one's card. Each is used by name "
                                    "wherever a checkpoint is accepted: --checkpoint pretrained:<name> (eval, "
@@ -388,7 +418,8 @@ def _add_train_parser(sub) -> None:
     p.add_argument("--out", default=None, help="output folder (default runs/<model>)")
     length = p.add_mutually_exclusive_group()
     length.add_argument("--steps", type=bounded_int("steps"), default=None, help="optimiser steps")
-    length.add_argument("--epochs", type=bounded_int("steps"), default=10, help="epochs, when --steps is not given (default 10)")
+    length.add_argument("--epochs", type=bounded_int("steps"), default=None,
+                        help=f"epochs, when --steps is not given (default {DEFAULT_EPOCHS}; --resume: the stored budget)")
     p.add_argument("--batch-size", type=bounded_int("batch"), default=None,
                    help="batch size (default: the model's paper value; "
                         + ", ".join(f"{n} {s.batch_size}" for n, s in sorted(MODELS.items())) + ")")
@@ -555,7 +586,30 @@ def build_parser() -> argparse.ArgumentParser:
     _add_demo_parser(sub)
     weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
     _add_pretrained_parser(sub)
+    cache_cli.add_parser(sub)  # cache [--clear] (spec/cli.md §11)
+    return _global_options_after_the_command(parser)
+
+
+#: The top-level options that every sub-command also accepts after its name (spec/cli.md §1).
+GLOBAL_OPTIONS = ("--traceback", "--blas-threads", "--malloc")
+
+
+def _global_options_after_the_command(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Copy :data:`GLOBAL_OPTIONS` into every sub-command's parser (``refimpl train ... --blas-threads 1``), with
+    no default there, so that a value given before the command is kept unless given again after it."""
+    top = {a.option_strings[0]: a for a in parser._actions if a.option_strings}
+    for sub in _subparsers(parser).choices.values():
+        group = sub.add_argument_group("options of every command (also before it)")
+        for flag in GLOBAL_OPTIONS:
+            a = top[flag]
+            extra = {} if a.nargs == 0 else {"type": a.type, "choices": a.choices, "metavar": a.metavar}
+            group.add_argument(flag, dest=a.dest, default=argparse.SUPPRESS, help=a.help,
+                               **({"action": "store_true"} if a.nargs == 0 else extra))
     return parser
+
+
+def _subparsers(parser: argparse.ArgumentParser):
+    return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
 
 
 def _one_line(exc: BaseException, limit: int = 1000) -> str:
@@ -572,7 +626,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``refimpl`` command line; returns the exit code (0 ok, 1 failure, 2 usage, 3 bad input file)."""
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args, unknown = parser.parse_known_args(argv)
+        if unknown:  # with the sub-command's usage (`train --modle qtg`), not the top level's
+            command = _subparsers(parser).choices.get(getattr(args, "command", None), parser)
+            command.error(f"unrecognized arguments: {' '.join(unknown)}")
     except SystemExit as exc:  # argparse: --help / --version (0) or a usage error (2)
         return exc.code if isinstance(exc.code, int) else (EXIT_OK if exc.code is None else EXIT_USAGE)
     if args.command is None:

@@ -39,6 +39,7 @@ from refimpl.protocols.transition import SAMPLE_DIR
 from refimpl.protocols.transition_join import with_join
 from refimpl.registry import MODELS
 from refimpl.threads import blas_thread_pool
+from refimpl.versions import library_versions
 from refimpl.services import (evaluate_model, export_onnx, load_trained, network_methods, train_model,
                               verify_onnx)
 from refimpl.tasks.transition import print_results, write_results
@@ -249,7 +250,9 @@ def _step_evaluate(tour: _Tour, model, test_ds):
     print_results(results, test_ds, model, curve=False)
     files["eval_json"] = tour.out / "eval.json"
     files["eval_curve_csv"] = tour.out / "eval_per_frame.csv"
-    write_results(results, 1.0 / test_ds.fps, json_path=files["eval_json"], csv_path=files["eval_curve_csv"])
+    write_results(results, 1.0 / test_ds.fps, json_path=files["eval_json"], csv_path=files["eval_curve_csv"],
+                  extra={"versions": library_versions(),
+                         "run": {"steps": tour.n_steps, "seed": tour.seed, "quick": tour.quick}})
     q = results["qtg"]["mean_cm"]
     best = min((k for k in results if not k.startswith("qtg")), key=lambda k: results[k]["mean_cm"])
     b = results[best]["mean_cm"]

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import csv
 import os
+import sys
+import time
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -33,7 +35,7 @@ import numpy as np
 
 from refimpl.atomic import atomic_path
 
-__all__ = ["render_gif", "render_loss_curve", "render_error_curves", "read_loss_log",
+__all__ = ["render_gif", "stderr_progress", "render_loss_curve", "render_error_curves", "read_loss_log",
            "render_path_motion"]
 
 GT_COLOR = "tab:blue"
@@ -60,7 +62,8 @@ def _finish_plot(fig, ax, title, path) -> Path:
 def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, fps: float = 30.0,
                stride: int = 1, highlight: tuple[int, int] | None = None,
                labels: tuple[str, str] = ("ground truth", "prediction"), title: str | None = None,
-               up: str = "y", frame_numbers=None, panel_size: float = 2.6, dpi: float = 80, sides=None) -> Path:
+               up: str = "y", frame_numbers=None, panel_size: float = 2.6, dpi: float = 80, sides=None,
+               progress=None) -> Path:
     """Animate a motion (and, side by side, a prediction) and save it as a GIF with Pillow.
 
     The camera follows the ground-truth root horizontally, with one fixed scale (equal aspect, orthographic).
@@ -84,6 +87,9 @@ def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, 
         Draw every ``stride``-th frame.
     highlight, labels, title, up, frame_numbers, panel_size, dpi, sides
         As in :func:`refimpl.render_strip.render_strip`.
+    progress : callable, optional
+        ``progress(line)`` every ~5 s of drawing (``"walk.gif: frame 120 of 300, 11 s"``; the commands pass
+        :func:`stderr_progress`: a long GIF takes a minute).
 
     Returns
     -------
@@ -145,7 +151,11 @@ def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, 
     writer = PillowWriter(fps=max(1.0, fps / int(stride)))
     with atomic_path(path, make_parents=True) as tmp:
         with writer.saving(fig, str(tmp), dpi):
-            for t in idx:  # one draw per frame: move the artists, then grab
+            t0 = t_last = time.perf_counter()
+            for k, t in enumerate(idx):  # one draw per frame: move the artists, then grab
+                if progress is not None and time.perf_counter() - t_last > 5.0:
+                    t_last = time.perf_counter()
+                    progress(f"{path.name}: frame {k} of {len(idx)}, {t_last - t0:.0f} s")
                 context = highlight is not None and not (start <= t < stop)
                 for ax, grid, layers in panels:
                     centre_axes(ax, grid, gt_p[t, 0, :2], half, floor, mid)
@@ -156,6 +166,11 @@ def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, 
                 caption.set_text(f"frame {numbers[t]}" + (" (context)" if context else ""))
                 writer.grab_frame(facecolor="white")
     return path
+
+
+def stderr_progress(line: str) -> None:
+    """Print a progress line to stderr at once (the ``progress`` of the commands' pictures)."""
+    print(line, file=sys.stderr, flush=True)
 
 
 def read_loss_log(csv_path: str | os.PathLike) -> dict[str, np.ndarray]:

@@ -1,8 +1,10 @@
 """The options of a training run, stored in its checkpoint so that ``refimpl train --resume`` reuses them
 (spec/cli.md §4).
 
-A run is decided by its model, representation, data, ``--set`` overrides, optimiser, batch, dtype, seed and
-its task's options. ``refimpl train`` stores them (:func:`run_options`) in the checkpoint's
+A run is decided by its model, representation, data (with its frame rate, held-out share and window stride),
+``--set`` overrides, optimiser (the learning rate and betas stored as numbers), batch, dtype, seed and its task's
+options; its budget and its checkpoint / validation / progress intervals (:data:`INTERVALS`) are in every
+checkpoint's ``train_config`` (spec/cli.md §4). ``refimpl train`` stores them (:func:`run_options`) in the checkpoint's
 ``train_config["run_options"]``; on ``--resume`` (:func:`reconcile`) an option left at its default takes the
 stored value, an option given with the stored value is accepted, and an option given with another value is a
 conflict, reported field by field (for ``--set``: only the fields that differ) before any data is read.
@@ -13,10 +15,15 @@ from __future__ import annotations
 
 from typing import Iterable, Mapping
 
-__all__ = ["RUN_OPTIONS", "run_options", "reconcile"]
+__all__ = ["RUN_OPTIONS", "INTERVALS", "run_options", "reconcile", "restore_intervals"]
 
 #: The ``refimpl train`` options that decide a run (besides each task's own options).
-RUN_OPTIONS = ("model", "representation", "data", "set", "lr", "betas", "clip_norm", "batch_size", "dtype", "seed")
+RUN_OPTIONS = ("model", "representation", "data", "fps", "test_fraction", "stride", "set", "lr", "betas",
+               "clip_norm", "batch_size", "dtype", "seed")
+
+#: Options that shape a run's files but not its numbers: restored on ``--resume`` when not given (from the
+#: checkpoint's ``train_config``, which every checkpoint holds), and free to change.
+INTERVALS = ("checkpoint_every", "validate_every", "progress_every")
 
 
 def _json(value):
@@ -28,12 +35,27 @@ def run_options(args, names: Iterable[str]) -> dict:
     return {n: _json(getattr(args, n)) for n in names if hasattr(args, n)}
 
 
+def restore_intervals(args, train_config: Mapping, defaults: Mapping) -> None:
+    """Set each :data:`INTERVALS` option of ``args`` left at its parser default to ``train_config``'s value."""
+    for name in INTERVALS:
+        if name in train_config and getattr(args, name, None) == defaults.get(name):
+            setattr(args, name, train_config[name])
+
+
 def _set_fields(items) -> dict:
     out = {}
     for item in items or ():
         key, _, value = str(item).partition("=")
         out[key.strip().replace("-", "_")] = value.strip()
     return out
+
+
+def _shown(value) -> str:
+    if isinstance(value, list):
+        return " ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value)
+    if value is None:
+        return "none"
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def reconcile(args, stored: Mapping, defaults: Mapping) -> list[str]:
@@ -62,5 +84,6 @@ def reconcile(args, stored: Mapping, defaults: Mapping) -> list[str]:
         if current == _json(defaults.get(name)):
             setattr(args, name, tuple(value) if isinstance(value, list) else value)
         elif current != value:
-            conflicts.append(f"--{name.replace('_', '-')}: the checkpoint has {value}, the command line {current}")
+            conflicts.append(f"--{name.replace('_', '-')}: the checkpoint has {_shown(value)}, "
+                             f"the command line {_shown(current)}")
     return conflicts

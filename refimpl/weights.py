@@ -235,13 +235,18 @@ def import_checkpoint(spec: ModelSpec, state: Mapping[str, np.ndarray], layout: 
     except ValueError as exc:
         other = next((o for o in LAYOUTS if o != layout), None)
         try:
-            if set(state) == {n for n, _ in layout_names(spec, config, other).values()}:
+            if set(state) != {n for n, _ in names.values()} and \
+                    set(state) == {n for n, _ in layout_names(spec, config, other).values()}:
                 raise ValueError(f"{exc} (these are the names of --layout {other})") from None
         except UsageError:
             pass
         fields = ", ".join(f.name for f in getattr(config, "__dataclass_fields__", {}).values())
         hint = spec.import_hint
-        raise ValueError(f"{exc} (model {spec.name!r}, layout {layout!r}; other sizes: --set one of {fields}"
+        sizes = ("the names are right, the sizes another network's: its frame size follows the joint count of "
+                 "--data's skeleton, so pass the data the weights were trained on (H3.6M weights: H3.6M data); "
+                 if set(state) == {n for n, _ in names.values()} else "")
+        raise ValueError(f"{exc} (model {spec.name!r}, layout {layout!r}; {sizes}other layer sizes: --set one of "
+                         f"{fields}"
                          + (f"; {hint}" if hint else "") + ")") from None
     kinds = sorted({a.dtype.name for a in params.values()})
     if dtype is None:

@@ -47,6 +47,7 @@ def cmd_import(args) -> int:
     if args.representation is not None and args.representation not in spec.representations:
         raise UsageError(f"--representation {args.representation!r}: model {spec.name!r} trains on "
                          f"{list(spec.representations)}")
+    args.layout = _import_layout(spec, args.layout)  # an impossible layout is exit 2 before the data is read
     p = existing_file(args.weights)
     with reading(p):
         state = read_state_dict(p)
@@ -59,6 +60,18 @@ def cmd_import(args) -> int:
     _say(f"imported {p} ({len(arrays)} tensors, {n:,} values, layout {args.layout}) as model {spec.name}")
     _say(f"checkpoint {out}  (next: refimpl info / eval / generate / export --checkpoint {out})")
     return 0
+
+
+def _import_layout(spec, layout):
+    """``--layout`` of ``refimpl import``: as given, or the model's default (published when the model has
+    published code); ``published`` for a model without it is a UsageError."""
+    has_published = spec.published_names is not None
+    if layout is None:
+        return "published" if has_published else "refimpl"
+    if layout == "published" and not has_published:
+        raise UsageError(f"--layout published: model {spec.name!r} has no published code to take names from; "
+                         f"use --layout refimpl (spec/import.md)")
+    return layout
 
 
 def cmd_export_weights(args) -> int:
@@ -88,10 +101,10 @@ def add_parsers(sub) -> None:
                                    "See spec/import.md.")
     p.add_argument("weights", help="state dict file: .npz (np.savez), .safetensors, or .pt/.pth/.bin (needs torch)")
     p.add_argument("--model", required=True, choices=sorted(MODELS), help="network the weights are for")
-    p.add_argument("--layout", default="published", choices=LAYOUTS,
+    p.add_argument("--layout", default=None, choices=LAYOUTS,
                    help="parameter names: 'published' (the published code's: QuaterNet, pace, acRNN lstm1..3; "
                         "acRNN then uses the published skewed stack) or 'refimpl' (this project's; default "
-                        "published)")
+                        "published for a model with published code, refimpl for QTG and quaternet-cnn)")
     p.add_argument("--out", required=True, help="checkpoint to write (.npz)")
     p.add_argument("--representation", default=None, help="the task's representation / row (as for train)")
     add_data_options(p)

@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Modules not listed (new ones) must be added here: the test fails until they are.
 LAYERS = {
     0: ["refimpl", "refimpl._parsing", "refimpl.atomic", "refimpl.datacache", "refimpl.testing", "refimpl.gradcheck",
-        "refimpl.bounds"],
+        "refimpl.bounds", "refimpl.versions"],
     1: ["refimpl.quat", "refimpl.rotations", "refimpl.dualquat"],
     2: ["refimpl.skeleton", "refimpl.current_dq", "refimpl.mirroring", "refimpl.bone_ik"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.bvh_write", "refimpl.expmap", "refimpl.skeletons",
@@ -27,7 +27,7 @@ LAYERS = {
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
         "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.recipe_api", "refimpl.run_options",
         "refimpl.threads", "refimpl.pretrained"],
-    8: ["refimpl.cli", "refimpl.cli_info", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
+    8: ["refimpl.cli", "refimpl.cli_info", "refimpl.weights_cli", "refimpl.cache_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).
 DEPLOY_IMPORTERS = {"refimpl.cli", "refimpl.demo", "refimpl.services"}

@@ -48,7 +48,9 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
     assert model.meta["step"] == QUICK_STEPS
     assert len((out / "train" / "loss.csv").read_text().splitlines()) == QUICK_STEPS + 1
     results = json.loads((out / "eval.json").read_text())
-    assert set(results) == {"qtg", "qtg+join", "qtg+join+footlock", "inertialization", "interpolation"}
+    assert set(results) == {"qtg", "qtg+join", "qtg+join+footlock", "inertialization", "interpolation", "versions",
+                            "run"}
+    assert results["versions"]["numpy"] == np.__version__ and "kernel" in results["versions"]["blas"]
     q = results["qtg+join"]["quality"]
     for key in ("join_in_cm", "join_out_cm", "skate_cm_s", "first_frame_cm", "last_frame_cm", "ground_truth"):
         assert key in q

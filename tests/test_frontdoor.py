@@ -43,7 +43,7 @@ class _ClosedPipe:
             raise BrokenPipeError(32, "Broken pipe")
 
 
-def test_deploy_info_into_a_closed_pipe_stops_quietly(monkeypatch, capsys):
+def test_deploy_info_into_a_closed_pipe_stops_quietly(monkeypatch, capsys, tmp_path):
     import deploy.cli
     import deploy.runtime
 
@@ -55,7 +55,8 @@ def test_deploy_info_into_a_closed_pipe_stops_quietly(monkeypatch, capsys):
     deploy.cli._parser()  # imports every exporter's module first, so none of them binds the stand-in below
     monkeypatch.setattr(deploy.runtime, "load_model", lambda path: _Model())
     monkeypatch.setattr("sys.stdout", _ClosedPipe())
-    assert deploy.cli.main(["info", "model.onnx"]) == 1  # old: BrokenPipeError traceback
+    (tmp_path / "model.onnx").write_bytes(b"")  # info checks that the file exists (#35) before loading it
+    assert deploy.cli.main(["info", str(tmp_path / "model.onnx")]) == 1  # old: BrokenPipeError traceback
 
 
 # ------------------------------------------------------------------------------------------------ the defects
@@ -150,7 +151,7 @@ def test_resume_reuses_the_stored_options(tmp_path, capsys):
     cap = capsys.readouterr()
     assert rc == 2
     assert "--set hidden_size: the checkpoint has 8, the command line 16" in cap.err
-    assert "--lr: the checkpoint has None, the command line 0.5" in cap.err
+    assert "--lr: the checkpoint has 0.0001, the command line 0.5" in cap.err  # #35: the default's value, not None
     assert "num_layers" not in cap.err and "mean" not in cap.err and len(cap.err) < 600
     assert "reading" not in cap.out  # before any data is read
     assert load_checkpoint(out / "checkpoint.npz")[1]["step"] == 4

@@ -350,8 +350,8 @@ def test_mismatched_files_exit_3_with_one_line(tmp_path, capsys):
 
 def test_bad_options_exit_2(tmp_path, capsys):
     np.savez(tmp_path / "a.npz", **_state("qtg", layout="refimpl"))
-    _one_line_error(capsys, _import(tmp_path, tmp_path / "a.npz", "qtg"), 2)                 # no published code
-    assert _import(tmp_path, tmp_path / "a.npz", "qtg", "--layout", "refimpl") == 0
+    _one_line_error(capsys, _import(tmp_path, tmp_path / "a.npz", "qtg", "--layout", "published"), 2)  # no code
+    assert _import(tmp_path, tmp_path / "a.npz", "qtg") == 0  # #35: QTG's default layout is refimpl
     capsys.readouterr()
     _one_line_error(capsys, _import(tmp_path, tmp_path / "a.npz", "qtg", "--layout", "refimpl"), 2)  # exists
     _one_line_error(capsys, _import(tmp_path, tmp_path / "a.npz", "qtg", "--layout", "refimpl", out="c.pt"), 2)

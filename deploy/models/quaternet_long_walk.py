@@ -171,7 +171,7 @@ def run_walk(runtime, args) -> int:
     else:
         write_outputs(walk, bvh=out, controls=args.controls)
         what = describe_walk(walk)
-    warning = short_walk_warning(walk, seconds)
+    warning = short_walk_warning(walk, seconds, given=args.seconds is not None)
     if warning:
         print(f"python -m deploy run: warning: {warning}", file=sys.stderr, flush=True)
     print(f"wrote {out}: {what}" + (f"; controls {args.controls}" if args.controls else ""))

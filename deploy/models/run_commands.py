@@ -82,7 +82,8 @@ def run_prediction(runtime, args) -> int:
     s = len(rotations) - 1 if args.start is None else int(args.start)
     pr = prediction.make_prediction(prediction.onnx_method(runtime), rotations, s, P, k,
                                     skeleton=prediction.skeleton_of(dataset), frame_time=1.0 / fps,
-                                    method_name=f"{meta['model']['name']}_onnx", name=Path(args.output).stem)
+                                    method_name=f"{meta['model']['name']}_onnx", name=Path(args.output).stem,
+                                    flag="--start")
     if str(args.output).lower().endswith(".npy"):
         write_npy(args.output, pr.motion.rotations[pr.start:pr.stop])
     else:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -132,15 +133,36 @@ def load_bandai_namco_source(source: TransitionSource, fps: float = 30.0):
     return skel, [(rot[a:b], pos[a:b])]
 
 
-def build_datasets(root, T: int = 30, stride: int = 4, test_stride: int | None = None):
+def build_datasets(root, T: int = 30, stride: int = 4, test_stride: int | None = None, progress=None):
     """Train and test :class:`~refimpl.protocols.transition.TransitionDataset` of the takes in ``root`` (spec/qtg.md §8.4).
 
     Windows of ``2 + T + 2`` poses every ``stride`` frames of every take (``test_stride`` for the held-out takes,
-    default ``stride``); root statistics from the training windows.
+    default ``stride``); root statistics from the training windows. ``progress(line)``, when given, hears every
+    ~5 s how many files have been read (``"read 212 of 830 files, 15 s"``: the whole set takes a minute or more).
     """
     train_src, test_src = bandai_namco_sources(root)
+    loader = load_bandai_namco_source
+    if progress is not None:
+        loader = _counting(loader, len(train_src) + len(test_src), progress)
     return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride,
-                                     loader=load_bandai_namco_source)
+                                     loader=loader)
+
+
+def _counting(loader, total: int, progress, every_s: float = 5.0):
+    """``loader`` that calls ``progress`` with the number of files read at most every ``every_s`` seconds."""
+    t0 = time.perf_counter()
+    state = {"n": 0, "last": t0}
+
+    def load(source, **kw):
+        out = loader(source, **kw)
+        state["n"] += 1
+        now = time.perf_counter()
+        if now - state["last"] > every_s:
+            state["last"] = now
+            progress(f"read {state['n']} of {total} files, {now - t0:.0f} s")
+        return out
+
+    return load
 
 
 def heldout_dataset(root, root_mean, root_std, T: int = 30, stride: int = 4):

@@ -35,7 +35,7 @@ __all__ = [
     "add_export_options", "add_generate_options", "resolve_files", "train_datasets", "num_examples",
     "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of", "rig_of",
     "onnx_method", "methods", "evaluate", "load_eval_data", "eval_command", "walk_options", "walk_from_checkpoints",
-    "describe_walk", "short_walk_warning", "generate_command", "export_options", "verify_inputs",
+    "describe_walk", "short_walk_warning", "skating_phrase", "generate_command", "export_options", "verify_inputs",
 ]
 
 NAME = "locomotion"
@@ -327,13 +327,24 @@ def describe_walk(walk) -> str:
             f"centimetres; root travelled {dist:.1f} m along a {walk.path.length * QUATERNET_UNIT_CM / 100:.1f} m path")
 
 
-def short_walk_warning(walk, seconds: float) -> str | None:
-    """The warning when an open path ended before ``seconds`` (the motion is shorter than asked), else None."""
+def skating_phrase(skate: dict) -> str:
+    """``foot skating 3.2 cm/s in contact (41 % of foot-frames)`` of a :func:`foot_skating` result, or, when no
+    foot-frame is in contact (a briefly trained network's feet may never rest), ``foot skating: no foot in contact``
+    (not ``nan cm/s``)."""
+    if not math.isfinite(skate["speed_cm_s"]):
+        return "foot skating: no foot in contact (no foot-frame within 2 cm of its lowest height)"
+    return (f"foot skating {skate['speed_cm_s']:.1f} cm/s in contact ({100 * skate['contact_fraction']:.0f} % of "
+            f"foot-frames)")
+
+
+def short_walk_warning(walk, seconds: float, given: bool = True) -> str | None:
+    """The warning when an open path ended before ``seconds`` (the motion is shorter than asked), else None;
+    ``given=False``: ``seconds`` is the default length, not a ``--seconds`` of the command line."""
     asked, n = int(round(seconds * FPS)), walk.motion.num_frames
     if n >= asked:
         return None
-    return (f"the path ends after {n / FPS:.1f} s at this speed; --seconds {seconds:g} asked for {asked} frames, "
-            f"the motion has {n}")
+    what = f"--seconds {seconds:g} asked for" if given else f"the default length ({seconds:g} s) is"
+    return f"the path ends after {n / FPS:.1f} s at this speed; {what} {asked} frames, the motion has {n}"
 
 
 def generate_command(args, model) -> int:
@@ -371,8 +382,7 @@ def generate_command(args, model) -> int:
     agree = np.sum(face * walk.controls[:, 4:6], axis=-1)
     _say(f"wrote {out}: {describe_walk(walk)}")
     _say(f"facing vs the pace network: median angle {math.degrees(np.median(np.arccos(np.clip(agree, -1, 1)))):.1f}°;"
-        f" foot skating {skate['speed_cm_s']:.1f} cm/s in contact ({100 * skate['contact_fraction']:.0f} % of "
-        f"foot-frames); bone-length drift {bone_length_drift(m) * QUATERNET_UNIT_CM:.2g} cm")
+        f" {skating_phrase(skate)}; bone-length drift {bone_length_drift(m) * QUATERNET_UNIT_CM:.2g} cm")
     if walk.dq_positions is not None:  # dual quaternions: the positions the network's losses saw (Eq. 8)
         gap = np.linalg.norm(walk.dq_positions - m.positions(), axis=-1) * QUATERNET_UNIT_CM
         drift = dq_bone_length_drift(walk.dq_positions, m.skeleton)
@@ -380,7 +390,7 @@ def generate_command(args, model) -> int:
         _say(f"dual quaternions: positions read from the DQs (Eq. 8) vs FK of the decoded rotations (Eq. 12): mean "
             f"{gap.mean():.2f} cm, max {gap.max():.2f} cm; DQ bone-length drift mean {drift['mean'] * QUATERNET_UNIT_CM:.2f}"
             f" cm ({100 * drift['mean_relative']:.1f} %), max {drift['max'] * QUATERNET_UNIT_CM:.2f} cm (not enforced "
-            f"by the representation); foot skating of the DQ positions {dq_skate['speed_cm_s']:.1f} cm/s")
+            f"by the representation); of the DQ positions: {skating_phrase(dq_skate)}")
     for f in (args.gif, args.png, args.controls):
         if f:
             _say(f"wrote {f}")

@@ -273,9 +273,11 @@ class Prediction:
 
 
 def make_prediction(method: Callable, rotations, frame: int, prefix_length: int, k: int, *, skeleton: Skeleton,
-                    frame_time: float, method_name: str = "network", name: str = "prediction") -> Prediction:
+                    frame_time: float, method_name: str = "network", name: str = "prediction",
+                    flag: str = "--source-frame") -> Prediction:
     """Predict ``k`` frames after frame ``frame`` of ``rotations (F, J, 4)`` from the ``prefix_length`` frames
-    ending there (``method(prefix (1, P, J, 4), k)``).
+    ending there (``method(prefix (1, P, J, 4), k)``); ``flag`` names the option of ``frame`` in the error
+    (``python -m deploy run``: ``--start``).
 
     Raises
     ------
@@ -288,7 +290,7 @@ def make_prediction(method: Callable, rotations, frame: int, prefix_length: int,
     rot = np.asarray(rotations, dtype=np.float64)
     F = rot.shape[0]
     if not prefix_length - 1 <= frame <= F - 1:
-        raise UsageError(f"--source-frame must lie in [{prefix_length - 1}, {F - 1}] (a {prefix_length}-frame "
+        raise UsageError(f"{flag} must lie in [{prefix_length - 1}, {F - 1}] (a {prefix_length}-frame "
                          f"prefix ending there, frames at the model's rate), got {frame}")
     prefix = rot[frame - prefix_length + 1:frame + 1]  # (P, J, 4)
     pred = np.asarray(method(prefix[None], int(k)), dtype=np.float64)[0]  # (k, J, 4)
@@ -307,7 +309,7 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
     """Draw a :class:`Prediction` (against its ground truth when it has one): the last ``context`` prefix frames
     and the predicted ones, as a PNG strip and / or a GIF, numbered as in the BVH the prediction is written to,
     with a title (default: the method and the predicted frames)."""
-    from refimpl.render import render_gif
+    from refimpl.render import render_gif, stderr_progress
     from refimpl.render_strip import render_strip
 
     a = max(0, pr.start - context)
@@ -327,6 +329,7 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
                                     frame_time=pr.motion.frame_time, frame_numbers=numbers))
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred if pr.truth is not None else None,
+                                  progress=stderr_progress,
                                   fps=pr.motion.fps, highlight=hl, labels=labels, title=title,
                                   frame_numbers=numbers))
     return written

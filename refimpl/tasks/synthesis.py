@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+import time
 from pathlib import Path
 from typing import Mapping
 
@@ -24,7 +25,7 @@ from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, END_S
                                          in_source_units, load_salsa_motion, load_synthesis_data, motion_to_frames,
                                          skeleton_of)
 from refimpl.registry import require_source
-from refimpl.services import checkpoint_for, evaluate_model, network_methods
+from refimpl.services import checkpoint_for, network_methods
 from refimpl.skeleton import Skeleton
 from refimpl.tasks.transition_generate import with_end_sites
 
@@ -242,13 +243,21 @@ def methods(networks: Mapping | None = None, *, fps: float = FPS) -> dict:
     return {**dict(networks or {}), "hold": _hold_last}
 
 
-def evaluate(test_ds: SynthesisData, methods_by_name: Mapping, max_seeds: int = MAX_SEEDS) -> dict:
-    """The protocol (:func:`evaluate_generator`) for each method on raw frames: ``{name: result}``."""
+def evaluate(test_ds: SynthesisData, methods_by_name: Mapping, max_seeds: int = MAX_SEEDS, progress=None) -> dict:
+    """The protocol (:func:`evaluate_generator`) for each method on raw frames: ``{name: result}``;
+    ``progress(line)``, when given, hears each method's start and end and every ~5 s of its seeds."""
     out = {}
-    for name, f in methods_by_name.items():
+    for k, (name, f) in enumerate(methods_by_name.items(), 1):
         def gen(seed, n, f=f):
             return test_ds.standardise(f(test_ds.destandardise(seed), n))
-        out[name] = evaluate_generator(gen, test_ds, max_seeds=max_seeds)
+        t0 = time.perf_counter()
+        if progress is not None:
+            progress(f"evaluating {name} ({k} of {len(methods_by_name)}) ...")
+        out[name] = evaluate_generator(gen, test_ds, max_seeds=max_seeds,
+                                       progress=None if progress is None else (lambda line, n=name:
+                                                                              progress(f"  {n}: {line}")))
+        if progress is not None:
+            progress(f"  {name}: {out[name]['num_seeds']} seeds in {time.perf_counter() - t0:.1f} s")
     return out
 
 
@@ -363,7 +372,8 @@ def eval_command(args, model) -> int:
         print(f"refimpl eval: warning: take(s) {', '.join(seen)} of --data {args.data} were training takes of "
               f"{args.checkpoint} (trained on {', '.join(model.extra.get('train_takes'))}): these scores are not "
               "held-out (pass --data with the model's own test takes)", file=sys.stderr, flush=True)
-    results = evaluate_model(model, data, onnx_dir=args.onnx)
+    results = evaluate(data, methods(network_methods(model, onnx_dir=args.onnx), fps=data.fps),
+                       progress=lambda line: print(line, file=sys.stderr, flush=True))  # a minute or more
     print_results(results, data, model)
     if args.json:
         write_results(results, args.json)
@@ -393,7 +403,7 @@ def generate_command(args, model) -> int:
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
          "centimetres (the take's units)")
     if args.png or args.gif:
-        from refimpl.render import render_gif
+        from refimpl.render import render_gif, stderr_progress
         from refimpl.render_strip import render_strip
 
         pos = motion.positions()
@@ -405,6 +415,7 @@ def generate_command(args, model) -> int:
             _say(f"wrote {args.png}")
         if args.gif:
             render_gif(args.gif, pos, parents, fps=motion.fps, highlight=(seed_frames, motion.num_frames),
+                       progress=stderr_progress,
                        labels=labels)
             _say(f"wrote {args.gif}")
     return 0

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -252,7 +253,8 @@ def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.
     spec/qtg.md §8.4)."""
     if data != "sample" and is_bandai_namco_folder(data):
         try:
-            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride)
+            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride,
+                                      progress=lambda line: print(f"  {line}", file=sys.stderr, flush=True))
         except (OSError, ValueError) as exc:
             raise BadInputError(f"--data {data}: {exc}") from exc
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
@@ -440,11 +442,12 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
         _say(_curve_table(results, 1.0 / test_ds.fps))
 
 
-def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=None, csv_path=None) -> None:
-    """Write :func:`refimpl.services.evaluate_model` results as JSON (everything) and / or CSV (the per-frame
-    curves)."""
+def write_results(results: Mapping[str, dict], frame_time: float, *, json_path=None, csv_path=None,
+                  extra: Mapping | None = None) -> None:
+    """Write :func:`refimpl.services.evaluate_model` results as JSON (everything, and the keys of ``extra``, e.g.
+    the demo's ``versions``) and / or CSV (the per-frame curves)."""
     if json_path:
-        atomic_write_text(Path(json_path), _results_json(results), make_parents=True)
+        atomic_write_text(Path(json_path), _results_json({**results, **(extra or {})}), make_parents=True)
     if csv_path:
         atomic_write_text(Path(csv_path), _curve_csv(results, frame_time), make_parents=True)
 

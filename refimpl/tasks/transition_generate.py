@@ -174,7 +174,7 @@ def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
     (:func:`refimpl.render_strip.limb_sides`), the feet's floor tracks
     (:func:`refimpl.protocols.transition_quality.foot_joints`) and a floor grid fixed in the world (spec/cli.md).
     """
-    from refimpl.render import render_gif
+    from refimpl.render import render_gif, stderr_progress
     from refimpl.render_strip import join_frames, limb_sides, render_strip
 
     skel = tr.motion.skeleton
@@ -191,7 +191,7 @@ def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
                                     feet=_feet(skel)))
         _say(f"wrote {png}")
     if gif:
-        written.append(render_gif(gif, gt, parents, prediction=pred, fps=tr.motion.fps,
+        written.append(render_gif(gif, gt, parents, prediction=pred, fps=tr.motion.fps, progress=stderr_progress,
                                   highlight=(tr.start, tr.stop), labels=labels, title=title, sides=sides))
         _say(f"wrote {gif}")
     return written

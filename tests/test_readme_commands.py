@@ -1,0 +1,307 @@
+"""Every command of README.md and deploy/README.md runs as written (issue #35): a documented command that fails is
+a failing test.
+
+Each ```bash / ```sh block of the two pages is split into commands (``\\`` continues a line, ``#`` starts a
+comment, ``&&`` separates commands). Every command is parsed by its own parser (``refimpl``'s, ``python -m
+deploy``'s), and then run, in the order of the page, in one scratch folder per page that holds ``refimpl/``
+(the embedded sample), ``examples/``, ``deploy/`` and ``pretrained/`` and has ``../shared`` beside it (a link to the real one), so
+the relative paths of the pages resolve as in a clone. Blocks that need earlier outputs get them from the
+commands before them; the few inputs a page names without making them are made first (:data:`SETUP`).
+
+What changes, declared here (nothing else is touched):
+
+* :data:`BUDGETS`: budgets become tiny (``--steps 2``, small hidden sizes, a 2 s walk, 40 of the locomotion
+  set's files), so the whole file takes a few minutes on an idle machine; the commands, paths and every other
+  option are the page's.
+* :data:`NOT_RUN`: the install (this environment is it; ``test_ci_installs_as_the_readme_says`` checks that
+  ``.ci/run`` runs the README's line), ``refimpl demo`` (``.ci/run`` runs it as written before the tests), the
+  test suite itself, and the C build and run (``tests/test_c_example.py`` builds and runs it with ``ORT_C_DIR``).
+* Commands that need ``../shared`` are skipped when it is absent (they are still parsed).
+* ``SLOW``: the README's QTG-on-Bandai-Namco commands read the 830 locomotion files for transition windows,
+  which is not cached (60 s on an idle machine, 250 s at load 9): they are parsed, and run only with
+  ``REFIMPL_README_SLOW=1`` (the README says so).
+"""
+from __future__ import annotations
+
+import functools
+import os
+import re
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared"
+PAGES = ("README.md", "deploy/README.md")
+FENCE = re.compile(r"^```(bash|sh)\s*$")
+
+#: Seconds one command may take (the slowest, the first read of the locomotion set, takes ~1 min idle).
+TIMEOUT_S = 1200
+
+#: (regular expression, replacement) applied to every command's text: the budgets, nothing else.
+BUDGETS = [
+    (r"--steps \d+", "--steps 2"),
+    (r"--epochs \d+", "--steps 2"),
+    (r"hidden_size=\d+", "hidden_size=16"),
+    (r"channels=\d+", "channels=16"),
+    (r"--seconds \d+", "--seconds 2"),
+    (r"--length 300\b", "--length 12"),
+    (r"--frames 300\b", "--frames 12"),
+    # the locomotion networks read 40 of the 830 files (the whole set: minutes on a loaded machine)
+    (r"(--model (?:pace|quaternet-long) --data \.\./shared/data/bandai_namco_locomotion)",
+     r"\1 --locomotion-max-files 40"),
+    # the imported acRNN is a small one (the setup exports a 16-unit network): its evaluation takes seconds
+    (r"^(refimpl import weights\.npz --model acrnn)", r"\1 --set hidden_size=16"),
+]
+
+#: Options the budgets may add to a command.
+ADDED = ("--locomotion-max-files", "--set")
+
+#: Commands not run (prefix of the command's text -> why).
+NOT_RUN = {
+    "python -m pip install": "the environment of this test is the install (.ci/run runs the README's line)",
+    "python -m pytest": "the test suite itself",
+    "refimpl demo": ".ci/run runs it as written before the tests (tests/test_versions.py compares its numbers with "
+                    "benchmarks/results/demo_eval.json); tests/test_demo.py runs demo --quick",
+    "cc ": "the C example (shell variables, a C compiler): tests/test_c_example.py builds it with ORT_C_DIR",
+    "LD_LIBRARY_PATH=": "the C example: tests/test_c_example.py runs it with ORT_C_DIR",
+}
+
+#: Commands that read the Bandai Namco set for transitions (uncached, > 1 min): run with REFIMPL_README_SLOW=1.
+SLOW = re.compile(r"runs/qtg_bn|--model qtg --data \.\./shared/data/bandai_namco_locomotion")
+
+_TINY_QTG = ["--set", "encoder_sizes=16,8", "--set", "gru_hidden=8", "--set", "decoder_sizes=16"]
+#: Inputs a page names without making them: made before the page's first command (refimpl argv lists).
+SETUP = {
+    "README.md": [
+        # published names of a small acRNN (BUDGETS imports it with --set hidden_size=16)
+        ["train", "--model", "acrnn", "--data", "../shared/data", "--set", "hidden_size=16", "--steps", "1",
+         "--out", "setup/acrnn"],
+        ["export-weights", "setup/acrnn/checkpoint.npz", "--out", "weights.npz"],
+    ],
+    "deploy/README.md": [
+        ["train", "--model", "qtg", "--steps", "2", *_TINY_QTG, "--out", "runs/qtg"],
+        ["train", "--model", "quaternet", "--steps", "2", "--set", "hidden_size=16", "--out", "runs/quaternet"],
+        ["train", "--model", "acrnn", "--steps", "2", "--set", "hidden_size=16", "--out", "runs/acrnn"],
+        ["train", "--model", "quaternet-long", "--data", "../shared/data/bandai_namco_locomotion", "--steps", "2",
+         "--set", "hidden_size=16", "--locomotion-max-files", "40", "--out", "runs/long"],
+        ["train", "--model", "pace", "--data", "../shared/data/bandai_namco_locomotion", "--steps", "2",
+         "--locomotion-max-files", "40", "--out", "runs/pace"],
+    ],
+}
+
+
+@dataclass(frozen=True)
+class Command:
+    page: str
+    line: int
+    text: str   # as written (continuations joined, comment removed)
+    argv: tuple  # after BUDGETS
+
+    @property
+    def id(self) -> str:
+        return f"{self.page}:{self.line}"
+
+
+def _logical_lines(block: list[tuple[int, str]]):
+    buf, start = "", None
+    for n, line in block:
+        if start is None:
+            start = n
+        if line.rstrip().endswith("\\"):
+            buf += line.rstrip()[:-1] + " "
+            continue
+        yield start, buf + line
+        buf, start = "", None
+
+
+def page_commands(page: str) -> list[Command]:
+    """The commands of ``page``'s ```bash / ```sh blocks, in order."""
+    lines = (ROOT / page).read_text(encoding="utf-8").splitlines()
+    out, block, inside = [], [], False
+    for n, line in enumerate(lines, 1):
+        if not inside and FENCE.match(line):
+            inside, block = True, []
+        elif inside and line.startswith("```"):
+            inside = False
+            for start, text in _logical_lines(block):
+                tokens = shlex.split(text, comments=True)
+                while tokens:
+                    cut = tokens.index("&&") if "&&" in tokens else len(tokens)
+                    written = shlex.join(tokens[:cut])
+                    budget = written
+                    for pattern, repl in BUDGETS:
+                        budget = re.sub(pattern, repl, budget)
+                    out.append(Command(page, start, written, tuple(shlex.split(budget))))
+                    tokens = tokens[cut + 1:]
+        elif inside:
+            block.append((n, line))
+    return out
+
+
+def _kind(argv) -> str:
+    if argv[0] == "refimpl":
+        return "refimpl"
+    if argv[:3] == ("python", "-m", "deploy"):
+        return "deploy"
+    return "other"
+
+
+@functools.lru_cache(maxsize=None)
+def _parser_of(kind: str):
+    if kind == "refimpl":
+        from refimpl.cli import build_parser
+
+        return build_parser()
+    from deploy.cli import _parser
+
+    return _parser()
+
+
+def _parse(cmd: Command) -> None:
+    """The command's own parser accepts it (an unknown option, a typo of the page: exit 2 here)."""
+    kind = _kind(cmd.argv)
+    if kind == "other":
+        return
+    parser, rest = _parser_of(kind), list(cmd.argv[1:] if kind == "refimpl" else cmd.argv[3:])
+    try:
+        parser.parse_args(rest)
+    except SystemExit as exc:
+        pytest.fail(f"{cmd.id}: `{cmd.text}` does not parse (exit {exc.code})")
+
+
+def _not_run(cmd: Command) -> str | None:
+    for prefix, why in NOT_RUN.items():
+        if cmd.text.startswith(prefix):
+            return why
+    return None
+
+
+def _workspace(tmp: Path) -> Path:
+    """A folder laid out as a clone: refimpl/, examples/, deploy/, pretrained/ linked; ../shared beside it."""
+    work = tmp / "repo"
+    work.mkdir()
+    for name in ("refimpl", "examples", "deploy", "pretrained", "constraints.txt"):
+        if (ROOT / name).exists():
+            (work / name).symlink_to(ROOT / name)
+    if SHARED.is_dir():
+        (tmp / "shared").symlink_to(SHARED)
+    return work
+
+
+def _run(cmd: Command, cwd: Path) -> tuple[int, str]:
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    argv = list(cmd.argv)
+    if argv[0] == "refimpl":
+        argv = [sys.executable, "-m", "refimpl", *argv[1:]]
+    elif argv[0] == "python":
+        argv = [sys.executable, *argv[1:]]
+    try:
+        p = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+    except subprocess.TimeoutExpired as exc:
+        out = (exc.stdout or b"").decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+        return -9, f"timed out after {TIMEOUT_S} s (a loaded machine?)\n{out[-1500:]}"
+    return p.returncode, (p.stdout[-1500:] + p.stderr[-1500:])
+
+
+def _needs_shared(cmd: Command) -> bool:
+    return "../shared" in cmd.text
+
+
+def _setup(page: str, work: Path) -> None:
+    for argv in SETUP.get(page, ()):
+        if "../shared" in " ".join(argv) and not SHARED.is_dir():
+            continue
+        cmd = Command(page, 0, "refimpl " + shlex.join(argv), ("refimpl", *argv))
+        rc, log = _run(cmd, work)
+        assert rc == 0, f"setup `{cmd.text}` failed:\n{log}"
+    if page == "deploy/README.md":  # the path CSV and the .npy frames the page's walk commands read
+        (work / "path.csv").write_text("x,z\n" + "\n".join(f"{0.05 * i:.2f},{0.01 * i:.2f}" for i in range(80)))
+
+
+def _frames_for_the_long_model(work: Path) -> None:
+    """``inputs.npy`` of deploy/README.md's ``run long/ inputs.npy ...``: (1, 40, 4 J + 8) frames with controls,
+    J from the exported step model's skeleton (identity rotations, zero controls)."""
+    from deploy.runtime import load_model
+
+    J = len(load_model(work / "long" / "quaternet-long_step.onnx").metadata["skeleton"]["names"])
+    x = np.zeros((1, 40, 4 * J + 8), np.float32)
+    x[:, :, 0:4 * J:4] = 1.0
+    np.save(work / "inputs.npy", x)
+
+
+#: Inputs made just before the first command that names them (a page's earlier commands make what they need).
+PREPARE = {"inputs.npy": _frames_for_the_long_model}
+
+
+def test_every_page_has_commands():
+    for page in PAGES:
+        assert len(page_commands(page)) >= 8, page
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_every_documented_command_parses(page):
+    for cmd in page_commands(page):
+        _parse(cmd)
+
+
+def test_ci_installs_as_the_readme_says():
+    install = next(c.text for c in page_commands("README.md") if c.text.startswith("python -m pip install"))
+    assert "-c constraints.txt" in install
+    ci = [shlex.split(line, comments=True) for line in (ROOT / ".ci" / "run").read_text().splitlines()]
+    assert shlex.split(install) in ci, ".ci/run must install exactly as the README says"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", PAGES)
+def test_every_documented_command_runs(page, tmp_path):
+    """Run every command of ``page`` in order (budgets of :data:`BUDGETS`); collect every failure."""
+    work = _workspace(tmp_path)
+    _setup(page, work)
+    slow = os.environ.get("REFIMPL_README_SLOW") == "1"
+    failed, ran, skipped = [], 0, []
+    for cmd in page_commands(page):
+        why = _not_run(cmd)
+        if why is None and _needs_shared(cmd) and not SHARED.is_dir():
+            why = "needs ../shared"
+        if why is None and SLOW.search(cmd.text) and not slow:
+            why = "reads the Bandai Namco set for transitions (> 1 min): REFIMPL_README_SLOW=1 runs it"
+        if why is None and page == "deploy/README.md" and "long/" in cmd.text and not SHARED.is_dir():
+            why = "the long-term models train on ../shared"
+        if why is not None:
+            skipped.append(f"{cmd.id} {cmd.text[:60]}: {why}")
+            continue
+        _parse(cmd)
+        for name, make in PREPARE.items():
+            if name in cmd.argv and not (work / name).exists():
+                make(work)
+        t0 = time.perf_counter()
+        rc, log = _run(cmd, work)
+        print(f"{cmd.id}: exit {rc} in {time.perf_counter() - t0:.0f} s: {cmd.text[:90]}", flush=True)  # with -s
+        ran += 1
+        if rc != 0:
+            failed.append(f"{cmd.id}: `{' '.join(cmd.argv)}` exit {rc}\n{log}")
+    print("\n".join(["not run:"] + skipped))
+    assert not failed, "\n\n".join(failed)
+    assert ran >= 5
+
+
+def test_budgets_only_shrink_numbers():
+    """The replacements change budgets, never a path or an option name."""
+    for page in PAGES:
+        for cmd in page_commands(page):
+            written = shlex.split(cmd.text)
+            flags = [t for t in written if t.startswith("--")]
+            want = [("--steps" if f == "--epochs" else f) for f in flags]
+            got = [t for t in cmd.argv if t.startswith("--")]
+            extra = list(got)
+            for f in want:
+                extra.remove(f)
+            assert all(f in ADDED for f in extra), cmd.id  # and every written option is still there (remove)
+
