@@ -43,7 +43,7 @@ from refimpl.skeleton import Skeleton, remove_joints
 from refimpl.splines import gaussian_filter1d
 from refimpl.checkpoint_fields import TaskSchema, int_field, kind_of, number_array, require_fields, skeleton_field
 
-__all__ = ["CHECKPOINT_SCHEMA", 
+__all__ = ["CHECKPOINT_SCHEMA", "skeleton_of", 
     "QUATERNET_UNIT_CM", "FPS", "PHASE_EPSILON", "PHASE_COOLDOWN", "AMPLITUDE_SIGMA", "FEATURE_NAMES",
     "LocomotionRig", "CMU_RIG", "BANDAI_NAMCO_RIG", "load_cmu_bvh", "load_cmu_expmap", "load_bandai_namco",
     "prepare_motion", "mirror_motion", "facing_vectors", "build_phase_track", "extract_features",
@@ -529,6 +529,14 @@ def bandai_namco_split(paths: Iterable) -> tuple[list, list]:
 
 
 # ---- what the task stores in a checkpoint (spec/robustness.md §9.1) ----
+
+def skeleton_of(model_config: Mapping) -> Skeleton:
+    """The training skeleton a locomotion checkpoint stores (``refimpl.tasks.locomotion.checkpoint_extra``), with
+    its sides."""
+    s = model_config["skeleton"]
+    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), names=s["names"],
+                    joints_left=s.get("joints_left"), joints_right=s.get("joints_right"))
+
 
 def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
     """The locomotion fields: ``rig`` ``cmu`` or ``bandai_namco`` and a ``skeleton`` with that rig's joints (both

@@ -47,7 +47,7 @@ __all__ = ["CHECKPOINT_SCHEMA",
     "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN", "TABLE1_ROWS",
     "DEFAULT_ROW", "horizon_frames", "in_source_units", "END_SITE_REPRESENTATIONS", "load_salsa_motion",
     "motion_to_frames", "frames_to_motion", "SynthesisData", "skeleton_of", "load_synthesis_data", "sample_windows",
-    "seed_windows", "evaluate_generator", "NPSS_VARIANTS", "root_zeroed_positions", "mean_joint_error", "npss",
+    "count_windows", "seed_windows", "evaluate_generator", "NPSS_VARIANTS", "root_zeroed_positions", "mean_joint_error", "npss",
     "mean_acceleration", "acceleration_comparison",
 ]
 
@@ -263,6 +263,12 @@ def load_synthesis_data(representation: str, folder, train: Sequence[str] = SALS
     return SynthesisData(representation, skel, tuple(train_frames), tuple(frames[n] for n in test),
                          tuple(train) + tuple(f"{n}/odd" for n in train if parities == 2), tuple(test), mean, std,
                          standardise, parities)
+
+
+def count_windows(sequences: Sequence[np.ndarray], window_length: int) -> int:
+    """Training windows of ``window_length + 1`` frames: every start in every sequence (an epoch of
+    :func:`sample_windows` is nominal)."""
+    return int(sum(len(s) - window_length for s in sequences))
 
 
 def sample_windows(rng: np.random.Generator, sequences: Sequence[np.ndarray], batch_size: int = 32,

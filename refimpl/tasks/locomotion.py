@@ -22,6 +22,7 @@ from refimpl.bounds import bounded_float, check_number
 from refimpl.errors import UsageError, existing_file, reading
 from refimpl.protocols.locomotion import LocomotionDataset, build_dataset, evaluate, format_results, zero_velocity
 from refimpl.protocols.locomotion_data import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
+from refimpl.protocols.locomotion_data import skeleton_of
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                bandai_namco_split, cmu_split)
 from refimpl.services import load_trained, network_methods
@@ -199,13 +200,6 @@ def check_checkpoint(model_config: Mapping, path) -> None:
 def trained_fields(model_config: Mapping, config) -> dict:
     """The :class:`~refimpl.registry.TrainedModel` fields of this task: the frame rate."""
     return {"fps": float(model_config.get("fps", FPS))}
-
-
-def skeleton_of(model_config: Mapping) -> Skeleton:
-    """The training skeleton stored by :func:`checkpoint_extra`."""
-    s = model_config["skeleton"]
-    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), names=s["names"],
-                    joints_left=s.get("joints_left"), joints_right=s.get("joints_right"))
 
 
 def rig_of(model_config: Mapping) -> LocomotionRig:

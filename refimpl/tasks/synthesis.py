@@ -18,6 +18,7 @@ from refimpl.options import export_length
 from refimpl.errors import UsageError
 from refimpl.models import acrnn
 from refimpl.protocols.synthesis import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
+from refimpl.protocols.synthesis import count_windows
 from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS,
                                          SALSA_TEST, SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE,
                                          TABLE1_ROWS, SynthesisData, evaluate_generator, frames_to_motion,
@@ -183,7 +184,7 @@ def train_datasets(args):
 def num_examples(dataset) -> int:
     """Training windows (every start of a ``T + 1``-frame window in every take; batches are drawn with
     :func:`sample_windows`, so an epoch is nominal)."""
-    return int(sum(len(s) - dataset.window_length for s in dataset.data.train))
+    return count_windows(dataset.data.train, dataset.window_length)
 
 
 def describe_data(train_ds, test_ds) -> str:
