@@ -8,7 +8,7 @@ Network (defaults of :class:`ACRNNConfig` = the papers' sizes)::
 
 ``F = 3 + D·J`` is the frame vector of the chosen representation (refimpl/representations.py), standardised
 with the training set's mean and std. ``skewed=True`` is the published code's stacking (layer k reads layer
-k-1's PREVIOUS output, reference/dualquat_acrnn_qtg.md §2.1); ``skewed=False`` (default) the paper's ordinary
+k-1's PREVIOUS output, spec/layers.md §5.3); ``skewed=False`` (default) the paper's ordinary
 stack. Parameters: ``5121·F + 20,996,096`` at H = 1024 (:func:`count_parameters`, Table 4).
 
 Auto-conditioning (training, :func:`sequence_forward`): a window of ``T + 1`` standardised frames
@@ -129,7 +129,7 @@ def param_shapes(config: ACRNNConfig) -> dict[str, tuple[int, ...]]:
 
 
 def published_names(config: ACRNNConfig) -> dict[str, tuple[str, tuple[int, ...]]]:
-    """Name map to the published code (papagina/Auto_Conditioned_RNN_motion, ``code/pytorch_train_aclstm.py``):
+    """Name map to the published code (papagina/Auto_Conditioned_RNN_motion; spec/import.md):
     our name -> ``(published name, published shape)``.
 
     The published network holds one ``nn.LSTMCell`` per layer, ``lstm1`` … ``lstm3`` (``lstm{k+1}.weight_ih``

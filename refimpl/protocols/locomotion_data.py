@@ -1,7 +1,7 @@
 """QuaterNet long-term locomotion data: rigs, loading, mirroring, facing, phase, features, sequences, splits.
 
 The data of the long-term system (spec/locomotion.md; QuaterNet
-§3.7, §4.3; quaternet_reference_code.md §7, §8); the windows, pace data and protocol are in
+§3.7, §4.3; spec/locomotion.md §3); the windows, pace data and protocol are in
 :mod:`refimpl.protocols.locomotion`. Pipeline per file::
 
     load_* (BVH / exp-map)  →  prepare_motion (joint subset, units)  →  build_sequences (mirror × downsample
@@ -111,7 +111,7 @@ _CMU_PAIRS = (("LHipJoint", "RHipJoint"),) + tuple(
     (n, n.replace("Left", "Right")) for n in _CMU_KEEP if n.startswith("Left"))
 
 #: CMU (cgspeed BVH, 31 joints + End Sites, or the 38-joint ASF skeleton of the exp-map files) → QuaterNet's 26
-#: joints (Spine1, the finger bases and thumbs and the End Sites removed; quaternet_reference_code.md §3.6).
+#: joints (Spine1, the finger bases and thumbs and the End Sites removed; spec/locomotion.md §3.1).
 CMU_RIG = LocomotionRig(name="cmu", keep=_CMU_KEEP, left_foot="LeftFoot", right_foot="RightFoot",
                         left_hip="LeftUpLeg", right_hip="RightUpLeg", pairs=_CMU_PAIRS, unit_scale=1.0)
 
