@@ -34,6 +34,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from refimpl.bvh import read_bvh
+from refimpl.dq_output import DQ_TERMS
+from refimpl.losses import WEIGHT_ACRNN_QUAT_FK
 from refimpl.motion import Motion
 from refimpl.nn.params import check_float_array
 from refimpl.preprocess import downsample, feature_statistics
@@ -42,7 +44,7 @@ from refimpl.skeleton import Skeleton, remove_joints
 from refimpl.checkpoint_fields import (MAX_TASK_ABS, MIN_STD, TaskSchema, int_field, kind_of, number_array,
                                        require_fields, skeleton_field)
 
-__all__ = ["CHECKPOINT_SCHEMA", 
+__all__ = ["Variant", "VARIANTS", "CHECKPOINT_SCHEMA", 
     "SALSA_FRAME_TIME", "SALSA_TRAIN", "SALSA_TEST", "SAMPLE_TRAIN", "SAMPLE_TEST", "LENGTH_SCALE", "FPS",
     "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN", "TABLE1_ROWS",
     "DEFAULT_ROW", "horizon_frames", "in_source_units", "END_SITE_REPRESENTATIONS", "load_salsa_motion",
@@ -70,7 +72,32 @@ ACCELERATION_FRAMES = 300
 WINDOW_MARGIN = 10
 
 
-#: ``--representation`` value -> row of Table 1 (a key of :data:`refimpl.models.acrnn.VARIANTS`).
+@dataclasses.dataclass(frozen=True)
+class Variant:
+    """One trainable row of Table 1: a representation and its loss weights (name → weight)."""
+
+    name: str
+    representation: str
+    weights: Mapping[str, float] = dataclasses.field(default_factory=lambda: {"mse": 1.0})
+
+
+#: Table 1 rows (plus the original positional acRNN). Weights: Appendix B (DQ: MSE + (L_pos + L_offset)/3 +
+#: local L_quat + 0.01 L_reg; quaternions-FK: MSE + L_quat + 1/4 FK position loss).
+VARIANTS = {v.name: v for v in (
+    Variant("positions", "positions"),
+    Variant("positions_acrnn", "positions_acrnn"),      # the published code's 171-value frame (End Sites kept)
+    Variant("euler", "euler"),
+    Variant("quaternions", "quaternions"),
+    Variant("quaternions_fk", "quaternions", {"mse": 1.0, "quat": 1.0, "fk": WEIGHT_ACRNN_QUAT_FK}),
+    Variant("quaternions+positions", "quaternions+positions"),
+    Variant("ortho6d", "ortho6d"),
+    Variant("ortho6d+positions", "ortho6d+positions"),
+    Variant("dual_quaternions", "dual_quaternions"),
+    Variant("dual_quaternions_all", "dual_quaternions", {"mse": 1.0, **DQ_TERMS}),
+)}
+
+
+#: ``--representation`` value -> row of Table 1 (a key of :data:`VARIANTS`).
 TABLE1_ROWS = {
     "dq-all": "dual_quaternions_all",            # dual quaternions (all losses), the paper's proposal
     "dq-mse": "dual_quaternions",                # dual quaternions (MSE)
@@ -489,7 +516,6 @@ def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
     numbers (``std`` in [1e-6, 1e6]), ``loss_weights`` finite numbers >= 0 by loss name, ``window_length`` /
     ``condition_length`` / ``ground_truth_length`` positive integers, ``train_takes`` / ``test_takes`` lists of
     strings."""
-    from refimpl.models import acrnn
     from refimpl.representations import frame_size
 
     rows = TABLE1_ROWS  # --representation value -> variant
@@ -499,12 +525,12 @@ def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
         raise ValueError(f"{where}: model_config.data_representation: expected one of {sorted(REPRESENTATIONS)}, "
                          f"got {kind_of(rep)}")
     variant = cfg["variant"]
-    if not isinstance(variant, str) or variant not in acrnn.VARIANTS:
-        raise ValueError(f"{where}: model_config.variant: expected one of {sorted(acrnn.VARIANTS)}, got "
+    if not isinstance(variant, str) or variant not in VARIANTS:
+        raise ValueError(f"{where}: model_config.variant: expected one of {sorted(VARIANTS)}, got "
                          f"{kind_of(variant)}")
-    if acrnn.VARIANTS[variant].representation != rep:
+    if VARIANTS[variant].representation != rep:
         raise ValueError(f"{where}: model_config.data_representation {rep!r} does not match the variant "
-                         f"{variant!r}, which trains on {acrnn.VARIANTS[variant].representation!r}")
+                         f"{variant!r}, which trains on {VARIANTS[variant].representation!r}")
     for key in ("row", "representation"):
         if key in cfg:
             row = cfg[key]

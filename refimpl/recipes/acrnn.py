@@ -33,7 +33,7 @@ from refimpl.models import acrnn
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
 from refimpl.options import config_with_overrides
-from refimpl.protocols.synthesis import (TABLE1_ROWS, WINDOW_MARGIN, count_windows, motion_to_frames, sample_windows,
+from refimpl.protocols.synthesis import (TABLE1_ROWS, VARIANTS, WINDOW_MARGIN, count_windows, motion_to_frames, sample_windows,
                                          skeleton_of)
 from refimpl.train import ModelAdapter, OptimConfig
 
@@ -89,7 +89,7 @@ def make_config(train_ds, overrides: Sequence[str] = ()) -> ACRNNConfig:
 def loss_spec(variant: str, weights: Mapping | None, mean, std, skeleton) -> acrnn.LossSpec:
     """The :class:`~refimpl.models.acrnn.LossSpec` of a row (``weights`` overrides, UsageError when invalid)."""
     try:
-        return acrnn.LossSpec.for_variant(variant, mean, std, skeleton, weights=weights)
+        return acrnn.LossSpec.for_variant(VARIANTS[variant], mean, std, skeleton, weights=weights)
     except ValueError as exc:
         raise UsageError(f"--losses: {exc}") from None
 

@@ -26,12 +26,11 @@ from refimpl.protocols.locomotion_data import skeleton_of
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                bandai_namco_split, cmu_split)
 from refimpl.services import load_trained, network_methods
-from refimpl.skeleton import Skeleton
 from refimpl.tasks.locomotion_generate import (SPEEDS, bone_length_drift, dq_bone_length_drift, facing_of,
                                               foot_skating, generate_walk, parse_path, parse_speed, read_path_file,
                                               write_outputs)
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SEED_FRAMES", "add_train_options", "add_eval_options",
     "add_export_options", "add_generate_options", "resolve_files", "train_datasets", "num_examples",
     "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of", "rig_of",
