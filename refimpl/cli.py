@@ -17,6 +17,8 @@ render      a BVH / exp-map motion (optionally against a second one) to a PNG st
 demo        the whole tour on the embedded sample (:mod:`refimpl.demo`)
 import      a PyTorch state dict (.npz, .safetensors, .pt) as a checkpoint; ``export-weights`` the reverse
             (:mod:`refimpl.weights_cli`, spec/import.md)
+pretrained  the shipped trained models and their cards; ``--checkpoint pretrained:<name>`` everywhere
+            (:mod:`refimpl.pretrained`)
 ==========  ==============================================================================================
 
 Exit codes (scripts may rely on them): 0 success; 1 runtime failure (including a missing optional dependency
@@ -51,12 +53,13 @@ import numpy as np
 
 from refimpl import weights_cli
 from refimpl.allocator import retain_freed_memory
-from refimpl.cli_info import cmd_info
+from refimpl.cli_info import cmd_info, cmd_pretrained
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
 from refimpl.bounds import bounded_int
 from refimpl.threads import AUTO, threads_option
 from refimpl.options import add_data_options, add_export_length_option, beta, check_overrides, nonneg_int, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
+from refimpl.pretrained import shipped_name
 from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
 from refimpl.threads import blas_thread_pool
 from refimpl.services import (export_onnx, load_trained, onnx_metadata, read_motion, train_model,
@@ -201,10 +204,19 @@ def cmd_eval(args) -> int:
     return task_of(spec).eval_command(args, model)
 
 
+def _default_export_dir(checkpoint: str, model) -> Path:
+    """``onnx/`` beside the checkpoint; ``onnx/<name>/`` in the working folder for a shipped model (its folder
+    belongs to the repository)."""
+    name = shipped_name(checkpoint)
+    if name is not None:
+        return Path("onnx") / name
+    return Path(model.path).parent / "onnx"
+
+
 def cmd_export(args) -> int:
     """``refimpl export``."""
     model = load_trained(args.checkpoint)
-    out = Path(args.out) if args.out else Path(model.path).parent / "onnx"
+    out = Path(args.out) if args.out else _default_export_dir(args.checkpoint, model)
     task = task_of(model.spec)
     _refuse_other_tasks_options(args, model.spec.task, model.spec.name)
     written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, **task.export_options(args))
@@ -334,6 +346,18 @@ def cmd_demo(args) -> int:
 # ----------------------------------------------------------------------------------------------------------------
 # parser and main
 # ----------------------------------------------------------------------------------------------------------------
+
+
+def _add_pretrained_parser(sub) -> None:
+    """``refimpl pretrained [NAME]``: the shipped trained models and their cards (spec/cli.md §10)."""
+    p = sub.add_parser("pretrained", help="list the shipped trained models (pretrained:<name>) and their cards",
+                       description="List the shipped trained models, or show one's card. Each is used by name "
+                                   "wherever a checkpoint is accepted: --checkpoint pretrained:<name> (eval, "
+                                   "generate, export, info, every checkpoint option, python -m deploy export); its file is checked "
+                                   "against the card's sha256 first (a damaged or missing file: exit 3).")
+    p.add_argument("name", nargs="?", default=None, help="a model's name: print its card")
+    p.add_argument("--json", action="store_true", help="the card(s) as JSON")
+    p.set_defaults(func=cmd_pretrained)
 
 
 def _add_info_parser(sub) -> None:
@@ -525,6 +549,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render_parser(sub)
     _add_demo_parser(sub)
     weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
+    _add_pretrained_parser(sub)
     return parser
 
 

@@ -16,6 +16,7 @@ from typing import Callable
 import numpy as np
 
 from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
+from refimpl.pretrained import resolve_checkpoint
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
 
 __all__ = ["read_motion", "load_trained", "checkpoint_for", "train_model", "network_methods",
@@ -44,7 +45,8 @@ def read_motion(path, *, fps: float | None = None, layout: str = "cmu"):
 
 
 def load_trained(path) -> TrainedModel:
-    """Read a checkpoint written by ``refimpl train`` (or :func:`train_model`).
+    """Read a checkpoint written by ``refimpl train`` (or :func:`train_model`); ``pretrained:<name>`` reads a
+    shipped model once its checksum matches its card (:mod:`refimpl.pretrained`).
 
     Raises
     ------
@@ -58,7 +60,7 @@ def load_trained(path) -> TrainedModel:
     from refimpl.checkpoint import load_checkpoint
     from refimpl.checkpoint_schema import validate_trained
 
-    p = existing_file(path)
+    p = existing_file(resolve_checkpoint(path))
     with reading(p):
         arrays, meta = load_checkpoint(p)
         # the whole schema (spec/robustness.md §9) before anything is built: config types, task fields,

@@ -13,7 +13,7 @@ LAYERS = {
     0: ["refimpl", "refimpl._parsing", "refimpl.atomic", "refimpl.datacache", "refimpl.testing", "refimpl.gradcheck",
         "refimpl.bounds"],
     1: ["refimpl.quat", "refimpl.rotations", "refimpl.dualquat"],
-    2: ["refimpl.skeleton", "refimpl.current_dq", "refimpl.mirroring"],
+    2: ["refimpl.skeleton", "refimpl.current_dq", "refimpl.mirroring", "refimpl.bone_ik"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.bvh_write", "refimpl.expmap", "refimpl.skeletons",
         "refimpl.preprocess", "refimpl.representations", "refimpl.strategies", "refimpl.splines", "refimpl.augment"],
     4: ["refimpl.nn", "refimpl.nn.*", "refimpl.losses", "refimpl.dq_output", "refimpl.dq_output_fast", "refimpl.dq_prediction",
@@ -26,7 +26,7 @@ LAYERS = {
     7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
         "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.recipe_api", "refimpl.run_options",
-        "refimpl.threads"],
+        "refimpl.threads", "refimpl.pretrained"],
     8: ["refimpl.cli", "refimpl.cli_info", "refimpl.weights_cli", "refimpl.demo", "refimpl.__main__"],
 }
 #: The only refimpl modules that may import deploy, and only inside functions (lazily).

@@ -33,6 +33,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from refimpl.bone_ik import rotations_from_positions
 from refimpl.bvh import read_bvh
 from refimpl.dq_output import DQ_TERMS
 from refimpl.losses import WEIGHT_ACRNN_QUAT_FK
@@ -184,7 +185,9 @@ def frames_to_motion(representation: str, skeleton: Skeleton, frames, frame_time
 
     The hip's horizontal position is the running sum of the differences from ``start`` (x, z):
     ``x_0 = start[0]``, ``x_{t+1} = x_t + Δx_t``; the height is read as is. Rotations by
-    :func:`refimpl.representations.decode` (``"positions"`` has no inverse and raises ValueError).
+    :func:`refimpl.representations.decode`; the positional frames (``"positions"``, the published
+    ``"positions_acrnn"``), which have no inverse, by the skeleton's bone directions
+    (:func:`refimpl.bone_ik.rotations_from_positions`, spec/kinematics.md §7).
 
     Parameters
     ----------
@@ -196,7 +199,11 @@ def frames_to_motion(representation: str, skeleton: Skeleton, frames, frame_time
     Motion with T frames.
     """
     x = np.asarray(frames, dtype=np.float64)
-    rot, root = decode(representation, skeleton, x)
+    if REPRESENTATIONS[representation].invertible:
+        rot, root = decode(representation, skeleton, x)
+    else:  # joint positions (relative to the frame's root entry): rotations along the bones
+        rot, _ = rotations_from_positions(skeleton, positions_from_frames(representation, skeleton, x))
+        root = x[:, :3]
     pos = np.empty_like(root)
     pos[:, 1] = root[:, 1]
     for axis, s in ((0, start[0]), (2, start[1])):
