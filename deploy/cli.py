@@ -14,6 +14,9 @@ Every model goes through its entry of the exporter table ``deploy.models.EXPORTE
     input (a BVH clip, an exp-map prefix, a seed take, ``.npy`` frames) to its natural output (BVH or ``.npy``).
 ``info MODEL.onnx``
     Validate a model and print its inputs, outputs and metadata.
+``web DIR [DIR ...] [--port N]``
+    Serve the models of the folders in a web page on 127.0.0.1 (``deploy.serve``: onnxruntime-web and three.js,
+    installed once with ``npm ci``).
 
 Options of one model come from its entry (``add_export_options(group)``, ``add_run_options(group)``) and are
 refused for another model. ``main(argv)`` returns the exit status: 0 success; 2 a bad option value or options
@@ -131,6 +134,12 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _cmd_web(args) -> int:
+    from deploy.serve import main_web
+
+    return main_web(args)
+
+
 def _add_model_options(sub, hook: str, owners: dict) -> None:
     """Each entry's ``hook(group)`` options (a function shared by several entries is called once), recorded in
     ``owners``: dest -> (flag, set of the models that take it)."""
@@ -165,6 +174,10 @@ def _parser():
                    help="form of a whole-sequence graph (qtg's rollout; default: the model's)")
     e.add_argument("--frames", type=int, default=None, help="frames of a fixed-length graph (qtg: T of the "
                                                              "rollout, quaternet: k of the predictor)")
+    e.add_argument("--target", choices=("default", "portable"), default="default",
+                   help="default: today's graphs (onnxruntime); portable: per-call graphs at opset 15, batch 1, "
+                        "primitive operators, the host loop in the metadata (Unity Inference Engine, other "
+                        "runtimes; deploy/README.md)")
     export_owners: dict = {}
     _add_model_options(e, "add_export_options", export_owners)
     e.set_defaults(func=_cmd_export, _owners=export_owners)
@@ -184,6 +197,10 @@ def _parser():
     i = sub.add_parser("info", help="validate a model and print its contract")
     i.add_argument("model")
     i.set_defaults(func=_cmd_info, _owners={})
+    w = sub.add_parser("web", help="serve the models of folders in a web page on 127.0.0.1 (onnxruntime-web)")
+    w.add_argument("folders", nargs="+", metavar="DIR", help="folders written by python -m deploy export")
+    w.add_argument("--port", type=int, default=8000, help="port on 127.0.0.1 (default 8000; 0: any free port)")
+    w.set_defaults(func=_cmd_web, _owners={})
     return p
 
 

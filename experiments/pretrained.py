@@ -78,6 +78,23 @@ MODELS = {
         "use": "transitions of 30 frames between two Bandai Namco-rig clips (21 joints, cm, 30 fps): "
                "`refimpl generate --checkpoint pretrained:qtg-locomotion --source A.bvh --target B.bvh ...`",
     },
+    "qtg-cmu-sample": {
+        "title": "QTG transition generator (the demo's reduced sizes), the embedded CMU sample, 3,000 steps",
+        "system": "QTG (Geleijn et al., IEEE VR 2021)", "model": "qtg", "run": "qtg_sample",
+        "train": ["--model", "qtg", "--data", "sample", "--set", "encoder_sizes=128,64", "--set", "gru_hidden=128",
+                  "--set", "decoder_sizes=128", "--steps", "3000", "--batch-size", "32", "--lr", "0.001", "--seed",
+                  "0", "--validate-every", "300"],
+        "eval": ["--data", "sample", "--join", "inertialize+footlock"], "eval_sample": None,
+        "per_frame": ("qtg_step.onnx", 1),
+        "data": {"name": "the embedded CMU sample (refimpl/data/sample: two BVH takes, exp-map walking and running, "
+                         "two salsa takes), 22 joints", "folder": "refimpl/data/sample",
+                 "split": "the sample's fixed split (refimpl.protocols.transition.sample_sources)",
+                 "licence": _CMU_TERMS},
+        "weights": _WEIGHTS_CMU,
+        "use": "transitions between CMU-rig clips with no data but the clone's: `refimpl generate --checkpoint "
+               "pretrained:qtg-cmu-sample --source refimpl/data/sample/bvh/02_01.bvh --source-frame 40 --target "
+               "refimpl/data/sample/bvh/01_01.bvh --target-frame 400 --out t.bvh`",
+    },
     "quaternet-cmu": {
         "title": "QuaterNet short-term (2 x 512 GRU, velocity mode), CMU walking and running, 2,000 steps",
         "system": "QuaterNet (Pavllo et al., BMVC 2018 / IJCV 2020), short-term prediction", "model": "quaternet",
@@ -125,22 +142,23 @@ MODELS = {
                "--speed walk --seconds 60 --out walk.bvh`",
     },
     "acrnn-dq-salsa": {
-        "title": "acRNN (3 x 128 LSTM, auto-conditioning) with dual quaternions and all losses, CMU salsa, 600 steps",
+        "title": "acRNN (3 x 256 LSTM, auto-conditioning) with dual quaternions and all losses, CMU salsa, 1,500 "
+                 "steps (the Table 1 experiment's budget)",
         "system": "Dual-quaternion pose representation (Andreou et al.) inside acRNN (Zhou, Li et al. 2018)",
-        "model": "acrnn", "run": "acrnn_dq",
-        "train": ["--model", "acrnn", "--representation", "dq-all", "--data", SALSA, "--set", "hidden_size=128",
-                  "--steps", "600", "--seed", "0", "--checkpoint-every", "100"],
+        "model": "acrnn", "run": "acrnn_dq_t1",
+        "train": ["--model", "acrnn", "--representation", "dq-all", "--data", SALSA, "--set", "hidden_size=256", "--steps", "1500", "--lr", "0.001", "--batch-size", "16",
+                  "--window-length", "50", "--seed", "0", "--checkpoint-every", "250", "--progress-every", "50"],
         "eval": ["--data", SALSA], "eval_sample": ["--data", "sample"], "per_frame": ("acrnn_step.onnx", 1),
         "data": _SALSA_DATA, "weights": _WEIGHTS_CMU,
         "use": "long-term salsa from a 10-frame seed: `refimpl generate --checkpoint pretrained:acrnn-dq-salsa "
                "--source take.bvh --length 300 --out salsa.bvh`",
     },
     "acrnn-positions-salsa": {
-        "title": "acRNN (3 x 128 LSTM) with the published positional frame (171 values), CMU salsa, 600 steps",
+        "title": "acRNN (3 x 256 LSTM) with the published positional frame (171 values), CMU salsa, 1,500 steps",
         "system": "acRNN (Zhou, Li et al. 2018), the published code's positional representation",
-        "model": "acrnn", "run": "acrnn_pos",
-        "train": ["--model", "acrnn", "--representation", "positions-published", "--data", SALSA, "--set",
-                  "hidden_size=128", "--steps", "600", "--seed", "0", "--checkpoint-every", "100"],
+        "model": "acrnn", "run": "acrnn_pos_t1",
+        "train": ["--model", "acrnn", "--representation", "positions-published", "--data", SALSA, "--set", "hidden_size=256", "--steps", "1500", "--lr", "0.001", "--batch-size", "16",
+                  "--window-length", "50", "--seed", "0", "--checkpoint-every", "250", "--progress-every", "50"],
         "eval": ["--data", SALSA], "eval_sample": ["--data", "sample"], "per_frame": ("acrnn_step.onnx", 1),
         "data": _SALSA_DATA, "weights": _WEIGHTS_CMU,
         "use": "long-term salsa from a 10-frame seed, as joint positions (`refimpl generate` writes BVH)",

@@ -120,7 +120,7 @@ def test_deploy_is_imported_only_lazily_by_the_top_layer():
 #: deploy's command layer (``python -m deploy``): reads clips, checkpoints and options as ``refimpl``'s
 #: application layer does, so it may import layer 7 (tasks, recipes, services, errors, registry), inside functions.
 DEPLOY_COMMANDS = {"deploy.cli", "deploy.models.qtg_cli", "deploy.models.run_commands",
-                   "deploy.models.quaternet_long_walk"}
+                   "deploy.models.quaternet_long_walk", "deploy.serve"}
 
 
 def test_deploy_imports_only_lower_refimpl_layers():
