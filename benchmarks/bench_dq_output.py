@@ -36,6 +36,7 @@ from refimpl import dq_output, dq_output_fast  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.dualquat import dq_normalize  # noqa: E402
 from refimpl.models import acrnn  # noqa: E402
+from refimpl.protocols.synthesis import VARIANTS  # noqa: E402
 from refimpl.skeleton import Skeleton  # noqa: E402
 
 
@@ -63,7 +64,7 @@ def main():
     F = 3 + 8 * J
     frames = np.concatenate([rng.standard_normal((B, T, 3)), target.reshape(B, T, 8 * J)], axis=-1)
     mean, std = frames.reshape(-1, F).mean(0), frames.reshape(-1, F).std(0) + 1e-3
-    spec = acrnn.LossSpec.for_variant("dual_quaternions_all", mean, std, Skeleton(parents, rng.standard_normal((J, 3))))
+    spec = acrnn.LossSpec.for_variant(VARIANTS["dual_quaternions_all"], mean, std, Skeleton(parents, rng.standard_normal((J, 3))))
     tgt = ((frames - mean) / std).astype(np.float32)
     pred = (tgt + 0.1 * rng.standard_normal(tgt.shape)).astype(np.float32)
 

@@ -33,7 +33,7 @@ import numpy as np
 from refimpl.protocols import locomotion as LP
 from refimpl.protocols import locomotion_data as LD
 from refimpl.recipes import quaternet_long as recipe
-from refimpl.recipes import quaternet_long_dq as dqr
+from refimpl.models import quaternet_long_dq as dqr
 from refimpl.services import load_trained
 from refimpl.tasks import locomotion as L
 from refimpl.tasks import locomotion_generate as G

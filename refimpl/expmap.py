@@ -11,10 +11,10 @@ One frame per line, comma-separated floats (whitespace is accepted too), in trip
   :func:`refimpl.skeletons.cmu_asf_skeleton` (joint 0 = root rotation, End Sites included, always zero).
 
 Sign convention: the files store rotation vectors in the row-vector convention (``R(r)ᵀ`` is the column-vector
-rotation), so, as in QuaterNet's data preparation (quaternet_reference_code.md §6.1), each joint's
+rotation), so, as in QuaterNet's data preparation (spec/data.md §4), each joint's
 quaternion is ``quat_from_axis_angle(−r)``, then ``quat_fix`` over time. For the CMU files this reproduces the
 rotation matrices of the BVH ``Zrotation Yrotation Xrotation`` channels of the same trial to about 1e-8 for
-every non-root joint (dualquat_acrnn_qtg.md §6; the root agrees only to about 1e-2).
+every non-root joint (spec/data.md §4; the root agrees only to about 1e-2).
 
 Shape legend: T frames, J joints.
 """

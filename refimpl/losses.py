@@ -39,11 +39,9 @@ import numpy as np
 from refimpl.nn.kinematics_layers import (check_parents, forward_kinematics_backward,
                                           forward_kinematics_forward, offsets_from_dq_backward, offsets_from_dq_forward,
                                           positions_from_dq_backward, positions_from_dq_forward)
-from refimpl.nn.quat_layers import (as_float_array, normalize,
-                                    normalize_backward, quat_conj_kernel,
-                                    quat_mul_backward_kernel, euler_from_quat_backward,
-                                    euler_from_quat_forward)
-from refimpl.quat import quat_mul_kernel
+from refimpl.nn.quat_layers import (as_float_array, normalize, normalize_backward, quat_mul_backward_kernel,
+                                    euler_from_quat_backward, euler_from_quat_forward)
+from refimpl.quat import quat_conj_kernel, quat_mul_kernel
 
 __all__ = [
     "WEIGHTS_ACRNN_DQ", "WEIGHT_ACRNN_QUAT_FK", "WEIGHTS_QUATERNET_DQ",

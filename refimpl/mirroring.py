@@ -34,7 +34,7 @@ def mirror(skeleton: Skeleton, rotations, root_positions, axis="x", mirror_offse
     With ``M = diag(-1, 1, 1)`` for ``axis="x"``: every local rotation becomes ``M R M`` — for quaternions
     ``(w, x, y, z) → (w, x, -y, -z)`` (``axis="y"``: ``(w, -x, y, -z)``, ``axis="z"``: ``(w, -x, -y, z)``);
     the rotation columns of ``joints_left[i]`` and ``joints_right[i]`` are swapped; the root position's
-    ``axis`` component is negated. This is QuaterNet's mirroring (quaternet_reference_code.md §3.4), which
+    ``axis`` component is negated. This is QuaterNet's mirroring (spec/kinematics.md §5), which
     leaves the offsets alone (exact for a symmetric skeleton). With ``mirror_offsets=True`` the skeleton is
     mirrored too (offsets reflected by ``M`` and swapped between partners), which makes the result the exact
     mirror image: ``FK'(p)[swap(j)] = M · FK(p)[j]``. Mirroring twice is the identity. Consecutive frames keep

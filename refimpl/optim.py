@@ -36,13 +36,13 @@ __all__ = [
     "adam_init", "adam_step", "clip_grad_norm", "exponential_lr",
 ]
 
-#: QuaterNet (``pose_network.py``): Adam lr 1e-3, default betas and eps, no weight decay.
+#: QuaterNet (spec/optim.md §4): Adam lr 1e-3, default betas and eps, no weight decay.
 QUATERNET_ADAM = MappingProxyType({"lr": 1e-3, "betas": (0.9, 0.999), "eps": 1e-8, "weight_decay": 0.0})
 #: QuaterNet: the learning rate is multiplied by 0.999 after every epoch.
 QUATERNET_LR_DECAY = 0.999
 #: QuaterNet: ``clip_grad_norm_(model.parameters(), 0.1)`` every iteration.
 QUATERNET_CLIP_NORM = 0.1
-#: acRNN (``pytorch_train_aclstm.py``): Adam lr 1e-4 (constant), default betas; no clipping.
+#: acRNN (spec/optim.md §4, spec/acrnn.md §1.1): Adam lr 1e-4 (constant), default betas; no clipping.
 ACRNN_ADAM = MappingProxyType({"lr": 1e-4, "betas": (0.9, 0.999), "eps": 1e-8, "weight_decay": 0.0})
 #: QTG (Geleijn et al.): Adam lr 1e-4, β1 = 0.5, β2 = 0.9.
 QTG_ADAM = MappingProxyType({"lr": 1e-4, "betas": (0.5, 0.9), "eps": 1e-8, "weight_decay": 0.0})

@@ -29,7 +29,7 @@ def downsample(motion: Motion, stride: int, phase: int = 0) -> Motion:
     """Keep every ``stride``-th frame starting at ``phase``; the frame time is multiplied by ``stride``.
 
     QuaterNet: H3.6M 50 → 25 Hz with ``stride=2`` and keeps both phases as separate sequences (``_d0``,
-    ``_d1``); the locomotion data 120 → 30 Hz with ``stride=4`` (quaternet_reference_code.md §6.2, §7.2).
+    ``_d1``); the locomotion data 120 → 30 Hz with ``stride=4`` (spec/prediction.md §2, spec/locomotion.md §3.2).
     No filtering is applied (plain decimation, as the references do).
 
     Parameters
@@ -147,7 +147,7 @@ def feature_statistics(frames, min_std: float = 1e-4) -> tuple[np.ndarray, np.nd
 
     Features whose std is below ``min_std`` (constant features, e.g. always-zero exp-map components) get
     std 1, so normalising leaves them at ``x − mean`` instead of amplifying noise (DMGNN's rule:
-    std < 1e-4 → 1; dualquat_acrnn_qtg.md §6).
+    std < 1e-4 → 1; spec/data.md §5.5).
 
     Parameters
     ----------

@@ -5,7 +5,7 @@ A mask is a boolean array over the decision steps: ``True`` = feed the ground-tr
 predictions (no detach): a manual backward must add the next step's input gradient to the output gradient
 of the step whose prediction was fed back. See ``spec/optim.md``.
 
-* QuaterNet scheduled sampling (Pavllo et al. §3.3; ``pose_network.py``): the teacher-forcing ratio starts at 1
+* QuaterNet scheduled sampling (Pavllo et al. §3.3; spec/optim.md §6.1): the teacher-forcing ratio starts at 1
   and is multiplied by 0.995 after every epoch (:func:`teacher_forcing_ratio`); for each batch, ONE Bernoulli
   draw per time step, shared by the whole batch (:func:`scheduled_sampling_mask`). QuaterNet decides the
   ``T - 1`` steps after the first prediction of a ``T``-frame target, i.e. it calls this with ``steps = T - 1``.

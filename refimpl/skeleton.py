@@ -11,7 +11,7 @@ Conventions (spec/kinematics.md, spec/conventions.md)
   is the per-frame ``root_positions`` (QuaterNet's definition; the BVH reader folds the ROOT OFFSET into
   ``root_positions``).
 * Local rotations are unit quaternions ``(w, x, y, z)`` (Hamilton product, active rotations, column vectors).
-  Forward kinematics (QuaterNet, quaternet_reference_code.md §3.2)::
+  Forward kinematics (QuaterNet, spec/kinematics.md §2)::
 
       q_world[0] = q[0]                      p[0] = root_position
       q_world[j] = q_world[p(j)] ⊗ q[j]      p[j] = p[p(j)] + R(q_world[p(j)]) · offset[j]
@@ -330,7 +330,7 @@ class Skeleton:
 
     @finite_output
     def forward_kinematics(self, rotations, root_positions, translations=None) -> np.ndarray:
-        """Joint positions by quaternion forward kinematics (QuaterNet, quaternet_reference_code.md §3.2).
+        """Joint positions by quaternion forward kinematics (QuaterNet, spec/kinematics.md §2).
 
         ``p[0] = root_position``; ``p[j] = p[p(j)] + R(q_world[p(j)]) · t[j]`` with
         ``q_world[j] = q_world[p(j)] ⊗ q[j]`` and ``t[j] = offset[j]`` (or ``translations[..., j, :]`` when
@@ -446,7 +446,7 @@ def remove_joints(skeleton: Skeleton, rotations, joints: Iterable[int | str], of
 
     For each removed joint ``r`` (processed in increasing index order, so chains of removed joints compose):
     every child ``c`` gets ``q[c] ← q[r] ⊗ q[c]`` and is re-attached to ``r``'s parent (QuaterNet,
-    quaternet_reference_code.md §3.3). Offsets of the re-attached children:
+    spec/kinematics.md §4). Offsets of the re-attached children:
 
     * ``offsets="compose"`` (default, correct rest geometry): ``offset[c] ← offset[r] + offset[c]``. This keeps
       the rest pose exactly and every posed frame exactly whenever ``q[r]`` is the identity (End Sites,

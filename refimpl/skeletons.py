@@ -4,14 +4,14 @@ Every table here was transcribed from the project's reference notes, which recor
 code bases as data (spec/data.md §3 gives the provenance of each):
 
 * :func:`h36m_skeleton` — the Human3.6M 32-joint exp-map skeleton of Martinez et al. / QuaterNet
-  (quaternet_reference_code.md §3.5), millimetres, no trajectory. "Offsets of Subject 1" (QuaterNet issue #9).
+  (spec/kinematics.md §6), millimetres, no trajectory. "Offsets of Subject 1" (QuaterNet issue #9).
 * :func:`cmu_asf_skeleton` — the CMU ASF skeleton of subject 02 behind the 117-value CMU exp-map files
-  (DMGNN ``_some_variables``; dualquat_acrnn_qtg.md §6): 31 joints with rotations + 7 End Sites = 38 joints,
+  (DMGNN ``_some_variables``; spec/data.md §3): 31 joints with rotations + 7 End Sites = 38 joints,
   CMU ASF length units (≈ 5.6 cm). Identical to the hierarchy of the cgspeed BVH of CMU 02_01.
 * :func:`cmu_skeleton` — the same skeleton without its End Sites: the 31-joint CMU list used by the
   dual-quaternion paper (251-value frames) and QuaterNet.
 * :func:`quaternet_locomotion_skeleton` — QuaterNet's 31-joint CMU/Holden locomotion skeleton
-  (quaternet_reference_code.md §3.6), optionally reduced to 26 joints the way QuaterNet does it.
+  (spec/kinematics.md §6), optionally reduced to 26 joints the way QuaterNet does it.
 
 Names: the joint names of the corresponding BVH; End Sites are called ``<parent>_end``; H3.6M names are the
 project's own (the source code has none), chosen so that the side prefixes give anatomically correct
@@ -32,7 +32,7 @@ __all__ = [
 ]
 
 # ------------------------------------------------------------------------------------------------------------
-# Human3.6M, 32 joints (quaternet_reference_code.md §3.5)
+# Human3.6M, 32 joints (spec/kinematics.md §6)
 # ------------------------------------------------------------------------------------------------------------
 
 H36M_PARENTS = (-1, 0, 1, 2, 3, 4, 0, 6, 7, 8, 9, 0, 11, 12, 13, 14, 12, 16, 17, 18, 19, 20, 19, 22, 12, 24, 25,
@@ -88,7 +88,7 @@ _H36M_END_SITES = (5, 10, 15, 21, 23, 29, 31)
 
 
 def h36m_skeleton() -> Skeleton:
-    """Human3.6M 32-joint skeleton (Martinez et al. / QuaterNet ``dataset_h36m.py``), millimetres.
+    """Human3.6M 32-joint skeleton (Martinez et al., as QuaterNet reads the Human3.6M data set), millimetres.
 
     The 7 leaves (5, 10, 15, 21, 23, 29, 31) are flagged as End Sites (their rotations never move a position).
     Rest pose (all identity) is not a T-pose: legs along −y, spine and both arm chains along +y.
@@ -101,7 +101,7 @@ def h36m_skeleton() -> Skeleton:
 
 
 # ------------------------------------------------------------------------------------------------------------
-# CMU ASF (subject 02), 38 joints incl. 7 End Sites (dualquat_acrnn_qtg.md §6)
+# CMU ASF (subject 02), 38 joints incl. 7 End Sites (spec/data.md §3)
 # ------------------------------------------------------------------------------------------------------------
 
 CMU_ASF_PARENTS = (-1, 0, 1, 2, 3, 4, 5, 0, 7, 8, 9, 10, 11, 0, 13, 14, 15, 16, 17, 18, 15, 20, 21, 22, 23, 24, 25,
@@ -189,7 +189,7 @@ def cmu_skeleton() -> Skeleton:
 
 
 # ------------------------------------------------------------------------------------------------------------
-# QuaterNet locomotion (CMU/Holden), 31 → 26 joints (quaternet_reference_code.md §3.6)
+# QuaterNet locomotion (CMU/Holden), 31 → 26 joints (spec/data.md §3, spec/locomotion.md §3.1)
 # ------------------------------------------------------------------------------------------------------------
 
 LOCOMOTION_PARENTS = CMU_PARENTS
@@ -239,14 +239,14 @@ _LOCOMOTION_NAMES = (
 
 
 def quaternet_locomotion_skeleton(reduced: bool = False) -> Skeleton:
-    """QuaterNet's CMU/Holden locomotion skeleton (``long_term/dataset_locomotion.py``).
+    """QuaterNet's CMU/Holden locomotion skeleton (the CMU/Holden locomotion data set; spec/locomotion.md §3.1).
 
     Parameters
     ----------
     reduced : bool
         False: the 31 joints. True: QuaterNet's 26-joint version, ``remove_joints(LOCOMOTION_REMOVED_JOINTS,
         offsets="drop")`` — Spine1's non-zero offset is dropped as in QuaterNet, so the upper body is about
-        2.05 units shorter than the BVH (quaternet_reference_code.md §3.6, quirk 4).
+        2.05 units shorter than the BVH (spec/locomotion.md §3.1).
 
     Returns
     -------

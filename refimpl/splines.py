@@ -1,7 +1,7 @@
 """Arc-length parameterised 2-D polylines with tracks, for paths on the ground (spec/locomotion.md §2).
 
 QuaterNet §3.7 represents a trajectory "as a piecewise linear spline with equal-length segments" and the pace
-network recurs over its points (quaternet_reference_code.md §8.1). A :class:`Spline` is ``n`` points
+network recurs over its points (spec/locomotion.md §2). A :class:`Spline` is ``n`` points
 ``(x, y)`` on the ground plane (for this project's Y-up data: world ``(x, z)``), open or closed, with the
 cumulative arc length at every point and named per-point *tracks*:
 

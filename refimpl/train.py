@@ -103,7 +103,7 @@ class OptimConfig:
 
     ``lr_epoch = lr · lr_decay^epoch`` (:func:`refimpl.optim.exponential_lr`). Defaults: Adam's own (Kingma & Ba;
     lr 1e-3, β = (0.9, 0.999)), no clipping, no decay. A model's paper values are named constants of its recipe
-    (``refimpl.recipes.qtg.PAPER_OPTIM``: lr 1e-4, β = (0.5, 0.9)).
+    (its ``PAPER_OPTIM``, :class:`refimpl.recipe_api.Recipe`).
     """
 
     lr: float = 1e-3

@@ -10,6 +10,7 @@ from refimpl.dualquat import dq_from_quat_translation, dq_inv, dq_mul, dq_normal
 from refimpl.gradcheck import check_gradients, check_vjp
 from refimpl.losses import WEIGHTS_ACRNN_DQ, mse_loss_forward
 from refimpl.models import acrnn
+from refimpl.protocols.synthesis import VARIANTS
 from refimpl.nn.linear import linear_backward, linear_forward
 from refimpl.nn.lstm import lstm_backward, lstm_forward
 from refimpl.nn.params import count_parameters as count_arrays
@@ -75,12 +76,12 @@ def _frames(rep, rng, B, T1, F, mean, std):
 
 
 def _setup(variant, rng, skewed=False, weights=None):
-    rep = acrnn.VARIANTS[variant].representation
+    rep = VARIANTS[variant].representation
     skel = _skeleton(rng)
     cfg, params = _small(rep, rng, skewed)
     mean = 0.1 * rng.standard_normal(cfg.frame_size)
     std = 0.5 + rng.random(cfg.frame_size)
-    spec = acrnn.LossSpec.for_variant(variant, mean, std, skel, weights)
+    spec = acrnn.LossSpec.for_variant(VARIANTS[variant], mean, std, skel, weights)
     frames = _frames(rep, rng, 2, 8, cfg.frame_size, mean, std)
     return cfg, params, spec, frames
 
@@ -212,21 +213,21 @@ def test_every_table1_variant_trains_with_one_option():
     rng = np.random.default_rng(8)
     expected = {"positions", "euler", "quaternions", "quaternions_fk", "quaternions+positions", "ortho6d",
                 "ortho6d+positions", "dual_quaternions", "dual_quaternions_all", "positions_acrnn"}
-    assert set(acrnn.VARIANTS) == expected
+    assert set(VARIANTS) == expected
     for name in expected:
         cfg, params, spec, frames = _setup(name, rng)
         total, parts, grads = acrnn.loss_and_grads(params, cfg, frames, spec)
         assert np.isfinite(total) and set(grads) == set(params)
-        assert set(parts) == set(acrnn.VARIANTS[name].weights)
+        assert set(parts) == set(VARIANTS[name].weights)
 
 
 def test_variant_weights_follow_appendix_b():
-    assert acrnn.VARIANTS["dual_quaternions_all"].weights == {"mse": 1.0, **DQ_TERMS}
+    assert VARIANTS["dual_quaternions_all"].weights == {"mse": 1.0, **DQ_TERMS}
     assert DQ_TERMS == {"reg": 0.01, "pos": 1 / 3, "offset": 1 / 3, "quat": 1.0}
     assert dict(WEIGHTS_ACRNN_DQ) == {"mse": 1.0, **DQ_TERMS}
-    assert acrnn.VARIANTS["quaternions_fk"].weights == {"mse": 1.0, "quat": 1.0, "fk": 0.25}
+    assert VARIANTS["quaternions_fk"].weights == {"mse": 1.0, "quat": 1.0, "fk": 0.25}
     for name in ("positions", "quaternions", "ortho6d", "dual_quaternions", "quaternions+positions"):
-        assert acrnn.VARIANTS[name].weights == {"mse": 1.0}
+        assert VARIANTS[name].weights == {"mse": 1.0}
 
 
 def test_mse_only_loss_is_mse_of_standardised_frames():

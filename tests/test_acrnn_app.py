@@ -39,7 +39,7 @@ def test_registry_knows_acrnn_on_the_synthesis_task():
     spec = MODELS["acrnn"]
     assert spec.task == "synthesis" and spec.exporter == "acrnn"
     assert set(spec.representations) == set(S.TABLE1_ROWS) and spec.representations[0] == "dq-all"
-    assert all(v in acrnn.VARIANTS for v in S.TABLE1_ROWS.values())
+    assert all(v in SP.VARIANTS for v in S.TABLE1_ROWS.values())
     assert spec.optim.lr == 1e-4 and spec.recipe.PAPER_BATCH == 32 and spec.recipe.PAPER_WINDOW == 100
 
 

@@ -183,3 +183,11 @@ def test_no_refimpl_function_is_longer_than_a_screen():
                 if n > MAX_FUNCTION_LINES:
                     long.append(f"{m}.{node.name} (line {node.lineno}): {n} lines")
     assert not long, "split these functions (one screen each):\n" + "\n".join(long)
+
+
+def test_no_recipe_imports_a_task():
+    """A recipe knows its network and its task's protocol, never the task module (not even inside a function):
+    the tasks call the services, which import the registry, which imports every recipe."""
+    bad = [f"{m} imports {t}" for m, p in _sources("refimpl").items() if m.startswith("refimpl.recipes.")
+           for t, _, _ in _imports(m, p) if t == "refimpl.tasks" or t.startswith("refimpl.tasks.")]
+    assert not bad, "\n".join(bad)

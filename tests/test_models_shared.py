@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from refimpl.models._shared import accumulate_grads, check_param_dict
+from refimpl.models._shared import check_param_dict
+from refimpl.nn.params import accumulate_grads
 
 
 def test_check_param_dict():

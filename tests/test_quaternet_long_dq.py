@@ -11,7 +11,7 @@ from refimpl.losses import WEIGHTS_QUATERNET_DQ
 from refimpl.models import quaternet, quaternet_sequence
 from refimpl.quat import quat_conj, quat_mul, quat_normalize
 from refimpl.recipes import quaternet_long as recipe
-from refimpl.recipes import quaternet_long_dq as dqr
+from refimpl.models import quaternet_long_dq as dqr
 from refimpl.skeleton import Skeleton
 from refimpl.testing import TOL_FD
 

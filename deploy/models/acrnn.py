@@ -38,7 +38,7 @@ from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries, skelet
 from deploy.quat import dq_normalize, quat_mul, quat_normalize
 from deploy.recurrent import tiled_state
 
-__all__ = ["export_acrnn_step", "export_acrnn_generate", "decoded_outputs"]
+__all__ = ["export_acrnn_step", "export_acrnn_generate"]
 
 SOURCE = ("Andreou, Aristidou, Chrysanthou: Pose Representations for Deep Skeletal Animation (SCA 2022), on "
           "acRNN (Zhou, Li et al., ICLR 2018)")
@@ -56,15 +56,6 @@ def _check(params, config, mean, std, representation):
     if rep is None or (F - 3) % rep.dim:
         raise ValueError(f"representation: {representation!r} does not fit frames of {F} values")
     return (F - 3) // rep.dim, rep.dim
-
-
-def decoded_outputs(representation: str) -> tuple[str, ...]:
-    """Names of the decoded outputs the graphs add for ``representation``."""
-    if representation == "dual_quaternions":
-        return ("joints", "positions")
-    if representation in ("quaternions", "quaternions+positions"):
-        return ("joints",)
-    return ()
 
 
 def _decode(g: GraphBuilder, frames: str, representation: str, J: int, D: int, lead: int, name: str) -> dict:
@@ -157,7 +148,8 @@ def export_acrnn_step(params: Mapping[str, np.ndarray], config: ACRNNConfig, *, 
                       dtype=np.float32, opset: int = OPSET, primitive: bool | None = None, skeleton=None,
                       frame_rate: float = 30.0, metadata: Mapping | None = None) -> onnx.ModelProto:
     """The ``step`` model: inputs ``frame (B, F)`` raw, ``h, c (L, B, H)``; outputs ``next_frame (B, F)`` raw,
-    ``h_next``, ``c_next``, and the decoded outputs (:func:`decoded_outputs`) of ``next_frame``."""
+    ``h_next``, ``c_next``, and the decoded outputs of ``next_frame`` (dual quaternions: ``joints``, ``positions``;
+    quaternions: ``joints``)."""
     J, D = _check(params, config, mean, std, representation)
     F, H, L = config.frame_size, config.hidden_size, config.num_layers
     g = GraphBuilder("acrnn_step", dtype=dtype, opset=opset, primitive=primitive)

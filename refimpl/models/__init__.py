@@ -7,7 +7,8 @@ forward/backward pair and a ``step`` for online use (the function the ONNX expor
 Modules: ``refimpl.models.qtg`` (Quaternion Transition Generator, Geleijn et al. 2021; spec/qtg.md) with its fast
 paths ``refimpl.models.qtg_fast`` (training) and ``refimpl.models.qtg_fast_inference`` (spec/architecture.md §Fast
 paths); ``refimpl.models.quaternet`` (QuaterNet recurrent pose network, short- and long-term; spec/quaternet.md
-§1-§4) with its training sequence ``refimpl.models.quaternet_sequence``; ``refimpl.models.quaternet_cnn``
+§1-§4) with its training sequence ``refimpl.models.quaternet_sequence`` and the long-term network over current dual
+quaternions ``refimpl.models.quaternet_long_dq`` (spec/locomotion.md §11); ``refimpl.models.quaternet_cnn``
 (QuaterNet convolutional pose network, our reconstruction; spec/quaternet.md §5); ``refimpl.models.pace`` (the
 pace network of the long-term model; spec/locomotion.md); ``refimpl.models.acrnn`` (acRNN with the
 dual-quaternion paper's representations; spec/acrnn.md); ``refimpl.models._shared`` (helpers the modules share).

@@ -6,7 +6,7 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["check_param_dict", "accumulate_grads"]
+__all__ = ["check_param_dict"]
 
 
 def check_param_dict(params: Mapping[str, np.ndarray], shapes: Mapping[str, tuple[int, ...]]) -> np.dtype:
@@ -37,10 +37,3 @@ def check_param_dict(params: Mapping[str, np.ndarray], shapes: Mapping[str, tupl
     return dtype
 
 
-def accumulate_grads(total: dict, g: Mapping[str, np.ndarray]) -> None:
-    """``total[k] += g[k]`` in place (the first occurrence is copied, so ``g``'s arrays are never aliased)."""
-    for k, v in g.items():
-        if k in total:
-            total[k] += v
-        else:
-            total[k] = np.array(v, copy=True)

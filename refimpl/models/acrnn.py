@@ -8,7 +8,7 @@ Network (defaults of :class:`ACRNNConfig` = the papers' sizes)::
 
 ``F = 3 + D·J`` is the frame vector of the chosen representation (refimpl/representations.py), standardised
 with the training set's mean and std. ``skewed=True`` is the published code's stacking (layer k reads layer
-k-1's PREVIOUS output, reference/dualquat_acrnn_qtg.md §2.1); ``skewed=False`` (default) the paper's ordinary
+k-1's PREVIOUS output, spec/layers.md §5.3); ``skewed=False`` (default) the paper's ordinary
 stack. Parameters: ``5121·F + 20,996,096`` at H = 1024 (:func:`count_parameters`, Table 4).
 
 Auto-conditioning (training, :func:`sequence_forward`): a window of ``T + 1`` standardised frames
@@ -18,8 +18,9 @@ starting with ground truth); ``y_t`` predicts ``f_{t+1}``. The loss (:func:`loss
 step. Backward (:func:`sequence_backward`) runs the steps in reverse; the gradient of an output fed back at step
 t+1 is added to the loss gradient of ``y_t``.
 
-Losses (:data:`VARIANTS`, the rows of Table 1): MSE on the standardised frames; for quaternions L_quat and the
-FK position loss (quaternions-FK); for dual quaternions the output path of refimpl/dq_output.py on the
+Losses (the rows of Table 1, :data:`refimpl.protocols.synthesis.VARIANTS`, reach :class:`LossSpec` through
+:meth:`LossSpec.for_variant`): MSE on the standardised frames; for quaternions L_quat and the FK position loss
+(quaternions-FK); for dual quaternions the output path of refimpl/dq_output.py on the
 de-standardised output (L_reg on the raw values, Eq. 13, L_pos, L_offset, local L_quat), any subset selectable.
 
 Shape legend: B batch, T steps, S seed frames, N generated frames, F frame size, H hidden size, L layers,
@@ -27,15 +28,15 @@ J joints, D values per joint.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
 
 from refimpl.models._shared import check_param_dict
-from refimpl.dq_output import DQ_TERM_NAMES, DQ_TERMS
+from refimpl.dq_output import DQ_TERM_NAMES
 from refimpl.dq_output_fast import dq_output_loss_backward, dq_output_loss_forward
-from refimpl.losses import (WEIGHT_ACRNN_QUAT_FK, euclidean_loss_backward, euclidean_loss_forward,
+from refimpl.losses import (euclidean_loss_backward, euclidean_loss_forward,
                             mse_loss_backward, mse_loss_forward, quat_loss_backward, quat_loss_forward,
                             quat_norm_loss_backward, quat_norm_loss_forward)
 from refimpl.nn.kinematics_layers import forward_kinematics_backward, forward_kinematics_forward
@@ -47,7 +48,7 @@ from refimpl.representations import REPRESENTATIONS, frame_size
 from refimpl.schedules import ACRNN_CONDITION_LENGTH, ACRNN_GROUND_TRUTH_LENGTH, auto_conditioning_mask
 
 __all__ = [
-    "ACRNNConfig", "Variant", "VARIANTS", "LossSpec", "TABLE4_PARAMETERS",
+    "ACRNNConfig", "LossSpec", "TABLE4_PARAMETERS",
     "param_shapes", "published_names", "count_parameters", "init_params", "init_state", "step",
     "sequence_forward", "sequence_backward", "generate",
     "loss_forward", "loss_backward", "loss_and_grads", "config_for",
@@ -129,7 +130,7 @@ def param_shapes(config: ACRNNConfig) -> dict[str, tuple[int, ...]]:
 
 
 def published_names(config: ACRNNConfig) -> dict[str, tuple[str, tuple[int, ...]]]:
-    """Name map to the published code (papagina/Auto_Conditioned_RNN_motion, ``code/pytorch_train_aclstm.py``):
+    """Name map to the published code (papagina/Auto_Conditioned_RNN_motion; spec/import.md):
     our name -> ``(published name, published shape)``.
 
     The published network holds one ``nn.LSTMCell`` per layer, ``lstm1`` … ``lstm3`` (``lstm{k+1}.weight_ih``
@@ -317,31 +318,6 @@ _QUAT_TERMS = ("quat", "fk", "reg")
 
 
 @dataclass(frozen=True)
-class Variant:
-    """One trainable row of Table 1: a representation and its loss weights (name → weight)."""
-
-    name: str
-    representation: str
-    weights: Mapping[str, float] = field(default_factory=lambda: {"mse": 1.0})
-
-
-#: Table 1 rows (plus the original positional acRNN). Weights: Appendix B (DQ: MSE + (L_pos + L_offset)/3 +
-#: local L_quat + 0.01 L_reg; quaternions-FK: MSE + L_quat + 1/4 FK position loss).
-VARIANTS = {v.name: v for v in (
-    Variant("positions", "positions"),
-    Variant("positions_acrnn", "positions_acrnn"),      # the published code's 171-value frame (End Sites kept)
-    Variant("euler", "euler"),
-    Variant("quaternions", "quaternions"),
-    Variant("quaternions_fk", "quaternions", {"mse": 1.0, "quat": 1.0, "fk": WEIGHT_ACRNN_QUAT_FK}),
-    Variant("quaternions+positions", "quaternions+positions"),
-    Variant("ortho6d", "ortho6d"),
-    Variant("ortho6d+positions", "ortho6d+positions"),
-    Variant("dual_quaternions", "dual_quaternions"),
-    Variant("dual_quaternions_all", "dual_quaternions", {"mse": 1.0, **DQ_TERMS}),
-)}
-
-
-@dataclass(frozen=True)
 class LossSpec:
     """Everything :func:`loss_forward` needs besides the arrays.
 
@@ -397,9 +373,10 @@ class LossSpec:
         object.__setattr__(self, "parents", tuple(int(p) for p in self.parents))
 
     @classmethod
-    def for_variant(cls, variant: str | Variant, mean, std, skeleton=None, weights=None) -> "LossSpec":
-        """The loss of a :data:`VARIANTS` row (``weights`` overrides its weights, e.g. for the ablation)."""
-        v = VARIANTS[variant] if isinstance(variant, str) else variant
+    def for_variant(cls, variant, mean, std, skeleton=None, weights=None) -> "LossSpec":
+        """The loss of a row of Table 1 (``variant``: its ``representation`` and loss ``weights``, a
+        :class:`refimpl.protocols.synthesis.Variant`; ``weights`` overrides them, e.g. for the ablation)."""
+        v = variant
         w = dict(v.weights if weights is None else weights)
         parents = tuple(skeleton.parents) if skeleton is not None else ()
         offsets = skeleton.offsets if skeleton is not None else None

@@ -1,6 +1,6 @@
 """QuaterNet's pace network: trajectory parameters along a spline from its curvature and a target speed.
 
-QuaterNet §3.7 (quaternet_reference_code.md §8.3, §9; spec/locomotion.md §4). Per spline point (5 points per
+QuaterNet §3.7 (spec/locomotion.md §4). Per spline point (5 points per
 unit of length) the network reads ``x = [turning angle, average speed]`` (I = 2) and predicts
 ``y = [amplitude A, frequency ω, cos Δ, sin Δ]`` (4): the local speed, the phase increment per frame and the
 facing direction relative to the tangent. Two variants:
@@ -111,7 +111,7 @@ def param_shapes(config: PaceConfig) -> dict[str, tuple[int, ...]]:
 
 
 def published_names(config: PaceConfig) -> dict[str, tuple[str, tuple[int, ...]]]:
-    """Name map to the published code (facebookresearch/QuaterNet ``long_term/pace_network.py``,
+    """Name map to the published code (facebookresearch/QuaterNet's long-term pace network, spec/locomotion.md §4,
     ``BidirectionalModel`` / ``DelayedModel``): our name -> ``(published name, published shape)``. The same names;
     only the delayed model's ``eos`` differs in shape, ``(1, 1, I)`` there and ``(I,)`` here."""
     out = {name: (name, shape) for name, shape in param_shapes(config).items()}
@@ -215,7 +215,7 @@ def backward(dy: np.ndarray, cache) -> tuple[np.ndarray, dict[str, np.ndarray]]:
 
 
 def loss_forward(pred: np.ndarray, target: np.ndarray):
-    """L1 training loss (reference ``train_pace_network.py``): ``mean |pred - target|`` over B, N and the 4 outputs."""
+    """L1 training loss (spec/locomotion.md §5): ``mean |pred - target|`` over B, N and the 4 outputs."""
     return mae_loss_forward(pred, target)
 
 

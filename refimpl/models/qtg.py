@@ -204,7 +204,7 @@ def rtn_macs_per_frame(pose_size: int = 91, frame_encoder: tuple[int, ...] = (51
                        count_target_encoder: bool = False) -> int:
     """Multiply-accumulates per generated frame of the Recurrent Transition Network (Harvey & Pal 2018).
 
-    Sizes from the reference notes (dualquat_acrnn_qtg.md §3.3; a third-party re-implementation, unverified):
+    Sizes as spec/qtg.md §5 states them (a third-party re-implementation, unverified):
     frame encoder ``P -> 512 -> 512``, offset encoder (target − current) ``P -> 128 -> 128``, target encoder
     ``P -> 128 -> 128``, one LSTM of 512 on the concatenation (768 inputs), decoder ``512 -> 256 -> 128 -> P``.
     The target encoding is constant over a transition and counted once per transition, i.e. not per frame,

@@ -38,11 +38,11 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.models._shared import accumulate_grads, check_param_dict
+from refimpl.models._shared import check_param_dict
 from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init, gru_step_backward, gru_step_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
-from refimpl.nn.params import check_float_array, init_normal
+from refimpl.nn.params import accumulate_grads, check_float_array, init_normal
 from refimpl.nn.quat_layers import (dq_normalize_backward, dq_normalize_forward, dq_velocity_backward,
                                     dq_velocity_forward, qmul_velocity_backward, qmul_velocity_forward,
                                     quat_normalize_backward, quat_normalize_forward)

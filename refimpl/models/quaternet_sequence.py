@@ -18,7 +18,7 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.models._shared import accumulate_grads
+from refimpl.nn.params import accumulate_grads
 from refimpl.models.quaternet import (QuaterNetConfig, check_frames, check_mask, check_params, frame_backward,
                                       frame_forward, head_backward, head_forward, init_state, input_backward,
                                       input_forward, run_backward, run_forward, step)

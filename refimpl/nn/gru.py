@@ -18,7 +18,7 @@ Shapes: B batch, T time, I input size, H hidden size, L layers, D directions (1 
 ``x (B, T, I)`` batch-first; ``h0, h_n (L*D, B, H)`` as PyTorch (row ``k*D + d``); ``y (B, T, D*H)`` the top
 layer's outputs, forward direction first.
 
-Implementation (spec/layers.md §4.3, reference/performance_facts.md): a teacher-forced sequence is processed
+Implementation (spec/layers.md §4.3): a teacher-forced sequence is processed
 layer by layer; the input projections of all time steps of a layer are ONE GEMM ``(T*B, I) @ W_ih^T``; the
 per-step recurrent product uses a weight transposed once per call; back-propagation through time stores the
 per-step pre-activation gradients and forms ``dW_hh``, ``dW_ih`` and ``dx`` with one GEMM each after the loop.

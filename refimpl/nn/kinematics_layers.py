@@ -29,9 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.nn.quat_layers import (as_float_array, check_grad,
-                                    quat_conj_kernel, unbroadcast)
-from refimpl.quat import quat_mul_kernel
+from refimpl.nn.quat_layers import as_float_array, check_grad, unbroadcast
+from refimpl.quat import quat_conj_kernel, quat_mul_kernel
 
 __all__ = [
     "forward_kinematics_forward", "forward_kinematics_backward",

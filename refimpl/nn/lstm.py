@@ -17,7 +17,7 @@ Parameters (``k`` = layer)::
     {prefix}.bias_hh_l{k}    (4H,)
 
 Stacking. Ordinary (``skewed=False``, PyTorch): layer k reads layer k-1's output of the SAME step,
-``x^k_t = h^{k-1}_t``. Skewed (``skewed=True``, acRNN's published code, reference/dualquat_acrnn_qtg.md §2.1):
+``x^k_t = h^{k-1}_t``. Skewed (``skewed=True``, acRNN's published code, spec/layers.md §5.3):
 layer k reads layer k-1's output of the PREVIOUS step, ``x^k_t = h^{k-1}_{t-1}``, where ``h^{k-1}_{-1}`` is
 layer k-1's initial state ``h0[k-1]`` (zeros in acRNN). Layer 0 reads ``x_t`` in both. The top layer's new
 state is the output, so with L layers ``y_t`` depends on ``x_0 .. x_{t-L+1}`` only (for t < L-1, on no input).

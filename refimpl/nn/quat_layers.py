@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import quat_mul_kernel  # Hamilton product (broadcasting, keeps float32)
+from refimpl.quat import quat_conj_kernel, quat_mul_kernel  # conjugate, Hamilton product (broadcasting, keep float32)
 from refimpl.rotations import quat_elementary_kernel
 
 __all__ = [
@@ -100,13 +100,6 @@ def unbroadcast(g: np.ndarray, shape: tuple) -> np.ndarray:
     if axes:
         g = g.sum(axis=axes, keepdims=True)
     return g
-
-
-def quat_conj_kernel(q: np.ndarray) -> np.ndarray:
-    """Quaternion conjugate ``(w, -x, -y, -z)``."""
-    out = -q
-    out[..., 0] = q[..., 0]
-    return out
 
 
 def quat_mul_backward_kernel(dy: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -581,4 +574,4 @@ def axis_angle_to_quat_backward(dq, cache) -> np.ndarray:
 
 
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
-# as_float_array, check_grad, normalize, normalize_backward, quat_conj_kernel, quat_mul_backward_kernel, unbroadcast.
+# as_float_array, check_grad, normalize, normalize_backward, quat_mul_backward_kernel, unbroadcast.

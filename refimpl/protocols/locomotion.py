@@ -1,7 +1,7 @@
 """QuaterNet long-term locomotion protocol: pose-network windows and augmentation, splines and pace-network data,
 the whole-file datasets, and the held-out evaluation (free-running position and velocity error over the horizon
 with ground-truth controls) with its zero-velocity baseline (spec/locomotion.md; QuaterNet §3.7, §4.3-4.4;
-quaternet_reference_code.md §7, §8). The data (rigs, loading, features, sequences) is in
+spec/locomotion.md §3, §5). The data (rigs, loading, features, sequences) is in
 :mod:`refimpl.protocols.locomotion_data`.
 
 Units: QuaterNet units (CMU ASF units, 1 unit = 5.6444 cm), 30 frames per second.

@@ -1,7 +1,7 @@
 """QuaterNet long-term locomotion data: rigs, loading, mirroring, facing, phase, features, sequences, splits.
 
 The data of the long-term system (spec/locomotion.md; QuaterNet
-§3.7, §4.3; quaternet_reference_code.md §7, §8); the windows, pace data and protocol are in
+§3.7, §4.3; spec/locomotion.md §3); the windows, pace data and protocol are in
 :mod:`refimpl.protocols.locomotion`. Pipeline per file::
 
     load_* (BVH / exp-map)  →  prepare_motion (joint subset, units)  →  build_sequences (mirror × downsample
@@ -43,7 +43,7 @@ from refimpl.skeleton import Skeleton, remove_joints
 from refimpl.splines import gaussian_filter1d
 from refimpl.checkpoint_fields import TaskSchema, int_field, kind_of, number_array, require_fields, skeleton_field
 
-__all__ = ["CHECKPOINT_SCHEMA", 
+__all__ = ["CHECKPOINT_SCHEMA", "skeleton_of", 
     "QUATERNET_UNIT_CM", "FPS", "PHASE_EPSILON", "PHASE_COOLDOWN", "AMPLITUDE_SIGMA", "FEATURE_NAMES",
     "LocomotionRig", "CMU_RIG", "BANDAI_NAMCO_RIG", "load_cmu_bvh", "load_cmu_expmap", "load_bandai_namco",
     "prepare_motion", "mirror_motion", "facing_vectors", "build_phase_track", "extract_features",
@@ -111,7 +111,7 @@ _CMU_PAIRS = (("LHipJoint", "RHipJoint"),) + tuple(
     (n, n.replace("Left", "Right")) for n in _CMU_KEEP if n.startswith("Left"))
 
 #: CMU (cgspeed BVH, 31 joints + End Sites, or the 38-joint ASF skeleton of the exp-map files) → QuaterNet's 26
-#: joints (Spine1, the finger bases and thumbs and the End Sites removed; quaternet_reference_code.md §3.6).
+#: joints (Spine1, the finger bases and thumbs and the End Sites removed; spec/locomotion.md §3.1).
 CMU_RIG = LocomotionRig(name="cmu", keep=_CMU_KEEP, left_foot="LeftFoot", right_foot="RightFoot",
                         left_hip="LeftUpLeg", right_hip="RightUpLeg", pairs=_CMU_PAIRS, unit_scale=1.0)
 
@@ -529,6 +529,14 @@ def bandai_namco_split(paths: Iterable) -> tuple[list, list]:
 
 
 # ---- what the task stores in a checkpoint (spec/robustness.md §9.1) ----
+
+def skeleton_of(model_config: Mapping) -> Skeleton:
+    """The training skeleton a locomotion checkpoint stores (``refimpl.tasks.locomotion.checkpoint_extra``), with
+    its sides."""
+    s = model_config["skeleton"]
+    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), names=s["names"],
+                    joints_left=s.get("joints_left"), joints_right=s.get("joints_right"))
+
 
 def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
     """The locomotion fields: ``rig`` ``cmu`` or ``bandai_namco`` and a ``skeleton`` with that rig's joints (both

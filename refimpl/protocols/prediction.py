@@ -1,7 +1,7 @@
 """Short-term motion prediction, the evaluation (spec/prediction.md): protocol, error, baselines, tables.
 
 QuaterNet journal paper §4.2, Tables 1-2; the protocol is the one of the published evaluation
-(quaternet_reference_code.md §6), which replicates Fragkiadaki et al. / Martinez et al. The data is in
+(spec/prediction.md §3), which replicates Fragkiadaki et al. / Martinez et al. The data is in
 :mod:`refimpl.protocols.prediction_data`.
 
 * Protocol (:class:`Protocol`, :func:`make_protocol`): a fresh ``RandomState(1234567890)`` per action, draws

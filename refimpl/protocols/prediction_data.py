@@ -1,7 +1,7 @@
 """Short-term motion prediction, the data (spec/prediction.md): Human3.6M and CMU exp-map files as rotation
 sequences at the protocol's rate, their skeletons, and the training windows.
 
-QuaterNet journal paper §4.1; the loading replicates the published code (quaternet_reference_code.md §6).
+QuaterNet journal paper §4.1; the loading replicates the published code (spec/prediction.md §2).
 
 * Human3.6M exp-map text files ``S{n}/{action}_{subaction}.txt`` (99 values per row, 50 Hz; :func:`load_h36m`)
   and the CMU exp-map layout ``{train,test}/{action}/{action}_{k}.txt`` (117 values per row; :func:`load_cmu`),
@@ -36,7 +36,7 @@ __all__ = ["CHECKPOINT_SCHEMA",
     "usable_training", "stride_of",
 ]
 
-# The published evaluation's action order (quaternet_reference_code.md §6.6).
+# The published evaluation's action order (spec/prediction.md §3).
 H36M_ACTIONS = ("walking", "eating", "smoking", "discussion", "directions", "greeting", "phoning", "posing",
                 "purchases", "sitting", "sittingdown", "takingphoto", "waiting", "walkingdog", "walkingtogether")
 H36M_TRAIN_SUBJECTS = ("S1", "S6", "S7", "S8", "S9", "S11")

@@ -37,6 +37,8 @@ import numpy as np
 
 from refimpl.bone_ik import rotations_from_positions
 from refimpl.bvh import read_bvh
+from refimpl.dq_output import DQ_TERMS
+from refimpl.losses import WEIGHT_ACRNN_QUAT_FK
 from refimpl.motion import Motion
 from refimpl.nn.params import check_float_array
 from refimpl.preprocess import downsample, feature_statistics
@@ -45,12 +47,12 @@ from refimpl.skeleton import Skeleton, remove_joints
 from refimpl.checkpoint_fields import (MAX_TASK_ABS, MIN_STD, TaskSchema, int_field, kind_of, number_array,
                                        require_fields, skeleton_field)
 
-__all__ = ["CHECKPOINT_SCHEMA", 
+__all__ = ["Variant", "VARIANTS", "CHECKPOINT_SCHEMA", 
     "SALSA_FRAME_TIME", "SALSA_TRAIN", "SALSA_TEST", "SAMPLE_TRAIN", "SAMPLE_TEST", "LENGTH_SCALE", "FPS",
     "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN", "TABLE1_ROWS",
     "DEFAULT_ROW", "horizon_frames", "in_source_units", "END_SITE_REPRESENTATIONS", "load_salsa_motion",
     "motion_to_frames", "frames_to_motion", "SynthesisData", "skeleton_of", "load_synthesis_data", "sample_windows",
-    "seed_windows", "evaluate_generator", "NPSS_VARIANTS", "root_zeroed_positions", "mean_joint_error", "npss",
+    "count_windows", "seed_windows", "evaluate_generator", "NPSS_VARIANTS", "root_zeroed_positions", "mean_joint_error", "npss",
     "mean_acceleration", "acceleration_comparison",
 ]
 
@@ -73,7 +75,32 @@ ACCELERATION_FRAMES = 300
 WINDOW_MARGIN = 10
 
 
-#: ``--representation`` value -> row of Table 1 (a key of :data:`refimpl.models.acrnn.VARIANTS`).
+@dataclasses.dataclass(frozen=True)
+class Variant:
+    """One trainable row of Table 1: a representation and its loss weights (name → weight)."""
+
+    name: str
+    representation: str
+    weights: Mapping[str, float] = dataclasses.field(default_factory=lambda: {"mse": 1.0})
+
+
+#: Table 1 rows (plus the original positional acRNN). Weights: Appendix B (DQ: MSE + (L_pos + L_offset)/3 +
+#: local L_quat + 0.01 L_reg; quaternions-FK: MSE + L_quat + 1/4 FK position loss).
+VARIANTS = {v.name: v for v in (
+    Variant("positions", "positions"),
+    Variant("positions_acrnn", "positions_acrnn"),      # the published code's 171-value frame (End Sites kept)
+    Variant("euler", "euler"),
+    Variant("quaternions", "quaternions"),
+    Variant("quaternions_fk", "quaternions", {"mse": 1.0, "quat": 1.0, "fk": WEIGHT_ACRNN_QUAT_FK}),
+    Variant("quaternions+positions", "quaternions+positions"),
+    Variant("ortho6d", "ortho6d"),
+    Variant("ortho6d+positions", "ortho6d+positions"),
+    Variant("dual_quaternions", "dual_quaternions"),
+    Variant("dual_quaternions_all", "dual_quaternions", {"mse": 1.0, **DQ_TERMS}),
+)}
+
+
+#: ``--representation`` value -> row of Table 1 (a key of :data:`VARIANTS`).
 TABLE1_ROWS = {
     "dq-all": "dual_quaternions_all",            # dual quaternions (all losses), the paper's proposal
     "dq-mse": "dual_quaternions",                # dual quaternions (MSE)
@@ -272,6 +299,12 @@ def load_synthesis_data(representation: str, folder, train: Sequence[str] = SALS
     return SynthesisData(representation, skel, tuple(train_frames), tuple(frames[n] for n in test),
                          tuple(train) + tuple(f"{n}/odd" for n in train if parities == 2), tuple(test), mean, std,
                          standardise, parities)
+
+
+def count_windows(sequences: Sequence[np.ndarray], window_length: int) -> int:
+    """Training windows of ``window_length + 1`` frames: every start in every sequence (an epoch of
+    :func:`sample_windows` is nominal)."""
+    return int(sum(len(s) - window_length for s in sequences))
 
 
 def sample_windows(rng: np.random.Generator, sequences: Sequence[np.ndarray], batch_size: int = 32,
@@ -497,7 +530,6 @@ def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
     numbers (``std`` in [1e-6, 1e6]), ``loss_weights`` finite numbers >= 0 by loss name, ``window_length`` /
     ``condition_length`` / ``ground_truth_length`` positive integers, ``train_takes`` / ``test_takes`` lists of
     strings."""
-    from refimpl.models import acrnn
     from refimpl.representations import frame_size
 
     rows = TABLE1_ROWS  # --representation value -> variant
@@ -507,12 +539,12 @@ def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
         raise ValueError(f"{where}: model_config.data_representation: expected one of {sorted(REPRESENTATIONS)}, "
                          f"got {kind_of(rep)}")
     variant = cfg["variant"]
-    if not isinstance(variant, str) or variant not in acrnn.VARIANTS:
-        raise ValueError(f"{where}: model_config.variant: expected one of {sorted(acrnn.VARIANTS)}, got "
+    if not isinstance(variant, str) or variant not in VARIANTS:
+        raise ValueError(f"{where}: model_config.variant: expected one of {sorted(VARIANTS)}, got "
                          f"{kind_of(variant)}")
-    if acrnn.VARIANTS[variant].representation != rep:
+    if VARIANTS[variant].representation != rep:
         raise ValueError(f"{where}: model_config.data_representation {rep!r} does not match the variant "
-                         f"{variant!r}, which trains on {acrnn.VARIANTS[variant].representation!r}")
+                         f"{variant!r}, which trains on {VARIANTS[variant].representation!r}")
     for key in ("row", "representation"):
         if key in cfg:
             row = cfg[key]

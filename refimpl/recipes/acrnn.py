@@ -33,7 +33,8 @@ from refimpl.models import acrnn
 from refimpl.models.acrnn import ACRNNConfig
 from refimpl.optim import ACRNN_ADAM
 from refimpl.options import config_with_overrides
-from refimpl.protocols.synthesis import TABLE1_ROWS, WINDOW_MARGIN, motion_to_frames, sample_windows, skeleton_of
+from refimpl.protocols.synthesis import (TABLE1_ROWS, VARIANTS, WINDOW_MARGIN, count_windows, motion_to_frames, sample_windows,
+                                         skeleton_of)
 from refimpl.train import ModelAdapter, OptimConfig
 
 __all__ = ["PUBLISHED_SETTINGS", "IMPORT_HINT", "published_names", "NAME", "SUMMARY", "TASK", "REPRESENTATIONS", "CONFIG_TYPE",
@@ -88,7 +89,7 @@ def make_config(train_ds, overrides: Sequence[str] = ()) -> ACRNNConfig:
 def loss_spec(variant: str, weights: Mapping | None, mean, std, skeleton) -> acrnn.LossSpec:
     """The :class:`~refimpl.models.acrnn.LossSpec` of a row (``weights`` overrides, UsageError when invalid)."""
     try:
-        return acrnn.LossSpec.for_variant(variant, mean, std, skeleton, weights=weights)
+        return acrnn.LossSpec.for_variant(VARIANTS[variant], mean, std, skeleton, weights=weights)
     except ValueError as exc:
         raise UsageError(f"--losses: {exc}") from None
 
@@ -115,10 +116,8 @@ def make_adapter(train_ds, val_ds, config: ACRNNConfig, dtype, extra: Mapping) -
         total, _, grads = acrnn.loss_and_grads(params, config, batch, spec)
         return total, grads
 
-    from refimpl.tasks.synthesis import num_examples
-
     cfg = dict(config.to_dict(), dtype=np.dtype(dtype).name, **{**extra, "representation": train_ds.row})
-    return ModelAdapter(name=NAME, num_examples=num_examples(train_ds),
+    return ModelAdapter(name=NAME, num_examples=count_windows(train_ds.data.train, train_ds.window_length),
                         init_params=lambda rng: acrnn.init_params(config, rng, dtype=dtype),
                         get_batch=get_batch, loss_and_grads=loss_and_grads, config=cfg)
 

@@ -14,7 +14,7 @@
 * :func:`make_method` — free-running prediction ``f(inputs (B, P + T, F), P)`` with the ground-truth controls;
   :func:`extra_methods` — a dual-quaternion model's positions read from its DQs, for ``refimpl eval``;
 * ``output=dual_quaternion`` (Andreou et al. §6.2): frames of current dual quaternions, L_pos + L_offset + L_quat
-  + 0.01 L_reg, decoding with Eq. 12 — :mod:`refimpl.recipes.quaternet_long_dq` (spec/locomotion.md §11).
+  + 0.01 L_reg, decoding with Eq. 12 — :mod:`refimpl.models.quaternet_long_dq` (spec/locomotion.md §11).
 
 Shape legend: B batch, P prefix, T target frames, J joints, F = 4J + 8 input features, G = 4J + 2 outputs
 (8J + 8 and 8J + 2 for dual quaternions).
@@ -30,13 +30,13 @@ from refimpl.errors import UsageError
 from refimpl.losses import (QUATERNET_PENALTY_WEIGHT, fk_position_loss_backward, fk_position_loss_forward,
                             quat_norm_loss_backward, quat_norm_loss_forward)
 from refimpl.losses import euclidean_loss_backward, euclidean_loss_forward
-from refimpl.models import quaternet, quaternet_sequence
-from refimpl.recipes import quaternet_long_dq
+from refimpl.models import quaternet, quaternet_long_dq, quaternet_sequence
 from refimpl.nn.quat_layers import (axis_angle_to_quat_backward, axis_angle_to_quat_forward, euler_to_quat_backward,
                                     euler_to_quat_forward)
 from refimpl.rotations import axis_angle_from_quat, euler_from_quat
 from refimpl.optim import QUATERNET_ADAM, QUATERNET_CLIP_NORM, QUATERNET_LR_DECAY
 from refimpl.options import config_with_overrides
+from refimpl.protocols.locomotion_data import skeleton_of
 from refimpl.schedules import QUATERNET_TF_DECAY, scheduled_sampling_mask, teacher_forcing_ratio
 from refimpl.train import ModelAdapter, OptimConfig
 
@@ -182,8 +182,8 @@ def loss_and_grads(params: Mapping[str, np.ndarray], batch: Mapping, net: quater
     (:func:`euler_to_quat_forward`, :func:`axis_angle_to_quat_forward`) before the same FK loss; the penalty
     acts on the placeholder quaternion only. Positions (QN §4.4.3): ``mean ‖p̂_j − p_j‖ + mean |o − õ| +
     mean |h − h̃|`` (the height is inside the FK positions of the other models; here it is its own output).
-    Dual quaternions (Andreou et al. §6.2): :func:`refimpl.recipes.quaternet_long_dq.loss_and_grads` with the
-    DQs' unit ``dq_scale`` (``batch["inputs"]`` from :func:`~refimpl.recipes.quaternet_long_dq.dq_inputs`).
+    Dual quaternions (Andreou et al. §6.2): :func:`refimpl.models.quaternet_long_dq.loss_and_grads` with the
+    DQs' unit ``dq_scale`` (``batch["inputs"]`` from :func:`~refimpl.models.quaternet_long_dq.dq_inputs`).
 
     Parameters
     ----------
@@ -317,7 +317,6 @@ def make_adapter(train_ds, val_ds, config: QuaterNetLongConfig, dtype, extra: Ma
 
 def make_method(model) -> Callable:
     """``f(inputs (B, P + T, F), P) -> (rotations, translations)``: :func:`rollout` of a trained model."""
-    from refimpl.tasks.locomotion import skeleton_of
     net = model.config.network()
     skel = skeleton_of(model.extra)
 
@@ -333,7 +332,6 @@ def extra_methods(model) -> dict:
     instead of FK of the decoded rotations; none for the other outputs."""
     if model.config.output != "dual_quaternion":
         return {}
-    from refimpl.tasks.locomotion import skeleton_of
     net = model.config.network()
     skel = skeleton_of(model.extra)
 
@@ -351,8 +349,6 @@ def export_inputs(model) -> dict:
     if model.config.output not in ("quaternion", "dual_quaternion"):
         raise UsageError(f"export: only quaternion- and dual-quaternion-output models are exported (this one: "
                          f"{model.config.output})")
-    from refimpl.tasks.locomotion import skeleton_of
-
     metadata = {"frame_rate": float(model.fps or 30.0),
                 "training": {"checkpoint_step": model.meta.get("step"), "rig": model.extra.get("rig")}}
     if model.config.output == "dual_quaternion":  # the DQs' translation unit, for a walk from the exported step

@@ -22,15 +22,15 @@ from refimpl.bounds import bounded_float, check_number
 from refimpl.errors import UsageError, existing_file, reading
 from refimpl.protocols.locomotion import LocomotionDataset, build_dataset, evaluate, format_results, zero_velocity
 from refimpl.protocols.locomotion_data import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
+from refimpl.protocols.locomotion_data import skeleton_of
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                bandai_namco_split, cmu_split)
 from refimpl.services import load_trained, network_methods
-from refimpl.skeleton import Skeleton
 from refimpl.tasks.locomotion_generate import (SPEEDS, bone_length_drift, dq_bone_length_drift, facing_of,
                                               foot_skating, generate_walk, parse_path, parse_speed, read_path_file,
                                               write_outputs)
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SEED_FRAMES", "add_train_options", "add_eval_options",
     "add_export_options", "add_generate_options", "resolve_files", "train_datasets", "num_examples",
     "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of", "rig_of",
@@ -199,13 +199,6 @@ def check_checkpoint(model_config: Mapping, path) -> None:
 def trained_fields(model_config: Mapping, config) -> dict:
     """The :class:`~refimpl.registry.TrainedModel` fields of this task: the frame rate."""
     return {"fps": float(model_config.get("fps", FPS))}
-
-
-def skeleton_of(model_config: Mapping) -> Skeleton:
-    """The training skeleton stored by :func:`checkpoint_extra`."""
-    s = model_config["skeleton"]
-    return Skeleton(s["parents"], np.asarray(s["offsets"], dtype=np.float64), names=s["names"],
-                    joints_left=s.get("joints_left"), joints_right=s.get("joints_right"))
 
 
 def rig_of(model_config: Mapping) -> LocomotionRig:

@@ -35,7 +35,7 @@ from refimpl.motion import Motion
 from refimpl.protocols.locomotion import rotate_controls
 from refimpl.protocols.locomotion_data import FPS, QUATERNET_UNIT_CM
 from refimpl.quat import quat_mul
-from refimpl.recipes import quaternet_long_dq
+from refimpl.models import quaternet_long_dq
 from refimpl.skeleton import Skeleton
 from refimpl.splines import Spline, circle_path, figure_eight_path, line_with_turn_path, read_path_csv
 
@@ -173,7 +173,7 @@ def generate_walk(pose_params: Mapping, net: quaternet.QuaterNetConfig, pace_par
     ----------
     pose_params, net : the long-term pose network (``net.num_controls == 6``, ``num_outputs == 2``), over local
         quaternions or current dual quaternions (``net.representation``; the seed converted with
-        :func:`refimpl.recipes.quaternet_long_dq.dq_inputs`, the outputs decoded with Eq. 12 / Eq. 8)
+        :func:`refimpl.models.quaternet_long_dq.dq_inputs`, the outputs decoded with Eq. 12 / Eq. 8)
     pace_params, pace_config : the pace network (bidirectional or delayed, run offline over the whole path)
     skeleton : the training skeleton (J joints, QuaterNet units)
     seed_rotations : (P, J, 4); seed_features : (P, 8) — the conditioning clip

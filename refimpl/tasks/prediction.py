@@ -28,7 +28,7 @@ from refimpl.registry import require_source
 from refimpl.services import checkpoint_for, network_methods, onnx_frame_rate, onnx_metadata
 from refimpl.skeleton import Skeleton
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SAMPLE_EXPMAP_DIR", "add_train_options", "add_eval_options",
     "add_export_options", "add_generate_options", "resolve_data", "train_datasets", "num_examples", "describe_data",
     "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method", "methods", "evaluate", "eval_protocol",

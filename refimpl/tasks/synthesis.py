@@ -17,8 +17,8 @@ import numpy as np
 
 from refimpl.options import export_length
 from refimpl.errors import UsageError
-from refimpl.models import acrnn
 from refimpl.protocols.synthesis import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
+from refimpl.protocols.synthesis import VARIANTS, count_windows
 from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS,
                                          SALSA_TEST, SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE,
                                          TABLE1_ROWS, SynthesisData, evaluate_generator, frames_to_motion,
@@ -29,7 +29,7 @@ from refimpl.services import checkpoint_for, network_methods
 from refimpl.skeleton import Skeleton
 from refimpl.tasks.transition_generate import with_end_sites
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "NPSS_REPORTED", "SAMPLE_SALSA", "TrainingSet", "add_train_options",
     "add_eval_options", "add_export_options", "add_generate_options", "resolve_data", "train_datasets",
     "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
@@ -165,7 +165,7 @@ def train_datasets(args):
         raise UsageError(f"--representation {row!r}: expected one of {list(TABLE1_ROWS)}")
     folder, train, test = resolve_data(args.data)
     parities, augment = int(getattr(args, "parities", 1)), bool(getattr(args, "augment_heading", False))
-    representation = acrnn.VARIANTS[TABLE1_ROWS[row]].representation
+    representation = VARIANTS[TABLE1_ROWS[row]].representation
     try:
         data = load_synthesis_data(representation, folder, train, test, parities=parities,
                                    standardise=not getattr(args, "raw_frames", False))
@@ -184,7 +184,7 @@ def train_datasets(args):
 def num_examples(dataset) -> int:
     """Training windows (every start of a ``T + 1``-frame window in every take; batches are drawn with
     :func:`sample_windows`, so an epoch is nominal)."""
-    return int(sum(len(s) - dataset.window_length for s in dataset.data.train))
+    return count_windows(dataset.data.train, dataset.window_length)
 
 
 def describe_data(train_ds, test_ds) -> str:
@@ -200,7 +200,7 @@ def checkpoint_extra(train_ds) -> dict:
     representation, the Table 1 row and its loss weights, the window length and the skeleton (for BVH output)."""
     d = train_ds.data
     sk = d.skeleton
-    weights = dict(acrnn.VARIANTS[train_ds.variant].weights if train_ds.weights is None else train_ds.weights)
+    weights = dict(VARIANTS[train_ds.variant].weights if train_ds.weights is None else train_ds.weights)
     return {"mean": [float(v) for v in d.mean], "std": [float(v) for v in d.std], "fps": float(FPS),
             "data_representation": d.representation, "variant": train_ds.variant, "row": train_ds.row,
             "loss_weights": weights, "window_length": int(train_ds.window_length),

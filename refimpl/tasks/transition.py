@@ -54,7 +54,7 @@ from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
 from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "add_train_options", "add_eval_options", "add_export_options",
     "add_generate_options", "source_for_file", "resolve_data", "build_datasets", "train_datasets", "num_examples",
     "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "JoinedOnnxMethod", "onnx_method",

@@ -307,7 +307,7 @@ def _skeleton_variants(sk: dict) -> list:
 
 def _task_values(model: str, cfg: dict) -> dict:
     """field -> hostile values for the task fields of ``model``'s checkpoints."""
-    from refimpl.models.acrnn import VARIANTS
+    from refimpl.protocols.synthesis import VARIANTS
     from refimpl.representations import REPRESENTATIONS
     from refimpl.protocols.synthesis import TABLE1_ROWS
 
@@ -349,7 +349,7 @@ def _task_values(model: str, cfg: dict) -> dict:
 def _acrnn_labels_agree(cfg: dict) -> str | None:
     """The oracle of an accepted acRNN checkpoint: the labels and the frame size agree (computed here from the
     paper's tables, not with the schema's code)."""
-    from refimpl.models.acrnn import VARIANTS
+    from refimpl.protocols.synthesis import VARIANTS
     from refimpl.representations import REPRESENTATIONS
     from refimpl.protocols.synthesis import TABLE1_ROWS
 
