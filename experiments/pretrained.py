@@ -25,7 +25,6 @@ import contextlib
 import io
 import json
 import os
-import platform
 import shlex
 import subprocess
 import sys
@@ -38,6 +37,7 @@ import numpy as np
 from refimpl.atomic import atomic_write_text
 from refimpl.checkpoint import load_checkpoint, save_checkpoint
 from refimpl.pretrained import PREFIX, sha256_of, weights_only
+from refimpl.versions import library_versions
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "pretrained"
@@ -168,24 +168,6 @@ MODELS = {
 
 def _say(*a):
     print(*a, file=sys.stderr, flush=True)
-
-
-def library_versions() -> dict:
-    """Python, NumPy, its BLAS (name, version, kernel, threads; threadpoolctl) and onnx / onnxruntime versions."""
-    out = {"python": platform.python_version(), "numpy": np.__version__, "machine": platform.machine(),
-           "cpu_count": os.cpu_count()}
-    try:
-        from threadpoolctl import threadpool_info
-
-        blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
-        if blas:
-            out["blas"] = {k: blas[0].get(k) for k in ("internal_api", "version", "architecture", "num_threads")}
-    except ImportError:
-        pass
-    for name in ("onnx", "onnxruntime"):
-        with contextlib.suppress(ImportError):
-            out[name] = __import__(name).__version__
-    return out
 
 
 def train_command(name: str, runs: Path) -> list[str]:
