@@ -15,7 +15,8 @@ What changes, declared here (nothing else is touched):
   option are the page's.
 * :data:`NOT_RUN`: the install (this environment is it; ``test_ci_installs_as_the_readme_says`` checks that
   ``.ci/run`` runs the README's line), ``refimpl demo`` (``.ci/run`` runs it as written before the tests), the
-  test suite itself, and the C build and run (``tests/test_c_example.py`` builds and runs it with ``ORT_C_DIR``).
+  test suite itself, the C build and run (``tests/test_c_example.py`` builds and runs it with ``ORT_C_DIR``) and
+  the web server, which serves until stopped (``tests/test_web.py`` runs it in headless Chromium).
 * Commands that need ``../shared`` are skipped when it is absent (they are still parsed).
 * ``SLOW``: the README's QTG-on-Bandai-Namco commands read the 830 locomotion files for transition windows,
   which is not cached (60 s on an idle machine, 250 s at load 9): they are parsed, and run only with
@@ -71,6 +72,8 @@ NOT_RUN = {
                     "benchmarks/results/demo_eval.json); tests/test_demo.py runs demo --quick",
     "cc ": "the C example (shell variables, a C compiler): tests/test_c_example.py builds it with ORT_C_DIR",
     "LD_LIBRARY_PATH=": "the C example: tests/test_c_example.py runs it with ORT_C_DIR",
+    "python -m deploy web": "serves the page until Ctrl-C: tests/test_web.py serves it and drives headless Chromium "
+                            "through it, tests/test_deploy_serve.py checks the server",
 }
 
 #: Commands that read the Bandai Namco set for transitions (uncached, > 1 min): run with REFIMPL_README_SLOW=1.
