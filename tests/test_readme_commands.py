@@ -180,8 +180,9 @@ def _parse(cmd: Command) -> None:
 
 
 def _not_run(cmd: Command) -> str | None:
+    plain = " ".join(shlex.split(cmd.text))   # unquoted (shlex.join quotes `VAR=$X`)
     for prefix, why in NOT_RUN.items():
-        if cmd.text.startswith(prefix):
+        if plain.startswith(prefix):
             return why
     return None
 
