@@ -53,9 +53,9 @@ from refimpl import weights_cli
 from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
-from refimpl.bounds import bounded_int
+from refimpl.bounds import bounded_float, bounded_int
 from refimpl.threads import AUTO, threads_option
-from refimpl.options import add_data_options, beta, check_overrides, nonneg_int, positive_float, positive_int
+from refimpl.options import add_data_options, beta, check_overrides, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
 from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
 from refimpl.threads import blas_thread_pool
@@ -368,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file")
     p.add_argument("--joints", action="store_true", help="list the joint hierarchy with offsets")
     p.add_argument("--layout", default="cmu", choices=("cmu", "h36m"), help="exp-map layout (default cmu)")
-    p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
+    p.add_argument("--fps", type=bounded_float("fps"), default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
     p = sub.add_parser("train", help=f"train a network ({', '.join(sorted(MODELS))}) on motion files",
@@ -448,7 +448,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    f"of the exported models in --onnx, else {DEFAULT_MODEL}'s) and write a BVH.",
                        usage=generate_usage().replace("usage: ", "", 1))
     p.add_argument("--source", default=None, help=".bvh or exp-map .txt: the source clip, prefix or seed")
-    p.add_argument("--source-frame", type=nonneg_int, default=None,
+    p.add_argument("--source-frame", type=bounded_int("frame_index"), default=None,
                    help="frame of --source where the task starts (see the usage lines above)")
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (NumPy backend)")
     p.add_argument("--backend", default="numpy", choices=("numpy", "onnx"))
@@ -478,7 +478,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--up", default="y", choices=("y", "z"), help="the data's up axis (BVH: y)")
     p.add_argument("--title", default=None)
     p.add_argument("--layout", default="cmu", choices=("cmu", "h36m"), help="exp-map layout")
-    p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
+    p.add_argument("--fps", type=bounded_float("fps"), default=None, help="override the frame rate")
     p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("demo", help="train, evaluate, export, verify, generate and render on the sample",

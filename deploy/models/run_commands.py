@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from refimpl.bounds import bounded_int
+
 from deploy.models.entry_io import write_npy as _write_npy
 
 __all__ = ["add_prediction_run_options", "run_prediction", "run_synthesis", "run_locomotion", "export_trained"]
@@ -43,12 +45,13 @@ def export_trained(entry, args) -> dict:
 
 def _read_npy(path) -> np.ndarray:
     from refimpl.errors import BadInputError, existing_file
+    from refimpl.npy_files import read_npy
 
     p = existing_file(path)
     try:
-        a = np.load(p, allow_pickle=False)
+        a = read_npy(p, kinds="fiu")  # the declared shape checked against the file's size before allocating
     except (OSError, ValueError) as exc:
-        raise BadInputError(f"{p}: not a readable .npy array ({type(exc).__name__})") from None
+        raise BadInputError(f"{p}: not a readable .npy array of numbers ({exc})") from None
     if not isinstance(a, np.ndarray) or a.dtype.kind not in "fiu":
         raise BadInputError(f"{p}: expected a numeric .npy array")
     return a
@@ -56,7 +59,7 @@ def _read_npy(path) -> np.ndarray:
 
 def add_prediction_run_options(group) -> None:
     """QuaterNet's option of ``python -m deploy run``."""
-    group.add_argument("--prefix", type=int, default=None, help="quaternet, quaternet-cnn: prefix frames (default: "
+    group.add_argument("--prefix", type=bounded_int("frames"), default=None, help="quaternet, quaternet-cnn: prefix frames (default: "
                                                                  "the metadata's prefix_length)")
 
 
