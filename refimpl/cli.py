@@ -116,6 +116,7 @@ def cmd_train(args) -> int:
         _reuse_run_options(args, out / "checkpoint.npz")
     spec = MODELS[args.model]
     task = task_of(spec)
+    _refuse_other_tasks_options(args, spec.task, spec.name)
     rep = args.representation or spec.representations[0]
     if rep not in spec.representations:
         raise UsageError(f"--representation {rep!r}: model {spec.name!r} trains on {list(spec.representations)}")
@@ -198,6 +199,7 @@ def cmd_eval(args) -> int:
     model = load_trained(args.checkpoint) if args.checkpoint else None
     _check_model_option(args, model)
     spec = model.spec if model is not None else MODELS[args.model or DEFAULT_MODEL]
+    _refuse_other_tasks_options(args, spec.task, spec.name)  # eval --join of a QuaterNet: exit 2, not ignored
     return task_of(spec).eval_command(args, model)
 
 

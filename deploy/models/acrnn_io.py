@@ -16,7 +16,7 @@ import numpy as np
 from refimpl.models.acrnn import ACRNNConfig
 
 from deploy.graph import OPSET
-from deploy.models.arguments import count, frames_array
+from deploy.models.arguments import check_graph_inputs, count, frames_array
 from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
 from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
                                     write_models)
@@ -84,6 +84,8 @@ class ACRNNRuntime:
         for m, role in ((self.step_model, "step"), (self.generate_model, "generate")):
             if m is not None and m.role != role:
                 raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
+            if m is not None:
+                check_graph_inputs(m, role, {"step": ("frame", "h", "c"), "generate": ("seed", "num_frames")}[role])
         if self.step_model is None and self.generate_model is None:
             raise ValueError("ACRNNRuntime: expected a step or a generate model")
 

@@ -7,7 +7,9 @@ any of them is converted, so that a wrapper refuses (``ValueError``) what it can
   :data:`deploy.runtime.MAX_INPUT_ELEMENTS` elements) as float32;
 * :func:`count` — a frame count or batch size: an integer (``bool``, ``3.0``, ``"3"`` refused) within
   :data:`refimpl.bounds.BOUNDS` (the same bounds as ``refimpl``'s options);
-* :func:`metadata_int` — an integer read from a model's metadata (a model whose metadata lacks it is refused).
+* :func:`metadata_int` — an integer read from a model's metadata (a model whose metadata lacks it is refused);
+* :func:`check_graph_inputs` — a loaded model of a role has exactly the graph inputs its runtime feeds (a folder
+  holding another graph under the role's file name is refused when opened, not at the first call).
 
 Shape legend: B batch, T frames, F features.
 """
@@ -21,7 +23,7 @@ from refimpl.bounds import check_count
 
 from deploy.runtime import MAX_INPUT_ELEMENTS
 
-__all__ = ["frames_array", "count", "metadata_int"]
+__all__ = ["frames_array", "count", "metadata_int", "check_graph_inputs"]
 
 
 def frames_array(value, name: str, ranks=(3,)) -> np.ndarray:
@@ -65,3 +67,12 @@ def metadata_int(model, key: str, bound: str = "frames") -> int:
     naming the key when it is missing or not an integer in range."""
     meta = getattr(model, "metadata", None) or {}
     return check_count(meta.get(key), f"metadata[{key!r}]", bound)
+
+
+def check_graph_inputs(model, role: str, names) -> None:
+    """``ValueError`` unless the :class:`~deploy.runtime.DeployedModel` ``model`` of ``role`` takes exactly the
+    inputs ``names`` (its runtime feeds those, by name)."""
+    got = [n for n, _, _ in model.inputs]
+    if sorted(got) != sorted(names):
+        raise ValueError(f"{role}: expected a graph with inputs {list(names)}, got {got} (another model's graph "
+                         "under this role's file name?)")

@@ -21,6 +21,7 @@ from refimpl.models.qtg import QTGConfig
 from refimpl.protocols.transition_join import inertialize_joins, join_blend_frames as default_blend
 
 from deploy.graph import OPSET
+from deploy.models.arguments import check_graph_inputs
 from deploy.models.entry_io import checkpoint_params, read_checkpoint, write_models
 from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step, join_entry
 from deploy.models.qtg_compact import export_qtg_rollout_compact
@@ -33,6 +34,8 @@ __all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime", "MAX_TRANSITIO
 #: bound of ``refimpl``'s ``--transition-length`` too (``refimpl.bounds``).
 MAX_TRANSITION_FRAMES = _BOUND_T
 _STATE_KEYS = ("pose", "latent_prev", "hidden", "target_latent")
+#: The inputs each role's graph takes (the runtime feeds them by name).
+_GRAPH_INPUTS = {"init": ("past", "target"), "step": _STATE_KEYS, "rollout": ("past", "target")}
 
 
 def load_qtg_checkpoint(path):
@@ -130,6 +133,8 @@ class QTGRuntime:
         for m, role in ((self.init_model, "init"), (self.step_model, "step"), (self.rollout_model, "rollout")):
             if m is not None and m.role != role:
                 raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
+            if m is not None:
+                check_graph_inputs(m, role, _GRAPH_INPUTS[role])
 
     @classmethod
     def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QTGRuntime":
