@@ -126,7 +126,7 @@ def load_entry(name: str, key: str, *, folder: Path | None = None) -> tuple[dict
     if path is None:
         return {}, {}, "miss"
     remove_stale_temp_files(path)  # of a writer killed while writing this entry (refimpl.atomic)
-    if not path.is_file():
+    if not os.path.lexists(path):
         return {}, {}, "miss"
     try:
         # the checkpoint reader's bounds: a regular file, stored members only, every declared size checked

@@ -85,7 +85,7 @@ def _parse_header(raw: bytes, buffer_size: int, where: str) -> tuple[list, dict]
         if not isinstance(e, dict) or set(e) != {"dtype", "shape", "data_offsets"}:
             raise ValueError(f"{at}: expected an object with exactly dtype, shape and data_offsets")
         dt, shape, offsets = e["dtype"], e["shape"], e["data_offsets"]
-        if dt not in _ITEMSIZE:
+        if not isinstance(dt, str) or dt not in _ITEMSIZE:  # a JSON list or object is unhashable: not a dtype
             raise ValueError(f"{at}: unsupported dtype {dt!r}; expected one of {sorted(_ITEMSIZE)}")
         if not isinstance(shape, list) or not all(_is_uint(n) for n in shape):
             raise ValueError(f"{at}: shape must be a list of non-negative integers, got {shape!r}")

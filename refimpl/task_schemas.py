@@ -20,7 +20,7 @@ task            fields (checked when the task writes them; ``required`` ones mus
                 numbers >= 0 by loss name, ``window_length`` / ``condition_length`` / ``ground_truth_length``
                 positive integers, ``train_takes`` / ``test_takes`` lists of strings
 ``prediction``  ``dataset`` ``cmu`` or ``h36m`` (required), ``num_joints`` = the dataset skeleton's, ``frame_time``
-                finite > 0 and ``fps`` = 1 / ``frame_time`` (0.1 %)
+                (required) seconds in [1e-4, 10] and ``fps`` = 1 / ``frame_time`` (0.1 %)
 ``locomotion``  ``rig`` ``cmu`` or ``bandai_namco`` and a ``skeleton`` with that rig's joints (both required),
                 ``prefix`` / ``target``
                 positive integers; the pose network: ``num_joints`` = the skeleton's J, ``seed_clip`` with
@@ -175,7 +175,7 @@ def _synthesis(cfg: Mapping, config, where: str, task_module=None) -> None:
 def _prediction(cfg: Mapping, config, where: str, task_module=None) -> None:
     from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
 
-    _require(cfg, ("dataset",), where, "prediction")
+    _require(cfg, ("dataset", "frame_time"), where, "prediction")  # both read by eval, generate and export
     dataset = cfg["dataset"]
     if dataset not in ("cmu", "h36m"):
         raise ValueError(f"{where}: model_config.dataset: expected 'cmu' or 'h36m', got {_kind(dataset)}")

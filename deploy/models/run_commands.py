@@ -83,7 +83,8 @@ def run_prediction(runtime, args) -> int:
     s = len(rotations) - 1 if args.start is None else int(args.start)
     pr = prediction.make_prediction(prediction.onnx_method(runtime), rotations, s, P, k,
                                     skeleton=prediction.skeleton_of(dataset), frame_time=1.0 / fps,
-                                    method_name=f"{meta['model']['name']}_onnx", name=Path(args.output).stem)
+                                    method_name=f"{meta['model']['name']}_onnx", name=Path(args.output).stem,
+                                    option="--start", source=str(args.input))
     if str(args.output).lower().endswith(".npy"):
         _write_npy(args.output, pr.motion.rotations[pr.start:pr.stop])
     else:
@@ -119,7 +120,7 @@ def run_synthesis(runtime, args) -> int:
         return out
 
     start = 1 if args.start is None else int(args.start)  # frame 0 of a salsa take is its reference T-pose
-    motion, seeds = synthesis.continue_seed(method, config, args.input, start, n)
+    motion, seeds = synthesis.continue_seed(method, config, args.input, start, n, option="--start")
     if str(args.output).lower().endswith(".npy"):
         _write_npy(args.output, frames[0])
         what = f"raw frames ({n}, {frames[0].shape[1]}), metres"
@@ -145,17 +146,21 @@ def run_locomotion(runtime, args) -> int:
     x = _read_npy(args.input).astype(np.float32)
     if not str(args.output).lower().endswith(".npy"):
         raise ValueError(f"output: quaternet-long writes .npy arrays, got {args.output!r}")
+    from refimpl.errors import BadInputError, reading
+
     if runtime.step_model is not None and not (runtime.pace_model is not None and x.ndim == 3 and x.shape[-1] == 2):
-        if x.ndim != 3:
-            raise ValueError(f"{args.input}: expected frames (B, P + T, F), got shape {x.shape}")
+        if x.ndim != 3 or x.shape[1] < 2:
+            raise BadInputError(f"{args.input}: expected frames (B, P + T, F) with P + T >= 2, got shape {x.shape}")
         P = int(args.start or 1)
         if not 1 <= P < x.shape[1]:
             raise ValueError(f"--start: expected the prefix length P in [1, {x.shape[1] - 1}], got {P}")
-        rot, tr = runtime.rollout(x, P)
+        with reading(args.input):  # frames of another size or non-finite values: the file's fault, exit 3
+            rot, tr = runtime.rollout(x, P)
         y = np.concatenate([rot.reshape(rot.shape[0], rot.shape[1], -1), tr], axis=-1)
         what = f"{y.shape[1]} frames after a {P}-frame prefix, [rotations | offset, height]"
     elif runtime.pace_model is not None:
-        y = runtime.pace(x)
+        with reading(args.input):
+            y = runtime.pace(x)
         what = "pace outputs [A, omega, cos, sin] per point (before clipping)"
     else:
         raise ValueError(f"{args.model_dir}: no step model for frames (B, P + T, F)")
