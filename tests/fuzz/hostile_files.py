@@ -11,7 +11,7 @@ limit per case, NumPy warnings are errors, ``tracemalloc`` peak ≤ 256 MB for t
                     ``/dev/zero``, ``/dev/urandom`` or ``/dev/null``, a socket, a dangling symlink, a folder,
                     a chain of symlinks to a FIFO: exit 3, one line naming the path, within 20 s
 ``cache-damage``    a data-cache entry damaged in one of 30 ways (``__meta__`` valid JSON but not an object, a
-                    member declaring a huge shape, deflated members, a 200 MB deflate bomb, bit flips, truncation,
+                    member declaring a huge shape, deflated members, a 64 MB deflate bomb, bit flips, truncation,
                     junk, an object dtype, a FIFO, ``/dev/zero``, a decode that raises, ...) with stale and live
                     temporary files beside it: ``cached`` returns the freshly built value, notes "ignored" for
                     damage, the entry verifies afterwards; stale temporary files removed, a live writer's kept
@@ -231,14 +231,14 @@ _BOMB: dict = {}
 
 
 def _bomb() -> bytes:
-    """A deflated member declaring 200 MB of zeros (~0.2 MB on disk), built once."""
+    """A deflated member declaring 64 MB of zeros (~64 KB on disk), built once."""
     if "zip" not in _BOMB:
         buf = io.BytesIO()
         with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
             with z.open("x.npy", "w", force_zip64=True) as f:
-                f.write(_npy_header((25_000_000,)))
+                f.write(_npy_header((2**23,)))
                 block = bytes(2**22)
-                for _ in range(200_000_000 // len(block)):
+                for _ in range(16):
                     f.write(block)
         _BOMB["zip"] = buf.getvalue()
     return _BOMB["zip"]
