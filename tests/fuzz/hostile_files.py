@@ -257,7 +257,7 @@ def _damage_entry(path: Path, kind: str, rng, keep) -> None:
 
     data = path.read_bytes()
     members = fc.readers._unzip(data)
-    meta = json.loads(str(np.load(io.BytesIO(members["__meta__.npy"]))))
+    meta = json.loads(str(np.load(io.BytesIO(members["__meta__.npy"]), allow_pickle=False)))
     text = {"meta-list": "[1, 2]", "meta-number": "5", "meta-string": '"x"', "meta-null": "null",
             "meta-inner-list": json.dumps(dict(meta, meta=[1])), "meta-deep": "[" * 100_000 + "]" * 100_000,
             "meta-not-json": "{", "meta-nan": "NaN", "key-other": json.dumps(dict(meta, key="0" * 64)),
@@ -381,20 +381,18 @@ def fam_cache_damage(stats, n, seed, tmp, log):
 
 OPTION_VALUES = ["0", "-1", "1", "2", "3", "5", "30", "60", "256", "257", "1000", "1001", "100000", "100001",
                  "99999999999999999999", "1e-300", "1e300", "nan", "inf", "-inf", "1.5", "0.5", "x", "", "0x10"]
-#: option -> bound name of refimpl.bounds (None: an integer any value of which parses, checked by the runner).
-DEPLOY_OPTIONS = {"--threads": "ort_threads", "--fps": "fps", "--source-fps": "fps", "--start": "frame_index",
-                  "--frames": "frames", "--prefix": "frames"}
+#: option -> its range (spec/cli.md §1.1, written out here as the oracle: ``refimpl.bounds`` is under test).
+DEPLOY_OPTIONS = {"--threads": (1, 256), "--fps": (1.0, 1000.0), "--source-fps": (1.0, 1000.0),
+                  "--start": (0, 100_000), "--frames": (1, 100_000), "--prefix": (1, 100_000)}
 
 
 def _in_bounds(flag: str, text: str) -> bool:
-    from refimpl.bounds import BOUNDS
-
-    b = BOUNDS[DEPLOY_OPTIONS[flag]]
+    lo, hi = DEPLOY_OPTIONS[flag]
     try:
-        v = float(text) if isinstance(b.lo, float) else int(text)
+        v = float(text) if isinstance(lo, float) else int(text)
     except ValueError:
         return False
-    return v == v and b.lo <= v <= b.hi
+    return v == v and lo <= v <= hi
 
 
 def _deploy_run_argv(rng, seeds, out: Path) -> tuple[str, list]:
@@ -692,8 +690,16 @@ def campaign(scale: float = 1.0, seed: int = 0, only: set | None = None, log=pri
     return fc.summary(stats, seed, scale, counts, t_all)
 
 
+def _with_command(scale: float, seed: int, only) -> dict:
+    """:func:`campaign`'s result with the command line that reproduces it (stored in the result JSON)."""
+    res = campaign(scale, seed, only)
+    res["command"] = (f"python -m tests.fuzz.hostile_files --scale {scale:g} --seed {seed}"
+                      + (f" --only {','.join(sorted(only))}" if only else ""))
+    return res
+
+
 def main(argv=None) -> int:
-    return fc.run_main(argv, __doc__, FAMILIES, campaign, "fuzz_hostile_files.json")
+    return fc.run_main(argv, __doc__, FAMILIES, _with_command, "fuzz_hostile_files.json")
 
 
 if __name__ == "__main__":
