@@ -112,11 +112,11 @@ _FILE_INPUTS = (".bvh", ".txt", ".npy", ".csv")
 
 
 def _cmd_info(args) -> int:
-    from deploy.runtime import load_model
-    from refimpl.errors import existing_file, reading
+    from deploy import runtime
+    from refimpl.errors import reading
 
-    with reading(existing_file(args.model)):  # metadata types and fields checked on loading: exit 3 otherwise
-        m = load_model(args.model)
+    with reading(args.model):  # a regular file (deploy.runtime reads it with refimpl.files), metadata types and
+        m = runtime.load_model(args.model)  # fields checked on loading: exit 3 otherwise
     for title, entries in (("inputs", m.inputs), ("outputs", m.outputs)):
         print(f"{title}:")
         for n, shape, t in entries:

@@ -163,19 +163,7 @@ class DeployedModel:
         self.inputs = [(i.name, list(i.shape), _NP_FROM_ORT.get(i.type, None)) for i in self.session.get_inputs()]
         self.outputs = [(o.name, list(o.shape), _NP_FROM_ORT.get(o.type, None))
                         for o in self.session.get_outputs()]
-        self._check_frame_layout()
 
-    def _check_frame_layout(self) -> None:
-        """The frame size the metadata states (``representation.size``) must be the one the graph's first input
-        takes (its last axis): a graph of another layout is refused when opened, not at its first run."""
-        rep = self.metadata.get("representation")
-        size = rep.get("size") if isinstance(rep, dict) else None
-        if not self.inputs or not isinstance(size, int) or isinstance(size, bool):
-            return
-        name, shape, _ = self.inputs[0]
-        if shape and isinstance(shape[-1], int) and shape[-1] > 0 and shape[-1] != size:
-            raise ValueError(f"metadata['representation']['size'] is {size}, but the graph's input {name!r} takes "
-                             f"frames of {shape[-1]} (shape {shape}): metadata and graph of different layouts")
 
     @property
     def role(self) -> str | None:

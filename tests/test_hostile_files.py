@@ -361,12 +361,13 @@ def test_qtg_step_graph_with_other_inputs_is_refused_when_opened(seeds, tmp_path
 
 
 def test_frame_size_of_the_graph_must_match_the_metadata(seeds, tmp_path):
-    from deploy.runtime import load_model
+    from deploy.models import runtime_for_dir
 
-    f = tmp_path / "s.onnx"
-    hf.edit_metadata(seeds["onnx:acrnn"] / "acrnn_step.onnx", f, "representation", "size=347")
+    d = tmp_path / "a"
+    shutil.copytree(seeds["onnx:acrnn"], d)
+    hf.edit_metadata(d / "acrnn_step.onnx", d / "acrnn_step.onnx", "representation", "size=347")
     with pytest.raises(ValueError, match="frames of 132"):
-        load_model(f)
+        runtime_for_dir(d)
 
 
 def test_quaternet_checkpoint_without_frame_time_is_refused(seeds, tmp_path):

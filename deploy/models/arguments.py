@@ -71,8 +71,18 @@ def metadata_int(model, key: str, bound: str = "frames") -> int:
 
 def check_graph_inputs(model, role: str, names) -> None:
     """``ValueError`` unless the :class:`~deploy.runtime.DeployedModel` ``model`` of ``role`` takes exactly the
-    inputs ``names`` (its runtime feeds those, by name)."""
+    inputs ``names`` (its runtime feeds those, by name), the first of them frames of the size the metadata states
+    (``representation.size``, when it is an integer): a graph of another layout is refused when it is opened, not at
+    its first run."""
     got = [n for n, _, _ in model.inputs]
     if sorted(got) != sorted(names):
         raise ValueError(f"{role}: expected a graph with inputs {list(names)}, got {got} (another model's graph "
                          "under this role's file name?)")
+    rep = model.metadata.get("representation")
+    size = rep.get("size") if isinstance(rep, dict) else None
+    shape = next(s for n, s, _ in model.inputs if n == names[0])
+    if isinstance(size, int) and not isinstance(size, bool) and shape and isinstance(shape[-1], int) \
+            and shape[-1] != size:
+        raise ValueError(f"{role}: metadata['representation']['size'] is {size}, but the graph's input "
+                         f"{names[0]!r} takes frames of {shape[-1]} (shape {shape}): metadata and graph of "
+                         "different layouts")

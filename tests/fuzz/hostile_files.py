@@ -429,7 +429,9 @@ def fam_deploy_options(stats, n, seed, seeds, tmp, log):
             if bad:
                 return check_deploy(code, err, (2,), [flag])
             return check_deploy(code, err, (0, 2, 3))
-        kind, failure, detail, sec, peak = fc._classify(case, (), 60.0, check_memory=False)
+        # honest work up to the bound (100,000 predicted frames) takes minutes on a busy core
+        limit = 600.0 if not bad and flag in ("--frames", "--prefix") and int(value) >= 10_000 else 60.0
+        kind, failure, detail, sec, peak = fc._classify(case, (), limit, check_memory=False)
         stats.add("deploy-options", kind, "CliContract" if failure == "AcceptedMalformed" else failure, detail,
                   sec, peak, " ".join(map(str, argv[3:]))[:200] + f" ({model})")
         if log and (i + 1) % 100 == 0:
