@@ -374,7 +374,7 @@ def _model_params(args, cfg):
         print(f"note: no sample data ({exc}); accuracy on random contexts only", file=sys.stderr)
         train = None
     if args.checkpoint:
-        from deploy.models.qtg_io import load_qtg_checkpoint
+        from deploy.models.qtg_io import load_checkpoint as load_qtg_checkpoint
         params, ck_cfg, _ = load_qtg_checkpoint(args.checkpoint)
         if ck_cfg != cfg:
             raise SystemExit("--checkpoint: only the default QTGConfig is benchmarked")

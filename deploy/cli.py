@@ -78,6 +78,9 @@ def _cmd_export(args) -> int:
     from deploy.models import exporter
     from deploy.models.run_commands import export_trained
 
+    from refimpl.pretrained import resolve_checkpoint
+
+    args.checkpoint = str(resolve_checkpoint(args.checkpoint))   # pretrained:<name> -> its verified file
     key = _exporter_of_checkpoint(args.checkpoint, args.model)
     _check_foreign_options(args, key, args._owners)
     entry = exporter(key)

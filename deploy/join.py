@@ -32,7 +32,7 @@ def join_metadata(mode: str, T: int, frame_rate: float, blend_frames: int, in_gr
     where = ("in this graph: the output poses are already joined" if in_graph else
              "not in this graph (a per-frame model cannot know the last frame): after the T frames, apply "
              "refimpl.protocols.transition_join.inertialize_joins(past, poses, target, dt=1/frame_rate, blend_frames) "
-             "(deploy.models.qtg_io.QTGRuntime.transition does)")
+             "(deploy.models.qtg_io.Runtime.transition does)")
     return {"mode": mode, "blend_frames": int(blend_frames), "frame_time": 1.0 / float(frame_rate),
             "transition_length": int(T), "applied": where,
             "definition": "spec/qtg.md 7.4: the offset of the past's continuation p_0 + (p_0 - p_-1) from frame 1, "

@@ -36,7 +36,7 @@ class Bound:
 
 #: Frames generated or predicted in one call (``--length``, ``k``, ``num_frames``, a clip's frames).
 MAX_FRAMES = 100_000
-#: Frames of one QTG transition (``--transition-length``, ``QTGRuntime.transition``'s ``T``).
+#: Frames of one QTG transition (``--transition-length``, ``qtg_io.Runtime.transition``'s ``T``).
 MAX_TRANSITION_FRAMES = 10_000
 #: Largest integer a ``--set`` override may give a config field (sizes, lengths), and the longest size list.
 MAX_CONFIG_SIZE = 100_000

@@ -174,25 +174,47 @@ def _parse_float(tok: str, line: int, what: str, toks: _Tokens) -> float:
     return v
 
 
+def _parse_channels(toks: _Tokens, line: int, joint: str) -> tuple:
+    """The channel names after ``CHANNELS`` (on ``line``, for ``joint``): a count in [0, 6], then that many known,
+    distinct names and nothing more on the line."""
+    ntok, _ = toks.next("the channel count")
+    try:
+        n = int(ntok)
+    except ValueError:
+        raise toks.error(line, f"CHANNELS: expected a channel count, got {ntok!r}") from None
+    if not 0 <= n <= 6:
+        raise toks.error(line, f"CHANNELS: expected between 0 and 6 channels, got {n}")
+    chans = []
+    for k in range(n):
+        ctok, cline = toks.next(f"channel {k + 1} of {n}")
+        canon = _CHANNEL_NAMES.get(ctok.lower())
+        if canon is None:
+            where_found = "" if cline == line else f" on line {cline}"
+            raise toks.error(line, f"CHANNELS {n} for {joint!r}: expected {n} channel names "
+                                   f"(Xposition ... Zrotation), found {ctok!r}{where_found} after {k}")
+        chans.append(canon)
+    if len(set(chans)) != len(chans):
+        raise toks.error(line, f"CHANNELS for {joint!r} repeats a channel: {' '.join(chans)}")
+    extra = toks.more_on_line(line) if n else None
+    if extra is not None:
+        raise toks.error(line, f"CHANNELS {n} for {joint!r} lists more than {n} channel names "
+                               f"(found {extra!r})")
+    return tuple(chans)
+
+
 def _parse_hierarchy(toks: _Tokens):
     """Parse ``HIERARCHY ROOT ...`` up to (and including) the closing brace of the ROOT block.
 
     Returns parents, offsets, names, channels, end-site flags, in depth-first order.
     """
-    tok = toks.next("HIERARCHY")
-    if tok[0].upper() != "HIERARCHY":
-        raise toks.error(tok[1], f"expected HIERARCHY, got {tok[0]!r}")
-    tok = toks.next("ROOT")
-    if tok[0].upper() != "ROOT":
-        raise toks.error(tok[1], f"expected ROOT, got {tok[0]!r}")
-    parents: list[int] = []
-    offsets: list[tuple] = []
-    names: list[str] = []
-    channels: list[tuple] = []
-    end_flags: list[bool] = []
+    for keyword in ("HIERARCHY", "ROOT"):
+        tok = toks.next(keyword)
+        if tok[0].upper() != keyword:
+            raise toks.error(tok[1], f"expected {keyword}, got {tok[0]!r}")
+    # joints in depth-first order: parent index, OFFSET, file name, channel names, End Site or not
+    parents, offsets, names, channels, end_flags = [], [], [], [], []
     # stack of (joint index, is_end_site, has_offset, line of its opening keyword)
     stack: list[list] = []
-
     seen: dict[str, int] = {}  # file joint name -> line
 
     def open_node(parent: int, end_site: bool, name: str, line: int):
@@ -234,29 +256,7 @@ def _parse_hierarchy(toks: _Tokens):
                 raise toks.error(line, f"second CHANNELS for {names[j]!r}")
             if len(names) - 1 > j:  # data columns follow the CHANNELS lines, which must precede the children
                 raise toks.error(line, f"CHANNELS for {names[j]!r} after its first child")
-            ntok, _ = toks.next("the channel count")
-            try:
-                n = int(ntok)
-            except ValueError:
-                raise toks.error(line, f"CHANNELS: expected a channel count, got {ntok!r}") from None
-            if not 0 <= n <= 6:
-                raise toks.error(line, f"CHANNELS: expected between 0 and 6 channels, got {n}")
-            chans = []
-            for k in range(n):
-                ctok, cline = toks.next(f"channel {k + 1} of {n}")
-                canon = _CHANNEL_NAMES.get(ctok.lower())
-                if canon is None:
-                    where_found = "" if cline == line else f" on line {cline}"
-                    raise toks.error(line, f"CHANNELS {n} for {names[j]!r}: expected {n} channel names "
-                                           f"(Xposition ... Zrotation), found {ctok!r}{where_found} after {k}")
-                chans.append(canon)
-            if len(set(chans)) != len(chans):
-                raise toks.error(line, f"CHANNELS for {names[j]!r} repeats a channel: {' '.join(chans)}")
-            extra = toks.more_on_line(line) if n else None
-            if extra is not None:
-                raise toks.error(line, f"CHANNELS {n} for {names[j]!r} lists more than {n} channel names "
-                                       f"(found {extra!r})")
-            channels[j] = tuple(chans)
+            channels[j] = _parse_channels(toks, line, names[j])
         elif key == "JOINT":
             if is_end:
                 raise toks.error(line, "an End Site cannot have children")

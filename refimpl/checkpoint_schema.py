@@ -9,10 +9,10 @@ the *content* of a ``refimpl train`` checkpoint, generically for every registere
   (``int`` — not ``bool``, not ``1.5``; ``float`` — a finite number, not ``bool``; ``bool``; ``str``;
   ``tuple[int, ...]`` — a list of such ints), integers within ``±`` :data:`MAX_CONFIG_INT` and lists of at most
   :data:`MAX_CONFIG_LIST` entries, then the dataclass itself checks the ranges;
-* the task's stored fields (:data:`TASK_FIELDS`, extended by a task module's ``CHECKPOINT_FIELDS``):
-  ``fps`` > 0 and finite, ``root_mean`` 3 finite numbers, ``root_std`` 3 finite numbers > 0, ``transition_length``
-  a positive int, ``dtype`` ``"float32"``/``"float64"``, ``representation`` a string; then each task's own schema
-  (:mod:`refimpl.task_schemas`: types, ranges, shapes, and that the labels agree with the frame size);
+* the fields every run stores (:data:`COMMON_FIELDS`): ``fps`` > 0 and finite, ``dtype``
+  ``"float32"``/``"float64"``, ``representation`` a string; then the task's schema (its ``CHECKPOINT_SCHEMA``, a
+  :class:`refimpl.checkpoint_fields.TaskSchema` kept with its paper's protocol: its fields when present, then
+  its checks of the whole stored config — types, ranges, shapes, and that the labels agree with the frame size);
 * the parameters: exactly the names and shapes the config implies (the recipe's ``param_shapes(config)``, else
   the config module's ``param_shapes``, else its ``init_params`` on a tiny generator), one floating dtype
   (float32 or float64, the stored ``dtype`` when there is one), all finite and of magnitude at most
@@ -20,7 +20,10 @@ the *content* of a ``refimpl train`` checkpoint, generically for every registere
 * optimiser state (``optim.*``) and the sampler permutation, when :func:`validate_training_state` is asked.
 
 Every problem is a ``ValueError`` whose message starts with the file and names the field
-(``"ckpt.npz: model_config.gru_layers: expected an integer, got bool (True)"``).
+(``"ckpt.npz: model_config.gru_layers: expected an integer, got bool (True)"``). This module names no task and no
+model: the task's schema comes from the caller (``task_of(spec).CHECKPOINT_SCHEMA``).
+
+Shape legend: parameter shapes as the model's ``param_shapes``.
 """
 from __future__ import annotations
 
@@ -33,11 +36,12 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from refimpl.task_schemas import validate_task_checkpoint
+from refimpl.checkpoint_fields import (TaskSchema, float_dtype_name, is_int, is_number, kind_of, positive_number,
+                                       string)
 
-__all__ = ["TASK_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "MAX_PARAM_ABS", "validate_model_config",
-           "expected_param_shapes", "validate_params", "validate_task_fields", "validate_checkpoint_config",
-           "validate_trained", "validate_training_state"]
+__all__ = ["COMMON_FIELDS", "MAX_CONFIG_INT", "MAX_CONFIG_LIST", "MAX_PARAM_ABS", "validate_model_config",
+           "expected_param_shapes", "validate_params", "validate_task_fields", "validate_task_schema",
+           "validate_checkpoint_config", "validate_trained", "validate_training_state"]
 
 #: Largest integer any config field (or entry of a size list) may hold, and the longest size list: bounds the
 #: work of computing the parameter shapes (``gru_layers = 10**30`` would loop for ever) before the parameters
@@ -55,18 +59,6 @@ MAX_FALLBACK_SIZE = 4096
 MAX_PARAM_ABS = 1e6
 
 
-def _kind(v) -> str:
-    return f"{type(v).__name__} ({v!r})" if len(repr(v)) <= 40 else type(v).__name__
-
-
-def _is_int(v) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
-
-
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
-
-
 def _check_type(value, hint, name: str) -> Any:
     """``value`` checked against the annotation ``hint`` (JSON lists become tuples); ValueError naming ``name``."""
     origin = typing.get_origin(hint)
@@ -82,26 +74,26 @@ def _check_type(value, hint, name: str) -> Any:
                 return _check_type(value, a, name)
             except ValueError as exc:
                 errors.append(str(exc))
-        raise ValueError(errors[0] if errors else f"{name}: unexpected value {_kind(value)}")
+        raise ValueError(errors[0] if errors else f"{name}: unexpected value {kind_of(value)}")
     if hint is bool:
         if not isinstance(value, (bool, np.bool_)):
-            raise ValueError(f"{name}: expected true or false, got {_kind(value)}")
+            raise ValueError(f"{name}: expected true or false, got {kind_of(value)}")
         return bool(value)
     if hint is int:
-        if not _is_int(value):
-            raise ValueError(f"{name}: expected an integer, got {_kind(value)}")
+        if not is_int(value):
+            raise ValueError(f"{name}: expected an integer, got {kind_of(value)}")
         return int(value)
     if hint is float:
-        if not _is_number(value) or not math.isfinite(float(value)):
-            raise ValueError(f"{name}: expected a finite number, got {_kind(value)}")
+        if not is_number(value) or not math.isfinite(float(value)):
+            raise ValueError(f"{name}: expected a finite number, got {kind_of(value)}")
         return float(value)
     if hint is str:
         if not isinstance(value, str):
-            raise ValueError(f"{name}: expected a string, got {_kind(value)}")
+            raise ValueError(f"{name}: expected a string, got {kind_of(value)}")
         return value
     if origin is tuple or hint is tuple:
         if not isinstance(value, (list, tuple)):
-            raise ValueError(f"{name}: expected a list, got {_kind(value)}")
+            raise ValueError(f"{name}: expected a list, got {kind_of(value)}")
         args = typing.get_args(hint)
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(_check_type(v, args[0], f"{name}[{i}]") for i, v in enumerate(value))
@@ -121,7 +113,7 @@ def validate_model_config(config_type: type, model_config, where: str = "checkpo
         ``model_config`` is not an object, a field has the wrong type, or the dataclass refuses a value.
     """
     if not isinstance(model_config, Mapping):
-        raise ValueError(f"{where}: model_config: expected a JSON object, got {_kind(model_config)}")
+        raise ValueError(f"{where}: model_config: expected a JSON object, got {kind_of(model_config)}")
     try:
         hints = typing.get_type_hints(config_type)
     except Exception:  # noqa: BLE001 - unresolvable annotations: leave the checks to the dataclass
@@ -136,7 +128,7 @@ def validate_model_config(config_type: type, model_config, where: str = "checkpo
             raise ValueError(f"{name}: {len(raw)} entries, more than the limit {MAX_CONFIG_LIST}")
         value = _check_type(raw, hints.get(f.name, Any), name)
         for x in (value if isinstance(value, (list, tuple)) else (value,)):
-            if _is_int(x) and abs(x) > MAX_CONFIG_INT:
+            if is_int(x) and abs(x) > MAX_CONFIG_INT:
                 raise ValueError(f"{name}: {x} is beyond the limit {MAX_CONFIG_INT} for a size")
         values[f.name] = value
     try:
@@ -149,25 +141,27 @@ def _config_module(config_type):
     return sys.modules.get(getattr(config_type, "__module__", ""), None)
 
 
-def expected_param_shapes(recipe, config_type: type, config) -> dict[str, tuple[int, ...]]:
+def expected_param_shapes(owner, config_type: type, config) -> dict[str, tuple[int, ...]]:
     """Name -> shape of every parameter of the model ``config`` describes.
 
-    Looked up in order: ``recipe.param_shapes(config)``, the config module's ``param_shapes(config)``, its
-    ``init_params(config, rng, dtype=float32)`` on a tiny generator (only for configs whose integers are at most
-    :data:`MAX_FALLBACK_SIZE`, so that a crafted config cannot make it allocate without bound).
+    ``owner``: what may know the shapes — a :class:`~refimpl.registry.ModelSpec` (its ``param_shapes``, the
+    recipe's), a model module, or None. Looked up in order: ``owner.param_shapes(config)``, the config module's
+    ``param_shapes(config)``, its ``init_params(config, rng, dtype=float32)`` on a tiny generator (only for
+    configs whose integers are at most :data:`MAX_FALLBACK_SIZE`, so that a crafted config cannot make it
+    allocate without bound).
     """
     module = _config_module(config_type)
-    for owner in (recipe, module):
-        fn = getattr(owner, "param_shapes", None)
+    for where in (owner, module):
+        fn = getattr(where, "param_shapes", None)
         if callable(fn):
             return {str(k): tuple(int(d) for d in v) for k, v in fn(config).items()}
-    for owner in (recipe, module):
-        fn = getattr(owner, "init_params", None)
+    for where in (owner, module):
+        fn = getattr(where, "init_params", None)
         if callable(fn):
             for f in dataclasses.fields(config):
                 v = getattr(config, f.name)
                 for x in (v if isinstance(v, tuple) else (v,)):
-                    if _is_int(x) and x > MAX_FALLBACK_SIZE:
+                    if is_int(x) and x > MAX_FALLBACK_SIZE:
                         raise ValueError(f"model_config.{f.name}: {x} is above {MAX_FALLBACK_SIZE}, the largest "
                                          "size checked without the model's param_shapes")
             params = fn(config, np.random.default_rng(0), dtype=np.float32)
@@ -211,65 +205,35 @@ def validate_params(params: Mapping[str, np.ndarray], shapes: Mapping[str, tuple
     return found
 
 
-def _positive_number(v, name):
-    if not _is_number(v) or not math.isfinite(float(v)) or float(v) <= 0:
-        raise ValueError(f"{name}: expected a finite number > 0, got {_kind(v)}")
-    return float(v)
-
-
-def _vector3(positive: bool):
-    def check(v, name):
-        if not isinstance(v, (list, tuple)) or len(v) != 3:
-            raise ValueError(f"{name}: expected a list of 3 numbers, got {_kind(v)}")
-        for i, x in enumerate(v):
-            if not _is_number(x) or not math.isfinite(float(x)) or (positive and float(x) <= 0):
-                raise ValueError(f"{name}[{i}]: expected a finite number{' > 0' if positive else ''}, got {_kind(x)}")
-        return [float(x) for x in v]
-    return check
-
-
-def _positive_int(v, name):
-    if not _is_int(v) or v < 1:
-        raise ValueError(f"{name}: expected a positive integer, got {_kind(v)}")
-    return int(v)
-
-
-def _float_dtype(v, name):
-    if v not in ("float32", "float64"):
-        raise ValueError(f"{name}: expected 'float32' or 'float64', got {_kind(v)}")
-    return v
-
-
-def _string(v, name):
-    if not isinstance(v, str):
-        raise ValueError(f"{name}: expected a string, got {_kind(v)}")
-    return v
-
-
-#: What tasks store beside the network's config (``checkpoint_extra``), checked when present. A task module may
-#: add its own in ``CHECKPOINT_FIELDS`` (name -> ``check(value, name) -> value``, raising ValueError).
-TASK_FIELDS: dict[str, Callable] = {
-    "fps": _positive_number,
-    "root_mean": _vector3(positive=False),
-    "root_std": _vector3(positive=True),
-    "transition_length": _positive_int,
-    "dtype": _float_dtype,
-    "representation": _string,
+#: What every run stores beside the network's config, checked when present (the task's own fields are its
+#: schema's, :class:`refimpl.checkpoint_fields.TaskSchema`).
+COMMON_FIELDS: dict[str, Callable] = {
+    "fps": positive_number,
+    "dtype": float_dtype_name,
+    "representation": string,
 }
 
 
-def validate_task_fields(model_config: Mapping, task_module=None, where: str = "checkpoint") -> None:
-    """Check the task fields present in ``model_config`` (:data:`TASK_FIELDS` and the task's own)."""
-    checks = dict(TASK_FIELDS)
-    checks.update(getattr(task_module, "CHECKPOINT_FIELDS", None) or {})
+def validate_task_fields(model_config: Mapping, schema: TaskSchema | None = None, where: str = "checkpoint") -> None:
+    """Check the fields present in ``model_config``: :data:`COMMON_FIELDS` and the ``fields`` of the task's
+    ``schema``."""
+    checks = dict(COMMON_FIELDS)
+    checks.update(schema.fields if schema is not None else {})
     for key, check in checks.items():
         if key in model_config:
             check(model_config[key], f"{where}: model_config.{key}")
 
 
+def validate_task_schema(schema: TaskSchema | None, model_config: Mapping, config, where: str = "checkpoint") -> None:
+    """The task's checks of the whole stored config (``schema.check``) against the validated network ``config``;
+    nothing without a schema."""
+    if schema is not None and schema.check is not None:
+        schema.check(model_config, config, where)
+
+
 def validate_checkpoint_config(spec, model_config, where: str = "checkpoint", task_of: Callable | None = None):
-    """Everything of a checkpoint but its arrays: ``model_config``'s task fields (:data:`TASK_FIELDS`, the task's
-    schema in :mod:`refimpl.task_schemas`) and network config, and the parameter shapes it implies.
+    """Everything of a checkpoint but its arrays: ``model_config``'s fields (:data:`COMMON_FIELDS`, the task's
+    ``CHECKPOINT_SCHEMA``: ``task_of(spec)``'s) and network config, and the parameter shapes it implies.
 
     Used by :func:`validate_trained` on a file and by ``refimpl train`` on the checkpoint it is about to write
     (so that training never writes a file its loader refuses).
@@ -279,13 +243,13 @@ def validate_checkpoint_config(spec, model_config, where: str = "checkpoint", ta
     config, shapes (name -> shape)
     """
     if not isinstance(model_config, Mapping):
-        raise ValueError(f"{where}: model_config: expected a JSON object, got {_kind(model_config)}")
-    task = task_of(spec) if task_of is not None else None
-    validate_task_fields(model_config, task, where)
+        raise ValueError(f"{where}: model_config: expected a JSON object, got {kind_of(model_config)}")
+    schema = task_of(spec).CHECKPOINT_SCHEMA if task_of is not None else None
+    validate_task_fields(model_config, schema, where)
     config = validate_model_config(spec.config_type, model_config, where)
-    validate_task_checkpoint(getattr(spec, "task", None), model_config, config, where, task)
+    validate_task_schema(schema, model_config, config, where)
     try:
-        shapes = expected_param_shapes(spec.recipe, spec.config_type, config)
+        shapes = expected_param_shapes(spec, spec.config_type, config)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
     return config, shapes
@@ -299,19 +263,19 @@ def validate_trained(arrays: Mapping[str, np.ndarray], meta, models: Mapping, wh
     ----------
     arrays, meta : what :func:`refimpl.checkpoint.load_checkpoint` returned
     models : dict name -> :class:`~refimpl.registry.ModelSpec`
-    task_of : callable spec -> task module, optional (its ``CHECKPOINT_FIELDS``)
+    task_of : callable spec -> task module, optional (its ``CHECKPOINT_SCHEMA``)
 
     Returns
     -------
     spec, config, params (name -> ndarray, without the ``param.`` prefix), model_config (dict)
     """
     if not isinstance(meta, Mapping):
-        raise ValueError(f"{where}: metadata: expected a JSON object, got {_kind(meta)}")
+        raise ValueError(f"{where}: metadata: expected a JSON object, got {kind_of(meta)}")
     if meta.get("format") != expected_format:
         raise ValueError(f"{where}: not a refimpl training checkpoint (format {meta.get('format')!r})")
     name = meta.get("model")
     if not isinstance(name, str):
-        raise ValueError(f"{where}: model: expected a model name, got {_kind(name)}")
+        raise ValueError(f"{where}: model: expected a model name, got {kind_of(name)}")
     spec = models.get(name)
     if spec is None:
         raise ValueError(f"{where}: unknown model {name!r}; known: {sorted(models)}")
@@ -332,11 +296,11 @@ def validate_training_state(params: Mapping[str, np.ndarray], opt_state: Mapping
     """
     for key in ("step", "epoch", "position"):
         v = meta.get(key)
-        if not _is_int(v) or v < 0:
-            raise ValueError(f"{where}: {key}: expected a non-negative integer, got {_kind(v)}")
+        if not is_int(v) or v < 0:
+            raise ValueError(f"{where}: {key}: expected a non-negative integer, got {kind_of(v)}")
     if not isinstance(meta.get("rng_state"), str):
         raise ValueError(f"{where}: rng_state: expected the generator state as JSON text, got "
-                         f"{_kind(meta.get('rng_state'))}")
+                         f"{kind_of(meta.get('rng_state'))}")
     for k, a in params.items():
         if a.dtype.kind != "f" or not np.isfinite(a).all():
             raise ValueError(f"{where}: param.{k}: expected finite floating values")

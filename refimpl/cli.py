@@ -17,6 +17,8 @@ render      a BVH / exp-map motion (optionally against a second one) to a PNG st
 demo        the whole tour on the embedded sample (:mod:`refimpl.demo`)
 import      a PyTorch state dict (.npz, .safetensors, .pt) as a checkpoint; ``export-weights`` the reverse
             (:mod:`refimpl.weights_cli`, spec/import.md)
+pretrained  the shipped trained models and their cards; ``--checkpoint pretrained:<name>`` everywhere
+            (:mod:`refimpl.pretrained`)
 ==========  ==============================================================================================
 
 Exit codes (scripts may rely on them): 0 success; 1 runtime failure (including a missing optional dependency
@@ -51,12 +53,13 @@ import numpy as np
 
 from refimpl import weights_cli
 from refimpl.allocator import retain_freed_memory
-from refimpl.cli_info import cmd_info
+from refimpl.cli_info import cmd_info, cmd_pretrained
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
 from refimpl.bounds import bounded_float, bounded_int
 from refimpl.threads import AUTO, threads_option
-from refimpl.options import add_data_options, beta, check_overrides, positive_float, positive_int
+from refimpl.options import add_data_options, add_export_length_option, beta, check_overrides, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
+from refimpl.pretrained import shipped_name
 from refimpl.run_options import RUN_OPTIONS, reconcile, run_options
 from refimpl.threads import blas_thread_pool
 from refimpl.services import (export_onnx, load_trained, onnx_metadata, read_motion, train_model,
@@ -203,14 +206,22 @@ def cmd_eval(args) -> int:
     return task_of(spec).eval_command(args, model)
 
 
+def _default_export_dir(checkpoint: str, model) -> Path:
+    """``onnx/`` beside the checkpoint; ``onnx/<name>/`` in the working folder for a shipped model (its folder
+    belongs to the repository)."""
+    name = shipped_name(checkpoint)
+    if name is not None:
+        return Path("onnx") / name
+    return Path(model.path).parent / "onnx"
+
+
 def cmd_export(args) -> int:
     """``refimpl export``."""
     model = load_trained(args.checkpoint)
-    out = Path(args.out) if args.out else Path(model.path).parent / "onnx"
+    out = Path(args.out) if args.out else _default_export_dir(args.checkpoint, model)
     task = task_of(model.spec)
     _refuse_other_tasks_options(args, model.spec.task, model.spec.name)
-    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, T=args.transition_length,
-                          **task.export_options(args))
+    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, **task.export_options(args))
     for role, path in written.items():
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
@@ -339,31 +350,20 @@ def cmd_demo(args) -> int:
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``refimpl`` (see spec/cli.md)."""
-    import refimpl
+def _add_pretrained_parser(sub) -> None:
+    """``refimpl pretrained [NAME]``: the shipped trained models and their cards (spec/cli.md §10)."""
+    p = sub.add_parser("pretrained", help="list the shipped trained models (pretrained:<name>) and their cards",
+                       description="List the shipped trained models, or show one's card. Each is used by name "
+                                   "wherever a checkpoint is accepted: --checkpoint pretrained:<name> (eval, "
+                                   "generate, export, info, every checkpoint option, python -m deploy export); its file is checked "
+                                   "against the card's sha256 first (a damaged or missing file: exit 3).")
+    p.add_argument("name", nargs="?", default=None, help="a model's name: print its card")
+    p.add_argument("--json", action="store_true", help="the card(s) as JSON")
+    p.set_defaults(func=cmd_pretrained)
 
-    what = refimpl.__doc__.splitlines()[0].partition(": ")[2].rstrip(".")  # the package's one-line summary
-    parser = argparse.ArgumentParser(
-        prog="refimpl",
-        description=f"{what[0].upper()}{what[1:]}: inspect files, train, evaluate, export to ONNX, generate "
-                    "motion, render. Start with `refimpl demo`.",
-        epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
-    parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
-    parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
-    parser.add_argument("--blas-threads", type=threads_option, default=None, metavar="{auto,N}",
-                        help="BLAS threads for NumPy (default auto, except demo: 1, so that its numbers are the "
-                             "same on every machine; auto = the cores other processes leave free, measured "
-                             "from /proc at the start and every ~2 s of training; 1 without /proc. A fixed count "
-                             "N forces it: 2 threads are faster on an idle 2-core machine but 8-31x slower when "
-                             "other jobs share the cores, benchmarks/bench_thread_default.py; 0 = library default; "
-                             "needs threadpoolctl)")
-    parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
-                        help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
-                             "training step instead of faulting it in again (step time 0.76-0.99x of glibc's defaults, "
-                             "benchmarks/bench_allocator.py); 'system' leaves glibc's defaults")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
+def _add_info_parser(sub) -> None:
+    """``refimpl info FILE``: what a motion file, checkpoint or ONNX model holds."""
     p = sub.add_parser("info", help="what a .bvh, exp-map .txt, checkpoint .npz or .onnx file holds",
                        description="Print joints, frames, frame rate and channel layout of a motion file; "
                                    "parameters, shapes and metadata of a checkpoint or ONNX model.")
@@ -373,6 +373,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=bounded_float("fps"), default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
+
+def _add_train_parser(sub) -> None:
+    """``refimpl train``: the run's options (``--model``, data, length, optimiser, files) and every task's group."""
     p = sub.add_parser("train", help=f"train a network ({', '.join(sorted(MODELS))}) on motion files",
                        description="Train a network with Adam; checkpoint.npz (resumable), loss.csv and "
                                    "loss_val.csv go to --out. Progress lines (rate, ETA) go to stderr. "
@@ -411,6 +414,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--progress-every", type=bounded_int("every"), default=50)
     p.set_defaults(func=cmd_train, option_defaults={a.dest: a.default for a in p._actions})
 
+
+def _add_eval_parser(sub) -> None:
+    """``refimpl eval``: ``--checkpoint`` / ``--onnx``, data, outputs and every task's group."""
     p = sub.add_parser("eval", help="a network against its task's baselines, under its task's protocol",
                        description="Evaluate a network (--checkpoint, --onnx) or, without one, the baselines of "
                                    "--model's task, under the task's protocol. "
@@ -427,6 +433,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_options(p, lambda task, group: task.add_eval_options(group))
     p.set_defaults(func=cmd_eval)
 
+
+def _add_export_parser(sub) -> None:
+    """``refimpl export``: ``--checkpoint``, the graph form and check, and every task's group."""
     p = sub.add_parser("export", help="export a checkpoint of any model to ONNX, verified (needs the deploy extra)",
                        description="Write the model's ONNX files <model>_<role>.onnx (validated; the exporter's "
                                    "roles); the graphs standardise inside (raw poses in and out) and carry their "
@@ -439,11 +448,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="skip the onnxruntime-vs-NumPy check on the task's check inputs")
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random inputs")
-    p.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
-                   help="frames of the rollout / predict model (default: the model's)")
+    add_export_length_option(p)
     _add_task_options(p, lambda task, group: task.add_export_options(group))
     p.set_defaults(func=cmd_export)
 
+
+def _add_generate_parser(sub) -> None:
+    """``refimpl generate``: the source, backend, outputs and every task's group."""
     p = sub.add_parser("generate", help="generate motion with a network or a baseline, BVH out (every model: "
                                         "`refimpl generate --help` lists each task's form)",
                        description="Generate motion with the task of --model (else of --checkpoint's model, else "
@@ -467,6 +478,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_options(p, lambda task, group: task.add_generate_options(group))
     p.set_defaults(func=cmd_generate)
 
+
+def _add_render_parser(sub) -> None:
+    """``refimpl render``: a motion (and a second one to compare) to PNG / GIF."""
     p = sub.add_parser("render", help="draw a motion as a PNG strip or GIF (matplotlib)",
                        description="Draw a .bvh / exp-map motion, optionally beside a second one (--compare) on "
                                    "the same skeleton, as a PNG strip of frames or an animated GIF.")
@@ -483,6 +497,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=bounded_float("fps"), default=None, help="override the frame rate")
     p.set_defaults(func=cmd_render)
 
+
+def _add_demo_parser(sub) -> None:
+    """``refimpl demo``: the tour's folder, seed and switches."""
     p = sub.add_parser("demo", help="train, evaluate, export, verify, generate and render on the sample",
                        description="The whole tour on the embedded CMU sample in a few minutes on 2 cores.")
     p.add_argument("--out", default="demo_out", help="output folder (default ./demo_out)")
@@ -495,7 +512,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-render", action="store_true", help="skip the pictures")
     p.set_defaults(func=cmd_demo, default_blas_threads=1)  # reproducible numbers: BLAS rounding depends on threads
 
+
+def _add_global_options(parser) -> None:
+    """The options before the command: ``--traceback``, ``--blas-threads``, ``--malloc``."""
+    parser.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
+    parser.add_argument("--blas-threads", type=threads_option, default=None, metavar="{auto,N}",
+                        help="BLAS threads for NumPy (default auto, except demo: 1, so that its numbers are the "
+                             "same on every machine; auto = the cores other processes leave free, measured "
+                             "from /proc at the start and every ~2 s of training; 1 without /proc. A fixed count "
+                             "N forces it: 2 threads are faster on an idle 2-core machine but 8-31x slower when "
+                             "other jobs share the cores, benchmarks/bench_thread_default.py; 0 = library default; "
+                             "needs threadpoolctl)")
+    parser.add_argument("--malloc", choices=("retain", "system"), default="retain",
+                        help="C allocator settings (glibc): 'retain' (default) keeps freed memory for the next "
+                             "training step instead of faulting it in again (step time 0.76-0.99x of glibc's defaults, "
+                             "benchmarks/bench_allocator.py); 'system' leaves glibc's defaults")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``refimpl`` (see spec/cli.md)."""
+    import refimpl
+
+    what = refimpl.__doc__.splitlines()[0].partition(": ")[2].rstrip(".")  # the package's one-line summary
+    parser = argparse.ArgumentParser(
+        prog="refimpl",
+        description=f"{what[0].upper()}{what[1:]}: inspect files, train, evaluate, export to ONNX, generate "
+                    "motion, render. Start with `refimpl demo`.",
+        epilog="exit codes: 0 ok, 1 runtime failure, 2 usage error, 3 bad input file")
+    parser.add_argument("--version", action="version", version=f"refimpl {refimpl.__version__}")
+    _add_global_options(parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    _add_info_parser(sub)
+    _add_train_parser(sub)
+    _add_eval_parser(sub)
+    _add_export_parser(sub)
+    _add_generate_parser(sub)
+    _add_render_parser(sub)
+    _add_demo_parser(sub)
     weights_cli.add_parsers(sub)  # import, export-weights (spec/import.md)
+    _add_pretrained_parser(sub)
     return parser
 
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from refimpl.errors import DEPLOY_HINT, BadInputError, MissingDependency, existing_file, reading
 from refimpl.files import read_bytes
+from refimpl.pretrained import resolve_checkpoint
 from refimpl.registry import MODELS, task_of
 from refimpl.services import read_motion
 
@@ -229,10 +230,41 @@ def _info_onnx(p: Path, args) -> None:
 
 def cmd_info(args) -> int:
     """``refimpl info FILE``."""
-    p = existing_file(args.file)
+    p = existing_file(resolve_checkpoint(args.file))   # pretrained:<name> -> its verified model.npz
     kind = p.suffix.lower()
     handlers = {".bvh": _info_bvh, ".txt": _info_expmap, ".npz": _info_npz, ".onnx": _info_onnx}
     if kind not in handlers:
         raise BadInputError(f"{p}: unknown file type {p.suffix!r} (expected .bvh, .txt, .npz or .onnx)")
     handlers[kind](p, args)
+    return 0
+
+
+def cmd_pretrained(args) -> int:
+    """``refimpl pretrained [NAME] [--json]``: the shipped models with their cards (:mod:`refimpl.pretrained`)."""
+    from refimpl.pretrained import PREFIX, catalogue, find, roots
+
+    if args.name:
+        shipped = find(args.name[len(PREFIX):] if args.name.startswith(PREFIX) else args.name)
+        if args.json:
+            print(json.dumps(shipped.card, indent=1, sort_keys=True))
+        else:
+            card_md = shipped.folder / "card.md"
+            print(card_md.read_text(encoding="utf-8") if card_md.is_file() else json.dumps(shipped.card, indent=1))
+        return 0
+    models = catalogue()
+    if args.json:
+        print(json.dumps({n: m.card for n, m in models.items()}, indent=1, sort_keys=True))
+        return 0
+    if not models:
+        _say("no shipped model found in " + ", ".join(str(r) for r in roots())
+             + " (they ship in the repository's pretrained/ folder: run from a clone, or set REFIMPL_PRETRAINED)")
+        return 0
+    width = max(len(n) for n in models) + len(PREFIX)
+    for n, m in models.items():
+        c = m.card
+        weights = c["licence"]["weights"].split(":")[0] if isinstance(c.get("licence"), dict) else "?"
+        _say(f"{PREFIX + n:<{width}}  {c['title']}")
+        _say(f"{'':<{width}}  {c['parameters']:,} parameters, {c['size_bytes'] / 1e6:.1f} MB, weights {weights}; "
+             f"{m.folder / 'card.md'}")
+    _say("use one wherever a checkpoint is accepted, e.g. refimpl eval --checkpoint " + PREFIX + next(iter(models)))
     return 0

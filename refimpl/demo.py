@@ -150,72 +150,112 @@ def run_demo(out_dir="demo_out", *, seed: int = 0, quick: bool = False, steps: i
         return _run(Path(out_dir), seed, quick, steps, onnx, render, say, on_step or (auto and auto.poll))
 
 
-def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResult:
-    from refimpl.protocols.transition import build_transition_datasets, load_source, sample_sources
+@dataclasses.dataclass
+class _Tour:
+    """What the demo's steps share: the folder, the switches, the report and what was written or skipped."""
 
+    out: Path
+    seed: int
+    quick: bool
+    n_steps: int
+    onnx: bool
+    render: bool
+    say: Callable[[str], None]
+    on_step: Callable[..., None] | None
+    files: dict = dataclasses.field(default_factory=dict)
+    skipped: list = dataclasses.field(default_factory=list)
+
+
+def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResult:
+    """The seven steps of the tour, in order (module docstring)."""
     t_start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
-    files: dict[str, Path] = {}
-    skipped: list[str] = []
-    spec = MODELS["qtg"]
-    n_steps = steps if steps is not None else (QUICK_STEPS if quick else DEMO_STEPS)
-    sizes = QUICK_CONFIG if quick else DEMO_CONFIG
-    if onnx and (why := _missing("deploy.models.qtg_io") or _missing("onnxruntime")):
-        skipped.append(f"ONNX export / verification / generation: {why} (pip install 'refimpl[deploy]')")
-        onnx = False
-    if render and (why := _missing("matplotlib")):
-        skipped.append(f"pictures: {why} (pip install 'refimpl[render]')")
-        render = False
+    tour = _Tour(out, seed, quick, steps if steps is not None else (QUICK_STEPS if quick else DEMO_STEPS), onnx,
+                 render, say, on_step)
+    _check_extras(tour)
+    train_src, test_src, train_ds, test_ds = _step_data(tour)
+    model = _step_train(tour, train_ds, test_ds)
+    results, verdict = _step_evaluate(tour, model, test_ds)
+    check = _step_export_verify(tour, model, test_ds)
+    transitions, crosses = _step_generate(tour, model, test_src)
+    _step_render(tour, transitions, crosses, results, test_ds)
+    elapsed = time.perf_counter() - t_start
+    _summary(tour, verdict, elapsed)
+    return DemoResult(out_dir=out, files=tour.files, results=results, verify=check, skipped=tour.skipped,
+                      elapsed_s=elapsed)
 
-    # 1. data --------------------------------------------------------------------------------------------
+
+def _check_extras(tour: _Tour) -> None:
+    """Switch off the ONNX steps and the pictures when their optional dependencies are missing (said at the end)."""
+    if tour.onnx and (why := _missing("deploy.models.qtg_io") or _missing("onnxruntime")):
+        tour.skipped.append(f"ONNX export / verification / generation: {why} (pip install 'refimpl[deploy]')")
+        tour.onnx = False
+    if tour.render and (why := _missing("matplotlib")):
+        tour.skipped.append(f"pictures: {why} (pip install 'refimpl[render]')")
+        tour.render = False
+
+
+def _step_data(tour: _Tour):
+    """1. The embedded CMU sample: ``(train sources, test sources, train windows, held-out windows)``."""
+    from refimpl.protocols.transition import build_transition_datasets, sample_sources
+
     t0 = time.perf_counter()
-    say(f"[1/7] data: the embedded CMU sample ({SAMPLE_DIR})")
+    tour.say(f"[1/7] data: the embedded CMU sample ({SAMPLE_DIR})")
     train_src, test_src = sample_sources(SAMPLE_DIR)
     train_ds, test_ds = build_transition_datasets(train_src, test_src, T=_T, stride=4,
-                                                  test_stride=16 if quick else 4)
-    say(f"      {train_ds.num_windows} training windows from {len(train_src)} sources, {test_ds.num_windows} "
-        f"held-out windows from {len(test_src)} (split by file, and by time inside 01_01 and the salsa takes); "
-        f"2 past + {_T} + 2 target poses at 30 fps, 22 joints, cm ({time.perf_counter() - t0:.1f} s)")
+                                                  test_stride=16 if tour.quick else 4)
+    tour.say(f"      {train_ds.num_windows} training windows from {len(train_src)} sources, {test_ds.num_windows} "
+             f"held-out windows from {len(test_src)} (split by file, and by time inside 01_01 and the salsa takes); "
+             f"2 past + {_T} + 2 target poses at 30 fps, 22 joints, cm ({time.perf_counter() - t0:.1f} s)")
+    return train_src, test_src, train_ds, test_ds
 
-    # 2. train -------------------------------------------------------------------------------------------
-    t0 = time.perf_counter()
-    train_dir = out / "train"
+
+def _step_train(tour: _Tour, train_ds, test_ds):
+    """2. Train QTG into ``out/train`` (the files of an earlier run removed); the loaded checkpoint."""
+    from refimpl.models.qtg import count_parameters
+
+    spec = MODELS["qtg"]
+    sizes = QUICK_CONFIG if tour.quick else DEMO_CONFIG
+    train_dir = tour.out / "train"
     for stale in ("checkpoint.npz", "loss.csv", "loss_val.csv"):
         if (train_dir / stale).is_file():
             (train_dir / stale).unlink()
     overrides = [f"{k}={','.join(map(str, v)) if isinstance(v, tuple) else v}" for k, v in sizes.items()]
     config = spec.make_config(train_ds, overrides)
-    from refimpl.models.qtg import count_parameters
-
-    say(f"[2/7] train: QTG {sizes} ({count_parameters(config):,} parameters), {n_steps} steps of batch "
-        f"{DEMO_BATCH}, MAE loss, Adam lr {DEMO_LR:g} betas (0.5, 0.9), seed {seed}; progress on stderr")
+    n_steps = tour.n_steps
+    tour.say(f"[2/7] train: QTG {sizes} ({count_parameters(config):,} parameters), {n_steps} steps of batch "
+             f"{DEMO_BATCH}, MAE loss, Adam lr {DEMO_LR:g} betas (0.5, 0.9), seed {tour.seed}; progress on stderr")
     result = train_model(spec, config, train_ds, test_ds, train_dir, steps=n_steps, batch_size=DEMO_BATCH,
-                         lr=DEMO_LR, seed=seed, checkpoint_every=max(n_steps, 1),
+                         lr=DEMO_LR, seed=tour.seed, checkpoint_every=max(n_steps, 1),
                          validate_every=max(1, n_steps // 10), progress_every=max(1, n_steps // 20),
                          progress=lambda line: print("      " + line, file=sys.stderr, flush=True),
-                         on_step=on_step)
+                         on_step=tour.on_step)
+    files = tour.files
     files.update(checkpoint=train_dir / "checkpoint.npz", loss_log=train_dir / "loss.csv",
                  validation_log=train_dir / "loss_val.csv")
     losses = result.losses
-    say(f"      loss {np.mean(losses[:10]):.4f} -> {np.mean(losses[-10:]):.4f} in {result.elapsed_s:.1f} s "
-        f"({n_steps / max(result.elapsed_s, 1e-9):.1f} steps/s); checkpoint {files['checkpoint']}")
-    model = load_trained(files["checkpoint"])
+    tour.say(f"      loss {np.mean(losses[:10]):.4f} -> {np.mean(losses[-10:]):.4f} in {result.elapsed_s:.1f} s "
+             f"({n_steps / max(result.elapsed_s, 1e-9):.1f} steps/s); checkpoint {files['checkpoint']}")
+    return load_trained(files["checkpoint"])
 
-    # 3. evaluate ----------------------------------------------------------------------------------------
+
+def _step_evaluate(tour: _Tour, model, test_ds):
+    """3. QTG (with the join option and foot locking, spec/qtg.md 7.4, 7.5) against the baselines on the held-out
+    windows; ``(results, verdict line)``."""
     t0 = time.perf_counter()
+    say, files = tour.say, tour.files
     say("[3/7] evaluate: QTG vs inertialisation vs interpolation on the held-out windows")
-    # qtg, qtg+join (spec/qtg.md 7.4), qtg+join+footlock (7.5), baselines
     results = evaluate_model(model, test_ds, join="inertialize+footlock")
     print_results(results, test_ds, model, curve=False)
-    files["eval_json"] = out / "eval.json"
-    files["eval_curve_csv"] = out / "eval_per_frame.csv"
+    files["eval_json"] = tour.out / "eval.json"
+    files["eval_curve_csv"] = tour.out / "eval_per_frame.csv"
     write_results(results, 1.0 / test_ds.fps, json_path=files["eval_json"], csv_path=files["eval_curve_csv"])
     q = results["qtg"]["mean_cm"]
     best = min((k for k in results if not k.startswith("qtg")), key=lambda k: results[k]["mean_cm"])
     b = results[best]["mean_cm"]
     verdict = (f"QTG {q:.2f} cm vs best baseline ({best}) {b:.2f} cm: "
                + (f"{100 * (1 - q / b):.0f} % lower" if q < b else f"NOT better ({100 * (q / b - 1):.0f} % higher)"))
-    say(f"      {verdict}" + ("  [quick mode: a smoke test, not a trained model]" if quick else ""))
+    say(f"      {verdict}" + ("  [quick mode: a smoke test, not a trained model]" if tour.quick else ""))
     qa, qj, gt = results["qtg"]["quality"], results["qtg+join"]["quality"], results["qtg"]["quality"]["ground_truth"]
     qf = results["qtg+join+footlock"]["quality"]
     say(f"      joins in/out: QTG {qa['join_in_cm']:.1f}/{qa['join_out_cm']:.1f} cm, with --join inertialize "
@@ -223,35 +263,44 @@ def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResul
         f"{gt['join_out_cm']:.1f} cm; foot skating {qa['skate_cm_s']:.0f} / {qj['skate_cm_s']:.0f} / "
         f"{qf['skate_cm_s']:.0f} with inertialize+footlock / {gt['skate_cm_s']:.0f} cm/s")
     say(f"      tables {files['eval_json']}, {files['eval_curve_csv']} ({time.perf_counter() - t0:.1f} s)")
+    return results, verdict
 
-    # 4. export / 5. verify ------------------------------------------------------------------------------
-    check = None
-    onnx_dir = out / "onnx"
-    if onnx:
-        t0 = time.perf_counter()
-        written = export_onnx(model, onnx_dir)
-        for role, path in written.items():
-            files[f"onnx_{role}"] = Path(path)
-        say("[4/7] export: " + ", ".join(f"{p.name} ({p.stat().st_size / 1024:.0f} KiB)"
-                                         for p in map(Path, written.values()))
-            + f" in {onnx_dir} ({time.perf_counter() - t0:.1f} s)")
-        past, _, target = test_ds.context()
-        check = verify_onnx(model, onnx_dir, past[:64], target[:64])
-        say(f"[5/7] verify: onnxruntime vs NumPy on {min(64, len(past))} held-out transitions: max |diff| "
-            f"rollout model {check.get('rollout', float('nan')):.2e}, init+step loop "
-            f"{check.get('step_loop', float('nan')):.2e} -> {'OK' if check['ok'] else 'MISMATCH'} "
-            "(tolerance rtol 1e-3, atol 2e-3 x pose std: the recipe's VERIFY_TOL)")
-        if not check["ok"]:
-            raise RuntimeError("onnxruntime and NumPy disagree beyond the rollout tolerance")
-    else:
-        say("[4/7] export: skipped" + "".join(f" ({r})" for r in skipped if r.startswith("ONNX")))
-        say("[5/7] verify: skipped")
 
-    # 6. generate ----------------------------------------------------------------------------------------
+def _step_export_verify(tour: _Tour, model, test_ds):
+    """4. Export to ``out/onnx``, 5. onnxruntime against NumPy on held-out transitions; the check (None when
+    skipped)."""
+    if not tour.onnx:
+        tour.say("[4/7] export: skipped" + "".join(f" ({r})" for r in tour.skipped if r.startswith("ONNX")))
+        tour.say("[5/7] verify: skipped")
+        return None
+    t0 = time.perf_counter()
+    onnx_dir = tour.out / "onnx"
+    written = export_onnx(model, onnx_dir)
+    for role, path in written.items():
+        tour.files[f"onnx_{role}"] = Path(path)
+    tour.say("[4/7] export: " + ", ".join(f"{p.name} ({p.stat().st_size / 1024:.0f} KiB)"
+                                          for p in map(Path, written.values()))
+             + f" in {onnx_dir} ({time.perf_counter() - t0:.1f} s)")
+    past, _, target = test_ds.context()
+    check = verify_onnx(model, onnx_dir, past[:64], target[:64])
+    tour.say(f"[5/7] verify: onnxruntime vs NumPy on {min(64, len(past))} held-out transitions: max |diff| "
+             f"rollout model {check.get('rollout', float('nan')):.2e}, init+step loop "
+             f"{check.get('step_loop', float('nan')):.2e} -> {'OK' if check['ok'] else 'MISMATCH'} "
+             "(tolerance rtol 1e-3, atol 2e-3 x pose std: the recipe's VERIFY_TOL)")
+    if not check["ok"]:
+        raise RuntimeError("onnxruntime and NumPy disagree beyond the rollout tolerance")
+    return check
+
+
+def _step_generate(tour: _Tour, model, test_src):
+    """6. Transitions as BVH: a held-out window by every method, then walk -> run across two held-out clips;
+    ``(transitions, crosses)``."""
     from refimpl.bvh_write import write_bvh
+    from refimpl.protocols.transition import load_source
 
+    out, files, say = tour.out, tour.files, tour.say
     say("[6/7] generate: transitions written as BVH (22 joints, centimetres, 30 fps)")
-    methods = network_methods(model, onnx_dir=onnx_dir if onnx else None)  # qtg (NumPy), qtg_onnx
+    methods = network_methods(model, onnx_dir=out / "onnx" if tour.onnx else None)  # qtg (NumPy), qtg_onnx
     methods["qtg+join"] = with_join(methods["qtg"], "inertialize", dt=1.0 / 30)
     walk = next(s for s in test_src if s.label == "walk")
     run = next(s for s in test_src if s.label == "run")
@@ -272,8 +321,8 @@ def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResul
     say(f"      held-out window of {Path(walk.path).name} (frames {s - 1}..{s + _T + 2}): mean joint error "
         + ", ".join(f"{k} {tr.error_cm():.2f} cm" for k, tr in transitions.items())
         + f"; {files['heldout_qtg_bvh'].name}, {files['heldout_truth_bvh'].name}"
-        + (f", {files['heldout_qtg_onnx_bvh'].name}" if onnx else ""))
-    if onnx:
+        + (f", {files['heldout_qtg_onnx_bvh'].name}" if tour.onnx else ""))
+    if tour.onnx:
         d = np.abs(transitions["qtg"].motion.positions() - transitions["qtg_onnx"].motion.positions()).max()
         say(f"      NumPy vs onnxruntime transition: max joint-position difference {d:.2e} cm")
     crosses = {}
@@ -286,50 +335,56 @@ def _run(out: Path, seed, quick, steps, onnx, render, say, on_step) -> DemoResul
     say(f"      walk -> run between two held-out clips ({Path(walk.path).name} -> {Path(run.path).name}, target "
         f"placed to continue the walk): {files['walk_to_run_bvh']}, {files['walk_to_run_join_bvh'].name} (--join "
         "inertialize)")
+    return transitions, crosses
 
-    # 7. render ------------------------------------------------------------------------------------------
-    if render:
-        from refimpl.render import render_error_curves, render_loss_curve
 
-        t0 = time.perf_counter()
-        files["strip_png"] = out / "heldout_strip.png"
-        files["strip_join_png"] = out / "heldout_join_strip.png"
-        files["heldout_gif"] = out / "heldout.gif"
-        files["walk_to_run_gif"] = out / "walk_to_run.gif"
-        files["walk_to_run_png"] = out / "walk_to_run.png"
-        files["walk_to_run_join_png"] = out / "walk_to_run_join.png"
-        files["loss_png"] = out / "loss.png"
-        files["error_curve_png"] = out / "error_curve.png"
-        say("[7/7] render:")
-        render_transition(transitions["qtg"], png=files["strip_png"], gif=files["heldout_gif"],
-                          title="held-out transition: ground truth (top/left) vs QTG; green = context")
-        render_transition(transitions["qtg+join"], png=files["strip_join_png"],
-                          title="the same with --join inertialize; green = context")
-        render_transition(crosses["qtg"], png=files["walk_to_run_png"], gif=files["walk_to_run_gif"],
-                          title="QTG transition walk -> run; green = context")
-        render_transition(crosses["qtg+join"], png=files["walk_to_run_join_png"],
-                          title="QTG walk -> run with --join inertialize; green = context")
-        render_loss_curve(files["loss_png"], _merged_log(train_dir), title="QTG training loss (MAE, normalised)")
-        say(f"wrote {files['loss_png']}")
-        render_error_curves(files["error_curve_png"], {k: v["per_frame_cm"] for k, v in results.items()},
-                            frame_time=1.0 / test_ds.fps,
-                            title=f"held-out error per transition frame ({test_ds.num_windows} windows)")
-        say(f"wrote {files['error_curve_png']}  ({time.perf_counter() - t0:.1f} s)")
-    else:
-        say("[7/7] render: skipped" + "".join(f" ({r})" for r in skipped if r.startswith("pictures")))
+def _step_render(tour: _Tour, transitions, crosses, results, test_ds) -> None:
+    """7. Strips and GIFs of the transitions, the loss curve and the per-frame error curves."""
+    if not tour.render:
+        tour.say("[7/7] render: skipped" + "".join(f" ({r})" for r in tour.skipped if r.startswith("pictures")))
+        return
+    from refimpl.render import render_error_curves, render_loss_curve
 
-    elapsed = time.perf_counter() - t_start
+    t0 = time.perf_counter()
+    out, files, say = tour.out, tour.files, tour.say
+    files["strip_png"] = out / "heldout_strip.png"
+    files["strip_join_png"] = out / "heldout_join_strip.png"
+    files["heldout_gif"] = out / "heldout.gif"
+    files["walk_to_run_gif"] = out / "walk_to_run.gif"
+    files["walk_to_run_png"] = out / "walk_to_run.png"
+    files["walk_to_run_join_png"] = out / "walk_to_run_join.png"
+    files["loss_png"] = out / "loss.png"
+    files["error_curve_png"] = out / "error_curve.png"
+    say("[7/7] render:")
+    render_transition(transitions["qtg"], png=files["strip_png"], gif=files["heldout_gif"],
+                      title="held-out transition: ground truth (top/left) vs QTG; green = context")
+    render_transition(transitions["qtg+join"], png=files["strip_join_png"],
+                      title="the same with --join inertialize; green = context")
+    render_transition(crosses["qtg"], png=files["walk_to_run_png"], gif=files["walk_to_run_gif"],
+                      title="QTG transition walk -> run; green = context")
+    render_transition(crosses["qtg+join"], png=files["walk_to_run_join_png"],
+                      title="QTG walk -> run with --join inertialize; green = context")
+    render_loss_curve(files["loss_png"], _merged_log(out / "train"), title="QTG training loss (MAE, normalised)")
+    say(f"wrote {files['loss_png']}")
+    render_error_curves(files["error_curve_png"], {k: v["per_frame_cm"] for k, v in results.items()},
+                        frame_time=1.0 / test_ds.fps,
+                        title=f"held-out error per transition frame ({test_ds.num_windows} windows)")
+    say(f"wrote {files['error_curve_png']}  ({time.perf_counter() - t0:.1f} s)")
+
+
+def _summary(tour: _Tour, verdict: str, elapsed: float) -> None:
+    """The closing lines: the verdict, the files, what was skipped, what to try next."""
+    say, files = tour.say, tour.files
     say("")
-    say(f"done in {elapsed:.0f} s. {verdict}. Files in {out}/:")
+    say(f"done in {elapsed:.0f} s. {verdict}. Files in {tour.out}/:")
     for key, path in files.items():
         if Path(path).is_file():
             say(f"  {key:22s} {path}")
-    for reason in skipped:
+    for reason in tour.skipped:
         say(f"  skipped: {reason}")
     say("next: `refimpl info " + str(files["checkpoint"]) + "`, `refimpl eval --checkpoint "
         + str(files["checkpoint"]) + "`, `refimpl render " + str(files["heldout_qtg_bvh"]) + " --compare "
         + str(files["heldout_truth_bvh"]) + " --out x.gif`")
-    return DemoResult(out_dir=out, files=files, results=results, verify=check, skipped=skipped, elapsed_s=elapsed)
 
 
 def _merged_log(train_dir: Path) -> dict:

@@ -60,7 +60,7 @@ def existing_file(path) -> Path:
     """``Path(path)`` when it names a regular file (after symlinks), else :class:`BadInputError` (exit 3).
 
     Checked with ``os.stat``, before anything is opened: a FIFO, a device (``/dev/zero`` or a symlink to it) or
-    a socket is refused as a folder is (spec/robustness.md §12), since a reader of one could block or never end.
+    a socket is refused as a folder is (spec/robustness.md §13), since a reader of one could block or never end.
     """
     p = Path(path)
     try:

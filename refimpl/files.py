@@ -1,4 +1,4 @@
-"""The one rule for every path a command reads (spec/robustness.md §12): a regular file, opened without blocking,
+"""The one rule for every path a command reads (spec/robustness.md §13): a regular file, opened without blocking,
 read no further than its real size.
 
 A FIFO blocks ``open`` until a writer comes and then streams without end; ``/dev/zero`` (or a symlink to it) has

@@ -1,4 +1,4 @@
-"""Bounded readers of ``.npy`` and ``.npz`` files (spec/robustness.md §12): nothing is allocated beyond what the
+"""Bounded readers of ``.npy`` and ``.npz`` files (spec/robustness.md §13): nothing is allocated beyond what the
 file's real size allows, nothing is unpickled.
 
 * :func:`read_npy_stream` — one ``.npy`` stream holding ``available`` bytes: NumPy parses the header

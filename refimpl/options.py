@@ -14,7 +14,7 @@ from refimpl.bounds import bounded_float, bounded_int, check_config_sizes
 from refimpl.errors import UsageError
 
 __all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "beta", "add_data_options",
-           "parse_overrides", "check_overrides", "config_with_overrides"]
+           "add_export_length_option", "export_length", "parse_overrides", "check_overrides", "config_with_overrides"]
 
 
 def number_parser(convert, accept, expected: str):
@@ -47,6 +47,20 @@ def add_data_options(p, default="sample") -> None:
                    help="true frame rate of the files when the header is wrong (CMU salsa: 60)")
     p.add_argument("--test-fraction", type=float, default=0.2, help="held-out share when splitting (default 0.2)")
     p.add_argument("--stride", type=bounded_int("stride"), default=4, help="frames between window starts (default 4)")
+
+
+def add_export_length_option(p) -> None:
+    """``refimpl export --transition-length``: the frames of an exported fixed-length graph (QTG's rollout,
+    QuaterNet's predict model), an option of every task's export; each task's ``export_options`` passes it on
+    (:func:`export_length`)."""
+    p.add_argument("--transition-length", type=bounded_int("transition_length"), default=None,
+                   help="frames of the rollout / predict model (default: the model's)")
+
+
+def export_length(args) -> dict:
+    """The exporter's keyword ``{"T": n}`` of ``refimpl export --transition-length n``; ``{}`` when not given (the
+    model's own length, its recipe's ``export_inputs``)."""
+    return {"T": args.transition_length} if args.transition_length else {}
 
 
 # ----------------------------------------------------------------------------------------------------------------

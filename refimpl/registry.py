@@ -1,8 +1,8 @@
 """The networks the application knows: model name -> recipe and task (spec/architecture.md §adding a model).
 
 Adding a model is one line in :data:`RECIPES` (its recipe module and its task); the recipe module
-(``refimpl/recipes/<name>.py``) provides the names :meth:`ModelSpec.from_recipe` reads. Recipes are imported when
-this module is; a task module (:data:`TASKS`) when :func:`task_of` first hands it out, checked against the task
+(``refimpl/recipes/<name>.py``) implements the recipe interface (:class:`refimpl.recipe_api.Recipe`), checked and
+read once by :meth:`ModelSpec.from_recipe`. Recipes are imported when this module is; a task module (:data:`TASKS`) when :func:`task_of` first hands it out, checked against the task
 interface (:class:`refimpl.task_api.Task`).
 """
 from __future__ import annotations
@@ -12,6 +12,7 @@ import importlib
 from types import ModuleType
 from typing import Any, Callable
 
+from refimpl.recipe_api import check_recipe, optional_members
 from refimpl.task_api import check_task
 
 __all__ = ["RECIPES", "TASKS", "DEFAULT_MODEL", "ModelSpec", "TrainedModel", "MODELS", "task_of", "generate_usage",
@@ -72,6 +73,14 @@ class ModelSpec:
         onnxruntime against the NumPy model (``refimpl export``'s check).
     extra_methods : callable ``TrainedModel -> dict`` or None
         More methods of the network for its task's evaluation (a DQ model's positions read from the DQs).
+    param_shapes : callable ``config -> dict`` or None
+        Name -> shape of the parameters (the checkpoint schema's; None: the model module's).
+    published_names : callable ``config -> dict`` or None
+        The published code's parameter names (``refimpl import --layout published``); None without published code.
+    published_settings : tuple of str
+        ``--set`` values of the published layout (acRNN's skewed stack).
+    import_hint : str
+        A hint for ``refimpl import``'s size errors.
     recipe : module
     """
 
@@ -89,17 +98,22 @@ class ModelSpec:
     export_inputs: Callable | None = None
     verify_onnx: Callable | None = None
     extra_methods: Callable | None = None
+    param_shapes: Callable | None = None
+    published_names: Callable | None = None
+    published_settings: tuple = ()
+    import_hint: str = ""
     recipe: ModuleType | None = None
 
     @classmethod
     def from_recipe(cls, recipe: ModuleType, task: str) -> "ModelSpec":
-        """The spec of ``recipe``: ``NAME``, ``SUMMARY``, ``TASK``, ``REPRESENTATIONS``, ``CONFIG_TYPE``,
-        ``PAPER_OPTIM``, ``PAPER_BATCH``, ``make_config``, ``make_adapter``, ``make_method``, and when the model
-        has them ``EXPORTER``, ``export_inputs``, ``verify_onnx``, ``extra_methods``."""
-        if recipe.TASK != task:
-            raise ValueError(f"registry: recipe {recipe.__name__} is for task {recipe.TASK!r}, registered as {task!r}")
-        optional = {"exporter": getattr(recipe, "EXPORTER", None)}
-        optional.update({n: getattr(recipe, n, None) for n in ("export_inputs", "verify_onnx", "extra_methods")})
+        """The spec of ``recipe`` (checked: :func:`refimpl.recipe_api.check_recipe`): the members of
+        :class:`refimpl.recipe_api.Recipe` and its optional members (:data:`refimpl.recipe_api.OPTIONAL_MEMBERS`)."""
+        check_recipe(recipe, task)
+        opt = optional_members(recipe)
+        optional = {"exporter": opt["EXPORTER"], "published_settings": tuple(opt["PUBLISHED_SETTINGS"]),
+                    "import_hint": str(opt["IMPORT_HINT"])}
+        optional.update({n: opt[n] for n in ("export_inputs", "verify_onnx", "extra_methods", "param_shapes",
+                                             "published_names")})
         return cls(name=recipe.NAME, summary=recipe.SUMMARY, task=task, representations=tuple(recipe.REPRESENTATIONS),
                    config_type=recipe.CONFIG_TYPE, make_config=recipe.make_config, make_adapter=recipe.make_adapter,
                    make_method=recipe.make_method, optim=recipe.PAPER_OPTIM, batch_size=int(recipe.PAPER_BATCH),

@@ -16,6 +16,7 @@ from typing import Callable
 import numpy as np
 
 from refimpl.errors import (DEPLOY_HINT, BadInputError, MissingDependency, UsageError, existing_file, reading)
+from refimpl.pretrained import resolve_checkpoint
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
 
 __all__ = ["read_motion", "load_trained", "checkpoint_for", "train_model", "network_methods",
@@ -44,7 +45,8 @@ def read_motion(path, *, fps: float | None = None, layout: str = "cmu"):
 
 
 def load_trained(path) -> TrainedModel:
-    """Read a checkpoint written by ``refimpl train`` (or :func:`train_model`).
+    """Read a checkpoint written by ``refimpl train`` (or :func:`train_model`); ``pretrained:<name>`` reads a
+    shipped model once its checksum matches its card (:mod:`refimpl.pretrained`).
 
     Raises
     ------
@@ -58,7 +60,7 @@ def load_trained(path) -> TrainedModel:
     from refimpl.checkpoint import load_checkpoint
     from refimpl.checkpoint_schema import validate_trained
 
-    p = existing_file(path)
+    p = existing_file(resolve_checkpoint(path))
     with reading(p):
         arrays, meta = load_checkpoint(p)
         # the whole schema (spec/robustness.md §9) before anything is built: config types, task fields,
@@ -235,7 +237,8 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     ``<name>_<role>.onnx`` in ``out_dir`` (the roles are the exporter's; standardisation inside the graphs).
 
     ``options``: ``mode`` (rollout graph: ``unrolled``, ``loop``, ``scan``; default ``unrolled``), ``dtype``
-    (default float32), and the task's ``export_options`` (e.g. ``T``, default: the model's).
+    (default float32), and the task's ``export_options`` (the exporter's keywords); an option given as None leaves
+    the recipe's value (its ``export_inputs``).
 
     Returns
     -------
@@ -246,10 +249,9 @@ def export_onnx(model: TrainedModel, out_dir, **options) -> dict:
     entry = _deploy_models("ONNX export").exporter(model.spec.exporter)
     _check_export_dir(Path(out_dir), model.spec.exporter)
     kw = dict(model.spec.export_inputs(model)) if model.spec.export_inputs is not None else {}
-    mode, dtype, T = options.pop("mode", "unrolled"), options.pop("dtype", np.float32), options.pop("T", None)
-    if T:
-        kw["T"] = T
-    return entry.export_dir(model.params, model.config, Path(out_dir), dtype=dtype, mode=mode, **kw, **options)
+    mode, dtype = options.pop("mode", "unrolled"), options.pop("dtype", np.float32)
+    kw.update({k: v for k, v in options.items() if v is not None})
+    return entry.export_dir(model.params, model.config, Path(out_dir), dtype=dtype, mode=mode, **kw)
 
 
 def _check_export_dir(out_dir: Path, name: str) -> None:

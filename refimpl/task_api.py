@@ -27,11 +27,15 @@ class Task(Protocol):
         One line for ``refimpl eval --help``: the protocol and the baselines.
     GENERATE_USAGE : str
         One usage line of ``refimpl generate`` for this task (``refimpl generate --help``, usage errors).
+    CHECKPOINT_SCHEMA : refimpl.checkpoint_fields.TaskSchema
+        What the task stores in a checkpoint and how it is checked (its paper's protocol's; every loader applies
+        it, :func:`refimpl.checkpoint_schema.validate_checkpoint_config`).
     """
 
     NAME: str
     EVAL_SUMMARY: str
     GENERATE_USAGE: str
+    CHECKPOINT_SCHEMA: Any
 
     def add_train_options(self, parser) -> None:
         """Add the task's ``refimpl train`` options to ``parser`` (an argument group of its own)."""

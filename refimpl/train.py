@@ -339,145 +339,210 @@ def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, res
         return _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, per_epoch, ckpt, identity)
 
 
-def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, per_epoch, ckpt, identity):
+@dataclasses.dataclass
+class _Run:
+    """The mutable state of one training run (what a checkpoint stores, and the clock)."""
+
+    params: dict
+    opt_state: dict
+    perm: np.ndarray
+    rng: np.random.Generator
+    step: int = 0
+    epoch: int = 0
+    pos: int = 0
+    elapsed0: float = 0.0
+    last_saved: int | None = None
+    t0: float = 0.0
+
+    def elapsed(self) -> float:
+        return self.elapsed0 + (time.perf_counter() - self.t0)
+
+
+def _start(adapter, config, resume, N, ckpt, identity) -> _Run:
+    """The run's state: the checkpoint's (``resume``, checked against this run's ``identity``) or a fresh one."""
     if ckpt is not None and resume and ckpt.is_file():
         params, opt_state, perm, meta = load_state(ckpt)
         validate_training_state(params, opt_state, perm, meta, N, where=f"checkpoint {ckpt}")
         for key, value in identity.items():
             if _jsonable(meta.get(key)) != _jsonable(value):
                 raise ValueError(f"checkpoint {ckpt}: {key} {meta.get(key)!r} does not match this run's {value!r}")
-        step, epoch, pos = int(meta["step"]), int(meta["epoch"]), int(meta["position"])
-        rng = rng_from_json(meta["rng_state"])
-        elapsed0 = float(meta.get("elapsed_s", 0.0))
-    else:
-        rng = np.random.Generator(np.random.PCG64(config.seed))
-        params = {k: np.array(v) for k, v in adapter.init_params(rng).items()}
-        opt_state = adam_init(params)
-        perm = np.arange(N)
-        step, epoch, pos, elapsed0 = 0, 0, 0, 0.0
+        step = int(meta["step"])
+        return _Run(params, opt_state, perm, rng_from_json(meta["rng_state"]), step, int(meta["epoch"]),
+                    int(meta["position"]), float(meta.get("elapsed_s", 0.0)), last_saved=step)
+    rng = np.random.Generator(np.random.PCG64(config.seed))
+    params = {k: np.array(v) for k, v in adapter.init_params(rng).items()}
+    return _Run(params, adam_init(params), np.arange(N), rng)
 
+
+def _open_logs(config, step: int) -> tuple[CsvLog, CsvLog]:
+    """The loss log and the validation log (``<log>_val.csv``), cut back to ``step``."""
     log = CsvLog(Path(config.log_path) if config.log_path else None, _LOG_FIELDS)
     val_log = CsvLog(None if config.log_path is None else
-                      Path(config.log_path).with_name(Path(config.log_path).stem + "_val.csv"), None)
+                     Path(config.log_path).with_name(Path(config.log_path).stem + "_val.csv"), None)
     for lg in (log, val_log):
         if lg.path is not None:
             lg.path.parent.mkdir(parents=True, exist_ok=True)
             truncate_csv(lg.path, step)
+    return log, val_log
 
-    def meta_now():
-        return dict(identity, format=TRAIN_FORMAT, step=step, epoch=epoch, position=pos,
-                    rng_state=rng_state_to_json(rng), lr=exponential_lr(optim.lr, optim.lr_decay, epoch),
-                    steps_target=config.steps, elapsed_s=elapsed0 + (time.perf_counter() - t0),
-                    train_config=dataclasses.asdict(config))
 
-    last_saved = [step if ckpt is not None and resume and ckpt.is_file() else None]
+def _save(run: _Run, name: str, optim, config, ckpt, identity) -> None:
+    """Write the run's checkpoint (nothing without a path); never a non-finite or out-of-range one."""
+    if ckpt is None:
+        return
+    bad = _first_non_finite(run.params) or _first_non_finite(run.opt_state) or \
+        (_first_beyond(run.params, MAX_PARAM_ABS) or (None,))[0]
+    if bad is not None:  # never reached by the loop's checks; a last line of defence
+        raise TrainingDiverged(f"{name}: {bad!r} is not finite or beyond {MAX_PARAM_ABS:g} at step "
+                               f"{run.step}; not saved, " + _kept(ckpt, run.last_saved))
+    ckpt.parent.mkdir(parents=True, exist_ok=True)
+    meta = dict(identity, format=TRAIN_FORMAT, step=run.step, epoch=run.epoch, position=run.pos,
+                rng_state=rng_state_to_json(run.rng), lr=exponential_lr(optim.lr, optim.lr_decay, run.epoch),
+                steps_target=config.steps, elapsed_s=run.elapsed(), train_config=dataclasses.asdict(config))
+    save_state(ckpt, run.params, run.opt_state, run.perm, meta)
+    run.last_saved = run.step
 
-    def checkpoint():
-        if ckpt is not None:
-            bad = _first_non_finite(params) or _first_non_finite(opt_state) or \
-                (_first_beyond(params, MAX_PARAM_ABS) or (None,))[0]
-            if bad is not None:  # never reached by the loop's checks; a last line of defence
-                raise TrainingDiverged(f"{adapter.name}: {bad!r} is not finite or beyond {MAX_PARAM_ABS:g} at step "
-                                       f"{step}; not saved, " + _kept(ckpt, last_saved[0]))
-            ckpt.parent.mkdir(parents=True, exist_ok=True)
-            save_state(ckpt, params, opt_state, perm, meta_now())
-            last_saved[0] = step
 
-    losses, validation = [], []
-    interrupted = False
-    t0 = time.perf_counter()
-    t_rate, step_rate = t0, step
-    start_step = step
-    stopped_by = None
+def _divergence(name: str, run: _Run, ckpt, *, loss=None, grads=None, lr=None) -> str | None:
+    """Why the run diverged at this step, or None: a non-finite ``loss``, a non-finite gradient or one whose
+    squares overflow (before the update, ``grads``), or after the update (``lr`` given) a parameter or Adam state
+    that became non-finite or a parameter beyond the checkpoint limit :data:`MAX_PARAM_ABS`."""
+    at = f"step {run.step + 1} (epoch {run.epoch}"
+    left = f"parameters left at step {run.step}" + (f", last checkpoint {ckpt}" if ckpt is not None else "")
+    if loss is not None and not math.isfinite(loss):
+        return f"{name}: loss is {loss} at {at}); {left}"
+    for k, g in (grads or {}).items():
+        if not np.all(np.isfinite(g)):
+            return f"{name}: gradient of {k!r} is not finite at {at}); {left}"
+    for k, g in (grads or {}).items():
+        if not math.isfinite(float(np.vdot(g, g))):  # Adam's second moment would overflow
+            return f"{name}: the squares of the gradient of {k!r} overflow at {at}); {left}"
+    if lr is None:
+        return None
+    bad = _first_non_finite(run.params) or _first_non_finite(run.opt_state)
+    if bad is not None:
+        return (f"{name}: {'parameter' if bad in run.params else 'Adam state'} {bad!r} became non-finite in the "
+                f"update of {at}, learning rate {lr:g}); nothing saved"
+                + (f", last checkpoint {ckpt} kept" if ckpt is not None else ""))
+    big = _first_beyond(run.params, MAX_PARAM_ABS)
+    if big is not None:  # the loader refuses such a checkpoint (checkpoint_schema.MAX_PARAM_ABS)
+        return (f"{name}: training diverged at {at}, learning rate {lr:g}): parameter {big[0]!r} reached "
+                f"magnitude {big[1]:.3g}, beyond the checkpoint limit {MAX_PARAM_ABS:g}; nothing saved, "
+                + _kept(ckpt, run.last_saved))
+    return None
+
+
+def _forward(run: _Run, adapter, N: int, B: int, start_step: int, ckpt):
+    """``(loss, grads)`` of the next batch, or None when interrupted (nothing of the step kept); TrainingDiverged
+    when the forward pass or the gradients are not finite (the generator restored)."""
+    snapshot = run.rng.bit_generator.state
+    try:
+        if run.pos == 0:
+            run.perm = run.rng.permutation(N)
+        idx = run.perm[run.pos * B:(run.pos + 1) * B]
+        batch = adapter.get_batch(idx, TrainContext(rng=run.rng, step=run.step, epoch=run.epoch))
+        loss, grads = adapter.loss_and_grads(run.params, batch)
+    except KeyboardInterrupt:
+        run.rng.bit_generator.state = snapshot  # nothing of this step is kept
+        return None
+    except ValueError as exc:
+        if run.step == start_step or not _NON_FINITE_TEXT.search(str(exc)):
+            raise
+        # a layer refused the non-finite values the updated parameters produced: the run diverged
+        run.rng.bit_generator.state = snapshot
+        raise TrainingDiverged(f"{adapter.name}: training diverged at step {run.step + 1} (epoch {run.epoch}): "
+                               f"the forward pass produced non-finite values ({exc}); parameters left at step "
+                               f"{run.step}" + (f", last checkpoint {ckpt} kept" if ckpt is not None else "")) from None
+    loss = float(loss)
+    why = _divergence(adapter.name, run, ckpt, loss=loss, grads=grads)
+    if why is not None:
+        run.rng.bit_generator.state = snapshot
+        raise TrainingDiverged(why)
+    return loss, grads
+
+
+def _update(run: _Run, adapter, optim, grads, per_epoch: int, ckpt) -> tuple[float, float]:
+    """Clip, Adam, check, advance the counters; returns ``(grad_norm, lr)``."""
+    lr = exponential_lr(optim.lr, optim.lr_decay, run.epoch)
+    if optim.clip_norm is not None:
+        gnorm = clip_grad_norm(grads, optim.clip_norm)
+    else:
+        gnorm = math.sqrt(math.fsum(float(np.vdot(g, g)) for g in grads.values()))
+    adam_step(run.params, grads, run.opt_state, lr, betas=optim.betas, eps=optim.eps,
+              weight_decay=optim.weight_decay)
+    why = _divergence(adapter.name, run, ckpt, lr=lr)
+    if why is not None:
+        raise TrainingDiverged(why)
+    run.step += 1
+    run.pos += 1
+    if run.pos == per_epoch:
+        run.pos, run.epoch = 0, run.epoch + 1
+    return gnorm, lr
+
+
+class _Reporter:
+    """What happens after a completed step: the CSV logs, validation, progress lines, checkpoints, callback."""
+
+    def __init__(self, run, adapter, config, progress, callback, save):
+        self.run, self.adapter, self.config = run, adapter, config
+        self.progress, self.callback, self.save = progress, callback, save
+        self.log, self.val_log = _open_logs(config, run.step)
+        self.validation = []
+        self.t_rate, self.step_rate = run.t0, run.step
+
+    def after_step(self, loss: float, gnorm: float, lr: float) -> None:
+        run, config = self.run, self.config
+        step, elapsed = run.step, run.elapsed()
+        if step % config.log_every_csv == 0 or step == config.steps:
+            self.log.write({"step": step, "epoch": run.epoch, "loss": loss, "grad_norm": gnorm, "lr": lr,
+                            "elapsed_s": round(elapsed, 3)})
+        if self.adapter.validate is not None and config.validate_every and step % config.validate_every == 0:
+            metrics = {k: float(v) for k, v in self.adapter.validate(run.params).items()}
+            self.validation.append(dict(step=step, **metrics))
+            self.val_log.write(dict(step=step, **metrics))
+        if self.progress is not None and (step % config.progress_every == 0 or step == config.steps):
+            self.progress(self._line(loss, lr, elapsed))
+        if step % config.checkpoint_every == 0:
+            self.save()
+        if self.callback is not None:
+            self.callback(StepInfo(step=step, epoch=run.epoch, loss=loss, grad_norm=gnorm, lr=lr,
+                                   elapsed_s=elapsed, params=run.params))
+
+    def _line(self, loss: float, lr: float, elapsed: float) -> str:
+        step, steps = self.run.step, self.config.steps
+        now = time.perf_counter()
+        rate = (step - self.step_rate) / max(now - self.t_rate, 1e-9)
+        self.t_rate, self.step_rate = now, step
+        eta = (steps - step) / rate if rate > 0 else math.inf
+        last = self.validation[-1] if self.validation else None
+        val = "" if last is None or last["step"] != step else " | " + " ".join(
+            f"{k} {v:.4g}" for k, v in last.items() if k != "step")
+        return (f"[{self.adapter.name}] step {step}/{steps} epoch {self.run.epoch} loss {loss:.5g} lr {lr:.3g} | "
+                f"{rate:.1f} it/s | elapsed {format_duration(elapsed)} ETA {format_duration(eta)}{val}")
+
+    def close(self) -> None:
+        self.log.close()
+        self.val_log.close()
+
+
+def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, per_epoch, ckpt, identity):
+    run = _start(adapter, config, resume, N, ckpt, identity)
+    run.t0 = time.perf_counter()
+    report = _Reporter(run, adapter, config, progress, callback,
+                       save=lambda: _save(run, adapter.name, optim, config, ckpt, identity))
+    losses, interrupted, stopped_by, start_step = [], False, None, run.step
     try:
         with _DeferSigint() as sigint, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            while step < config.steps:
-                rng_snapshot = rng.bit_generator.state
-                try:
-                    if pos == 0:
-                        perm = rng.permutation(N)
-                    idx = perm[pos * B:(pos + 1) * B]
-                    batch = adapter.get_batch(idx, TrainContext(rng=rng, step=step, epoch=epoch))
-                    loss, grads = adapter.loss_and_grads(params, batch)
-                except KeyboardInterrupt:
-                    rng.bit_generator.state = rng_snapshot  # nothing of this step is kept
+            while run.step < config.steps:
+                forward = _forward(run, adapter, N, B, start_step, ckpt)
+                if forward is None:
                     interrupted = True
                     break
-                except ValueError as exc:
-                    if step == start_step or not _NON_FINITE_TEXT.search(str(exc)):
-                        raise
-                    # a layer refused the non-finite values the updated parameters produced: the run diverged
-                    rng.bit_generator.state = rng_snapshot
-                    raise TrainingDiverged(f"{adapter.name}: training diverged at step {step + 1} (epoch {epoch}): "
-                                           f"the forward pass produced non-finite values ({exc}); parameters left "
-                                           f"at step {step}" + (f", last checkpoint {ckpt} kept" if ckpt is not None
-                                                                else "")) from None
-                loss = float(loss)
-                if not math.isfinite(loss):
-                    rng.bit_generator.state = rng_snapshot
-                    raise TrainingDiverged(f"{adapter.name}: loss is {loss} at step {step + 1} (epoch {epoch}); "
-                                           f"parameters left at step {step}"
-                                           + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
-                for k, g in grads.items():
-                    if not np.all(np.isfinite(g)):
-                        rng.bit_generator.state = rng_snapshot
-                        raise TrainingDiverged(f"{adapter.name}: gradient of {k!r} is not finite at step {step + 1} "
-                                               f"(epoch {epoch}); parameters left at step {step}"
-                                               + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
-                for k, g in grads.items():
-                    if not math.isfinite(float(np.vdot(g, g))):  # Adam's second moment would overflow
-                        rng.bit_generator.state = rng_snapshot
-                        raise TrainingDiverged(f"{adapter.name}: the squares of the gradient of {k!r} overflow at "
-                                               f"step {step + 1} (epoch {epoch}); parameters left at step {step}"
-                                               + (f", last checkpoint {ckpt}" if ckpt is not None else ""))
-                lr = exponential_lr(optim.lr, optim.lr_decay, epoch)
-                if optim.clip_norm is not None:
-                    gnorm = clip_grad_norm(grads, optim.clip_norm)
-                else:
-                    gnorm = math.sqrt(math.fsum(float(np.vdot(g, g)) for g in grads.values()))
-                adam_step(params, grads, opt_state, lr, betas=optim.betas, eps=optim.eps,
-                          weight_decay=optim.weight_decay)
-                bad = _first_non_finite(params) or _first_non_finite(opt_state)
-                if bad is not None:
-                    raise TrainingDiverged(
-                        f"{adapter.name}: {'parameter' if bad in params else 'Adam state'} {bad!r} became non-finite "
-                        f"in the update of step {step + 1} (epoch {epoch}, learning rate {lr:g}); nothing saved"
-                        + (f", last checkpoint {ckpt} kept" if ckpt is not None else ""))
-                big = _first_beyond(params, MAX_PARAM_ABS)
-                if big is not None:  # the loader refuses such a checkpoint (checkpoint_schema.MAX_PARAM_ABS)
-                    raise TrainingDiverged(
-                        f"{adapter.name}: training diverged at step {step + 1} (epoch {epoch}, learning rate {lr:g}): "
-                        f"parameter {big[0]!r} reached magnitude {big[1]:.3g}, beyond the checkpoint limit "
-                        f"{MAX_PARAM_ABS:g}; nothing saved, " + _kept(ckpt, last_saved[0]))
-                step += 1
-                pos += 1
-                if pos == per_epoch:
-                    pos, epoch = 0, epoch + 1
+                loss, grads = forward
+                gnorm, lr = _update(run, adapter, optim, grads, per_epoch, ckpt)
                 losses.append(loss)
                 try:  # the step is complete: an interrupt from here on keeps it
-                    elapsed = elapsed0 + time.perf_counter() - t0
-                    if step % config.log_every_csv == 0 or step == config.steps:
-                        log.write({"step": step, "epoch": epoch, "loss": loss, "grad_norm": gnorm, "lr": lr,
-                                   "elapsed_s": round(elapsed, 3)})
-                    if adapter.validate is not None and config.validate_every and step % config.validate_every == 0:
-                        metrics = {k: float(v) for k, v in adapter.validate(params).items()}
-                        validation.append(dict(step=step, **metrics))
-                        val_log.write(dict(step=step, **metrics))
-                    if progress is not None and (step % config.progress_every == 0 or step == config.steps):
-                        now = time.perf_counter()
-                        rate = (step - step_rate) / max(now - t_rate, 1e-9)
-                        t_rate, step_rate = now, step
-                        eta = (config.steps - step) / rate if rate > 0 else math.inf
-                        val = "" if not validation or validation[-1]["step"] != step else " | " + " ".join(
-                            f"{k} {v:.4g}" for k, v in validation[-1].items() if k != "step")
-                        progress(f"[{adapter.name}] step {step}/{config.steps} epoch {epoch} loss {loss:.5g} "
-                                 f"lr {lr:.3g} | {rate:.1f} it/s | elapsed {format_duration(elapsed)} "
-                                 f"ETA {format_duration(eta)}{val}")
-                    if ckpt is not None and step % config.checkpoint_every == 0:
-                        checkpoint()
-                    if callback is not None:
-                        callback(StepInfo(step=step, epoch=epoch, loss=loss, grad_norm=gnorm, lr=lr,
-                                          elapsed_s=elapsed, params=params))
+                    report.after_step(loss, gnorm, lr)
                 except KeyboardInterrupt:
                     interrupted = True
                     break
@@ -486,15 +551,14 @@ def _train_unlocked(adapter, optim, config, resume, callback, progress, N, B, pe
                     break
         stopped_by = sigint.signum
     finally:
-        log.close()
-        val_log.close()
-    checkpoint()
+        report.close()
+    _save(run, adapter.name, optim, config, ckpt, identity)
     if interrupted and progress is not None:
-        progress(f"[{adapter.name}] interrupted after step {step}; checkpoint "
+        progress(f"[{adapter.name}] interrupted after step {run.step}; checkpoint "
                  f"{ckpt if ckpt is not None else '(none: no checkpoint_path)'}")
-    return TrainResult(params=params, optim_state=opt_state, step=step, epoch=epoch, losses=losses,
-                       interrupted=interrupted, elapsed_s=elapsed0 + time.perf_counter() - t0,
-                       checkpoint_path=None if ckpt is None else str(ckpt), validation=validation,
+    return TrainResult(params=run.params, optim_state=run.opt_state, step=run.step, epoch=run.epoch, losses=losses,
+                       interrupted=interrupted, elapsed_s=run.elapsed(),
+                       checkpoint_path=None if ckpt is None else str(ckpt), validation=report.validation,
                        signal=stopped_by if interrupted else None)
 
 

@@ -104,7 +104,7 @@ def read_state_dict(path) -> dict[str, np.ndarray]:
     """
     p = Path(path)
     where = str(p)
-    check_regular(p)  # a FIFO or a device would block or never end (spec/robustness.md §12)
+    check_regular(p)  # a FIFO or a device would block or never end (spec/robustness.md §13)
     suffix = p.suffix.lower()
     if suffix in TORCH_SUFFIXES:
         raw = _read_torch(p, where)
@@ -134,10 +134,10 @@ def layout_names(spec: ModelSpec, config, layout: str) -> dict[str, tuple[str, t
         An unknown layout, or ``"published"`` for a model without published code (QTG, the convolutional QuaterNet).
     """
     if layout == "refimpl":
-        return {k: (k, s) for k, s in expected_param_shapes(spec.recipe, spec.config_type, config).items()}
+        return {k: (k, s) for k, s in expected_param_shapes(spec, spec.config_type, config).items()}
     if layout != "published":
         raise UsageError(f"--layout {layout!r}: expected one of {list(LAYOUTS)}")
-    fn = getattr(spec.recipe, "published_names", None)
+    fn = spec.published_names
     if fn is None:
         raise UsageError(f"--layout published: model {spec.name!r} has no published code to take names from; "
                          f"use --layout refimpl (spec/import.md)")
@@ -230,11 +230,11 @@ def import_checkpoint(spec: ModelSpec, state: Mapping[str, np.ndarray], layout: 
         A bad layout, ``--set`` value or dtype.
     """
     where = str(source) if source is not None else "state dict"
-    settings = tuple(getattr(spec.recipe, "PUBLISHED_SETTINGS", ())) if layout == "published" else ()
+    settings = spec.published_settings if layout == "published" else ()
     config = spec.make_config(train_ds, (*settings, *overrides))
     names = layout_names(spec, config, layout)
     try:
-        params = to_refimpl(state, names, expected_param_shapes(spec.recipe, spec.config_type, config), where)
+        params = to_refimpl(state, names, expected_param_shapes(spec, spec.config_type, config), where)
     except ValueError as exc:
         other = next((o for o in LAYOUTS if o != layout), None)
         try:
@@ -243,7 +243,7 @@ def import_checkpoint(spec: ModelSpec, state: Mapping[str, np.ndarray], layout: 
         except UsageError:
             pass
         fields = ", ".join(f.name for f in getattr(config, "__dataclass_fields__", {}).values())
-        hint = getattr(spec.recipe, "IMPORT_HINT", "")
+        hint = spec.import_hint
         raise ValueError(f"{exc} (model {spec.name!r}, layout {layout!r}; other sizes: --set one of {fields}"
                          + (f"; {hint}" if hint else "") + ")") from None
     kinds = sorted({a.dtype.name for a in params.values()})

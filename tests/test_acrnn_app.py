@@ -106,12 +106,14 @@ def test_generate_decodes_to_bvh_and_keeps_the_seed(trained, tmp_path, row, caps
     np.testing.assert_allclose(got, want, atol=1e-3)
 
 
-def test_generate_refuses_positions(tmp_path, capsys):
+def test_generate_writes_positions_as_bvh(tmp_path):
+    """A positional row has no rotation decoding: its frames become rotations along the bones (spec/kinematics.md
+    §7; this was exit 2 before issue 32)."""
     ck = tmp_path / "p"
     assert _train(ck, "--steps", "1", "--representation", "positions") == EXIT_OK
     code = main(["generate", "--model", "acrnn", "--checkpoint", str(ck / "checkpoint.npz"), "--source",
-                 str(SALSA / "16.bvh"), "--out", str(tmp_path / "g.bvh")])
-    assert code == EXIT_USAGE and "no rotation decoding" in capsys.readouterr().err
+                 str(SALSA / "16.bvh"), "--length", "4", "--out", str(tmp_path / "g.bvh")])
+    assert code == EXIT_OK and read_bvh(tmp_path / "g.bvh").num_frames == 14
 
 
 def test_export_verifies_and_onnx_backends_agree(trained, tmp_path, capsys):

@@ -38,7 +38,7 @@ def binary(tmp_path_factory):
 def model(tmp_path_factory):
     """A small exported QuaterNet (random weights): ``(folder, params, config)``."""
     pytest.importorskip("onnxruntime")
-    from deploy.models.quaternet_io import export_quaternet_dir
+    from deploy.models.quaternet_io import export_dir as export_quaternet_dir
     from refimpl.models.quaternet import QuaterNetConfig, init_params
 
     config = QuaterNetConfig(num_joints=J, hidden_size=H, num_layers=L)
@@ -58,7 +58,7 @@ def _prefix(P=9):
 
 
 def test_c_loop_matches_python(binary, model, tmp_path):
-    from deploy.models.quaternet_io import QuaterNetRuntime
+    from deploy.models.quaternet_io import Runtime as QuaterNetRuntime
     from refimpl.models import quaternet as rnn
     from refimpl.protocols.prediction import canonical_prefix
 

@@ -165,7 +165,7 @@ DEPLOY_CASES = [c for c in sorted(CASES) if not c.startswith(("model ", "format"
 def test_deploy_loader_validates_too(tmp_path, good, case):
     """spec/robustness.md §9: deploy's ``load_qtg_checkpoint`` applies the same schema (ValueError naming the field)."""
     pytest.importorskip("onnx")
-    from deploy.models.qtg_io import load_qtg_checkpoint
+    from deploy.models.qtg_io import load_checkpoint as load_qtg_checkpoint
 
     edit, field = CASES[case]
     path = _craft(tmp_path, good, edit)
@@ -180,7 +180,7 @@ def test_good_checkpoint_loads_everywhere(tmp_path, good):
     model = load_trained(path)
     assert model.config.gru_hidden == 8 and model.fps > 0 and np.all(model.fields["root_std"] > 0)
     pytest.importorskip("onnx")
-    from deploy.models.qtg_io import load_qtg_checkpoint
+    from deploy.models.qtg_io import load_checkpoint as load_qtg_checkpoint
 
     params, config, _ = load_qtg_checkpoint(path)
     assert config == model.config and set(params) == set(model.params)
@@ -189,7 +189,7 @@ def test_good_checkpoint_loads_everywhere(tmp_path, good):
 def test_state_dict_validated_against_default_config(tmp_path):
     """A plain state dict (no metadata) is checked against ``QTGConfig()``'s shapes and finiteness."""
     pytest.importorskip("onnx")
-    from deploy.models.qtg_io import load_qtg_checkpoint
+    from deploy.models.qtg_io import load_checkpoint as load_qtg_checkpoint
 
     params = init_params(QTGConfig(), np.random.default_rng(0), dtype=np.float32)
     np.savez(tmp_path / "sd.npz", **params)

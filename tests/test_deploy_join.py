@@ -9,7 +9,7 @@ import pytest
 
 from deploy.models.qtg import ROLLOUT_MODES, export_qtg_rollout
 from deploy.models.qtg_compact import export_qtg_rollout_compact
-from deploy.models.qtg_io import QTGRuntime, export_qtg_dir
+from deploy.models.qtg_io import Runtime as QTGRuntime, export_dir as export_qtg_dir
 from deploy.validate import run_onnxruntime, validate_model
 from deploy.metadata import read_metadata
 from refimpl.models.qtg import QTGConfig, init_params

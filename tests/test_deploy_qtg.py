@@ -14,7 +14,7 @@ import pytest
 
 from deploy.metadata import FORMAT, read_metadata
 from deploy.models.qtg import ROLLOUT_MODES, export_qtg_init, export_qtg_rollout, export_qtg_step
-from deploy.models.qtg_io import QTGRuntime
+from deploy.models.qtg_io import Runtime as QTGRuntime
 from deploy.validate import run_onnxruntime, run_reference, validate_model
 from refimpl.models.qtg import QTGConfig, QTGState, init_params, init_state, step
 from refimpl.models.qtg_fast import rollout_forward

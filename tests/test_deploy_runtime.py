@@ -9,7 +9,7 @@ import refimpl
 from deploy.cli import main
 from deploy.graph import GraphBuilder, save_model
 from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step
-from deploy.models.qtg_io import QTGRuntime, export_qtg_dir, load_qtg_checkpoint
+from deploy.models.qtg_io import Runtime as QTGRuntime, export_dir as export_qtg_dir, load_checkpoint as load_qtg_checkpoint
 from deploy.runtime import load_model, make_session, make_session_options
 from refimpl.bvh import read_bvh
 from refimpl.checkpoint import save_checkpoint

@@ -1,6 +1,6 @@
 """Issue #28: hostile inputs on the surfaces QuaterNet, locomotion and acRNN added — one test per cause found at
 36aec31 (each fails on that commit), plus the size bounds (refimpl/bounds.py) and the per-task checkpoint schemas
-(refimpl/task_schemas.py). spec/cli.md §1.1, spec/robustness.md §9.1, §11.1."""
+(each task's CHECKPOINT_SCHEMA, refimpl/checkpoint_fields.py). spec/cli.md §1.1, spec/robustness.md §9.1, §11.1."""
 from __future__ import annotations
 
 import copy
@@ -102,20 +102,20 @@ def test_deploy_loaders_raise_only_value_error(seeds, tmp_path):
     with pytest.raises(ValueError, match="num_joints"):
         quaternet_long_io.load_checkpoint(tmp_path / "x.npz")
     with pytest.raises(ValueError, match="data_representation"):
-        acrnn_io.load_acrnn_checkpoint(_crafted(seeds, tmp_path, "acrnn", data_representation="positions"))
+        acrnn_io.load_checkpoint(_crafted(seeds, tmp_path, "acrnn", data_representation="positions"))
     with pytest.raises(ValueError, match="hidden_size"):
-        quaternet_io.load_quaternet_checkpoint(_crafted(seeds, tmp_path, "quaternet", hidden_size="8"))
+        quaternet_io.load_checkpoint(_crafted(seeds, tmp_path, "quaternet", hidden_size="8"))
 
 
 def test_every_seed_checkpoint_passes_its_task_schema(seeds):
     """The schema accepts what training writes (all six models), and the deploy loaders accept it too."""
-    from deploy.models import acrnn_io, quaternet_io, quaternet_long_io
+    from deploy.models import acrnn_io, quaternet_cnn_io, quaternet_io, quaternet_long_io
 
     for name in fs.TINY:
         assert load_trained(seeds[name]).spec.name == name
-    acrnn_io.load_acrnn_checkpoint(seeds["acrnn"])
-    quaternet_io.load_quaternet_checkpoint(seeds["quaternet"])
-    quaternet_io.load_cnn_checkpoint(seeds["quaternet-cnn"])
+    acrnn_io.load_checkpoint(seeds["acrnn"])
+    quaternet_io.load_checkpoint(seeds["quaternet"])
+    quaternet_cnn_io.load_checkpoint(seeds["quaternet-cnn"])
     quaternet_long_io.load_checkpoint(seeds["quaternet-long"])
     quaternet_long_io.load_checkpoint(seeds["pace"])
 
@@ -257,7 +257,7 @@ def test_qtg_runtime_with_a_list_as_config(seeds, tmp_path):
     model is refused when it is loaded (``deploy.runtime``'s metadata checks), with ``ValueError`` naming the field."""
     import onnx
 
-    from deploy.models.qtg_io import QTGRuntime
+    from deploy.models.qtg_io import Runtime as QTGRuntime
 
     d = tmp_path / "qtg"
     d.mkdir()

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from refimpl import registry
+from refimpl.checkpoint_fields import TaskSchema, positive_int
 from refimpl.cli import main
 from refimpl.task_api import TASK_MEMBERS, Task, check_task
 from refimpl.train import ModelAdapter, OptimConfig
@@ -50,6 +51,7 @@ def _toy_task_module() -> types.ModuleType:
     t.NAME = "toy"
     t.EVAL_SUMMARY = "toy: mean |f(x) - y| on held-out rows, against zero"
     t.GENERATE_USAGE = "refimpl generate --model toy-linear (toy)"
+    t.CHECKPOINT_SCHEMA = TaskSchema("toy", fields={"rows": positive_int})
     t.add_train_options = lambda parser: parser.add_argument("--toy-rows", type=int, default=64)
     t.add_eval_options = lambda parser: None
     t.add_export_options = lambda parser: None
@@ -152,7 +154,20 @@ def _toy_exporter_module() -> types.ModuleType:
         def run(self, x):
             return self.session.run(None, {"x": np.asarray(x, np.float32)})[0].astype(np.float64)
 
-    e.export_dir, e.Runtime = export_dir, Runtime
+    def load_checkpoint(path):
+        from deploy.models.entry_io import checked_params, checkpoint_params, config_from_meta, read_checkpoint
+
+        arrays, meta = read_checkpoint(path)
+        config = config_from_meta(ToyConfig, meta, where=str(path))
+        return checked_params(checkpoint_params(arrays), config, str(path)), config, meta
+
+    def run_command(runtime, args):
+        from deploy.models.entry_io import write_npy
+
+        write_npy(args.output, runtime.run(np.load(args.input, allow_pickle=False)))
+        return 0
+
+    e.load_checkpoint, e.export_dir, e.Runtime, e.run_command = load_checkpoint, export_dir, Runtime, run_command
     return e
 
 
@@ -248,3 +263,52 @@ def test_the_command_line_and_the_services_name_no_model_and_no_task(module):
     names |= {n.replace("-", "_") for n in names}
     found = sorted(_words(ROOT / module) & names)
     assert not found, f"{module} names {found}: move that code into the task or the recipe"
+
+
+def test_every_exporter_entry_implements_the_entry_interface():
+    """deploy.models.entry_api: every entry of the exporter table defines the protocol's names itself; a module
+    lacking one is refused when the table hands it out."""
+    models = pytest.importorskip("deploy.models")
+    from deploy.models.entry_api import ENTRY_MEMBERS, OPTIONAL_MEMBERS, ExporterEntry, check_entry
+
+    assert set(ENTRY_MEMBERS) == {"Runtime", "export_dir", "load_checkpoint", "run_command"}
+    for name in models.EXPORTERS:
+        entry = models.exporter(name)
+        assert isinstance(entry, ExporterEntry), name
+        src = Path(entry.__file__).read_text(encoding="utf-8")
+        for member in ENTRY_MEMBERS:  # defined under its own name, not an alias line
+            assert re.search(rf"^(def|class) {member}\b", src, re.M) or f"import {member}" in src \
+                or re.search(rf"import \([^)]*\b{member}\b", src), (name, member)
+            assert not re.search(rf"^{member} = ", src, re.M), (name, member)
+    broken = types.ModuleType("broken_entry")
+    broken.export_dir, broken.Runtime = (lambda *a, **k: {}), type("R", (), {"from_dir": classmethod(lambda c, d: c)})
+    with pytest.raises(TypeError, match="load_checkpoint"):
+        check_entry(broken)
+    broken.load_checkpoint = broken.run_command = lambda *a: None
+    assert check_entry(broken) is broken
+    broken.add_run_options = "not callable"
+    with pytest.raises(TypeError, match="add_run_options"):
+        check_entry(broken)
+    assert "export_checkpoint" in OPTIONAL_MEMBERS
+
+
+def test_every_recipe_implements_the_recipe_interface_and_a_broken_one_is_refused():
+    """refimpl.recipe_api: the registry checks each recipe and reads its optional names once into the ModelSpec."""
+    from refimpl.recipe_api import OPTIONAL_MEMBERS, RECIPE_MEMBERS, Recipe, check_recipe, optional_members
+
+    for name, spec in registry.MODELS.items():
+        assert isinstance(spec.recipe, Recipe) and check_recipe(spec.recipe, spec.task) is spec.recipe
+        opt = optional_members(spec.recipe)
+        assert spec.exporter == opt["EXPORTER"] and spec.published_names is opt["published_names"], name
+        assert spec.published_settings == tuple(opt["PUBLISHED_SETTINGS"]) and set(opt) == set(OPTIONAL_MEMBERS)
+    recipe = _toy_recipe_module()
+    assert optional_members(recipe)["IMPORT_HINT"] == "" and optional_members(recipe)["param_shapes"] is not None
+    with pytest.raises(ValueError, match="registered as"):
+        check_recipe(recipe, "transition")
+    recipe.verify_onnx = "not callable"
+    with pytest.raises(TypeError, match="verify_onnx"):
+        check_recipe(recipe)
+    del recipe.make_method
+    with pytest.raises(TypeError, match="make_method"):
+        registry.ModelSpec.from_recipe(recipe, "toy")
+    assert "make_adapter" in RECIPE_MEMBERS and "PAPER_BATCH" in RECIPE_MEMBERS

@@ -1,7 +1,7 @@
 """Per-model exporters and runtimes, and the exporter table (spec/deploy.md §8, spec/architecture.md).
 
 :data:`EXPORTERS` maps a model name (``ModelSpec.exporter`` of its recipe, and ``model.name`` in the metadata
-of every file it exports) to its entry module, which provides:
+of every file it exports) to its entry module, which implements :class:`deploy.models.entry_api.ExporterEntry`:
 
 * ``load_checkpoint(path) -> (params, config, meta)`` — a ``refimpl train`` checkpoint or a state dict;
 * ``export_dir(params, config, out_dir, **options) -> dict role -> Path`` — validated files written atomically;
@@ -11,7 +11,7 @@ of every file it exports) to its entry module, which provides:
   export: ``deploy.models.run_commands.export_trained``), ``add_export_options(group)`` and
   ``add_run_options(group)`` (the model's own command-line options, refused for other models).
 
-:func:`exporter` imports an entry; :func:`runtime_for_dir` opens a folder of exported models with the runtime
+:func:`exporter` imports an entry and checks it (:func:`deploy.models.entry_api.check_entry`); :func:`runtime_for_dir` opens a folder of exported models with the runtime
 of the model named in their metadata. Adding a model: its graph builders in ``deploy/models/<name>.py``, its
 entry module, and one line in :data:`EXPORTERS`.
 """
@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import importlib
 from pathlib import Path
+
+from deploy.models.entry_api import check_entry
 
 __all__ = ["EXPORTERS", "exporter", "model_name_of_dir", "runtime_for_dir"]
 
@@ -33,10 +35,11 @@ EXPORTERS = {
 
 
 def exporter(name: str):
-    """The entry module of model ``name`` (:data:`EXPORTERS`); ``ValueError`` for an unknown name."""
+    """The entry module of model ``name`` (:data:`EXPORTERS`), checked against the entry interface
+    (:func:`deploy.models.entry_api.check_entry`); ``ValueError`` for an unknown name."""
     if name not in EXPORTERS:
         raise ValueError(f"model {name!r}: no exporter; known: {sorted(EXPORTERS)}")
-    return importlib.import_module(EXPORTERS[name])
+    return check_entry(importlib.import_module(EXPORTERS[name]))
 
 
 def model_name_of_dir(directory) -> str:

@@ -1,9 +1,11 @@
-"""acRNN's entry of the exporter table (``deploy.models.EXPORTERS["acrnn"]``): checkpoints in, model folders out,
+"""acRNN's entry of the exporter table (``deploy.models.EXPORTERS["acrnn"]``; protocol
+:class:`deploy.models.entry_api.ExporterEntry`): checkpoints in, model folders out,
 and the runtime that drives the exported models (spec/deploy.md §8.2).
 
-* :func:`load_acrnn_checkpoint` — ``(params, config, meta)`` from a ``refimpl train --model acrnn`` checkpoint;
-* :func:`export_acrnn_dir` — ``acrnn_step.onnx`` and ``acrnn_generate.onnx`` (validated, atomic);
-* :class:`ACRNNRuntime` — a host loop of ``step`` calls or one ``generate`` call, in onnxruntime.
+* :func:`load_checkpoint` — ``(params, config, meta)`` from a ``refimpl train --model acrnn`` checkpoint;
+* :func:`export_dir` — ``acrnn_step.onnx`` and ``acrnn_generate.onnx`` (validated, atomic);
+* :class:`Runtime` — a host loop of ``step`` calls or one ``generate`` call, in onnxruntime;
+* :func:`run_command` — ``python -m deploy run`` (:mod:`deploy.models.run_commands`).
 
 Shape legend: B batch, S seed frames, N generated frames, F frame size, H hidden, L layers.
 """
@@ -14,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.models.acrnn import ACRNNConfig
+from refimpl.protocols.synthesis import CHECKPOINT_SCHEMA
 
 from deploy.graph import OPSET
 from deploy.models.arguments import check_graph_inputs, count, frames_array
@@ -22,18 +25,18 @@ from deploy.models.entry_io import (checked_params, checkpoint_params, config_fr
                                     write_models)
 from deploy.runtime import DeployedModel, load_model
 
-__all__ = ["load_acrnn_checkpoint", "export_acrnn_dir", "ACRNNRuntime"]
+__all__ = ["load_checkpoint", "export_dir", "Runtime", "run_command"]
 
 
-def load_acrnn_checkpoint(path):
+def load_checkpoint(path):
     """``(params, config, meta)`` of an acRNN training checkpoint (parameters ``param.<name>``, config from
     ``meta["model_config"]``; the statistics, representation and skeleton are in ``meta["model_config"]`` too)."""
     arrays, meta = read_checkpoint(path)
-    config = config_from_meta(ACRNNConfig, meta, task="synthesis", where=str(path))
+    config = config_from_meta(ACRNNConfig, meta, schema=CHECKPOINT_SCHEMA, where=str(path))
     return checked_params(checkpoint_params(arrays), config, str(path)), config, meta
 
 
-def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, parents=None, opset=None,
+def export_dir(params, config, out_dir, *, mean, std, representation, parents=None, opset=None,
                      dtype=np.float32, mode: str = "loop", metadata=None, skeleton=None,
                      T: int | None = None) -> dict:
     """Export, validate and atomically write ``acrnn_step.onnx`` and ``acrnn_generate.onnx`` into ``out_dir``.
@@ -65,7 +68,7 @@ def export_acrnn_dir(params, config, out_dir, *, mean, std, representation, pare
     return write_models(models, out, "acrnn")
 
 
-class ACRNNRuntime:
+class Runtime:
     """acRNN inference from exported ``step`` / ``generate`` models (either or both).
 
     Parameters
@@ -87,10 +90,10 @@ class ACRNNRuntime:
             if m is not None:
                 check_graph_inputs(m, role, {"step": ("frame", "h", "c"), "generate": ("seed", "num_frames")}[role])
         if self.step_model is None and self.generate_model is None:
-            raise ValueError("ACRNNRuntime: expected a step or a generate model")
+            raise ValueError("Runtime: expected a step or a generate model")
 
     @classmethod
-    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "ACRNNRuntime":
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "Runtime":
         """Load ``acrnn_step.onnx`` and ``acrnn_generate.onnx`` from ``directory`` (those present)."""
         d = Path(directory)
         found = {k: (d / f"acrnn_{k}.onnx" if (d / f"acrnn_{k}.onnx").is_file() else None)
@@ -144,10 +147,8 @@ class ACRNNRuntime:
         return np.stack(frames, axis=1)                                      # (B, N, F)
 
 
-#: The exporter table's names for this model.
-load_checkpoint = load_acrnn_checkpoint
-export_dir = export_acrnn_dir
-Runtime = ACRNNRuntime
+def run_command(runtime, args) -> int:
+    """``python -m deploy run`` for acRNN (:func:`deploy.models.run_commands.run_synthesis`)."""
+    from deploy.models.run_commands import run_synthesis
 
-# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.run_commands import run_synthesis as run_command  # noqa: E402,F401
+    return run_synthesis(runtime, args)

@@ -23,7 +23,7 @@ import numpy as np
 from refimpl.atomic import atomic_write_bytes
 from refimpl.checkpoint import load_checkpoint, load_state_dict_npz
 from refimpl.checkpoint_schema import expected_param_shapes, validate_model_config, validate_params
-from refimpl.task_schemas import validate_task_checkpoint
+from refimpl.checkpoint_schema import validate_task_schema
 
 from deploy.graph import save_model
 from deploy.validate import validate_model
@@ -51,12 +51,13 @@ def checkpoint_params(arrays, *, state_dict_ok: bool = False) -> dict:
     return (params or dict(arrays)) if state_dict_ok else params
 
 
-def config_from_meta(config_type, meta, convert=None, *, task: str | None = None, where: str = "checkpoint"):
+def config_from_meta(config_type, meta, convert=None, *, schema=None, where: str = "checkpoint"):
     """``config_type`` built from the fields of ``meta["model_config"]`` it has (others ignored); ``convert``, if
     given, maps that dict first.
 
     The fields are checked against the checkpoint schema first (``refimpl.checkpoint_schema``: types, integer
-    limits; with ``task``, that task's stored fields, ``refimpl.task_schemas``), so that every problem is a
+    limits; with ``schema``, the task's checks of its stored fields: the ``CHECKPOINT_SCHEMA`` of its protocol,
+    ``refimpl.checkpoint_fields.TaskSchema``), so that every problem is a
     ``ValueError`` naming ``where`` and the field — never a ``TypeError`` or ``KeyError`` from the dataclass.
     """
     model_config = meta.get("model_config") if isinstance(meta, dict) else None
@@ -72,8 +73,8 @@ def config_from_meta(config_type, meta, convert=None, *, task: str | None = None
         config = validate_model_config(config_type, cfg, where)
     except (TypeError, KeyError, AttributeError, IndexError) as exc:
         raise ValueError(f"{where}: model_config: {type(exc).__name__} ({exc})") from None
-    if task is not None:
-        validate_task_checkpoint(task, model_config, config, where)
+    if schema is not None:
+        validate_task_schema(schema, model_config, config, where)
     return config
 
 

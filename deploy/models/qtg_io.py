@@ -1,11 +1,13 @@
 """QTG's entry of the exporter table (``deploy.models.EXPORTERS["qtg"]``): checkpoints in, model folders out,
 and the runtime that drives the exported models.
 
-* :func:`load_qtg_checkpoint` — ``(params, config, meta)`` from a ``refimpl train`` checkpoint or a state dict;
-* :func:`export_qtg_dir` — ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx`` (validated, atomic);
-* :class:`QTGRuntime` — ``init`` + ``step`` (a game loop) or one ``rollout`` call, in onnxruntime.
+* :func:`load_checkpoint` — ``(params, config, meta)`` from a ``refimpl train`` checkpoint or a state dict;
+* :func:`export_dir` — ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx`` (validated, atomic);
+* :class:`Runtime` — ``init`` + ``step`` (a game loop) or one ``rollout`` call, in onnxruntime.
 
-The table's generic names: :data:`load_checkpoint`, :data:`export_dir`, :data:`Runtime`.
+The protocol's names (:class:`deploy.models.entry_api.ExporterEntry`) are defined here; the command hooks
+(``add_export_options``, ``add_run_options``, ``export_checkpoint``, ``run_command``) call
+``deploy/models/qtg_cli.py``.
 
 Shape legend: B batch, T frames, P pose size.
 """
@@ -18,6 +20,7 @@ import numpy as np
 
 from refimpl.bounds import MAX_TRANSITION_FRAMES as _BOUND_T
 from refimpl.models.qtg import QTGConfig
+from refimpl.protocols.transition import CHECKPOINT_SCHEMA
 from refimpl.protocols.transition_join import inertialize_joins, join_blend_frames as default_blend
 
 from deploy.graph import OPSET
@@ -28,9 +31,10 @@ from deploy.models.qtg_compact import export_qtg_rollout_compact
 from deploy.quantize import WEIGHT_FORMATS
 from deploy.runtime import DeployedModel, load_model
 
-__all__ = ["load_qtg_checkpoint", "export_qtg_dir", "QTGRuntime", "MAX_TRANSITION_FRAMES"]
+__all__ = ["load_checkpoint", "export_dir", "Runtime", "MAX_TRANSITION_FRAMES", "add_export_options",
+           "add_run_options", "export_checkpoint", "run_command"]
 
-#: Largest ``T`` :meth:`QTGRuntime.transition` generates (5.5 minutes at 30 fps; a larger T would only hang); the
+#: Largest ``T`` :meth:`Runtime.transition` generates (5.5 minutes at 30 fps; a larger T would only hang); the
 #: bound of ``refimpl``'s ``--transition-length`` too (``refimpl.bounds``).
 MAX_TRANSITION_FRAMES = _BOUND_T
 _STATE_KEYS = ("pose", "latent_prev", "hidden", "target_latent")
@@ -38,7 +42,7 @@ _STATE_KEYS = ("pose", "latent_prev", "hidden", "target_latent")
 _GRAPH_INPUTS = {"init": ("past", "target"), "step": _STATE_KEYS, "rollout": ("past", "target")}
 
 
-def load_qtg_checkpoint(path):
+def load_checkpoint(path):
     """``(params, config, meta)`` from a QTG checkpoint (``refimpl.checkpoint``) or a plain state-dict ``.npz``.
 
     Parameters are the arrays named ``param.<name>`` (training checkpoints) or all arrays (state dicts); the
@@ -61,10 +65,10 @@ def load_qtg_checkpoint(path):
     arrays, meta = read_checkpoint(path, state_dict_ok=True)
     cfg = meta.get("model_config", {})
     cfg = {} if cfg is None else cfg
-    validate_task_fields(meta, where=where)  # top-level root_mean / root_std, when a caller stored them there
+    validate_task_fields(meta, CHECKPOINT_SCHEMA, where)  # top-level root_mean / root_std, when a caller stored them there
     if not isinstance(cfg, dict):
         raise ValueError(f"{where}: model_config: expected a JSON object, got {type(cfg).__name__}")
-    validate_task_fields(cfg, where=where)
+    validate_task_fields(cfg, CHECKPOINT_SCHEMA, where)
     config = validate_model_config(QTGConfig, cfg, where)
     params = checkpoint_params(arrays, state_dict_ok=True)
     validate_params(params, expected_param_shapes(qtg_model, QTGConfig, config), where, dtype=cfg.get("dtype"),
@@ -72,14 +76,14 @@ def load_qtg_checkpoint(path):
     return params, config, meta
 
 
-def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None, opset=None, dtype=np.float32,
+def export_dir(params, config, out_dir, *, normalization=None, skeleton=None, opset=None, dtype=np.float32,
                    mode: str = "scan", T: int | None = None, metadata=None,
                    compact: str | None = None, join: str = "none", join_blend_frames: int | None = None,
                    frame_rate: float | None = None) -> dict[str, Path]:
     """Export, validate and atomically write ``qtg_init/step/rollout.onnx`` into ``out_dir``; return the paths.
 
     ``join="inertialize"`` bakes the join option into the rollout graph (``deploy/join.py``) and writes a ``join``
-    entry into all three models' metadata (init and step: "apply after the T frames"; :meth:`QTGRuntime.transition`
+    entry into all three models' metadata (init and step: "apply after the T frames"; :meth:`Runtime.transition`
     does so on its step path). ``frame_rate`` (default: ``metadata["frame_rate"]``, else 30) sets the join's frame
     time and the metadata's rate.
 
@@ -113,7 +117,7 @@ def export_qtg_dir(params, config, out_dir, *, normalization=None, skeleton=None
     return write_models(models, out, "qtg")
 
 
-class QTGRuntime:
+class Runtime:
     """QTG inference from exported ``init``/``step``/``rollout`` models (any subset), as a game loop would use them.
 
     Parameters
@@ -137,7 +141,7 @@ class QTGRuntime:
                 check_graph_inputs(m, role, _GRAPH_INPUTS[role])
 
     @classmethod
-    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QTGRuntime":
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "Runtime":
         """Load ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx`` from ``directory`` (those present)."""
         d = Path(directory)
         files = {k: d / f"qtg_{k}.onnx" for k in ("init", "step", "rollout")}
@@ -209,10 +213,32 @@ class QTGRuntime:
         return joined.astype(poses.dtype)
 
 
-#: The exporter table's names for this model.
-load_checkpoint = load_qtg_checkpoint
-export_dir = export_qtg_dir
-Runtime = QTGRuntime
+# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table); their
+# code reads clips and options (deploy/models/qtg_cli.py, the command layer)
 
-# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.qtg_cli import add_export_options, add_run_options, export_checkpoint, run_command  # noqa: E402,F401
+def add_export_options(group) -> None:
+    """QTG's options of ``python -m deploy export`` (:func:`deploy.models.qtg_cli.add_export_options`)."""
+    from deploy.models import qtg_cli
+
+    qtg_cli.add_export_options(group)
+
+
+def add_run_options(group) -> None:
+    """QTG's options of ``python -m deploy run`` (:func:`deploy.models.qtg_cli.add_run_options`)."""
+    from deploy.models import qtg_cli
+
+    qtg_cli.add_run_options(group)
+
+
+def export_checkpoint(entry, args) -> dict:
+    """``python -m deploy export`` of a QTG checkpoint or state dict (:func:`deploy.models.qtg_cli.export_checkpoint`)."""
+    from deploy.models import qtg_cli
+
+    return qtg_cli.export_checkpoint(entry, args)
+
+
+def run_command(runtime, args) -> int:
+    """``python -m deploy run`` for QTG (:func:`deploy.models.qtg_cli.run_command`)."""
+    from deploy.models import qtg_cli
+
+    return qtg_cli.run_command(runtime, args)

@@ -1,14 +1,11 @@
-"""QuaterNet's entries of the exporter table (``deploy.models.EXPORTERS["quaternet"]`` and ``["quaternet-cnn"]``):
-checkpoints in, model folders out, and the runtimes that drive the exported models (spec/deploy.md §11).
+"""The recurrent QuaterNet's entry of the exporter table (``deploy.models.EXPORTERS["quaternet"]``; the protocol
+:class:`deploy.models.entry_api.ExporterEntry`): checkpoints in, model folders out, and the runtime that drives
+the exported models (spec/deploy.md §11).
 
-* :func:`load_quaternet_checkpoint`, :func:`export_quaternet_dir`, :class:`QuaterNetRuntime` — the recurrent
-  network: ``quaternet_init.onnx``, ``quaternet_step.onnx`` (a frame loop) and ``quaternet_predict.onnx``
-  (prefix → k frames in one call);
-* :func:`load_cnn_checkpoint`, :func:`export_cnn_dir`, :class:`QuaterNetCNNRuntime` — the convolutional network:
-  ``quaternet-cnn_window.onnx``.
-
-The module-level names of the table's contract (``load_checkpoint``, ``export_dir``, ``Runtime``) are the
-recurrent network's; the convolutional network's entry is ``deploy/models/quaternet_cnn_io.py``.
+* :func:`load_checkpoint`, :func:`export_dir`, :class:`Runtime` — ``quaternet_init.onnx``, ``quaternet_step.onnx``
+  (a frame loop) and ``quaternet_predict.onnx`` (prefix → k frames in one call);
+* :func:`run_command`, :func:`add_run_options` — ``python -m deploy run`` (shared with the convolutional network's
+  entry, ``deploy/models/quaternet_cnn_io.py``, which also uses this module's kernel tier).
 
 Shape legend: B batch, P prefix frames, k predicted frames, J joints, F input features, G output features,
 L layers, H hidden size.
@@ -20,86 +17,61 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.models.quaternet import QuaterNetConfig
-from refimpl.models.quaternet_cnn import QuaterNetCNNConfig
+from refimpl.protocols.prediction_data import CHECKPOINT_SCHEMA
 
 from deploy.graph import OPSET
 from deploy.models.arguments import count, frames_array, metadata_int
 from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
                                     write_models)
-from deploy.models.quaternet import (export_quaternet_cnn_window, export_quaternet_init, export_quaternet_predict,
-                                     export_quaternet_step)
+from deploy.models.quaternet import export_quaternet_init, export_quaternet_predict, export_quaternet_step
 from deploy.runtime import DeployedModel, load_model
 
-__all__ = ["load_quaternet_checkpoint", "export_quaternet_dir", "QuaterNetRuntime", "load_cnn_checkpoint",
-           "export_cnn_dir", "QuaterNetCNNRuntime"]
+__all__ = ["load_checkpoint", "export_dir", "Runtime", "run_command", "add_run_options"]
 
 
-def _read(path):
+def read_entry_checkpoint(path):
     arrays, meta = read_checkpoint(path, state_dict_ok=True)
     return checkpoint_params(arrays, state_dict_ok=True), meta
 
 
-def load_quaternet_checkpoint(path):
+def load_checkpoint(path):
     """``(params, QuaterNetConfig, meta)`` from a ``refimpl train`` checkpoint (``--model quaternet``) or a plain
     state-dict ``.npz`` (the config's defaults: the paper's short-term model)."""
-    params, meta = _read(path)
+    params, meta = read_entry_checkpoint(path)
     legacy = {"quat": "quaternion"}  # the registry's representation name, stored by checkpoints before §9
     config = config_from_meta(QuaterNetConfig, meta, lambda c: {
         **c, **({"representation": legacy[c["representation"]]} if c.get("representation") in legacy else {})},
-        task="prediction" if meta else None, where=str(path))
+        schema=CHECKPOINT_SCHEMA if meta else None, where=str(path))
     return checked_params(params, config, str(path)), config, meta
 
 
-def load_cnn_checkpoint(path):
-    """``(params, QuaterNetCNNConfig, meta)`` from a ``refimpl train`` checkpoint (``--model quaternet-cnn``)."""
-    def convert(cfg):
-        cfg = dict(cfg)
-        if isinstance(cfg.get("skips"), str):  # the recipe stores the skips as text "s:k,s:k"
-            cfg["skips"] = tuple(tuple(int(v) for v in item.split(":")) for item in cfg["skips"].split(",")
-                                 if item.strip())
-        return cfg
-
-    params, meta = _read(path)
-    config = config_from_meta(QuaterNetCNNConfig, meta, convert, task="prediction" if meta else None, where=str(path))
-    return checked_params(params, config, str(path)), config, meta
-
-
-def _network(config):
+def network_config(config):
     """The network config of a recipe config (``.network``) or the network config itself."""
     return getattr(config, "network", config)
 
 
-def _frame_rate(metadata):
+def frame_rate_of(metadata):
     return float((metadata or {}).get("frame_rate", 25.0))
 
 
-def export_quaternet_dir(params, config, out_dir, *, dtype=np.float32, opset=None, k: int = 10, T: int | None = None,
+def export_dir(params, config, out_dir, *, dtype=np.float32, opset=None, k: int = 10, T: int | None = None,
                          skeleton=None, metadata=None, mode: str = "unrolled") -> dict:
     """Export, validate and atomically write ``quaternet_init/step/predict.onnx`` into ``out_dir``.
 
     ``k`` (or ``T``, its name in ``refimpl export``) is the predictor's number of frames; ``mode`` is accepted for
     the table's contract (the predictor is always unrolled).
     """
-    cfg = _network(config)
+    cfg = network_config(config)
     k = int(T or k)
     kw = dict(dtype=dtype, opset=OPSET if opset is None else opset, skeleton=skeleton,
-              frame_rate=_frame_rate(metadata), metadata=metadata)
+              frame_rate=frame_rate_of(metadata), metadata=metadata)
     models = {"init": export_quaternet_init(params, cfg, **kw), "step": export_quaternet_step(params, cfg, **kw)}
     if cfg.num_controls == 0:
         models["predict"] = export_quaternet_predict(params, cfg, k=k, **kw)
     return write_models(models, out_dir, "quaternet")
 
 
-def export_cnn_dir(params, config, out_dir, *, dtype=np.float32, opset=None, skeleton=None, metadata=None,
-                   k: int = 10, T: int | None = None, mode: str = "unrolled") -> dict:
-    """Export, validate and atomically write ``quaternet-cnn_window.onnx`` into ``out_dir`` (``k``, ``T`` and
-    ``mode`` accepted for the table's contract; the window model has no fixed length)."""
-    m = export_quaternet_cnn_window(params, _network(config), dtype=dtype, opset=OPSET if opset is None else opset,
-                                   skeleton=skeleton, frame_rate=_frame_rate(metadata), metadata=metadata)
-    return write_models({"window": m}, out_dir, "quaternet-cnn")
-
-
-def _load(m, role, intra_op_threads):
+def load_role(m, role, intra_op_threads):
     if m is None:
         return None
     dm = m if isinstance(m, DeployedModel) else load_model(m, intra_op_threads=intra_op_threads)
@@ -108,7 +80,7 @@ def _load(m, role, intra_op_threads):
     return dm
 
 
-def _canonical(x: np.ndarray, meta: dict) -> np.ndarray:
+def canonical_frames(x: np.ndarray, meta: dict) -> np.ndarray:
     """``x (B, P, F)`` with the sign rule (``deploy.models.quaternet_sign``) applied to its joint quaternions when
     the model's frames are quaternions (``representation.name == "quaternet_frame"``); else unchanged."""
     rep = meta.get("representation") or {}
@@ -122,7 +94,7 @@ def _canonical(x: np.ndarray, meta: dict) -> np.ndarray:
     return np.concatenate([q, x[..., R:]], axis=-1).astype(np.float32)
 
 
-def _frames(prefix, name="prefix") -> tuple[np.ndarray, tuple]:
+def prefix_frames(prefix, name="prefix") -> tuple[np.ndarray, tuple]:
     """``(B, P, J, 4)`` or ``(B, P, F)`` -> ``(B, P, F)`` float32 and the trailing shape to restore (refused, not
     coerced: :func:`deploy.models.arguments.frames_array`)."""
     x = frames_array(prefix, name, ranks=(3, 4))
@@ -131,7 +103,7 @@ def _frames(prefix, name="prefix") -> tuple[np.ndarray, tuple]:
     return x, x.shape[2:]
 
 
-class QuaterNetRuntime:
+class Runtime:
     """The recurrent QuaterNet from exported ``init``/``step``/``predict`` models (any usable subset).
 
     Parameters
@@ -141,12 +113,12 @@ class QuaterNetRuntime:
     """
 
     def __init__(self, init=None, step=None, predict=None, *, intra_op_threads: int = 1):
-        self.init_model = _load(init, "init", intra_op_threads)
-        self.step_model = _load(step, "step", intra_op_threads)
-        self.predict_model = _load(predict, "predict", intra_op_threads)
+        self.init_model = load_role(init, "init", intra_op_threads)
+        self.step_model = load_role(step, "step", intra_op_threads)
+        self.predict_model = load_role(predict, "predict", intra_op_threads)
 
     @classmethod
-    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QuaterNetRuntime":
+    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "Runtime":
         """Load ``quaternet_init/step/predict.onnx`` from ``directory`` (those present)."""
         d = Path(directory)
         found = {k: (d / f"quaternet_{k}.onnx" if (d / f"quaternet_{k}.onnx").is_file() else None)
@@ -176,13 +148,13 @@ class QuaterNetRuntime:
     def predict(self, prefix, k: int, *, use_graph: bool = True) -> np.ndarray:
         """``k`` frames after ``prefix (B, P, J, 4)`` (or ``(B, P, F)``), in the prefix's trailing shape: the
         ``predict`` model when its ``k`` matches (and ``use_graph``), else ``init`` + a ``step`` loop."""
-        x, tail = _frames(prefix)
+        x, tail = prefix_frames(prefix)
         k = count(k, "k")
         B, P, _ = x.shape
         if use_graph and self.predict_model is not None and self.k == k:
             out = self.predict_model.run(prefix=x)["frames"]
         else:
-            x = _canonical(x, (self.step_model or self.init_model).metadata)   # the predict graph does it inside
+            x = canonical_frames(x, (self.step_model or self.init_model).metadata)   # the predict graph does it inside
             h = self.start(x[:, 0])
             for t in range(P):
                 y, h = self.step(x[:, t], h)
@@ -194,47 +166,19 @@ class QuaterNetRuntime:
         return out.reshape((B, int(k)) + tuple(tail))
 
 
-class QuaterNetCNNRuntime:
-    """The convolutional QuaterNet from an exported ``window`` model: predictions by repeated window calls, each
-    prediction appended to the window (``refimpl.models.quaternet_cnn.predict``)."""
+def add_run_options(group) -> None:
+    """QuaterNet's option of ``python -m deploy run`` (:func:`deploy.models.run_commands.add_prediction_run_options`)."""
+    from deploy.models.run_commands import add_prediction_run_options
 
-    def __init__(self, window, *, intra_op_threads: int = 1):
-        self.window_model = _load(window, "window", intra_op_threads)
-        if self.window_model is None:
-            raise ValueError("window: expected an exported quaternet-cnn window model, got None")
-        self.receptive_field = metadata_int(self.window_model, "receptive_field")
-
-    @classmethod
-    def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "QuaterNetCNNRuntime":
-        p = Path(directory) / "quaternet-cnn_window.onnx"
-        if not p.is_file():
-            raise ValueError(f"directory: no quaternet-cnn_window.onnx in {str(directory)!r}")
-        return cls(p, intra_op_threads=intra_op_threads)
-
-    def step(self, window) -> np.ndarray:
-        """``pose_next (B, 4J)`` from ``window (B, W, 4J)`` (the last R frames are sent)."""
-        w, _ = _frames(window, "window")
-        return self.window_model.run(window=w[:, -self.receptive_field:])["pose_next"]
-
-    def predict(self, prefix, k: int, *, use_graph: bool = True) -> np.ndarray:
-        """``k`` frames after ``prefix (B, P, J, 4)`` (or ``(B, P, 4J)``) in the prefix's trailing shape."""
-        x, tail = _frames(prefix)
-        k = count(k, "k")
-        R = self.receptive_field
-        x = _canonical(x, self.window_model.metadata)   # the sign rule on the whole prefix (input_transform)
-        window, ys = x[:, -R:], []
-        for _ in range(int(k)):
-            y = self.step(window)
-            ys.append(y)
-            window = np.concatenate([window, y[:, None]], axis=1)[:, -R:]
-        return np.stack(ys, axis=1).reshape((x.shape[0], int(k)) + tuple(tail))
+    add_prediction_run_options(group)
 
 
-#: The exporter table's names for the recurrent model.
-load_checkpoint = load_quaternet_checkpoint
-export_dir = export_quaternet_dir
-Runtime = QuaterNetRuntime
+def run_command(runtime, args) -> int:
+    """``python -m deploy run`` for QuaterNet (:func:`deploy.models.run_commands.run_prediction`)."""
+    from deploy.models.run_commands import run_prediction
 
-# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.run_commands import add_prediction_run_options as add_run_options  # noqa: E402,F401
-from deploy.models.run_commands import run_prediction as run_command  # noqa: E402,F401
+    return run_prediction(runtime, args)
+
+
+# Kernel tier (unchecked helpers shared with deploy/models/quaternet_cnn_io.py): read_entry_checkpoint,
+# network_config, frame_rate_of, load_role, canonical_frames, prefix_frames

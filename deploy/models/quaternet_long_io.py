@@ -1,4 +1,5 @@
-"""QuaterNet long-term's entry of the exporter table (``deploy.models.EXPORTERS["quaternet-long"]``): the pose
+"""QuaterNet long-term's entry of the exporter table (``deploy.models.EXPORTERS["quaternet-long"]``; protocol
+:class:`deploy.models.entry_api.ExporterEntry`): the pose
 network's step and the pace network (spec/deploy.md §12).
 
 * :func:`load_checkpoint` — ``(params, config, meta)`` of a ``refimpl train`` checkpoint of ``quaternet-long``
@@ -7,7 +8,9 @@ network's step and the pace network (spec/deploy.md §12).
   ``quaternet-long_seed.npy``, the checkpoint's seed clip that starts a walk) for a pose network,
   ``quaternet-long_pace.onnx`` for a pace network (validated, atomic);
 * :class:`Runtime` — ``step(x, state)`` and ``pace(x)`` in onnxruntime, a ``rollout`` for evaluation, and the
-  seed clip (``seed``).
+  seed clip (``seed``);
+* :func:`run_command`, :func:`add_run_options` — ``python -m deploy run`` (a walk along a path,
+  :mod:`deploy.models.quaternet_long_walk`, or ``.npy`` frames).
 
 Shape legend: B batch, F input features, G outputs, L layers, H hidden, N points, P prefix, T frames.
 """
@@ -18,9 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from refimpl.bounds import MAX_CONFIG_SIZE
-from refimpl.task_schemas import validate_task_checkpoint
+from refimpl.checkpoint_schema import validate_task_schema
 from refimpl.models import pace
 from refimpl.models.quaternet import QuaterNetConfig
+from refimpl.protocols.locomotion_data import CHECKPOINT_SCHEMA
 
 from deploy.graph import save_model
 from deploy.models.arguments import count, frames_array
@@ -30,7 +34,8 @@ from deploy.models.quaternet_long import NAME, export_pace, export_pose_step
 from deploy.runtime import DeployedModel, load_model
 from deploy.validate import validate_model
 
-__all__ = ["load_checkpoint", "export_dir", "Runtime", "STEP_FILE", "PACE_FILE", "H0_FILE", "SEED_FILE"]
+__all__ = ["load_checkpoint", "export_dir", "Runtime", "run_command", "add_run_options", "STEP_FILE", "PACE_FILE",
+           "H0_FILE", "SEED_FILE"]
 
 STEP_FILE = f"{NAME}_step.onnx"
 PACE_FILE = f"{NAME}_pace.onnx"
@@ -45,7 +50,7 @@ def load_checkpoint(path):
     params = checkpoint_params(arrays)
     where = str(path)
     if meta.get("model") == "pace":
-        config = config_from_meta(pace.PaceConfig, meta, task="locomotion", where=where)
+        config = config_from_meta(pace.PaceConfig, meta, schema=CHECKPOINT_SCHEMA, where=where)
         return checked_params(params, config, where), config, meta
     if meta.get("model") != NAME:
         raise ValueError(f"{path}: expected a quaternet-long or pace checkpoint, got model {meta.get('model')!r}")
@@ -63,7 +68,7 @@ def load_checkpoint(path):
                                         if cfg.get("output") == "dual_quaternion" else "quaternion")
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: model_config: {exc}") from None
-    validate_task_checkpoint("locomotion", cfg, net, where)
+    validate_task_schema(CHECKPOINT_SCHEMA, cfg, net, where)
     return checked_params(params, net, where), net, meta
 
 
@@ -233,6 +238,19 @@ class Runtime:
         y = np.stack(ys, axis=1)
         return y[..., :4 * J].reshape(B, -1, J, 4), y[..., 4 * J:]
 
-# ``python -m deploy``'s commands for this model (deploy/cli.py calls them through the exporter table)
-from deploy.models.quaternet_long_walk import add_run_options  # noqa: E402,F401
-from deploy.models.run_commands import run_locomotion as run_command  # noqa: E402,F401
+
+def add_run_options(group) -> None:
+    """quaternet-long's options of ``python -m deploy run`` (a walk; ``refimpl generate``'s names)."""
+    group.add_argument("--pace", default=None, metavar="DIR", help="quaternet-long: folder of the exported pace "
+                                                                    "network (default: MODEL_DIR)")
+    group.add_argument("--speed", default=None, help="quaternet-long: walk, jog, run or units per frame "
+                                                     "(default walk)")
+    group.add_argument("--seconds", default=None, help="quaternet-long: length of the walk (default 10)")
+    group.add_argument("--controls", default=None, help="quaternet-long: also write the per-frame controls as JSON")
+
+
+def run_command(runtime, args) -> int:
+    """``python -m deploy run`` for QuaterNet long-term (:func:`deploy.models.run_commands.run_locomotion`)."""
+    from deploy.models.run_commands import run_locomotion
+
+    return run_locomotion(runtime, args)

@@ -26,19 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["add_run_options", "run_walk", "walk_exported"]
+__all__ = ["walk_options_given", "run_walk", "walk_exported"]
 
 _OPTIONS = ("pace", "speed", "seconds", "controls")
-
-
-def add_run_options(group) -> None:
-    """quaternet-long's options of ``python -m deploy run`` (a walk; ``refimpl generate``'s names)."""
-    group.add_argument("--pace", default=None, metavar="DIR", help="quaternet-long: folder of the exported pace "
-                                                                    "network (default: MODEL_DIR)")
-    group.add_argument("--speed", default=None, help="quaternet-long: walk, jog, run or units per frame "
-                                                     "(default walk)")
-    group.add_argument("--seconds", default=None, help="quaternet-long: length of the walk (default 10)")
-    group.add_argument("--controls", default=None, help="quaternet-long: also write the per-frame controls as JSON")
 
 
 def walk_options_given(args) -> list:

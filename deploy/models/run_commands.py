@@ -25,7 +25,7 @@ import numpy as np
 
 from refimpl.bounds import bounded_int
 
-from deploy.models.entry_io import write_npy as _write_npy
+from deploy.models.entry_io import write_npy
 
 __all__ = ["add_prediction_run_options", "run_prediction", "run_synthesis", "run_locomotion", "export_trained"]
 
@@ -37,7 +37,7 @@ def export_trained(entry, args) -> dict:
 
     model = load_trained(args.checkpoint)
     options = {"mode": args.mode or "unrolled", "dtype": {"float32": np.float32, "float64": np.float64}[args.dtype],
-               "T": args.frames}
+               "T": args.frames or None}
     if args.opset is not None:
         options["opset"] = args.opset
     return export_onnx(model, Path(args.out_dir), **options)
@@ -86,7 +86,7 @@ def run_prediction(runtime, args) -> int:
                                     method_name=f"{meta['model']['name']}_onnx", name=Path(args.output).stem,
                                     option="--start", source=str(args.input))
     if str(args.output).lower().endswith(".npy"):
-        _write_npy(args.output, pr.motion.rotations[pr.start:pr.stop])
+        write_npy(args.output, pr.motion.rotations[pr.start:pr.stop])
     else:
         write_bvh(args.output, pr.motion)
     err = pr.euler_error()
@@ -122,7 +122,7 @@ def run_synthesis(runtime, args) -> int:
     start = 1 if args.start is None else int(args.start)  # frame 0 of a salsa take is its reference T-pose
     motion, seeds = synthesis.continue_seed(method, config, args.input, start, n, option="--start")
     if str(args.output).lower().endswith(".npy"):
-        _write_npy(args.output, frames[0])
+        write_npy(args.output, frames[0])
         what = f"raw frames ({n}, {frames[0].shape[1]}), metres"
     else:
         motion = synthesis.in_source_units(motion)
@@ -164,6 +164,6 @@ def run_locomotion(runtime, args) -> int:
         what = "pace outputs [A, omega, cos, sin] per point (before clipping)"
     else:
         raise ValueError(f"{args.model_dir}: no step model for frames (B, P + T, F)")
-    _write_npy(args.output, y)
+    write_npy(args.output, y)
     print(f"wrote {args.output}: {tuple(y.shape)} {what}")
     return 0

@@ -112,51 +112,14 @@ def _augmented(B: int, n: int, dtype) -> tuple[np.ndarray, np.ndarray]:
     return a, a[:, :n]
 
 
-def rollout_inference(model: QTGInference, past, target, T: int | None = None) -> np.ndarray:
-    """Same result as :func:`rollout_forward` (up to rounding), without caches, for deployment and benchmarks.
-
-    Parameters
-    ----------
-    model : QTGInference
-        From :func:`prepare_inference`.
-    past, target : ndarray (B, 2, P)
-        Same dtype as the model's weights.
-    T : int, optional
-
-    Returns
-    -------
-    poses : ndarray (B, T, P)
-
-    Notes
-    -----
-    Every per-step array is allocated once per call, with its views, and written in place (``out=``); the
-    inputs of the dense layers carry a constant 1 column so that the bias rows of the augmented weights add
-    the biases. Per step (default sizes): 6 matrix products and 19 element-wise calls (spec/qtg.md §6).
-    """
-    if not isinstance(model, QTGInference):
-        raise ValueError(f"model: expected a QTGInference from prepare_inference, got {type(model).__name__}")
+def _rollout_buffers(model: QTGInference, past: np.ndarray, B: int, T: int) -> tuple:
+    """The buffers of :func:`rollout_inference` and their views, allocated once per call (the loop only calls
+    NumPy kernels with ``out=``): frames ``(T + 1, B, P + 1)`` starting at ``past[:, 1]``, the dense layers'
+    buffers, the GRU states (at 0) and gate buffers."""
     config, dtype = model.config, model.dtype
-    past, target = check_context(past, target, config, dtype)
-    T = check_length(T, config)
-    B, P, Z, H, L = past.shape[0], config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
+    P, Z, H, L = config.pose_size, config.latent_size, config.gru_hidden, config.gru_layers
     H2, H3 = 2 * H, 3 * H
-    matmul, maximum, multiply, add, subtract, tanh = np.matmul, np.maximum, np.multiply, np.add, np.subtract, np.tanh
     slope = dtype.type(config.negative_slope)
-
-    def encode_(x):  # context poses only
-        for a in model.enc:
-            x = matmul(x, a[:-1])
-            add(x, a[-1], out=x)
-            maximum(x, multiply(x, slope), out=x)
-        return x
-
-    ctx = encode_(np.concatenate([past[:, 0], target[:, 0], target[:, 1]], axis=0))  # (3B, Z)
-    z_prev, e1, e2 = ctx[:B], ctx[B:2 * B], ctx[2 * B:]
-    targets = np.concatenate([e1, e2 - e1, np.ones((B, 1), dtype=dtype)], axis=1)  # (B, 2Z + 1)
-    k = targets @ model.target_product  # (B, 3H): k = W2 e1 + W3 (e2 − e1) + b_ih0, constant over the transition
-    c = k - z_prev @ model.z_product[:, H3:]  # (B, 3H): c_t = k − W1 z_{t−1}
-
-    # buffers and their views, allocated once; the loop only calls NumPy kernels with out=
     frames = np.empty((T + 1, B, P + 1), dtype=dtype)  # [p_t | 1], t = 0 … T
     frames[..., P] = 1
     frames[0, :, :P] = past[:, 1]
@@ -186,6 +149,57 @@ def rollout_inference(model: QTGInference, past, target, T: int | None = None) -
     half = np.full((B, H2), 0.5, dtype=dtype)
     cells = [(g_i[:, :H2], g_h[:, :H2], g_h[:, H2:], g_i[:, H2:], g_i[:, :H], g_i[:, H:H2], h_aug, h)
              for g_i, g_h, (h_aug, h) in zip(gi, gh, hs)]
+
+    return (frames, z, enc_layers, dec_layers, dec_first, dec_last, slopes, zz, zz_a, zz_b, hs, gi, gh, hm, velocity,
+            n, d, half, cells)
+
+
+def rollout_inference(model: QTGInference, past, target, T: int | None = None) -> np.ndarray:
+    """Same result as :func:`rollout_forward` (up to rounding), without caches, for deployment and benchmarks.
+
+    Parameters
+    ----------
+    model : QTGInference
+        From :func:`prepare_inference`.
+    past, target : ndarray (B, 2, P)
+        Same dtype as the model's weights.
+    T : int, optional
+
+    Returns
+    -------
+    poses : ndarray (B, T, P)
+
+    Notes
+    -----
+    Every per-step array is allocated once per call, with its views, and written in place (``out=``); the
+    inputs of the dense layers carry a constant 1 column so that the bias rows of the augmented weights add
+    the biases. Per step (default sizes): 6 matrix products and 19 element-wise calls (spec/qtg.md §6).
+    """
+    if not isinstance(model, QTGInference):
+        raise ValueError(f"model: expected a QTGInference from prepare_inference, got {type(model).__name__}")
+    config, dtype = model.config, model.dtype
+    past, target = check_context(past, target, config, dtype)
+    T = check_length(T, config)
+    B, P, H, L = past.shape[0], config.pose_size, config.gru_hidden, config.gru_layers
+    H3 = 3 * H
+    matmul, maximum, multiply, add, subtract, tanh = np.matmul, np.maximum, np.multiply, np.add, np.subtract, np.tanh
+    slope = dtype.type(config.negative_slope)
+
+    def encode_(x):  # context poses only
+        for a in model.enc:
+            x = matmul(x, a[:-1])
+            add(x, a[-1], out=x)
+            maximum(x, multiply(x, slope), out=x)
+        return x
+
+    ctx = encode_(np.concatenate([past[:, 0], target[:, 0], target[:, 1]], axis=0))  # (3B, Z)
+    z_prev, e1, e2 = ctx[:B], ctx[B:2 * B], ctx[2 * B:]
+    targets = np.concatenate([e1, e2 - e1, np.ones((B, 1), dtype=dtype)], axis=1)  # (B, 2Z + 1)
+    k = targets @ model.target_product  # (B, 3H): k = W2 e1 + W3 (e2 − e1) + b_ih0, constant over the transition
+    c = k - z_prev @ model.z_product[:, H3:]  # (B, 3H): c_t = k − W1 z_{t−1}
+
+    (frames, z, enc_layers, dec_layers, dec_first, dec_last, slopes, zz, zz_a, zz_b, hs, gi, gh, hm, velocity, n, d,
+     half, cells) = _rollout_buffers(model, past, B, T)
 
     def dense(x, lays):  # LeakyReLU dense layers (0 <= slope < 1: max(a, slope a)); returns the last buffer
         for a, pre, tmp, dst, nxt in lays:

@@ -30,7 +30,7 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Mapping
 
 import numpy as np
 
@@ -41,8 +41,9 @@ from refimpl.quat import quat_fix, quat_mul, quat_rotate
 from refimpl.rotations import matrix_from_quat, quat_from_matrix
 from refimpl.skeleton import Skeleton, remove_joints
 from refimpl.splines import gaussian_filter1d
+from refimpl.checkpoint_fields import TaskSchema, int_field, kind_of, number_array, require_fields, skeleton_field
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "QUATERNET_UNIT_CM", "FPS", "PHASE_EPSILON", "PHASE_COOLDOWN", "AMPLITUDE_SIGMA", "FEATURE_NAMES",
     "LocomotionRig", "CMU_RIG", "BANDAI_NAMCO_RIG", "load_cmu_bvh", "load_cmu_expmap", "load_bandai_namco",
     "prepare_motion", "mirror_motion", "facing_vectors", "build_phase_track", "extract_features",
@@ -525,3 +526,48 @@ def bandai_namco_split(paths: Iterable) -> tuple[list, list]:
             raise ValueError(f"paths: {os.fspath(p)!r} is not named dataset-2_<content>_<style>_<id>.bvh")
         (test if int(m.group("id")) % 10 == 1 else train).append(p)
     return sorted(train, key=str), sorted(test, key=str)
+
+
+# ---- what the task stores in a checkpoint (spec/robustness.md §9.1) ----
+
+def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
+    """The locomotion fields: ``rig`` ``cmu`` or ``bandai_namco`` and a ``skeleton`` with that rig's joints (both
+    required), ``prefix`` / ``target`` positive integers; the pose network: ``num_joints`` = the skeleton's J,
+    ``seed_clip`` with ``rotations`` (S, J, 4) of non-zero quaternions and ``features`` (S, 8) finite,
+    1 <= S <= 1000."""
+    require_fields(cfg, ("skeleton", "rig"), where, "locomotion")
+    rigs = {r.name: r for r in (CMU_RIG, BANDAI_NAMCO_RIG)}
+    if not isinstance(cfg["rig"], str) or cfg["rig"] not in rigs:
+        raise ValueError(f"{where}: model_config.rig: expected one of {list(rigs)}, got {kind_of(cfg['rig'])}")
+    sk = skeleton_field(cfg["skeleton"], where, want_sides=True)
+    keep = set(rigs[cfg["rig"]].keep)
+    if keep != set(sk.names):
+        raise ValueError(f"{where}: model_config.skeleton does not have the joints of the {cfg['rig']!r} rig "
+                         f"(missing {sorted(keep - set(sk.names))[:4]}, extra {sorted(set(sk.names) - keep)[:4]})")
+    for key in ("prefix", "target"):
+        if key in cfg:
+            int_field(cfg, key, where)
+    J = getattr(config, "num_joints", None)
+    if J is None:  # the pace network stores the rig and skeleton only
+        return
+    if J != sk.num_joints:
+        raise ValueError(f"{where}: model_config.num_joints {J!r} does not match the stored skeleton's "
+                         f"{sk.num_joints} joints")
+    require_fields(cfg, ("seed_clip",), where, "quaternet-long")
+    seed = cfg["seed_clip"]
+    if not isinstance(seed, Mapping) or "rotations" not in seed or "features" not in seed:
+        raise ValueError(f"{where}: model_config.seed_clip: expected an object with rotations and features, got "
+                         f"{kind_of(seed)}")
+    rot = number_array(seed["rotations"], f"{where}: model_config.seed_clip.rotations", (None, J, 4))
+    feat = number_array(seed["features"], f"{where}: model_config.seed_clip.features", (rot.shape[0], 8))
+    if not 1 <= rot.shape[0] <= 1000:
+        raise ValueError(f"{where}: model_config.seed_clip: expected 1 to 1000 frames, got {rot.shape[0]}")
+    norms = np.linalg.norm(rot, axis=-1)
+    if not np.all((norms > 0.5) & (norms < 2.0)):
+        raise ValueError(f"{where}: model_config.seed_clip.rotations: expected unit quaternions, got norms from "
+                         f"{norms.min():.3g} to {norms.max():.3g}")
+    del feat
+
+
+#: The locomotion task's checkpoint schema (``refimpl.tasks.locomotion.CHECKPOINT_SCHEMA``, deploy's long-term loader).
+CHECKPOINT_SCHEMA = TaskSchema("locomotion", check=_check_checkpoint)

@@ -16,10 +16,11 @@ Shape legend: B batch, T frames, J joints.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import re
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -27,8 +28,9 @@ from refimpl.expmap import read_expmap
 from refimpl.preprocess import downsample, fix_antipodal
 from refimpl.skeleton import Skeleton
 from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
+from refimpl.checkpoint_fields import TaskSchema, kind_of, require_fields
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "H36M_ACTIONS", "H36M_TRAIN_SUBJECTS", "H36M_TEST_SUBJECT", "H36M_VALID_SUBJECT", "SUBJECT_DIR",
     "PredictionSequence", "PredictionData", "load_h36m", "load_cmu", "skeleton_of", "training_windows",
     "usable_training", "stride_of",
@@ -309,3 +311,32 @@ def stride_of(dataset: str, frame_time: float) -> int:
     """Decimation stride of a trained model: its frame time over the files' (CMU 1/120 s, H3.6M 1/50 s)."""
     base = {"cmu": 1.0 / 120.0, "h36m": 1.0 / 50.0}[dataset]
     return max(1, int(round(frame_time / base)))
+
+
+# ---- what the task stores in a checkpoint (spec/robustness.md §9.1) ----
+
+def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
+    """The prediction fields: ``dataset`` ``cmu`` or ``h36m`` (required), ``num_joints`` = the dataset skeleton's,
+    ``frame_time`` (required: eval, generate and export read it) seconds in [1e-4, 10] and ``fps`` = 1 /
+    ``frame_time`` (0.1 %)."""
+    from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
+
+    require_fields(cfg, ("dataset", "frame_time"), where, "prediction")
+    dataset = cfg["dataset"]
+    if dataset not in ("cmu", "h36m"):
+        raise ValueError(f"{where}: model_config.dataset: expected 'cmu' or 'h36m', got {kind_of(dataset)}")
+    J = (cmu_asf_skeleton() if dataset == "cmu" else h36m_skeleton()).num_joints
+    got = getattr(config, "num_joints", cfg.get("num_joints"))
+    if got is not None and got != J:
+        raise ValueError(f"{where}: model_config.num_joints {got!r} does not match the {dataset} skeleton's {J}")
+    if "frame_time" in cfg:
+        ft = cfg["frame_time"]
+        if not isinstance(ft, (int, float)) or isinstance(ft, bool) or not (math.isfinite(ft) and 1e-4 <= ft <= 10):
+            raise ValueError(f"{where}: model_config.frame_time: expected seconds in [1e-4, 10], got {kind_of(ft)}")
+        fps = cfg.get("fps")
+        if isinstance(fps, (int, float)) and not isinstance(fps, bool) and abs(fps * ft - 1) > 1e-3:
+            raise ValueError(f"{where}: model_config.fps {fps!r} does not match frame_time {ft!r} (1 / frame_time)")
+
+
+#: The prediction task's checkpoint schema (``refimpl.tasks.prediction.CHECKPOINT_SCHEMA``, deploy's QuaterNet loaders).
+CHECKPOINT_SCHEMA = TaskSchema("prediction", check=_check_checkpoint)

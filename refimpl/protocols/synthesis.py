@@ -27,19 +27,23 @@ Shape legend: T frames, F frame size, B batch, K seeds, N generated frames, J jo
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
+from refimpl.bone_ik import rotations_from_positions
 from refimpl.bvh import read_bvh
 from refimpl.motion import Motion
 from refimpl.nn.params import check_float_array
 from refimpl.preprocess import downsample, feature_statistics
 from refimpl.representations import REPRESENTATIONS, decode, encode, fix_antipodal_frames, positions_from_frames
 from refimpl.skeleton import Skeleton, remove_joints
+from refimpl.checkpoint_fields import (MAX_TASK_ABS, MIN_STD, TaskSchema, int_field, kind_of, number_array,
+                                       require_fields, skeleton_field)
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "SALSA_FRAME_TIME", "SALSA_TRAIN", "SALSA_TEST", "SAMPLE_TRAIN", "SAMPLE_TEST", "LENGTH_SCALE", "FPS",
     "SEED_LENGTH", "SEED_STRIDE", "MAX_SEEDS", "HORIZONS_MS", "ACCELERATION_FRAMES", "WINDOW_MARGIN", "TABLE1_ROWS",
     "DEFAULT_ROW", "horizon_frames", "in_source_units", "END_SITE_REPRESENTATIONS", "load_salsa_motion",
@@ -154,7 +158,9 @@ def frames_to_motion(representation: str, skeleton: Skeleton, frames, frame_time
 
     The hip's horizontal position is the running sum of the differences from ``start`` (x, z):
     ``x_0 = start[0]``, ``x_{t+1} = x_t + Δx_t``; the height is read as is. Rotations by
-    :func:`refimpl.representations.decode` (``"positions"`` has no inverse and raises ValueError).
+    :func:`refimpl.representations.decode`; the positional frames (``"positions"``, the published
+    ``"positions_acrnn"``), which have no inverse, by the skeleton's bone directions
+    (:func:`refimpl.bone_ik.rotations_from_positions`, spec/kinematics.md §7).
 
     Parameters
     ----------
@@ -166,7 +172,11 @@ def frames_to_motion(representation: str, skeleton: Skeleton, frames, frame_time
     Motion with T frames.
     """
     x = np.asarray(frames, dtype=np.float64)
-    rot, root = decode(representation, skeleton, x)
+    if REPRESENTATIONS[representation].invertible:
+        rot, root = decode(representation, skeleton, x)
+    else:  # joint positions (relative to the frame's root entry): rotations along the bones
+        rot, _ = rotations_from_positions(skeleton, positions_from_frames(representation, skeleton, x))
+        root = x[:, :3]
     pos = np.empty_like(root)
     pos[:, 1] = root[:, 1]
     for axis, s in ((0, start[0]), (2, start[1])):
@@ -469,3 +479,67 @@ def acceleration_comparison(pred, gt) -> dict:
     """
     a_p, a_g = mean_acceleration(pred), mean_acceleration(gt)
     return {"pred": a_p, "gt": a_g, "abs_diff": abs(a_p - a_g)}
+
+
+# ---- what the task stores in a checkpoint (spec/robustness.md §9.1) ----
+
+def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
+    """The synthesis fields: ``row`` a Table 1 row, ``representation`` = ``row``, ``variant`` = the row's variant,
+    ``data_representation`` = the variant's representation (required), ``skeleton`` (required), ``frame_size`` =
+    ``3 + D · J`` of that representation and the skeleton's J, ``mean``/``std`` (required) ``frame_size`` finite
+    numbers (``std`` in [1e-6, 1e6]), ``loss_weights`` finite numbers >= 0 by loss name, ``window_length`` /
+    ``condition_length`` / ``ground_truth_length`` positive integers, ``train_takes`` / ``test_takes`` lists of
+    strings."""
+    from refimpl.models import acrnn
+    from refimpl.representations import frame_size
+
+    rows = TABLE1_ROWS  # --representation value -> variant
+    require_fields(cfg, ("mean", "std", "data_representation", "skeleton", "variant"), where, "synthesis")
+    rep = cfg["data_representation"]
+    if not isinstance(rep, str) or rep not in REPRESENTATIONS:
+        raise ValueError(f"{where}: model_config.data_representation: expected one of {sorted(REPRESENTATIONS)}, "
+                         f"got {kind_of(rep)}")
+    variant = cfg["variant"]
+    if not isinstance(variant, str) or variant not in acrnn.VARIANTS:
+        raise ValueError(f"{where}: model_config.variant: expected one of {sorted(acrnn.VARIANTS)}, got "
+                         f"{kind_of(variant)}")
+    if acrnn.VARIANTS[variant].representation != rep:
+        raise ValueError(f"{where}: model_config.data_representation {rep!r} does not match the variant "
+                         f"{variant!r}, which trains on {acrnn.VARIANTS[variant].representation!r}")
+    for key in ("row", "representation"):
+        if key in cfg:
+            row = cfg[key]
+            if not isinstance(row, str) or row not in rows:
+                raise ValueError(f"{where}: model_config.{key}: expected one of {list(rows)}, got {kind_of(row)}")
+            if rows[row] != variant:
+                raise ValueError(f"{where}: model_config.{key} {row!r} is the variant {rows[row]!r}, but "
+                                 f"model_config.variant is {variant!r}")
+    if isinstance(cfg.get("row"), str) and isinstance(cfg.get("representation"), str) and \
+            cfg["row"] != cfg["representation"]:
+        raise ValueError(f"{where}: model_config.row {cfg['row']!r} differs from model_config.representation "
+                         f"{cfg['representation']!r}")
+    sk = skeleton_field(cfg["skeleton"], where)
+    F = frame_size(rep, sk.num_joints)
+    got = getattr(config, "frame_size", cfg.get("frame_size"))
+    if got != F:
+        raise ValueError(f"{where}: model_config.frame_size {got!r} does not match {rep!r} frames of the "
+                         f"{sk.num_joints}-joint skeleton (3 + {REPRESENTATIONS[rep].dim} x {sk.num_joints} = {F})")
+    number_array(cfg["mean"], f"{where}: model_config.mean", (F,))
+    number_array(cfg["std"], f"{where}: model_config.std", (F,), MIN_STD, MAX_TASK_ABS)
+    if "loss_weights" in cfg:
+        w = cfg["loss_weights"]
+        if not isinstance(w, Mapping) or not w or not all(
+                isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                and 0 <= v <= MAX_TASK_ABS for k, v in w.items()):
+            raise ValueError(f"{where}: model_config.loss_weights: expected an object of loss name -> finite weight "
+                             f">= 0, got {kind_of(w)}")
+    for key in ("window_length", "condition_length", "ground_truth_length"):
+        if key in cfg:
+            int_field(cfg, key, where)
+    for key in ("train_takes", "test_takes"):
+        if key in cfg and (not isinstance(cfg[key], list) or not all(isinstance(t, str) for t in cfg[key])):
+            raise ValueError(f"{where}: model_config.{key}: expected a list of take names, got {kind_of(cfg[key])}")
+
+
+#: The synthesis task's checkpoint schema (``refimpl.tasks.synthesis.CHECKPOINT_SCHEMA``, deploy's acRNN loader).
+CHECKPOINT_SCHEMA = TaskSchema("synthesis", check=_check_checkpoint)

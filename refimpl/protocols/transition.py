@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Mapping
 
 import numpy as np
 
@@ -38,8 +38,9 @@ from refimpl.quat import quat_conj, quat_fix, quat_mul, quat_rotate
 from refimpl.rigs import (CMU_22_JOINTS, CMU_UNIT_CM, SALSA_22_JOINTS, SALSA_UNIT_CM, heading_from_root,
                           scale_skeleton, subset_22)
 from refimpl.skeleton import Skeleton
+from refimpl.checkpoint_fields import TaskSchema, positive_int, vector3
 
-__all__ = [
+__all__ = ["CHECKPOINT_SCHEMA", 
     "pose_size", "split_pose", "join_pose", "pose_statistics", "normalize_poses", "denormalize_poses",
     "CMU_22_JOINTS", "SALSA_22_JOINTS", "CMU_UNIT_CM", "SALSA_UNIT_CM",
     "TransitionSource", "TransitionDataset", "subset_22", "scale_skeleton", "heading_from_root", "make_windows",
@@ -472,3 +473,21 @@ def shared_sources(root: str | Path):
     for name in ("05", "20"):
         test.append(TransitionSource(str(salsa / f"{name}.bvh"), "salsa_bvh", 60.0, "salsa"))
     return train, test
+
+
+# ---- what the task stores in a checkpoint (spec/robustness.md §9.1) ----
+
+def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
+    """The transition fields: ``root_mean`` / ``root_std`` required (their types: :data:`CHECKPOINT_SCHEMA`'s
+    ``fields``)."""
+    if "root_mean" not in cfg or "root_std" not in cfg:
+        raise ValueError(f"{where}: the checkpoint has no normalisation statistics (root_mean/root_std); train it "
+                         "with `refimpl train`")
+
+
+#: The transition task's checkpoint schema (``refimpl.tasks.transition.CHECKPOINT_SCHEMA``, deploy's QTG loader):
+#: ``root_mean`` 3 finite numbers, ``root_std`` 3 finite numbers > 0, ``transition_length`` a positive integer.
+CHECKPOINT_SCHEMA = TaskSchema("transition", fields={"root_mean": vector3(positive=False),
+                                                     "root_std": vector3(positive=True),
+                                                     "transition_length": positive_int},
+                               check=_check_checkpoint)

@@ -32,8 +32,9 @@ from refimpl.protocols.transition import TransitionSource, build_transition_data
 from refimpl.protocols.transition_metrics import joint_position_errors, predict_transitions
 
 __all__ = ["KIND", "FOLDER", "JOINTS", "TakeFacts", "take_facts", "find_takes", "is_bandai_namco_folder",
-           "bandai_namco_sources", "load_bandai_namco_source", "build_datasets", "heldout_dataset", "window_speeds", "window_kinds",
-           "window_styles", "grouped_errors", "STAND_MAX_CM_S", "RUN_MIN_CM_S", "TURN_MIN_DEG"]
+           "bandai_namco_sources", "load_bandai_namco_source", "build_datasets", "heldout_dataset", "scored_takes",
+           "window_groups", "window_speeds", "window_kinds", "window_styles", "grouped_errors",
+           "STAND_MAX_CM_S", "RUN_MIN_CM_S", "TURN_MIN_DEG"]
 
 #: :class:`~refimpl.protocols.transition.TransitionSource` kind of a Bandai Namco take.
 KIND = "bandai_namco_bvh"
@@ -150,6 +151,37 @@ def heldout_dataset(root, root_mean, root_std, T: int = 30, stride: int = 4):
     test, _ = build_transition_datasets(test_src, [], T=T, stride=stride, loader=load_bandai_namco_source)
     return dataclasses.replace(test, root_mean=np.asarray(root_mean, dtype=np.float64),
                                root_std=np.asarray(root_std, dtype=np.float64))
+
+
+def scored_takes(takes) -> tuple[list[Path], str]:
+    """The takes an evaluation scores of a set of Bandai Namco takes, and why (spec/qtg.md §8.4).
+
+    A set that holds takes of both sides of the project's split (:func:`bandai_namco_sources`: ids ending in 1
+    held out) is the data set a model was trained on: its held-out side is scored. Any other set (only held-out
+    takes, or takes a model has not been trained on) is scored whole: nothing in it is a training take of the
+    split, or the split cannot say.
+
+    Returns
+    -------
+    takes : list of Path (sorted)
+    why : str
+        One line for the user (how many takes, which rule).
+    """
+    takes = sorted((Path(t) for t in takes), key=str)
+    if not takes:
+        raise ValueError("takes: no dataset-2_*.bvh take to score")
+    train, test = bandai_namco_split(takes)
+    if train and test:
+        return test, (f"the {len(test)} held-out takes (ids ending in 1) of {len(takes)}: the project's split "
+                      "(a folder of only held-out or new takes is scored whole)")
+    side = "held-out takes (ids ending in 1)" if test else "takes outside the held-out side of the project's split"
+    return takes, f"all {len(takes)} takes ({side}; no training split, normalisation from the checkpoint)"
+
+
+def window_groups(dataset) -> dict:
+    """``{"style": ..., "kind": ...}``: each window's take style and the transition it asks for, ``(N,)`` of str
+    each (:func:`window_styles`, :func:`window_kinds`), the groups an evaluation reports by."""
+    return {"style": window_styles(dataset), "kind": window_kinds(dataset.poses, dataset.fps)}
 
 
 def window_speeds(poses, fps: float = 30.0, past: int = 2, future: int = 2):

@@ -25,7 +25,8 @@ from refimpl.nn.params import check_float_array
 from refimpl.protocols.transition import TransitionDataset, split_pose
 from refimpl.skeleton import Skeleton
 
-__all__ = ["positions_from_poses", "joint_position_errors", "evaluate_methods", "predict_transitions", "format_table"]
+__all__ = ["positions_from_poses", "joint_position_errors", "evaluate_methods", "check_groups", "predict_transitions",
+           "format_table"]
 
 
 def positions_from_poses(poses, skeleton: Skeleton) -> np.ndarray:
@@ -86,7 +87,7 @@ def joint_position_errors(pred, gt, skeletons, skeleton_index) -> tuple[np.ndarr
 
 
 def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable], batch_size: int = 1024,
-                     labels: bool = True) -> dict:
+                     labels: bool = True, groups: Mapping[str, np.ndarray] | None = None) -> dict:
     """Run every method on every window of ``dataset`` and measure it (spec/qtg.md §9).
 
     Parameters
@@ -98,15 +99,19 @@ def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable]
         Windows per call.
     labels : bool
         Also break the mean down by source label (walk, run, jump, salsa).
+    groups : mapping grouping name -> ndarray (N,) of str, optional
+        More breakdowns, e.g. ``{"style": ..., "kind": ...}``
+        (:func:`refimpl.protocols.transition_locomotion.window_groups`): ``by_<name>``.
 
     Returns
     -------
     dict name -> {"mean_cm": float, "per_frame_cm": ndarray (T,), "abs_coord_cm": float,
-                  "by_label": {label: mean_cm}, "num_windows": N}
+                  "by_label": {label: mean_cm}, "by_<group>": {label: mean_cm}, "num_windows": N}
     """
     _check_dataset(dataset)
     gt = dataset.context()[1]
     label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
+    groups = check_groups(groups, dataset.num_windows)
     out = {}
     for name, f in methods.items():
         pred = predict_transitions(dataset, f, name, batch_size)
@@ -115,7 +120,20 @@ def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable]
                "abs_coord_cm": float(absc.mean()), "num_windows": int(dataset.num_windows)}
         if labels:
             res["by_label"] = {lab: float(dist[label_of == lab].mean()) for lab in sorted(set(label_of))}
+        for g, v in groups.items():
+            res[f"by_{g}"] = {lab: float(dist[v == lab].mean()) for lab in sorted(set(v.tolist()))}
         out[name] = res
+    return out
+
+
+def check_groups(groups: Mapping[str, np.ndarray] | None, num_windows: int) -> dict:
+    """``groups`` as ``{name: ndarray (N,) of str}``, checked (ValueError naming the group otherwise)."""
+    out = {}
+    for g, v in dict(groups or {}).items():
+        v = np.asarray(v)
+        if v.shape != (num_windows,):
+            raise ValueError(f"groups[{g!r}]: expected shape ({num_windows},), got {v.shape}")
+        out[str(g)] = v
     return out
 
 

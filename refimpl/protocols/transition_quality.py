@@ -29,12 +29,12 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from refimpl.protocols.transition_metrics import positions_from_poses, predict_transitions
+from refimpl.protocols.transition_metrics import check_groups, positions_from_poses, predict_transitions
 from refimpl.nn.params import check_float_array
 from refimpl.protocols.transition import TransitionDataset
 
 __all__ = ["CONTACT_HEIGHT_CM", "FOOT_WORDS", "foot_joints", "step_displacement", "join_displacement",
-           "contact_floor", "foot_contacts", "skate_speed", "window_quality", "evaluate_quality",
+           "contact_floor", "foot_contacts", "skate_speed", "window_quality", "evaluate_quality", "format_groups",
            "format_quality"]
 
 #: A foot joint is in contact when it is within this height (cm) of its floor (its lowest height over the
@@ -243,12 +243,13 @@ def _summarise(a: dict, sel=None) -> dict:
     err = a["err"].mean(axis=0)  # (T,)
     res.update(join_in_ratio=_ratio(res["join_in_cm"], median), join_out_ratio=_ratio(res["join_out_cm"], median),
                first_frame_cm=float(err[0]), last_frame_cm=float(err[-1]),
-               ground_truth=dict(measures("gt_"), median_step_cm=median))
+               ground_truth=dict(measures("gt_"), median_step_cm=median), num_windows=int(a["err"].shape[0]))
     return res
 
 
 def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable], batch_size: int = 1024,
-                     height: float = CONTACT_HEIGHT_CM, labels: bool = True) -> dict:
+                     height: float = CONTACT_HEIGHT_CM, labels: bool = True,
+                     groups: Mapping[str, np.ndarray] | None = None) -> dict:
     """:func:`window_quality` of every method on all windows of ``dataset`` (windows of every skeleton pooled:
     means over windows, the median step and the skating over all of them) and, with ``labels``, per source label.
 
@@ -262,12 +263,15 @@ def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable]
         Contact threshold (cm).
     labels : bool
         Also ``by_label``: ``{label: window_quality's dict}`` (walk, run, ... or a locomotion set's styles).
+    groups : mapping grouping name -> ndarray (N,) of str, optional
+        More breakdowns (:func:`refimpl.protocols.transition_metrics.evaluate_methods`): ``by_<name>``.
 
     Returns
     -------
-    dict name -> :func:`window_quality`'s dict, plus ``contact_rule`` (threshold, floor, foot joints) and
-    ``by_label``.
+    dict name -> :func:`window_quality`'s dict, plus ``contact_rule`` (threshold, floor, foot joints),
+    ``by_label`` and ``by_<group>``.
     """
+    groups = check_groups(groups, dataset.num_windows) if isinstance(dataset, TransitionDataset) else {}
     past, _, target = dataset.context() if isinstance(dataset, TransitionDataset) else (None, None, None)
     out = {}
     for name, f in methods.items():
@@ -290,6 +294,8 @@ def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable]
         if labels:
             label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
             res["by_label"] = {lab: _summarise(arrays, label_of == lab) for lab in sorted(set(label_of))}
+        for g, v in groups.items():
+            res[f"by_{g}"] = {lab: _summarise(arrays, v == lab) for lab in sorted(set(v.tolist()))}
         out[name] = res
     return out
 
@@ -324,3 +330,36 @@ def format_quality(quality: Mapping[str, dict]) -> str:
             "window, in both frames of a step")
     return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
                      for r in rows) + "\n" + note
+
+
+def format_groups(results: Mapping[str, dict]) -> list[tuple[str, str]]:
+    """``[(grouping, table)]`` for every ``by_<grouping>`` breakdown of evaluation results (``by_label`` aside;
+    e.g. ``style``, ``kind``): per label, each method's mean error (cm) and its foot skating (cm/s) at its contact
+    share, then the ground truth's skating, contact share and number of windows."""
+    first = next(iter(results.values()), {})
+    names = [k[3:] for k in first if k.startswith("by_") and k != "by_label" and isinstance(first[k], dict)]
+    return [(g, _group_table(results, g)) for g in names]
+
+
+def _group_table(results: Mapping[str, dict], group: str) -> str:
+    """Rows: the group's labels; columns: each method's mean error and skating at its contact share."""
+    names = list(results)
+    key = f"by_{group}"
+    labels = list(results[names[0]][key])
+
+    def cell(q):
+        skate = "-" if q["skate_cm_s"] is None or not np.isfinite(q["skate_cm_s"]) else f"{q['skate_cm_s']:.1f}"
+        return f"{skate}@{q['contact_share']:.2f}"
+
+    rows = [[group] + names + ["ground truth"]]
+    for lab in labels:
+        row = [lab]
+        for n in names:
+            q = results[n].get("quality", {}).get(key, {}).get(lab)
+            row.append(f"{results[n][key][lab]:.2f} | {cell(q)}" if q else f"{results[n][key][lab]:.2f}")
+        gt = results[names[0]].get("quality", {}).get(key, {}).get(lab)
+        row.append(f"{cell(gt['ground_truth'])} [{gt['num_windows']}]" if gt else "")
+        rows.append(row)
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.ljust(w) if not i else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+                     for r in rows)

@@ -16,10 +16,12 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from refimpl.options import export_length
 from refimpl.atomic import atomic_write_text
 from refimpl.bounds import bounded_float, check_number
 from refimpl.errors import UsageError, existing_file, reading
 from refimpl.protocols.locomotion import LocomotionDataset, build_dataset, evaluate, format_results, zero_velocity
+from refimpl.protocols.locomotion_data import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
                                                bandai_namco_split, cmu_split)
 from refimpl.services import load_trained, network_methods
@@ -386,8 +388,8 @@ def generate_command(args, model) -> int:
 
 
 def export_options(args) -> dict:
-    """The exporter's options of ``refimpl export``: none."""
-    return {}
+    """The exporter's options of ``refimpl export``: ``T`` (``--transition-length``, when given)."""
+    return export_length(args)
 
 
 def verify_inputs(args, model) -> tuple:

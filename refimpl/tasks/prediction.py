@@ -14,12 +14,14 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.options import export_length
 from refimpl.errors import BadInputError, UsageError
 from refimpl.expmap import read_expmap
 from refimpl.preprocess import downsample, fix_antipodal
 from refimpl.protocols.prediction import (Protocol, average_curves, baseline_methods, canonical_prefix, euler_errors,
                                           evaluate_all, format_table, make_protocol, table2_protocol,
                                           write_results_json)
+from refimpl.protocols.prediction_data import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
 from refimpl.protocols.prediction_data import (SUBJECT_DIR, PredictionData, load_cmu, load_h36m, skeleton_of,
                                                stride_of)
 from refimpl.registry import require_source
@@ -452,8 +454,8 @@ def generate_command(args, model) -> int:
 
 
 def export_options(args) -> dict:
-    """The exporter's options of ``refimpl export``: none."""
-    return {}
+    """The exporter's options of ``refimpl export``: ``T`` (``--transition-length``, when given)."""
+    return export_length(args)
 
 
 def verify_inputs(args, model) -> tuple:

@@ -14,16 +14,18 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.options import export_length
 from refimpl.errors import UsageError
 from refimpl.models import acrnn
+from refimpl.protocols.synthesis import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
 from refimpl.protocols.synthesis import (ACCELERATION_FRAMES, DEFAULT_ROW, END_SITE_REPRESENTATIONS, FPS, MAX_SEEDS,
                                          SALSA_TEST, SALSA_TRAIN, SAMPLE_TEST, SAMPLE_TRAIN, SEED_LENGTH, SEED_STRIDE,
                                          TABLE1_ROWS, SynthesisData, evaluate_generator, frames_to_motion,
                                          in_source_units, load_salsa_motion, load_synthesis_data, motion_to_frames,
                                          skeleton_of)
 from refimpl.registry import require_source
-from refimpl.representations import REPRESENTATIONS
 from refimpl.services import checkpoint_for, evaluate_model, network_methods
+from refimpl.skeleton import Skeleton
 from refimpl.tasks.transition_generate import with_end_sites
 
 __all__ = [
@@ -326,10 +328,9 @@ def continue_seed(method, model_config: Mapping, path, start: int, num_frames: i
     from refimpl.errors import BadInputError, UsageError
 
     rep = model_config["data_representation"]
-    if not REPRESENTATIONS[rep].invertible:
-        raise UsageError(f"representation {rep!r} has no rotation decoding (no BVH); use another row")
+    ends = rep in END_SITE_REPRESENTATIONS   # the published positional frame keeps the End Sites as joints
     try:
-        motion = load_salsa_motion(path)
+        motion = load_salsa_motion(path, end_sites=ends)
         frames = motion_to_frames(rep, motion)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"{path}: {exc}") from exc
@@ -344,8 +345,11 @@ def continue_seed(method, model_config: Mapping, path, start: int, num_frames: i
     gen = np.asarray(method(seed[None], num_frames), dtype=np.float64)[0]           # (N, F)
     allf = np.concatenate([seed, gen])
     root0 = motion.root_positions[start]
-    m = frames_to_motion(rep, skeleton_of(model_config), allf, start=(root0[0], root0[2]),
-                         name=Path(path).stem)
+    skel = skeleton_of(model_config)
+    if ends:  # its leaves are the file's End Sites: written back as End Sites
+        skel = Skeleton(skel.parents, skel.offsets, skel.names,
+                        end_sites=[j for j in range(skel.num_joints) if not skel.children[j]])
+    m = frames_to_motion(rep, skel, allf, start=(root0[0], root0[2]), name=Path(path).stem)
     return m, SEED_LENGTH
 
 
@@ -412,8 +416,8 @@ def generate_command(args, model) -> int:
 
 
 def export_options(args) -> dict:
-    """The exporter's options of ``refimpl export``: none."""
-    return {}
+    """The exporter's options of ``refimpl export``: ``T`` (``--transition-length``, when given)."""
+    return export_length(args)
 
 
 def verify_inputs(args, model) -> tuple:

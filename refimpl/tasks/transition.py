@@ -23,6 +23,7 @@ Shape legend: N windows, T transition frames, F frames of a clip, J joints, P po
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import Callable, Mapping
@@ -34,7 +35,8 @@ from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
 from refimpl.bounds import bounded_float, bounded_int
-from refimpl.options import nonneg_int
+from refimpl.options import export_length, nonneg_int
+from refimpl.protocols.transition import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
 from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                           build_transition_datasets, declared_rate, join_pose, load_source,
                                           sample_sources, shared_sources, split_pose)
@@ -42,9 +44,10 @@ from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
 from refimpl.protocols.transition_join import EXPORT_JOIN_MODES, JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_locomotion import JOINTS as BANDAI_NAMCO_JOINTS, KIND as BANDAI_NAMCO_KIND
 from refimpl.protocols.transition_locomotion import build_datasets as build_bandai_namco, is_bandai_namco_folder
+from refimpl.protocols.transition_locomotion import find_takes, scored_takes, take_facts, window_groups
 from refimpl.protocols.transition_locomotion import load_bandai_namco_source
 from refimpl.protocols.transition_metrics import evaluate_methods, format_table
-from refimpl.protocols.transition_quality import evaluate_quality, format_quality
+from refimpl.protocols.transition_quality import evaluate_quality, format_groups, format_quality
 from refimpl.rotations import quat_from_axis_angle
 from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
@@ -87,6 +90,11 @@ def add_eval_options(parser) -> None:
                         help="inertialize: also evaluate each network with its joins inertialised (spec/qtg.md "
                              "7.4), as <name>+join beside the paper-faithful row; inertialize+footlock: also "
                              "<name>+join+footlock, planted feet pinned by two-bone IK (7.5) (default none)")
+    parser.add_argument("--takes", nargs="+", default=None, metavar="FILE",
+                        help="score exactly these .bvh / exp-map files (no training split: the normalisation is "
+                             "the checkpoint's; instead of --data). A folder of Bandai Namco takes given as "
+                             "--data is scored on its held-out takes (ids ending in 1) when it holds both sides "
+                             "of the project's split, else whole; a train/ + test/ folder on test/")
 
 
 def add_export_options(parser) -> None:
@@ -141,6 +149,12 @@ def source_for_file(path, *, fps: float | None = None, label: str | None = None,
                         f"{missing[:5]}")
 
 
+def _motion_files(folder: Path) -> list[Path]:
+    """The ``.bvh`` / exp-map ``.txt`` files under ``folder`` (recursively, README files aside), sorted."""
+    return sorted(f for f in folder.rglob("*") if f.is_file() and f.suffix.lower() in (".bvh", ".txt")
+                  and not f.name.lower().startswith("readme"))
+
+
 def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 0.2):
     """Train and test sources for ``--data``.
 
@@ -168,15 +182,11 @@ def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 
     if (root / "dmgnn_cmu_expmap").is_dir():
         return shared_sources(root)
 
-    def files(folder: Path):
-        return sorted(f for f in folder.rglob("*") if f.is_file() and f.suffix.lower() in (".bvh", ".txt")
-                      and not f.name.lower().startswith("readme"))
-
     if (root / "train").is_dir() and (root / "test").is_dir():
-        train = [source_for_file(f, fps=fps) for f in files(root / "train")]
-        test = [source_for_file(f, fps=fps) for f in files(root / "test")]
+        train = [source_for_file(f, fps=fps) for f in _motion_files(root / "train")]
+        test = [source_for_file(f, fps=fps) for f in _motion_files(root / "test")]
     else:
-        found = files(root)
+        found = _motion_files(root)
         if len(found) == 1:
             return resolve_data(str(found[0]), fps=fps, test_fraction=test_fraction)
         n_test = max(1, int(round(test_fraction * len(found)))) if found else 0
@@ -186,6 +196,53 @@ def resolve_data(data: str, *, fps: float | None = None, test_fraction: float = 
         raise BadInputError(f"{root}: found {len(train)} training and {len(test)} test files (.bvh / .txt); "
                             "need at least one of each")
     return train, test
+
+
+def _load_any(source, fps: float = 30.0):
+    """The loader of a source of any kind: the Bandai Namco takes' own, else the CMU / salsa one."""
+    if source.kind == BANDAI_NAMCO_KIND:
+        return load_bandai_namco_source(source, fps)
+    return load_source(source, fps)
+
+
+def _take_content(path) -> str | None:
+    """A Bandai Namco take's content (walk, run, ...: its label, as in training), else None (the folder's name)."""
+    try:
+        return take_facts(path).content
+    except ValueError:
+        return None
+
+
+def eval_dataset(args, model, T: int):
+    """The windows ``refimpl eval`` scores and one line saying which (spec/cli.md §4): ``--takes`` exactly;
+    a Bandai Namco folder its held-out takes or all of them (:func:`~refimpl.protocols.transition_locomotion.scored_takes`);
+    the ``test/`` of a ``train/`` + ``test/`` folder; otherwise the held-out windows of :func:`build_datasets`.
+    Only the scored files are read when the statistics come from ``model`` (root z-normalisation)."""
+    takes, why = list(args.takes or ()), None
+    if takes and args.data != "sample":
+        raise UsageError("--takes replaces --data: give one of them")
+    root = Path(args.data)
+    if not takes and args.data != "sample" and root.is_dir():
+        if (root / "train").is_dir() and (root / "test").is_dir():
+            takes = _motion_files(root / "test")
+            why = f"the {len(takes)} files of {root / 'test'} (the train/ files are not read)"
+        elif is_bandai_namco_folder(root):
+            try:
+                takes, why = scored_takes(find_takes(root))
+            except ValueError as exc:
+                raise BadInputError(f"--data {args.data}: {exc}") from None
+    if not takes:
+        _, test_ds = build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
+        return test_ds, f"the held-out windows of --data {args.data}"
+    sources = [source_for_file(t, fps=args.fps, label=_take_content(t)) for t in takes]   # .bvh / .txt, rig known
+    stats = (model.fields["root_mean"], model.fields["root_std"]) if model is not None else (np.zeros(3), np.ones(3))
+    try:
+        ds, _ = build_transition_datasets(sources, [], T=T, stride=args.stride, loader=_load_any)
+    except (OSError, ValueError) as exc:
+        raise BadInputError(f"{'--takes' if args.takes else '--data ' + args.data}: {exc}") from exc
+    ds = dataclasses.replace(ds, root_mean=np.asarray(stats[0], dtype=np.float64),
+                             root_std=np.asarray(stats[1], dtype=np.float64))
+    return ds, why or f"the {len(takes)} files of --takes (no training split; normalisation from the checkpoint)"
 
 
 def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.2, test_stride=None):
@@ -200,7 +257,8 @@ def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.
             raise BadInputError(f"--data {data}: {exc}") from exc
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
     try:
-        return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride)
+        return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride,
+                                         loader=_load_any)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {data}: {exc}") from exc
 
@@ -299,11 +357,20 @@ def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
     """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`) and,
     under each method's ``"quality"``, the animator's measures
     (:func:`refimpl.protocols.transition_quality.evaluate_quality`: joins, foot skating, first and last frame, with
-    the ground truth's numbers)."""
-    results = evaluate_methods(test_ds, methods_by_name)
-    for name, q in evaluate_quality(test_ds, methods_by_name).items():
+    the ground truth's numbers); windows of Bandai Namco takes also ``by_style`` and ``by_kind`` in both
+    (:func:`refimpl.protocols.transition_locomotion.window_groups`)."""
+    groups = _groups(test_ds)
+    results = evaluate_methods(test_ds, methods_by_name, groups=groups)
+    for name, q in evaluate_quality(test_ds, methods_by_name, groups=groups).items():
         results[name]["quality"] = q
     return results
+
+
+def _groups(test_ds) -> dict:
+    """Per style and per transition kind for windows of Bandai Namco takes (their names say the style), else none."""
+    if test_ds.num_windows and all(s.kind == BANDAI_NAMCO_KIND for s in test_ds.sources):
+        return window_groups(test_ds)
+    return {}
 
 
 def _curve_csv(results: Mapping[str, dict], frame_time: float) -> str:
@@ -362,6 +429,11 @@ def print_results(results: Mapping[str, dict], test_ds, model=None, *,
         _say("Joins (mean joint displacement into frame 1 and out of frame T), foot skating (horizontal speed of "
              "the foot joints in contact) and the error at the first and last frames:")
         _say(format_quality({k: r["quality"] for k, r in results.items()}))
+    for g, table in format_groups(results):
+        _say("")
+        _say(f"By {g}: mean error cm | foot skating cm/s at contact share (the ground truth's in the last column; "
+             "windows per group in brackets):")
+        _say(table)
     if curve:
         _say("")
         _say("Per-frame curve (cm):")
@@ -405,10 +477,11 @@ def eval_command(args, model) -> int:
     """``refimpl eval`` on the transition task: the network(s) (``model``, ``--onnx``) and the baselines on the
     held-out windows of ``--data``; table, per-frame curve, JSON / CSV / PNG."""
     T = args.transition_length or (model.fields["transition_length"] if model else 30)
-    _say(f"reading {args.data} ...")
-    _, test_ds = build_datasets(args.data, T, args.stride, fps=args.fps, test_fraction=args.test_fraction)
+    _say(f"reading {' '.join(args.takes) if args.takes else args.data} ...")
+    test_ds, why = eval_dataset(args, model, T)
     if test_ds.num_windows == 0:
         raise BadInputError(f"--data {args.data}: no held-out window of {T + 4} frames")
+    _say(f"scoring {why}")
     results = evaluate_model(model, test_ds, onnx_dir=args.onnx, task=NAME, join=args.join)
     print_results(results, test_ds, model)
     frame_time = 1.0 / test_ds.fps
@@ -505,8 +578,9 @@ _JOIN_SUFFIX = {"none": "", "inertialize": "+join", "inertialize+footlock": "+jo
 
 
 def export_options(args) -> dict:
-    """The exporter's options of ``refimpl export``: ``join`` (``--join``, when not ``none``)."""
-    return {} if args.join == "none" else {"join": args.join}
+    """The exporter's options of ``refimpl export``: ``T`` (``--transition-length``, when given), ``join``
+    (``--join``, when not ``none``)."""
+    return {**export_length(args), **({} if args.join == "none" else {"join": args.join})}
 
 
 def verify_inputs(args, model) -> tuple:

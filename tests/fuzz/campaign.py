@@ -382,7 +382,7 @@ def fam_ckpt_schema(stats, n, seed, seeds, tmp, log):
     from refimpl.services import load_trained
 
     try:
-        from deploy.models.qtg_io import load_qtg_checkpoint
+        from deploy.models.qtg_io import load_checkpoint as load_qtg_checkpoint
     except ImportError:
         load_qtg_checkpoint = None
     rng = random.Random(seed)

@@ -61,7 +61,7 @@ from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.models.qtg import QTGConfig, init_params  # noqa: E402
 
 from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step  # noqa: E402
-from deploy.models.qtg_io import QTGRuntime  # noqa: E402
+from deploy.models.qtg_io import Runtime as QTGRuntime  # noqa: E402
 from deploy.runtime import load_model  # noqa: E402
 
 FAMILIES = ("valid", "batch", "nonfinite", "dtype", "shape", "T", "state", "bomb", "corrupt", "metadata")

@@ -171,8 +171,9 @@ class _Wrappers:
     """The four wrappers loaded from the seed folders, and their valid arguments."""
 
     def __init__(self, seeds):
-        from deploy.models.acrnn_io import ACRNNRuntime
-        from deploy.models.quaternet_io import QuaterNetCNNRuntime, QuaterNetRuntime
+        from deploy.models.acrnn_io import Runtime as ACRNNRuntime
+        from deploy.models.quaternet_cnn_io import Runtime as QuaterNetCNNRuntime
+        from deploy.models.quaternet_io import Runtime as QuaterNetRuntime
         from deploy.models.quaternet_long_io import Runtime as LongRuntime
 
         self.qn = QuaterNetRuntime.from_dir(seeds["onnx:quaternet"])
