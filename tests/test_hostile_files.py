@@ -85,10 +85,15 @@ def test_special_files_are_refused_at_once(tmp_path, tool, argv, kind):
 
 
 def _in_process(tool, argv):
-    """``(code, stderr)`` of ``tool``'s main in-process under a 20 s SIGALRM limit (a FIFO open is interrupted)."""
+    """``(code, stderr)`` of ``tool``'s main in-process under a 30 s SIGALRM limit (a FIFO open is interrupted);
+    the modules are imported first (on a busy machine that alone can take 20 s)."""
+    import deploy.cli
+    import refimpl.cli
+
+    deploy.cli._parser(), refimpl.cli.build_parser()
     got = []
     kind, failure, detail, _, _ = hf.fc._classify(
-        lambda: got.append(fs._main(argv) if tool == "refimpl" else hf.deploy_main(argv)), (), 20.0)
+        lambda: got.append(fs._main(argv) if tool == "refimpl" else hf.deploy_main(argv)), (), 30.0)
     assert failure is None, (kind, detail)
     return got[0]
 
