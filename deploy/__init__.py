@@ -6,7 +6,7 @@ quantisation for onnxruntime's ``MatMulNBits`` (``quantize``), the per-model exp
 exporter table (``deploy.models``: one graph module and one entry module ``*_io`` per model; QTG's ``qtg``,
 ``qtg_compact``, ``qtg_io`` are re-exported here), validation (``validate``: checker,
 strict shape inference, the ONNX reference evaluator, onnxruntime), sessions (``session``) and the generic
-runtime wrapper (``runtime``). See ``spec/deploy.md`` and
+runtime wrapper (``runtime``), the portable export target (``portable``). See ``spec/deploy.md`` and
 ``deploy/README.md`` (input/output contract, C API example).
 
 Requires the ``deploy`` extra: ``pip install 'refimpl[deploy]'``.
@@ -28,12 +28,13 @@ from .quantize import *  # noqa: F401,F403
 from .validate import *  # noqa: F401,F403
 from .session import *  # noqa: F401,F403
 from .runtime import *  # noqa: F401,F403
+from .portable import *  # noqa: F401,F403
 from .models.qtg import *  # noqa: F401,F403
 from .models.qtg_compact import *  # noqa: F401,F403
 from .models.qtg_io import *  # noqa: F401,F403
 
 # (the functions deploy.linear, deploy.gru, deploy.lstm shadow their modules here, so the modules are looked up)
 __all__ = [n for m in ("graph", "linear", "activations", "recurrent", "gru", "lstm", "conv1d", "quat", "kinematics",
-                       "features", "metadata", "quantize", "validate", "session", "runtime", "models.qtg",
+                       "features", "metadata", "quantize", "validate", "session", "runtime", "portable", "models.qtg",
                        "models.qtg_compact", "models.qtg_io")
            for n in importlib.import_module(f"{__name__}.{m}").__all__]

@@ -16,7 +16,7 @@ __all__ = ["leaky_relu", "relu", "tanh", "sigmoid", "activation"]
 
 def leaky_relu(g: GraphBuilder, x: str, *, name: str, alpha: float = 0.01) -> str:
     """``y = x`` for ``x ≥ 0``, ``α x`` otherwise (PyTorch ``negative_slope`` = ``alpha``); shape of ``x``."""
-    if not g.primitive:
+    if not g.primitive_layers:
         return g.node("LeakyRelu", [x], name, alpha=float(alpha))
     if alpha < 0:
         raise ValueError(f"alpha: primitive LeakyRelu needs alpha >= 0, got {alpha}")

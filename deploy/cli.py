@@ -178,6 +178,10 @@ def _parser():
                    help="form of a whole-sequence graph (qtg's rollout; default: the model's)")
     e.add_argument("--frames", type=bounded_int("frames"), default=None, help="frames of a fixed-length graph (qtg: T of the "
                                                              "rollout, quaternet: k of the predictor)")
+    e.add_argument("--target", choices=("default", "portable"), default="default",
+                   help="default: today's graphs (onnxruntime); portable: per-call graphs at opset 15, batch 1, "
+                        "primitive operators, the host loop in the metadata (Unity Inference Engine, other "
+                        "runtimes; deploy/README.md)")
     export_owners: dict = {}
     _add_model_options(e, "add_export_options", export_owners)
     e.set_defaults(func=_cmd_export, _owners=export_owners)

@@ -59,7 +59,7 @@ def conv1d_causal(g: GraphBuilder, x: str, params: Mapping[str, np.ndarray], pre
     bias = np.asarray(params[full_b]) if full_b in params else None
     pad = (k - 1) * d
     wname = wname or name
-    if not g.primitive:
+    if not g.primitive_layers:
         xc = g.node("Transpose", [x], f"{name}.x_ncl", perm=[0, 2, 1])  # (B, C_in, T)
         inputs = [xc, g.weight(f"{wname}.W", weight)] + ([g.weight(f"{wname}.b", bias)] if bias is not None else [])
         y = g.node("Conv", inputs, f"{name}.conv", pads=[pad, 0], dilations=[d], strides=[1],

@@ -41,8 +41,9 @@ OPSET = 17
 IR_VERSION = 8
 """IR version stamped on models at :data:`OPSET` (the lowest the opset allows, ``spec/deploy.md`` §1)."""
 
-MIN_OPSET = 17
-"""The oldest opset the builders support (``Squeeze``/``Split`` take inputs from 13; GRU ``layout`` from 14)."""
+MIN_OPSET = 15
+"""The oldest opset the builders support (``Squeeze``/``Split`` take inputs from 13; GRU ``layout`` from 14; 15 is
+the portable target's, ``deploy/portable.py``, with ``Shape``'s ``start``/``end``)."""
 
 
 def ir_version_for(opset: int) -> int:
@@ -98,9 +99,12 @@ class GraphBuilder:
     opset : int, default :data:`OPSET`
         Default-domain opset; some builders emit version-dependent forms (``Reduce*`` take ``axes`` as an input
         from opset 18 on).
-    primitive : bool, optional
+    primitive : bool or "recurrent", optional
         Decompose GRU, LSTM, Conv and LeakyRelu into primitive operators (MatMul, Add, Sigmoid, ...). Default:
         ``True`` for float64 (onnxruntime's CPU kernels of those operators are float32-only), else ``False``.
+        ``"recurrent"`` decomposes the recurrent cells only and keeps ``Conv`` and ``LeakyRelu`` (the portable
+        target, ``deploy/portable.py``: engines without GRU/LSTM/Scan have those two); float32 graphs only.
+        :attr:`primitive` is then ``True`` and :attr:`primitive_layers` ``False``.
 
     Notes
     -----
@@ -119,7 +123,12 @@ class GraphBuilder:
         self.name = name
         self.dtype = dtype
         self.opset = int(opset)
+        if primitive == "recurrent" and dtype != np.float32:
+            raise ValueError(f"primitive: 'recurrent' keeps Conv and LeakyRelu, float32 only; got dtype {dtype}")
+        self._primitive_arg = primitive
         self.primitive = bool(dtype == np.float64) if primitive is None else bool(primitive)
+        #: whether Conv and LeakyRelu are decomposed too (``primitive`` other than ``"recurrent"``)
+        self.primitive_layers = self.primitive and primitive != "recurrent"
         self.nodes: list[onnx.NodeProto] = []
         self.initializers: list[onnx.TensorProto] = []
         self.inputs: list[onnx.ValueInfoProto] = []
@@ -281,7 +290,7 @@ class GraphBuilder:
 
     def subgraph(self, name: str) -> "GraphBuilder":
         """A builder for a Loop/Scan body: same dtype, opset and ``primitive``; may read this graph's names."""
-        return GraphBuilder(name, dtype=self.dtype, opset=self.opset, primitive=self.primitive, _outer=self)
+        return GraphBuilder(name, dtype=self.dtype, opset=self.opset, primitive=self._primitive_arg, _outer=self)
 
     # ------------------------------------------------------------------------------------------ output
     def graph(self, doc_string: str | None = None) -> onnx.GraphProto:

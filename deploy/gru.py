@@ -36,7 +36,7 @@ from deploy.recurrent import (GRU_PERM, check_layer_shapes, concat_layers,
                               split_layers, squeeze0, time_major,
                               unsqueeze0)
 
-__all__ = ["gru", "gru_step", "gru_onnx_weights"]
+__all__ = ["gru", "gru_step", "gru_unrolled", "gru_onnx_weights"]
 
 
 def gru_onnx_weights(params: Mapping[str, np.ndarray], prefix: str, layer: int = 0,
@@ -206,6 +206,44 @@ def gru_step(g: GraphBuilder, x_t: str, h: str, params: Mapping[str, np.ndarray]
         hn.append(inp)
     y = squeeze0(g, inp, f"{name}.y")                                   # (B, H)
     return y, concat_layers(g, hn, f"{name}.h_new")                    # (L, B, H)
+
+
+def gru_unrolled(g: GraphBuilder, x: str, h0: str, params: Mapping[str, np.ndarray], prefix: str, *, name: str,
+                 steps: int, wname: str | None = None) -> tuple[str, str]:
+    """Append one forward GRU layer over a sequence of a fixed length ``steps``, unrolled (no ``Scan``, no ``GRU``
+    node): the input projections of all steps in one ``MatMul`` + ``Add``, then ``steps`` primitive cells.
+
+    Parameters
+    ----------
+    x : str
+        Input ``(B, K, I)`` with ``K = steps``.
+    h0 : str
+        Initial state ``(1, B, H)``.
+    params, prefix
+        Layer 0 of ``prefix`` (as :func:`gru`).
+
+    Returns
+    -------
+    y : str
+        ``(B, K, H)``: the state after each step.
+    h_n : str
+        ``(1, B, H)``: the last state.
+    """
+    check_layer_shapes(params, prefix, 0, 3, 1)
+    wl = wname or name
+    w_ih, w_hh, b_ih, b_hh = primitive_layer_weights(params, prefix, 0, False)
+    hidden = w_hh.shape[1]
+    xp = input_projection(g, x, w_ih, b_ih, name, wl)                                  # (B, K, 3H)
+    wh, bh = g.weight(f"{wl}.Wh", w_hh.T), g.weight(f"{wl}.bh", b_hh)
+    h = squeeze0(g, h0, f"{name}.h0")                                                # (B, H)
+    ys = []
+    for k in range(int(steps)):
+        xk = g.node("Gather", [xp, g.constant(f"{name}.t{k}.i", np.array(k, dtype=np.int64))], f"{name}.t{k}.xp",
+                    axis=1)                                                          # (B, 3H)
+        h = _gru_cell(g, xk, h, wh, bh, hidden, f"{name}.t{k}.cell")                # (B, H)
+        ys.append(g.node("Unsqueeze", [h, g.ints([1])], f"{name}.t{k}.y"))           # (B, 1, H)
+    y = ys[0] if len(ys) == 1 else g.node("Concat", ys, f"{name}.y", axis=1)          # (B, K, H)
+    return y, unsqueeze0(g, h, f"{name}.h_n")
 
 
 # --------------------------------------------------------------------------------------- quantised step

@@ -183,6 +183,10 @@ class DeployedModel:
 
         Outputs are checked too: a non-finite output (damaged weights, absurd inputs) is a ``ValueError``.
 
+        A portable graph (batch fixed at 1, ``deploy/portable.py``) given a batch of B > 1 along the axes its
+        metadata names (``target.batch_axes``) runs once per sample and the outputs are concatenated, as a host
+        with several sequences does.
+
         Raises
         ------
         ValueError
@@ -197,6 +201,9 @@ class DeployedModel:
         missing = [n for n in names if n not in given]
         if unknown or missing:
             raise ValueError(f"feeds: expected inputs {names}; missing {missing}, unknown {unknown}")
+        batch = self._portable_batch(given)
+        if batch > 1:
+            return self._run_per_sample(given, batch)
         ready = {}
         symbols: dict[str, tuple[str, int]] = {}
         for name, shape, dtype in self.inputs:
@@ -208,6 +215,35 @@ class DeployedModel:
                 raise ValueError(f"{name}: the model produced NaN or infinite values from finite inputs (weights "
                                  "damaged, or inputs far outside the training range)")
         return result
+
+    def _batch_axes(self) -> dict:
+        from deploy.portable import is_portable
+
+        if not is_portable(self.metadata):
+            return {}
+        axes = self.metadata["target"].get("batch_axes")
+        return axes if isinstance(axes, dict) else {}
+
+    def _portable_batch(self, given) -> int:
+        """The batch B > 1 given to a portable graph along its batch axes (1 otherwise, and for other graphs)."""
+        sizes = set()
+        for name, axis in self._batch_axes().items():
+            a = given.get(name)
+            if isinstance(a, np.ndarray) and isinstance(axis, int) and 0 <= axis < a.ndim:
+                sizes.add(int(a.shape[axis]))
+        if len(sizes) > 1:
+            raise ValueError(f"feeds: the batch axes of the inputs ({self._batch_axes()}) have different sizes "
+                             f"{sorted(sizes)}")
+        return sizes.pop() if sizes else 1
+
+    def _run_per_sample(self, given, batch: int) -> dict[str, np.ndarray]:
+        axes = self._batch_axes()
+        runs = []
+        for b in range(batch):
+            feeds = {k: (np.take(v, [b], axis=axes[k]) if k in axes else v) for k, v in given.items()}
+            runs.append(self.run(feeds))
+        return {k: np.concatenate([r[k] for r in runs], axis=axes[k]) if k in axes else runs[0][k]
+                for k in runs[0]}
 
     @staticmethod
     def _check_input(name, shape, dtype, value, symbols) -> np.ndarray:

@@ -221,7 +221,9 @@ def cmd_export(args) -> int:
     out = Path(args.out) if args.out else _default_export_dir(args.checkpoint, model)
     task = task_of(model.spec)
     _refuse_other_tasks_options(args, model.spec.task, model.spec.name)
-    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, **task.export_options(args))
+    target = {} if args.target == "default" else {"target": args.target}
+    written = export_onnx(model, out, mode=args.mode, dtype=np.dtype(args.dtype).type, **task.export_options(args),
+                          **target)
     for role, path in written.items():
         _say(f"{role:8s} {path} ({Path(path).stat().st_size / 1024:.0f} KiB)")
     if args.verify:
@@ -445,6 +447,9 @@ def _add_export_parser(sub) -> None:
     p.add_argument("--out", default=None, help="output folder (default: onnx/ beside the checkpoint)")
     p.add_argument("--mode", default="unrolled", choices=("unrolled", "loop", "scan"), help="rollout graph form")
     p.add_argument("--dtype", default="float32", choices=("float32", "float64"))
+    p.add_argument("--target", default="default", choices=("default", "portable"),
+                   help="default: today's graphs (onnxruntime); portable: per-call graphs at opset 15, batch 1, "
+                        "primitive operators, the host loop in the metadata (deploy/README.md)")
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="skip the onnxruntime-vs-NumPy check on the task's check inputs")
     p.add_argument("--seed", type=int, default=0, help="seed of the check's random inputs")

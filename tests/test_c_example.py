@@ -2,7 +2,9 @@
 Python's onnxruntime (deploy/README.md "Embedded use").
 
 Needs a C compiler (``$CC``, ``cc``, ``gcc`` or ``clang``) and onnxruntime's C headers: set ``ORT_C_DIR`` to an
-unpacked ``onnxruntime-linux-x64-<version>.tgz`` (``include/onnxruntime_c_api.h``, ``lib/libonnxruntime.so*``).
+unpacked ``onnxruntime-linux-x64-<version>.tgz`` (``include/onnxruntime_c_api.h``, ``lib/libonnxruntime.so*``), or
+to the root of Debian's ``libonnxruntime-dev`` files (``include/onnxruntime/onnxruntime_c_api.h``; ``/usr`` once
+installed).
 Without ``lib/`` the shared library of the installed ``onnxruntime`` wheel is used (it ships the library, not the
 headers). The header's ``ORT_API_VERSION`` must not exceed the library's version (1.N provides API versions
 <= N). Skips cleanly when any of this is missing.
@@ -20,6 +22,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT / "deploy" / "examples" / "qtg_rollout.c"
+FOOTLOCK_SOURCE = ROOT / "deploy" / "examples" / "qtg_footlock.c"  # compiled with it (--footlock)
 
 
 def test_source_reads_sizes_from_the_model():
@@ -74,8 +77,8 @@ def _wheel_library():
     return (libs[0], onnxruntime.__version__) if libs else None
 
 
-def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
-    """Build ``source`` with ``-Wall -Wextra`` (+ ``extra``) against ``$ORT_C_DIR``'s headers and its ``lib/`` (or
+def build_example(tmp_path_factory, source, name: str, extra=()) -> Path:
+    """Build ``source`` (a path or a tuple of paths) with ``-Wall -Wextra`` (+ ``extra``) against ``$ORT_C_DIR``'s headers and its ``lib/`` (or
     the wheel's library); ``pytest.skip`` when the compiler, headers or a fitting library are missing."""
     cc = _compiler()
     if cc is None:
@@ -85,8 +88,10 @@ def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
         pytest.skip("ORT_C_DIR not set: point it at an unpacked onnxruntime-linux-x64-<version>.tgz "
                     "(include/onnxruntime_c_api.h; see deploy/README.md)")
     header = Path(ort) / "include" / "onnxruntime_c_api.h"
+    if not header.is_file():  # Debian's libonnxruntime-dev: ORT_C_DIR=/usr, /usr/include/onnxruntime/
+        header = Path(ort) / "include" / "onnxruntime" / "onnxruntime_c_api.h"
     if not header.is_file():
-        pytest.skip(f"{header} not found")
+        pytest.skip(f"{Path(ort) / 'include' / 'onnxruntime_c_api.h'} not found")
     api = re.search(r"#define\s+ORT_API_VERSION\s+(\d+)", header.read_text(errors="replace"))
     if api is None:
         pytest.skip(f"{header}: no ORT_API_VERSION")
@@ -109,7 +114,8 @@ def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
         pytest.skip(f"header ORT_API_VERSION {api.group(1)} is newer than the library {version}: "
                     "use headers of the library's release")
     exe = work / name
-    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", *extra, str(source), f"-I{header.parent}", f"-L{lib_dir}",
+    sources = [str(s) for s in (source if isinstance(source, (tuple, list)) else (source,))]
+    build = subprocess.run([cc, "-O2", "-Wall", "-Wextra", *extra, *sources, f"-I{header.parent}", f"-L{lib_dir}",
                             "-lonnxruntime", "-lm", f"-Wl,-rpath,{lib_dir}", "-o", str(exe)],
                            capture_output=True, text=True, timeout=120)
     assert build.returncode == 0, build.stderr
@@ -119,7 +125,7 @@ def build_example(tmp_path_factory, source: Path, name: str, extra=()) -> Path:
 
 @pytest.fixture(scope="module")
 def binary(tmp_path_factory):
-    return build_example(tmp_path_factory, SOURCE, "qtg_rollout")
+    return build_example(tmp_path_factory, (SOURCE, FOOTLOCK_SOURCE), "qtg_rollout", extra=("-Werror",))
 
 
 def _python_rollout(model: Path, past: np.ndarray, target: np.ndarray) -> np.ndarray:

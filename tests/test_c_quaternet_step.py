@@ -34,17 +34,18 @@ def binary(tmp_path_factory):
     return build_example(tmp_path_factory, SOURCE, "quaternet_step", extra=("-Werror",))
 
 
-@pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    """A small exported QuaterNet (random weights): ``(folder, params, config)``."""
+@pytest.fixture(scope="module", params=["default", "portable"])
+def model(tmp_path_factory, request):
+    """A small exported QuaterNet (random weights), today's graphs and the portable ones (spec/deploy.md §13: the
+    same names, batch 1, primitive GRU cells): ``(folder, params, config)``."""
     pytest.importorskip("onnxruntime")
     from deploy.models.quaternet_io import export_dir as export_quaternet_dir
     from refimpl.models.quaternet import QuaterNetConfig, init_params
 
     config = QuaterNetConfig(num_joints=J, hidden_size=H, num_layers=L)
     params = init_params(config, np.random.default_rng(3), dtype=np.float32)
-    folder = tmp_path_factory.mktemp("c_qn_model")
-    export_quaternet_dir(params, config, folder, k=K)
+    folder = tmp_path_factory.mktemp(f"c_qn_model_{request.param}")
+    export_quaternet_dir(params, config, folder, k=K, target=request.param)
     return folder, params, config
 
 
@@ -73,7 +74,8 @@ def test_c_loop_matches_python(binary, model, tmp_path):
     got = np.fromfile(tmp_path / "frames.f32", "<f4").reshape(K, J, 4)
     rt = QuaterNetRuntime.from_dir(folder)
     loop = rt.predict(x[None], K, use_graph=False)[0]                     # Python: init + step loop
-    graph = rt.predict(x[None], K)[0]                                     # the predict graph (sign rule inside)
+    graph = rt.predict(x[None], K)[0]                                     # the predict graph (sign rule inside);
+    #                                                                       the portable folder has none: the loop
     numpy = rnn.predict(params, canonical_prefix(x[None]).reshape(1, P, -1).astype(np.float32), K,
                         config).reshape(K, J, 4)                          # NumPy on the canonical prefix
     assert np.abs(got - loop).max() <= 1e-5

@@ -23,6 +23,7 @@ from deploy.models.arguments import check_graph_inputs, count, frames_array
 from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
 from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
                                     write_models)
+from deploy.portable import builder_options, check_target, portable_model
 from deploy.runtime import DeployedModel, load_model
 
 __all__ = ["load_checkpoint", "export_dir", "Runtime", "run_command"]
@@ -38,11 +39,13 @@ def load_checkpoint(path):
 
 def export_dir(params, config, out_dir, *, mean, std, representation, parents=None, opset=None,
                      dtype=np.float32, mode: str = "loop", metadata=None, skeleton=None,
-                     T: int | None = None) -> dict:
+                     T: int | None = None, target: str = "default") -> dict:
     """Export, validate and atomically write ``acrnn_step.onnx`` and ``acrnn_generate.onnx`` into ``out_dir``.
 
     ``mode`` is accepted for the command line's sake (the generator is always a Scan over the seed and a Loop
     of ``num_frames`` steps); ``T`` is ignored (N is an input). ``parents`` goes into the metadata.
+    ``target="portable"`` (``deploy/portable.py``): the step graph only, at batch 1 in primitive operators, with
+    the host loop in its metadata (:func:`portable_loop`).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -64,8 +67,26 @@ def export_dir(params, config, out_dir, *, mean, std, representation, parents=No
         "steps": ["to write the source BVH's units again, multiply lengths by 100 (metres -> centimetres)"]})
     kw = dict(mean=np.asarray(mean), std=np.asarray(std), representation=representation, dtype=dtype,
               opset=OPSET if opset is None else opset, skeleton=skeleton, frame_rate=frame_rate, metadata=extra)
+    if check_target(target) == "portable":
+        kw.update(builder_options())
+        step = portable_model(export_acrnn_step(params, config, **kw), host_loop=portable_loop(config))
+        return write_models({"step": step}, out, "acrnn")
     models = {"step": export_acrnn_step(params, config, **kw), "generate": export_acrnn_generate(params, config, **kw)}
     return write_models(models, out, "acrnn")
+
+
+def portable_loop(config) -> dict:
+    """The host loop of acRNN's portable step graph (``metadata["target"]["host_loop"]``)."""
+    L, H = int(config.num_layers), int(config.hidden_size)
+    return {"summary": "one step per frame: the seed frames, then each next_frame fed back",
+            "graphs": ["acrnn_step.onnx"],
+            "state": [{"input": "h", "output": "h_next", "shape": [L, 1, H], "initial": "zeros"},
+                      {"input": "c", "output": "c_next", "shape": [L, 1, H], "initial": "zeros"}],
+            "loop": ["h = c = zeros (L, 1, H)",
+                     "for t in 0 .. S-1: out = step(frame=seed[t], h=h, c=c); h, c = out.h_next, out.c_next",
+                     "frames = [out.next_frame]",
+                     "repeat N-1 times: out = step(frame=frames[-1], h=h, c=c); h, c = out.h_next, out.c_next; "
+                     "frames.append(out.next_frame)"]}
 
 
 class Runtime:

@@ -53,7 +53,7 @@ from deploy.linear import linear
 from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries
 from deploy.recurrent import tiled_state
 
-__all__ = ["export_qtg_init", "export_qtg_step", "export_qtg_rollout", "ROLLOUT_MODES", "QTG_PAPER",
+__all__ = ["export_qtg_init", "export_qtg_step", "export_qtg_rollout", "export_qtg_join", "ROLLOUT_MODES", "QTG_PAPER",
            "qtg_representation", "QTG_INPUT_TRANSFORM", "QTG_OUTPUT_TRANSFORM", "default_skeleton"]
 
 ROLLOUT_MODES = ("scan", "loop", "unrolled")
@@ -496,3 +496,41 @@ def export_qtg_rollout(params: Mapping[str, np.ndarray], config: QTGConfig = QTG
     meta = qtg_metadata(config, "rollout", io, stats, norm is not None, skeleton, frame_rate, g, f"float.{mode}",
                         join_entry(metadata, join, T, frame_rate, blend, in_graph=True), T=T)
     return g.model(metadata=meta, doc_string=f"QTG rollout: {T} frames, {mode}", producer_version=EXPORTER_VERSION)
+
+
+def export_qtg_join(config: QTGConfig = QTGConfig(), *, T: int | None = None, join: str = "inertialize",
+                    join_blend_frames: int | None = None, dtype=np.float32, opset: int = OPSET,
+                    primitive: bool | None = None, normalization=None, normalize_in_graph: bool = True,
+                    skeleton=None, frame_rate: float = 30.0, metadata: Mapping | None = None) -> onnx.ModelProto:
+    """The ``join`` model: the join option alone (``deploy.join.inertialize_joins``, spec/qtg.md §7.4), for a host
+    that generates the T frames with ``init`` + ``step`` (the portable target, ``deploy/portable.py``).
+
+    Returns
+    -------
+    onnx.ModelProto
+        Inputs ``past (B, 2, P)``, ``poses (B, T, P)`` (the T generated raw frames), ``target (B, 2, P)``; output
+        ``poses_joined (B, T, P)``. No weights: the same graph for every checkpoint of a config and ``T``.
+    """
+    stats = check_normalization(normalization, config)
+    norm = stats if normalize_in_graph else None
+    T = config.transition_length if T is None else T
+    if not isinstance(T, (int, np.integer)) or isinstance(T, bool) or T < 1:
+        raise ValueError(f"T: expected a positive integer number of frames, got {T!r}")
+    T = int(T)
+    blend = join_blend(join, join_blend_frames, T, stats, norm)
+    if blend is None:
+        raise ValueError("join: the join model needs a join mode other than 'none'")
+    P = config.pose_size
+    g = _builder("qtg_join", dtype, opset, primitive)
+    past, poses, target = g.input("past", ["B", 2, P]), g.input("poses", ["B", T, P]), g.input("target", ["B", 2, P])
+    g.output(inertialize_joins(g, past, poses, target, T, P, frame_rate, blend, name="join"), "poses_joined",
+             ["B", T, P])
+    io = {"inputs": io_entries(("past", ["B", 2, P], "p_{-1}, p_0, as fed to init (raw poses)"),
+                               ("poses", ["B", T, P], "p_1 ... p_T: the T pose_next outputs of step, in order"),
+                               ("target", ["B", 2, P], "g1, g2, as fed to init")),
+          "outputs": io_entries(("poses_joined", ["B", T, P], "p_1 ... p_T with the join applied (unit "
+                                 "quaternions)"))}
+    meta = qtg_metadata(config, "join", io, stats, norm is not None, skeleton, frame_rate, g, f"join.{join}",
+                        join_entry(metadata, join, T, frame_rate, blend, in_graph=True), T=T)
+    return g.model(metadata=meta, doc_string=f"QTG join ({join}) of {T} generated frames",
+                   producer_version=EXPORTER_VERSION)

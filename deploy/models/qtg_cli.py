@@ -1,6 +1,7 @@
 """QTG's commands of ``python -m deploy`` (``spec/deploy.md`` §8): its export options and export from a checkpoint
-or a plain state dict, and ``run`` (a transition generated inside a BVH clip). Reached through QTG's entry of
-the exporter table (``deploy.models.qtg_io``); ``deploy/cli.py`` names no model.
+or a plain state dict, and ``run`` (a transition generated inside a BVH clip, optionally with the join option
+and foot locking as NumPy post-processes, ``--join``). Reached through QTG's entry of the exporter table
+(``deploy.models.qtg_io``); ``deploy/cli.py`` names no model.
 
 Shape legend: T transition frames, P pose size.
 """
@@ -13,7 +14,7 @@ import numpy as np
 
 from refimpl.bounds import bounded_float
 
-__all__ = ["add_export_options", "add_run_options", "export_checkpoint", "run_command"]
+__all__ = ["add_export_options", "add_run_options", "apply_join", "export_checkpoint", "run_command"]
 
 
 def add_export_options(group) -> None:
@@ -37,6 +38,42 @@ def add_run_options(group) -> None:
     group.add_argument("--joints", choices=("cmu", "salsa"), default=None, help="qtg: rig of the BVH (default cmu)")
     group.add_argument("--source-fps", type=bounded_float("fps"), default=None,
                        help="qtg: override the BVH frame rate")
+    group.add_argument("--join", choices=("none", "inertialize", "inertialize+footlock"), default=None,
+                       help="qtg: inertialize: the join option (spec/qtg.md 7.4) in NumPy unless the models were "
+                            "exported with it; inertialize+footlock: then pin the planted feet by two-bone IK (7.5), "
+                            "as refimpl generate --join (default: the frames as the models return them)")
+
+
+def apply_join(join, runtime, past, poses, target, skeleton, fps: float) -> np.ndarray:
+    """``--join`` of ``deploy run`` on the generated ``poses (B, T, P)`` (un-normalised, window frame, cm).
+
+    ``None``: ``poses`` as they are. ``"inertialize"``: :func:`~refimpl.protocols.transition_join.inertialize_joins`
+    at frame time ``1 / fps`` unless the models' metadata ``join`` says they already apply it (the rollout graph
+    or the runtime's step path). ``"inertialize+footlock"``: that, then
+    :func:`~refimpl.protocols.transition_footlock.footlock` with ``skeleton`` (spec/qtg.md §7.5): the numbers
+    of ``refimpl generate --join inertialize+footlock`` on the same frames.
+
+    Raises
+    ------
+    ValueError
+        ``"none"`` for models exported with the join option inside (it cannot be taken out).
+    """
+    from refimpl.protocols.transition_footlock import footlock
+    from refimpl.protocols.transition_join import inertialize_joins
+
+    if join is None:
+        return poses
+    exported = ((runtime.rollout_model or runtime.step_model).metadata.get("join") or {}).get("mode", "none")
+    if join == "none":
+        if exported != "none":
+            raise ValueError(f"--join none: these models were exported with the join option {exported!r}; "
+                             "export without --join for the network's own frames")
+        return poses
+    dt = 1.0 / fps
+    joined = poses if exported != "none" else inertialize_joins(past, poses, target, dt=dt)
+    if join == "inertialize+footlock":
+        joined = footlock(past, joined, target, skeleton, dt=dt)
+    return np.asarray(joined, dtype=np.float64)
 
 
 def _skeleton_from_bvh(path, joints: str):
@@ -83,14 +120,16 @@ def export_checkpoint(entry, args) -> dict:
     cfg = meta.get("model_config") if isinstance(meta.get("model_config"), dict) else {}
     if isinstance(cfg.get("fps"), (int, float)) and not isinstance(cfg.get("fps"), bool):
         extra["frame_rate"] = float(cfg["fps"])
+    target = getattr(args, "target", "default")
     return entry.export_dir(params, config, args.out_dir, normalization=normalization, skeleton=skeleton,
                             opset=args.opset, dtype=dtype, mode=args.mode or "scan", T=args.frames,
-                            compact=args.compact, metadata=extra)
+                            compact=args.compact, metadata=extra, **({"target": target} if target != "default" else {}))
 
 
 def run_command(runtime, args) -> int:
-    """``python -m deploy run DIR IN.bvh OUT.bvh --start S``: frames ``S … S+T−1`` of the clip replaced by a
-    transition generated from frames ``S−2, S−1`` and ``S+T, S+T+1``; prints the mean joint-position error."""
+    """``python -m deploy run DIR IN.bvh OUT.bvh --start S [--join MODE]``: frames ``S … S+T−1`` of the clip
+    replaced by a transition generated from frames ``S−2, S−1`` and ``S+T, S+T+1`` (then :func:`apply_join`);
+    prints the mean joint-position error."""
     from refimpl.bounds import check_count, check_number
     from refimpl.bvh import read_bvh_header
     from refimpl.bvh_write import write_bvh
@@ -133,12 +172,14 @@ def run_command(runtime, args) -> int:
                                 m, sd)[0]
     else:
         gen = rt.transition(past, target, T)[0]                          # (T, P)
+    gen = apply_join(args.join, rt, past, gen[None].astype(np.float64), target, skel, fps)[0]
     h = heading_from_root(rot[s - 2, 0])
     new_pos, new_rot = window_to_world(gen.astype(np.float64), h, pos[s - 2])
     truth = skel.forward_kinematics(rot[s:s + T], pos[s:s + T])
     out_rot, out_pos = rot.copy(), pos.copy()
     out_rot[s:s + T], out_pos[s:s + T] = new_rot, new_pos
-    name = meta["model"]["name"]
+    name = meta["model"]["name"] + {None: "", "none": "", "inertialize": "+join",
+                                    "inertialize+footlock": "+join+footlock"}[args.join]
     result = Motion(skel, out_rot, out_pos, frame_time=1.0 / fps, name=f"{Path(args.input).stem}_{name}")
     err = np.linalg.norm(skel.forward_kinematics(new_rot, new_pos) - truth, axis=-1).mean()
     write_bvh(args.output, result)

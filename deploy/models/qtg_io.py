@@ -26,8 +26,9 @@ from refimpl.protocols.transition_join import inertialize_joins, join_blend_fram
 from deploy.graph import OPSET
 from deploy.models.arguments import check_graph_inputs
 from deploy.models.entry_io import checkpoint_params, read_checkpoint, write_models
-from deploy.models.qtg import export_qtg_init, export_qtg_rollout, export_qtg_step, join_entry
+from deploy.models.qtg import export_qtg_init, export_qtg_join, export_qtg_rollout, export_qtg_step, join_entry
 from deploy.models.qtg_compact import export_qtg_rollout_compact
+from deploy.portable import builder_options, check_target, portable_model
 from deploy.quantize import WEIGHT_FORMATS
 from deploy.runtime import DeployedModel, load_model
 
@@ -79,8 +80,13 @@ def load_checkpoint(path):
 def export_dir(params, config, out_dir, *, normalization=None, skeleton=None, opset=None, dtype=np.float32,
                    mode: str = "scan", T: int | None = None, metadata=None,
                    compact: str | None = None, join: str = "none", join_blend_frames: int | None = None,
-                   frame_rate: float | None = None) -> dict[str, Path]:
+                   frame_rate: float | None = None, target: str = "default") -> dict[str, Path]:
     """Export, validate and atomically write ``qtg_init/step/rollout.onnx`` into ``out_dir``; return the paths.
+
+    ``target="portable"`` (``deploy/portable.py``) writes ``qtg_init.onnx``, ``qtg_step.onnx`` and, with a join,
+    ``qtg_join.onnx`` (:func:`deploy.models.qtg.export_qtg_join`) at batch 1 in primitive operators, with the
+    host loop in their metadata (:func:`portable_loop`); no rollout model (``mode``, ``compact``, ``dtype``,
+    ``opset`` do not apply).
 
     ``join="inertialize"`` bakes the join option into the rollout graph (``deploy/join.py``) and writes a ``join``
     entry into all three models' metadata (init and step: "apply after the T frames"; :meth:`Runtime.transition`
@@ -99,6 +105,11 @@ def export_dir(params, config, out_dir, *, normalization=None, skeleton=None, op
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rate = float(frame_rate or (metadata or {}).get("frame_rate") or 30.0)
+    if check_target(target) == "portable":
+        if compact is not None:
+            raise ValueError("compact: the portable target has no rollout model (compact applies to it only)")
+        return _export_portable(params, config, out, normalization=normalization, skeleton=skeleton, T=T,
+                                metadata=metadata, join=join, join_blend_frames=join_blend_frames, frame_rate=rate)
     kw = dict(dtype=dtype, opset=OPSET if opset is None else opset, normalization=normalization,
               skeleton=skeleton, metadata=metadata, frame_rate=rate)
     jkw = dict(join=join, join_blend_frames=join_blend_frames)
@@ -117,6 +128,50 @@ def export_dir(params, config, out_dir, *, normalization=None, skeleton=None, op
     return write_models(models, out, "qtg")
 
 
+def _export_portable(params, config, out, *, normalization, skeleton, T, metadata, join, join_blend_frames,
+                     frame_rate) -> dict[str, Path]:
+    """The portable target of :func:`export_dir`."""
+    T_eff = config.transition_length if T is None else int(T)
+    kw = dict(builder_options(), normalization=normalization, skeleton=skeleton, metadata=metadata,
+              frame_rate=frame_rate)
+    models = {}
+    if join != "none":
+        models["join"] = export_qtg_join(config, T=T_eff, join=join, join_blend_frames=join_blend_frames, **kw)
+        kw["metadata"] = join_entry(metadata, join, T_eff, frame_rate,
+                                    read_join_blend(models["join"]), in_graph=False)
+    models = {"init": export_qtg_init(params, config, **kw), "step": export_qtg_step(params, config, **kw), **models}
+    loop = portable_loop(config, T_eff, join != "none")
+    return write_models({role: portable_model(m, host_loop=loop) for role, m in models.items()}, out, "qtg")
+
+
+def read_join_blend(model) -> int:
+    """``blend_frames`` of the ``join`` metadata entry of an exported QTG model."""
+    from deploy.metadata import read_metadata
+
+    return int(read_metadata(model)["join"]["blend_frames"])
+
+
+def portable_loop(config, T: int, join: bool) -> dict:
+    """The host loop of QTG's portable graphs (``metadata["target"]["host_loop"]``; deploy/README.md)."""
+    Z, H, L, P = config.latent_size, config.gru_hidden, config.gru_layers, config.pose_size
+    init_out = "an output of qtg_init.onnx"
+    return {"summary": "init once per transition, step once per generated frame (T frames), then the join graph on "
+                       "the T frames when there is one",
+            "graphs": ["qtg_init.onnx", "qtg_step.onnx"] + (["qtg_join.onnx"] if join else []),
+            "state": [{"input": "pose", "output": "pose_next", "shape": [1, P], "initial": init_out},
+                      {"input": "latent_prev", "output": "latent_prev_next", "shape": [1, Z], "initial": init_out},
+                      {"input": "hidden", "output": "hidden_next", "shape": [L, 1, H], "initial": init_out},
+                      {"input": "target_latent", "output": None, "shape": [1, 2, Z],
+                       "initial": init_out + "; the same for every step of the transition"}],
+            "loop": ["past, target = input_transform of the four context frames, (1, 2, P) each",
+                     "pose, latent_prev, hidden, target_latent = init(past=past, target=target)",
+                     f"repeat T = {T} times: pose, latent_prev, hidden = step(pose=pose, latent_prev=latent_prev, "
+                     "hidden=hidden, target_latent=target_latent); frames.append(pose)",
+                     "poses = stack(frames, axis=1)   # (1, T, P)"]
+            + (["poses = join(past=past, poses=poses, target=target).poses_joined"] if join else [])
+            + ["output_transform of poses"]}
+
+
 class Runtime:
     """QTG inference from exported ``init``/``step``/``rollout`` models (any subset), as a game loop would use them.
 
@@ -127,14 +182,16 @@ class Runtime:
     intra_op_threads : int
     """
 
-    def __init__(self, init=None, step=None, rollout=None, *, intra_op_threads: int = 1):
+    def __init__(self, init=None, step=None, rollout=None, join=None, *, intra_op_threads: int = 1):
         def load(m):
             if m is None or isinstance(m, DeployedModel):
                 return m
             return load_model(m, intra_op_threads=intra_op_threads)
 
         self.init_model, self.step_model, self.rollout_model = load(init), load(step), load(rollout)
-        for m, role in ((self.init_model, "init"), (self.step_model, "step"), (self.rollout_model, "rollout")):
+        self.join_model = load(join)
+        for m, role in ((self.init_model, "init"), (self.step_model, "step"), (self.rollout_model, "rollout"),
+                        (self.join_model, "join")):
             if m is not None and m.role != role:
                 raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
             if m is not None:
@@ -142,9 +199,10 @@ class Runtime:
 
     @classmethod
     def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "Runtime":
-        """Load ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx`` from ``directory`` (those present)."""
+        """Load ``qtg_init.onnx``, ``qtg_step.onnx``, ``qtg_rollout.onnx``, ``qtg_join.onnx`` from ``directory``
+        (those present)."""
         d = Path(directory)
-        files = {k: d / f"qtg_{k}.onnx" for k in ("init", "step", "rollout")}
+        files = {k: d / f"qtg_{k}.onnx" for k in ("init", "step", "rollout", "join")}
         found = {k: (p if p.is_file() else None) for k, p in files.items()}
         if not any(found.values()):
             raise ValueError(f"directory: no qtg_init/step/rollout.onnx in {str(d)!r}")
@@ -208,6 +266,8 @@ class Runtime:
         if join.get("mode", "none") == "none":
             return poses
         # the join option of the export, after the frames (the step model cannot know the last frame)
+        if self.join_model is not None and self.join_model.metadata.get("model", {}).get("transition_length") == T:
+            return self.join_model.run(past=past, poses=poses, target=target)["poses_joined"]
         n = int(join["blend_frames"]) if join.get("transition_length") == T else default_blend(int(T))
         joined = inertialize_joins(past, poses, target, dt=float(join["frame_time"]), blend_frames=n)
         return joined.astype(poses.dtype)

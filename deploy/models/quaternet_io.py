@@ -24,6 +24,7 @@ from deploy.models.arguments import count, frames_array, metadata_int
 from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
                                     write_models)
 from deploy.models.quaternet import export_quaternet_init, export_quaternet_predict, export_quaternet_step
+from deploy.portable import builder_options, check_target, portable_model
 from deploy.runtime import DeployedModel, load_model
 
 __all__ = ["load_checkpoint", "export_dir", "Runtime", "run_command", "add_run_options"]
@@ -55,20 +56,42 @@ def frame_rate_of(metadata):
 
 
 def export_dir(params, config, out_dir, *, dtype=np.float32, opset=None, k: int = 10, T: int | None = None,
-                         skeleton=None, metadata=None, mode: str = "unrolled") -> dict:
+               skeleton=None, metadata=None, mode: str = "unrolled", target: str = "default") -> dict:
     """Export, validate and atomically write ``quaternet_init/step/predict.onnx`` into ``out_dir``.
 
     ``k`` (or ``T``, its name in ``refimpl export``) is the predictor's number of frames; ``mode`` is accepted for
-    the table's contract (the predictor is always unrolled).
+    the table's contract (the predictor is always unrolled). ``target="portable"`` (``deploy/portable.py``) writes
+    the init and step graphs only, at batch 1 in primitive operators, with the host loop in their metadata
+    (:func:`portable_loop`); ``dtype`` and ``opset`` are then the portable target's.
     """
     cfg = network_config(config)
     k = int(T or k)
     kw = dict(dtype=dtype, opset=OPSET if opset is None else opset, skeleton=skeleton,
               frame_rate=frame_rate_of(metadata), metadata=metadata)
+    if check_target(target) == "portable":
+        kw.update(builder_options())
+        loop = portable_loop(cfg)
+        models = {role: portable_model(f(params, cfg, **kw), host_loop=loop)
+                  for role, f in (("init", export_quaternet_init), ("step", export_quaternet_step))}
+        return write_models(models, out_dir, "quaternet")
     models = {"init": export_quaternet_init(params, cfg, **kw), "step": export_quaternet_step(params, cfg, **kw)}
     if cfg.num_controls == 0:
         models["predict"] = export_quaternet_predict(params, cfg, k=k, **kw)
     return write_models(models, out_dir, "quaternet")
+
+
+def portable_loop(config) -> dict:
+    """The host loop of QuaterNet's portable init + step graphs (``metadata["target"]["host_loop"]``)."""
+    L, H = config.num_layers, config.hidden_size
+    return {"summary": "init once per sequence, then one step per frame: the prefix frames, then each prediction "
+                       "fed back (with the frame's controls appended when the config has controls)",
+            "graphs": ["quaternet_init.onnx", "quaternet_step.onnx"],
+            "state": [{"input": "hidden", "output": "hidden_next", "shape": [L, 1, H],
+                       "initial": "output hidden of quaternet_init.onnx (the learned h0)"}],
+            "loop": ["x[0..P-1] = the prefix frames (1, F) after input_transform (the sign rule)",
+                     "hidden = init(x=x[0]).hidden",
+                     "for t in 0 .. P-1: y, hidden = step(x=x[t], hidden=hidden)",
+                     "repeat k-1 times: y, hidden = step(x=y, hidden=hidden)   # y: each predicted frame"]}
 
 
 def load_role(m, role, intra_op_threads):

@@ -22,18 +22,21 @@ from refimpl.models.quaternet import QuaterNetConfig, check_params
 
 from deploy.activations import leaky_relu
 from deploy.graph import OPSET, GraphBuilder
-from deploy.gru import gru, gru_step
+from deploy.gru import gru, gru_step, gru_unrolled
 from deploy.linear import linear
 from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries, skeleton_metadata
 from deploy.quat import dq_normalize, quat_normalize
 from deploy.recurrent import tiled_state
 
-__all__ = ["NAME", "QUATERNET_PAPER", "export_pose_step", "export_pace"]
+__all__ = ["NAME", "QUATERNET_PAPER", "export_pose_step", "export_pace", "export_pace_step"]
 
 NAME = "quaternet-long"
 QUATERNET_PAPER = ("Pavllo, Feichtenhofer, Auli, Grangier: Modeling Human Motion with Quaternion-based Neural "
                    "Networks, IJCV 2019 (long-term locomotion, §3.7)")
 
+
+#: Points per call of the portable pace graph (:func:`export_pace_step`).
+PACE_CHUNK = 16
 
 #: Length unit of the long-term networks (QuaterNet's locomotion data; spec/locomotion.md).
 UNITS = "QuaterNet units (1 unit = 5.6444 cm)"
@@ -125,6 +128,23 @@ def export_pose_step(params: Mapping[str, np.ndarray], config: QuaterNetConfig, 
                    producer_version=EXPORTER_VERSION)
 
 
+def _pace_config(config) -> dict:
+    return {"bidirectional": True, "hidden_size": int(config.hidden_size), "input_size": int(config.input_size),
+            "output_size": int(config.output_size)}
+
+
+#: The pace models' ``representation``, ``input_transform`` and ``output_transform`` metadata.
+PACE_REPRESENTATION = {"kind": "pace", "name": "pace", "points_per_unit": 5.0, "units": UNITS,
+                       "inputs": ["turning_angle (radians between consecutive tangents of the reparameterised path)",
+                                  "average_speed (units per frame at 30 fps)"],
+                       "outputs": ["amplitude", "frequency", "cos_delta", "sin_delta"]}
+PACE_INPUT_TRANSFORM = {"summary": "the path reparameterised to points_per_unit points per unit of length (smoothing "
+                                   "1.0); per point its turning angle and the target speed", "steps": []}
+PACE_OUTPUT_TRANSFORM = {"summary": "A = max(A, 0.1), omega = max(omega, 0); facing = the unit tangent (tx, tz) "
+                                    "rotated by (c, s) = (cos Δ, sin Δ) / (|(cos Δ, sin Δ)| + 1e-9): (tx c - tz s, "
+                                    "tz c + tx s)", "steps": []}
+
+
 def export_pace(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, dtype=np.float32, opset: int = OPSET,
                 primitive: bool | None = None, frame_rate: float = 30.0,
                 metadata: Mapping | None = None) -> onnx.ModelProto:
@@ -148,21 +168,83 @@ def export_pace(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, dt
           "outputs": io_entries(("y", ["B", "N", 4], "[amplitude A (units per frame), frequency omega "
                                  "(radians of gait phase per frame), cos Δ, sin Δ] per point (before "
                                  "output_transform)"))}
-    meta = build_metadata(g, name=NAME, role="pace", config={"bidirectional": True, "hidden_size": int(H),
-                                                             "input_size": int(config.input_size),
-                                                             "output_size": int(config.output_size)},
-                          io=io, representation={"kind": "pace", "name": "pace", "points_per_unit": 5.0,
-                                                 "units": UNITS, "inputs": ["turning_angle (radians between "
-                                                 "consecutive tangents of the reparameterised path)",
-                                                 "average_speed (units per frame at 30 fps)"],
-                                                 "outputs": ["amplitude", "frequency", "cos_delta", "sin_delta"]},
-                          frame_rate=frame_rate, source_paper=QUATERNET_PAPER, variant="float",
-                          extra=dict(metadata or {}),
-                          input_transform={"summary": "the path reparameterised to points_per_unit points per unit "
-                                           "of length (smoothing 1.0); per point its turning angle and the target "
-                                           "speed", "steps": []},
-                          output_transform={"summary": "A = max(A, 0.1), omega = max(omega, 0); facing = the unit "
-                                            "tangent (tx, tz) rotated by (c, s) = (cos Δ, sin Δ) / (|(cos Δ, "
-                                            "sin Δ)| + 1e-9): (tx c - tz s, tz c + tx s)", "steps": []})
+    meta = build_metadata(g, name=NAME, role="pace", config=_pace_config(config), io=io,
+                          representation=PACE_REPRESENTATION, frame_rate=frame_rate, source_paper=QUATERNET_PAPER,
+                          variant="float", extra=dict(metadata or {}), input_transform=PACE_INPUT_TRANSFORM,
+                          output_transform=PACE_OUTPUT_TRANSFORM)
     return g.model(metadata=meta, doc_string="QuaterNet pace network (bidirectional GRU + linear)",
+                   producer_version=EXPORTER_VERSION)
+
+
+def _direction_params(params: Mapping[str, np.ndarray], H: int) -> dict:
+    """The pace network's GRU directions and head as one-direction layers: ``fwd``/``bwd`` (``rnn``'s forward and
+    ``_reverse`` parameters as layer 0), ``head_f`` (``fc.weight[:, :H]``, no bias), ``head_b`` (``fc.weight[:, H:]``
+    and ``fc.bias``)."""
+    out = {}
+    for key in ("weight_ih", "weight_hh", "bias_ih", "bias_hh"):
+        for d, sfx in (("fwd", ""), ("bwd", "_reverse")):
+            if f"rnn.{key}_l0{sfx}" in params:
+                out[f"{d}.{key}_l0"] = np.asarray(params[f"rnn.{key}_l0{sfx}"])
+    w = np.asarray(params["fc.weight"])                                           # (4, 2H)
+    out["head_f.weight"], out["head_b.weight"] = w[:, :H], w[:, H:]
+    if "fc.bias" in params:
+        out["head_b.bias"] = np.asarray(params["fc.bias"])
+    return out
+
+
+def export_pace_step(params: Mapping[str, np.ndarray], config: pace.PaceConfig, *, points: int = PACE_CHUNK,
+                     dtype=np.float32, opset: int = OPSET, primitive: bool | str | None = None,
+                     frame_rate: float = 30.0, metadata: Mapping | None = None,
+                     h0_file: str | None = None) -> onnx.ModelProto:
+    """The ``pace_step`` model: ``points`` points of each direction of the pace network per call, for a host that
+    runs a path chunk by chunk (the portable target, ``deploy/portable.py``; no ``GRU`` node, no ``Scan``).
+
+    The forward direction reads the path in order, the backward direction the reversed path, each padded at its
+    end to a multiple of ``points`` (padding comes after the real points in both orders, so it changes nothing
+    before it). The pace output of point ``n`` of ``N`` is ``y_forward[n] + y_backward[N − 1 − n]`` over the
+    concatenated calls (``fc([h_f | h_b]) = W_f h_f + (W_b h_b + b)``), equal to :func:`export_pace`'s ``y``.
+
+    Returns
+    -------
+    onnx.ModelProto
+        Inputs ``x_forward (B, K, 2)``, ``h_forward (1, B, H)``, ``x_backward (B, K, 2)``, ``h_backward (1, B, H)``
+        with ``K = points``; outputs ``y_forward (B, K, 4)``, ``h_forward_next (1, B, H)``, ``y_backward (B, K, 4)``,
+        ``h_backward_next``.
+    """
+    if not config.bidirectional:
+        raise ValueError("config: only the bidirectional pace network is exported (the delayed one runs in NumPy)")
+    if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or points < 1:
+        raise ValueError(f"points: expected a positive integer, got {points!r}")
+    K, H, I, G = int(points), int(config.hidden_size), int(config.input_size), int(config.output_size)
+    p = _direction_params(params, H)
+    g = GraphBuilder(f"{NAME}_pace_step", dtype=dtype, opset=opset, primitive=primitive)
+    ins = {d: (g.input(f"x_{d}", ["B", K, I]), g.input(f"h_{d}", [1, "B", H])) for d in ("forward", "backward")}
+    for d, tag in (("forward", "f"), ("backward", "b")):
+        y, h_new = gru_unrolled(g, ins[d][0], ins[d][1], p, "fwd" if tag == "f" else "bwd", name=f"rnn_{tag}",
+                                steps=K)                                                 # (B, K, H), (1, B, H)
+        g.output(linear(g, y, p, f"head_{tag}", name=f"head_{tag}"), f"y_{d}", ["B", K, G])
+        g.output(h_new, f"h_{d}_next", [1, "B", H])
+    io = {"inputs": io_entries(("x_forward", ["B", K, I], f"[turning_angle, average_speed] of points c K ... c K + "
+                                f"{K - 1} (call c; zeros past the path's end)"),
+                               ("h_forward", [1, "B", H], "forward GRU state (initial_state[0], then h_forward_next)"),
+                               ("x_backward", ["B", K, I], "the same of the reversed path: points N-1-cK down to "
+                                f"N-{K}-cK (zeros past its end)"),
+                               ("h_backward", [1, "B", H], "backward GRU state (initial_state[1], then "
+                                                           "h_backward_next)")),
+          "outputs": io_entries(("y_forward", ["B", K, G], "forward parts of the pace outputs of those points"),
+                                ("h_forward_next", [1, "B", H], "forward state after them"),
+                                ("y_backward", ["B", K, G], "backward parts (with the bias) of the reversed path's "
+                                                            "points"),
+                                ("h_backward_next", [1, "B", H], "backward state after them"))}
+    extra = dict(metadata or {}, points_per_call=K)
+    extra["initial_state"] = {"file": h0_file, "shape": [2, 1, H], "dtype": np.dtype(dtype).name,
+                              "format": "NumPy .npy (no pickle)",
+                              "meaning": "the learned initial states: [0] forward, [1] backward"}
+    meta = build_metadata(g, name=NAME, role="pace_step", config=_pace_config(config), io=io,
+                          representation=PACE_REPRESENTATION, frame_rate=frame_rate, source_paper=QUATERNET_PAPER,
+                          variant="float", extra=extra, input_transform=PACE_INPUT_TRANSFORM,
+                          output_transform={**PACE_OUTPUT_TRANSFORM, "combine": "y[n] = y_forward[n] + "
+                                            "y_backward[N - 1 - n] over the concatenated calls, then the output "
+                                            "transform"})
+    return g.model(metadata=meta, doc_string=f"QuaterNet pace network: {K} points of each GRU direction",
                    producer_version=EXPORTER_VERSION)

@@ -55,8 +55,8 @@ def _pace_runtime(runtime, args):
     from deploy.models import model_name_of_dir
 
     if args.pace is None:
-        if runtime.pace_model is None:
-            raise BadInputError(f"{args.model_dir}: no quaternet-long_pace.onnx; pass --pace DIR (a folder written "
+        if runtime.pace_graph is None:
+            raise BadInputError(f"{args.model_dir}: no quaternet-long_pace.onnx (or _pace_step.onnx); pass --pace DIR (a folder written "
                                 "by `python -m deploy export PACE_CHECKPOINT DIR`)")
         return runtime
     d = Path(args.pace)
@@ -72,8 +72,8 @@ def _pace_runtime(runtime, args):
         pace_rt = type(runtime).from_dir(d, intra_op_threads=getattr(args, "threads", 1))
     except ValueError as exc:
         raise BadInputError(f"--pace {args.pace}: {exc}") from None
-    if pace_rt.pace_model is None:
-        raise BadInputError(f"--pace {args.pace}: no quaternet-long_pace.onnx in the folder")
+    if pace_rt.pace_graph is None:
+        raise BadInputError(f"--pace {args.pace}: no quaternet-long_pace.onnx (or _pace_step.onnx) in the folder")
     return pace_rt
 
 
@@ -128,7 +128,7 @@ def walk_exported(runtime, pace_runtime, path, speed: float, frames: int, model_
 
     skeleton, seed, dual, dq_scale = _step_parts(runtime, model_dir)
     J, P = skeleton.num_joints, seed.shape[0]
-    points = float((pace_runtime.pace_model.metadata.get("representation") or {}).get("points_per_unit", 5.0))
+    points = float((pace_runtime.pace_graph.metadata.get("representation") or {}).get("points_per_unit", 5.0))
     tracks = pace.predict_with(pace_runtime.pace, path, speed, points_per_unit=points, dtype=np.float32)
     return walk_path(lambda x, h: runtime.step(x, h), runtime.initial_state(1), tracks, skeleton,
                      seed[:, :4 * J].reshape(P, J, 4).astype(np.float64), seed[:, 4 * J:].astype(np.float64),

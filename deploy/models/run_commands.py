@@ -38,6 +38,8 @@ def export_trained(entry, args) -> dict:
     model = load_trained(args.checkpoint)
     options = {"mode": args.mode or "unrolled", "dtype": {"float32": np.float32, "float64": np.float64}[args.dtype],
                "T": args.frames or None}
+    if getattr(args, "target", "default") != "default":
+        options["target"] = args.target
     if args.opset is not None:
         options["opset"] = args.opset
     return export_onnx(model, Path(args.out_dir), **options)
@@ -148,7 +150,7 @@ def run_locomotion(runtime, args) -> int:
         raise ValueError(f"output: quaternet-long writes .npy arrays, got {args.output!r}")
     from refimpl.errors import BadInputError, reading
 
-    if runtime.step_model is not None and not (runtime.pace_model is not None and x.ndim == 3 and x.shape[-1] == 2):
+    if runtime.step_model is not None and not (runtime.pace_graph is not None and x.ndim == 3 and x.shape[-1] == 2):
         if x.ndim != 3 or x.shape[1] < 2:
             raise BadInputError(f"{args.input}: expected frames (B, P + T, F) with P + T >= 2, got shape {x.shape}")
         P = int(args.start or 1)
@@ -158,7 +160,7 @@ def run_locomotion(runtime, args) -> int:
             rot, tr = runtime.rollout(x, P)
         y = np.concatenate([rot.reshape(rot.shape[0], rot.shape[1], -1), tr], axis=-1)
         what = f"{y.shape[1]} frames after a {P}-frame prefix, [rotations | offset, height]"
-    elif runtime.pace_model is not None:
+    elif runtime.pace_graph is not None:
         with reading(args.input):
             y = runtime.pace(x)
         what = "pace outputs [A, omega, cos, sin] per point (before clipping)"

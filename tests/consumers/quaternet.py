@@ -33,14 +33,20 @@ def predict(folder, prefix: np.ndarray, k: int) -> np.ndarray:
     assert meta["representation"]["name"] == "quaternet_frame" and meta["input_transform"]["in_graph"] is False
     B, P, J, _ = prefix.shape
     x = canonical(prefix).reshape(B, P, 4 * J).astype(np.float32)
+    return step_loop(init, step, x, k).reshape(B, k, J, 4)
+
+
+def step_loop(init, step, x: np.ndarray, k: int) -> np.ndarray:
+    """The online loop of the README: ``hidden = init(x_0)``, one ``step`` per frame of ``x (B, P, F)`` with the
+    carried state, then ``k − 1`` steps feeding each prediction back; returns ``(B, k, G)``."""
     (h,) = init.run(None, {"x": x[:, 0]})
-    for t in range(P):
+    for t in range(x.shape[1]):
         y, h = step.run(None, {"x": x[:, t], "hidden": h})
     ys = [y]
     for _ in range(k - 1):
         y, h = step.run(None, {"x": y, "hidden": h})
         ys.append(y)
-    return np.stack(ys, axis=1).reshape(B, k, J, 4)
+    return np.stack(ys, axis=1)
 
 
 def predict_graph(folder, prefix: np.ndarray) -> np.ndarray:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from tests.consumers.common import metadata, session
-from tests.consumers.quaternet import canonical
+from tests.consumers.quaternet import canonical, step_loop
 
 
 def qmul(a, b):
@@ -49,12 +49,28 @@ def predict(folder, prefix: np.ndarray) -> np.ndarray:
     meta = metadata(s)
     assert meta["representation"]["name"] == "quaternet_dq_frame"
     sk = meta["skeleton"]
-    parents, offsets = sk["parents"], np.asarray(sk["offsets"], np.float64)
+    parents = sk["parents"]
     B, P, J, _ = prefix.shape
-    x = current_dqs(canonical(prefix), parents, offsets).reshape(B, P, 8 * J).astype(np.float32)
-    (y,) = s.run(None, {"prefix": x})
-    c = y.reshape(B, y.shape[1], J, 8).astype(np.float64)[..., :4]                          # real parts
+    x = current_dqs(canonical(prefix), parents, np.asarray(sk["offsets"], np.float64))
+    (y,) = s.run(None, {"prefix": x.reshape(B, P, 8 * J).astype(np.float32)})
+    return local_rotations(y.reshape(B, y.shape[1], J, 8), parents)
+
+
+def predict_steps(folder, prefix: np.ndarray, k: int) -> np.ndarray:
+    """As :func:`predict` with ``quaternet_init.onnx`` + ``quaternet_step.onnx`` (the online loop; also the portable
+    graphs): the prefix's current DQs fed one frame per call with the carried state, then each prediction."""
+    init, step = session(Path(folder) / "quaternet_init.onnx"), session(Path(folder) / "quaternet_step.onnx")
+    sk = metadata(step)["skeleton"]
+    B, P, J, _ = prefix.shape
+    x = current_dqs(canonical(prefix), sk["parents"], np.asarray(sk["offsets"], np.float64))
+    y = step_loop(init, step, x.reshape(B, P, 8 * J).astype(np.float32), k)             # (B, k, 8J)
+    return local_rotations(y.reshape(B, k, J, 8), sk["parents"])
+
+
+def local_rotations(frames: np.ndarray, parents) -> np.ndarray:
+    """``(B, k, J, 8)`` current DQs → local unit rotations ``(B, k, J, 4)`` (the output transform)."""
+    c = frames.astype(np.float64)[..., :4]                                                    # real parts
     out = np.empty_like(c)
-    for j in range(J):
+    for j in range(c.shape[-2]):
         out[..., j, :] = c[..., j, :] if parents[j] < 0 else qmul(conj(c[..., parents[j], :]), c[..., j, :])
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
