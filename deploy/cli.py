@@ -48,10 +48,9 @@ def _exporter_of_checkpoint(path, override: str | None) -> str:
     from refimpl.checkpoint import load_checkpoint
     from refimpl.registry import MODELS
 
-    from pathlib import Path
+    from refimpl.errors import existing_file
 
-    if not Path(path).is_file():
-        raise _BadInput(f"{path}: no such checkpoint file")
+    existing_file(path)  # a regular file (not a FIFO or a device), else exit 3
     name = override
     if name is None:
         try:
@@ -98,15 +97,25 @@ def _cmd_export(args) -> int:
 
 def _cmd_run(args) -> int:
     from deploy.models import exporter, model_name_of_dir, runtime_for_dir
+    from refimpl.errors import existing_file, reading
 
     from pathlib import Path
 
     if not Path(args.model_dir).is_dir():
         raise _BadInput(f"{args.model_dir}: no such folder of exported models")
-    name = model_name_of_dir(args.model_dir)
+    if Path(args.input).suffix.lower() in _FILE_INPUTS:
+        existing_file(args.input)  # a regular file, else exit 3 before any model is opened
+    with reading(args.model_dir):  # the folder's models are input files: damage is exit 3
+        name = model_name_of_dir(args.model_dir)
     _check_foreign_options(args, name, args._owners)
     entry = exporter(name)
-    return int(entry.run_command(runtime_for_dir(args.model_dir, intra_op_threads=args.threads), args))
+    with reading(args.model_dir):
+        runtime = runtime_for_dir(args.model_dir, intra_op_threads=args.threads)
+    return int(entry.run_command(runtime, args))
+
+
+#: Suffixes of ``run``'s INPUT that name a file (a path of quaternet-long may be a built-in path's text).
+_FILE_INPUTS = (".bvh", ".txt", ".npy", ".csv")
 
 
 def _cmd_info(args) -> int:
@@ -130,15 +139,16 @@ def _cmd_info(args) -> int:
 def _load_for_info(path):
     """The :class:`deploy.runtime.DeployedModel` of ``path``; a file that is missing or cannot be read as a valid
     ONNX model is :class:`_BadInput` (exit 3)."""
-    from refimpl.errors import MissingDependency
+    from refimpl.errors import BadInputError, MissingDependency, reading
 
     from deploy.runtime import load_model
 
-    if not path.is_file():
+    if not path.exists():
         raise _BadInput(f"{path}: no such file")
     try:
-        return load_model(path)
-    except (MissingDependency, BrokenPipeError):
+        with reading(path):  # a regular file read with refimpl.files; metadata types and fields checked: exit 3
+            return load_model(path)
+    except (MissingDependency, BrokenPipeError, BadInputError):
         raise
     except Exception as exc:  # noqa: BLE001 - whatever the decoder or the checker says: the file is bad
         raise _BadInput(f"{path}: not a valid ONNX model ({' '.join(str(exc).split())[:300]})") from None
@@ -190,6 +200,8 @@ def _add_model_options(sub, hook: str, owners: dict) -> None:
 
 
 def _parser():
+    from refimpl.bounds import bounded_float, bounded_int  # the bounds of refimpl's options (spec/cli.md §1.1)
+
     p = argparse.ArgumentParser(prog="python -m deploy",
                                 description="Export trained networks to ONNX and run exported models (the exporter "
                                             "and the runtime are chosen by the model named in the checkpoint or in "
@@ -200,11 +212,11 @@ def _parser():
     e.add_argument("out_dir")
     e.add_argument("--model", default=None, help="model or exporter name (default: the model named in the "
                                                   "checkpoint; a plain state dict: qtg)")
-    e.add_argument("--opset", type=int, default=None)
+    e.add_argument("--opset", type=int, default=None)  # checked by the exporter (deploy.graph)
     e.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     e.add_argument("--mode", choices=("scan", "loop", "unrolled"), default=None,
                    help="form of a whole-sequence graph (qtg's rollout; default: the model's)")
-    e.add_argument("--frames", type=int, default=None, help="frames of a fixed-length graph (qtg: T of the "
+    e.add_argument("--frames", type=bounded_int("frames"), default=None, help="frames of a fixed-length graph (qtg: T of the "
                                                              "rollout, quaternet: k of the predictor)")
     e.add_argument("--target", choices=("default", "portable"), default="default",
                    help="default: today's graphs (onnxruntime); portable: per-call graphs at opset 15, batch 1, "
@@ -217,12 +229,14 @@ def _parser():
     r.add_argument("model_dir")
     r.add_argument("input")
     r.add_argument("output")
-    r.add_argument("--start", type=int, default=None,
+    r.add_argument("--start", type=bounded_int("frame_index"), default=None,
                    help="qtg: first generated frame (required); quaternet: last prefix frame (default: the "
                         "clip's last); acrnn: first seed frame (default 1: frame 0 is the T-pose); quaternet-long: prefix length P")
-    r.add_argument("--frames", type=int, default=None, help="frames to generate (default: the model's)")
-    r.add_argument("--fps", type=float, default=None, help="qtg: frame rate of the transition (default 30)")
-    r.add_argument("--threads", type=int, default=1)
+    r.add_argument("--frames", type=bounded_int("frames"), default=None,
+                   help="frames to generate (default: the model's)")
+    r.add_argument("--fps", type=bounded_float("fps"), default=None,
+                   help="qtg: frame rate of the transition (default 30)")
+    r.add_argument("--threads", type=bounded_int("ort_threads"), default=1, help="onnxruntime threads")
     run_owners: dict = {}
     _add_model_options(r, "add_run_options", run_owners)
     r.set_defaults(func=_cmd_run, _owners=run_owners)

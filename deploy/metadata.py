@@ -36,6 +36,7 @@ import numpy as np
 import onnx
 
 from refimpl._parsing import json_loads_strict
+from refimpl.files import read_bytes
 
 from deploy.graph import IR_VERSION, OPSET, ir_version_for
 
@@ -104,9 +105,13 @@ def read_metadata(model: onnx.ModelProto | str | bytes) -> dict[str, Any]:
     """
     if isinstance(model, (str, bytes)) and not isinstance(model, onnx.ModelProto):
         try:
-            model = onnx.load_model_from_string(model) if isinstance(model, bytes) else onnx.load(model)
+            model = onnx.load_model_from_string(model if isinstance(model, bytes) else read_bytes(model))
         except OSError:
             raise
+        except ValueError as exc:  # not a regular file (a FIFO, a device): refimpl.files
+            if isinstance(model, str) and model in str(exc):
+                raise
+            raise ValueError(f"model: not a readable ONNX model ({type(exc).__name__})") from None
         except Exception as exc:  # noqa: BLE001 - protobuf's DecodeError and friends on a damaged file
             where = "model" if isinstance(model, bytes) else repr(str(model))
             raise ValueError(f"{where}: not a readable ONNX model ({type(exc).__name__})") from None

@@ -10,11 +10,15 @@ Shape legend: B batch, T frames, P pose size, Z latent size, H hidden size, L la
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 import onnx
+
+from refimpl.bounds import check_number
+from refimpl.files import read_bytes
 
 from deploy.metadata import read_metadata
 from deploy.session import check_model_size, make_session
@@ -43,10 +47,14 @@ def _load_proto(model) -> onnx.ModelProto:
         except Exception as exc:
             raise ValueError(f"model: the bytes are not a readable ONNX model ({type(exc).__name__})") from exc
     path = Path(model)
-    if not path.is_file():
-        raise ValueError(f"model: no such file {str(path)!r}")
     try:
-        return onnx.load(str(path))
+        data = read_bytes(path)  # a regular file (not a FIFO or a device), read to its real size
+    except FileNotFoundError:
+        raise ValueError(f"model: no such file {str(path)!r}") from None
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"model: {exc}") from None
+    try:
+        return onnx.load_model_from_string(data)
     except Exception as exc:  # onnx raises DecodeError and others on garbage
         raise ValueError(f"model: {str(path)!r} is not a readable ONNX model ({type(exc).__name__})") from exc
 
@@ -74,6 +82,64 @@ def _check_metadata_types(meta: dict) -> None:
                          f"{sorted(_METADATA_TYPES)}")
 
 
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _want(ok: bool, key: str, expected: str, value) -> None:
+    if not ok:
+        raise ValueError(f"metadata[{key}]: expected {expected}, got {type(value).__name__} {str(value)[:40]}")
+
+
+def _check_numbers(value, key: str) -> None:
+    _want(isinstance(value, list) and all(_is_number(v) for v in value), key, "a list of finite numbers", value)
+
+
+def _check_metadata_contents(meta: dict) -> None:
+    """The fields inside the documented keys that the runners and ``python -m deploy info`` read (the same JSON
+    types ``deploy/metadata.py`` writes), so that a damaged or hand-edited model is refused when it is opened
+    (one line naming the field) rather than failing later with a ``KeyError`` or ``TypeError``."""
+    model = meta.get("model")
+    if isinstance(model, dict):
+        _want(isinstance(model.get("name"), str), "'model']['name'", "a string", model.get("name"))
+        if "config" in model:
+            _want(isinstance(model["config"], dict), "'model']['config'", "a JSON object", model["config"])
+    rep = meta.get("representation")
+    if isinstance(rep, dict) and "name" in rep:
+        _want(isinstance(rep["name"], str), "'representation']['name'", "a string", rep["name"])
+    skel = meta.get("skeleton")
+    if isinstance(skel, dict):
+        names, parents, offsets = skel.get("names"), skel.get("parents"), skel.get("offsets")
+        _want(isinstance(names, list) and all(isinstance(n, str) for n in names), "'skeleton']['names'",
+              "a list of strings", names)
+        _want(isinstance(parents, list) and all(isinstance(p, int) and not isinstance(p, bool) for p in parents),
+              "'skeleton']['parents'", "a list of integers", parents)
+        _want(isinstance(offsets, list) and all(isinstance(o, list) and len(o) == 3 and all(map(_is_number, o))
+                                                for o in offsets), "'skeleton']['offsets'",
+              "a list of [x, y, z] numbers", offsets)
+        _want(len(names) == len(parents) == len(offsets), "'skeleton'", "as many names, parents and offsets",
+              f"{len(names)}, {len(parents)}, {len(offsets)}")
+        if skel.get("units") is not None:
+            _want(isinstance(skel["units"], str), "'skeleton']['units'", "a string", skel["units"])
+    norm = meta.get("normalization")
+    if isinstance(norm, dict):
+        _check_numbers(norm.get("mean"), "'normalization']['mean'")
+        _check_numbers(norm.get("std"), "'normalization']['std'")
+        _want(len(norm["mean"]) == len(norm["std"]) >= 1, "'normalization'", "mean and std of one length >= 1",
+              f"{len(norm['mean'])} and {len(norm['std'])}")
+        _want(isinstance(norm.get("in_graph"), bool), "'normalization']['in_graph'", "true or false",
+              norm.get("in_graph"))
+    for key in ("input_transform", "output_transform"):
+        t = meta.get(key)
+        if isinstance(t, dict):
+            if "summary" in t:
+                _want(isinstance(t["summary"], str), f"{key!r}]['summary'", "a string", t["summary"])
+            if "steps" in t:
+                _want(isinstance(t["steps"], list), f"{key!r}]['steps'", "a list", t["steps"])
+    if "frame_rate" in meta:
+        check_number(meta["frame_rate"], "metadata['frame_rate']", "fps")
+
+
 class DeployedModel:
     """An exported model loaded for inference: validated proto, decoded metadata, onnxruntime session.
 
@@ -92,10 +158,12 @@ class DeployedModel:
             validate_model(proto)
         self.metadata = read_metadata(proto)
         _check_metadata_types(self.metadata)
+        _check_metadata_contents(self.metadata)
         self.session = make_session(proto, intra_op_threads=intra_op_threads, check_size=False, spinning=spinning)
         self.inputs = [(i.name, list(i.shape), _NP_FROM_ORT.get(i.type, None)) for i in self.session.get_inputs()]
         self.outputs = [(o.name, list(o.shape), _NP_FROM_ORT.get(o.type, None))
                         for o in self.session.get_outputs()]
+
 
     @property
     def role(self) -> str | None:

@@ -32,6 +32,9 @@ import os
 import numpy as np
 import onnx
 
+from refimpl.bounds import check_count
+from refimpl.files import read_bytes
+
 __all__ = ["make_session_options", "make_session", "check_model_size", "MAX_TENSOR_BYTES", "MAX_CONSTANT_BYTES",
            "MAX_LOOP_ITERATIONS"]
 
@@ -219,8 +222,7 @@ def make_session_options(intra_op_threads: int = 1, *, optimization: str = "all"
     """
     import onnxruntime as ort
 
-    if not isinstance(intra_op_threads, (int, np.integer)) or intra_op_threads < 1:
-        raise ValueError(f"intra_op_threads: expected a positive integer, got {intra_op_threads!r}")
+    check_count(intra_op_threads, "intra_op_threads", "ort_threads")  # refimpl.bounds: [1, 256]
     levels = {"all": ort.GraphOptimizationLevel.ORT_ENABLE_ALL,
               "extended": ort.GraphOptimizationLevel.ORT_ENABLE_EXTENDED,
               "basic": ort.GraphOptimizationLevel.ORT_ENABLE_BASIC,
@@ -257,7 +259,7 @@ def make_session(model: onnx.ModelProto | bytes | str | os.PathLike, *, intra_op
     if not isinstance(model, onnx.ModelProto):
         try:
             model = (onnx.load_model_from_string(model) if isinstance(model, bytes)
-                     else onnx.load(os.fspath(model)))
+                     else onnx.load_model_from_string(read_bytes(os.fspath(model))))
         except Exception as exc:  # DecodeError, OSError, ...
             raise ValueError(f"model: not a readable ONNX model ({type(exc).__name__}: {exc})") from exc
     if check_size:

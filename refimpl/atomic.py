@@ -7,17 +7,29 @@ failure the temporary file is removed and the target is untouched.
 
 The temporary file is created exclusively with mode ``0o666 & ~umask`` (not ``tempfile.mkstemp``'s 0o600),
 so the final file gets the usual permissions, and keeps the target's suffix (some writers, such as
-matplotlib's ``savefig``, choose the format from it).
+matplotlib's ``savefig``, choose the format from it). Its name is ``.<stem>.<12 hex digits>.tmp<suffix>``.
+
+A writer killed with ``kill -9`` cannot remove its temporary file. While it writes, the writer holds an
+exclusive ``fcntl.flock`` on the file (POSIX; the kernel drops it when the process dies), so that
+:func:`remove_stale_temp_files` — called by the next reader or writer of the target (the trainer, the data
+cache, ``refimpl import``, ``export-weights``) — removes exactly the temporary files whose writer is gone and
+never the one of a live writer.
 """
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import secrets
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text"]
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX
+    fcntl = None
+
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "remove_stale_temp_files"]
 
 
 def _fsync_dir(directory: Path) -> None:
@@ -33,16 +45,77 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
-def _create_temp(path: Path) -> Path:
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+def _create_temp(path: Path) -> tuple[Path, int]:
+    """A new temporary file beside ``path`` and a descriptor holding its writer's lock (closing it drops it)."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0) | getattr(os, "O_CLOEXEC", 0)
     for _ in range(100):
         tmp = path.with_name(f".{path.stem}.{secrets.token_hex(6)}.tmp{path.suffix}")
         try:
-            os.close(os.open(tmp, flags, 0o666))
-            return tmp
+            fd = os.open(tmp, flags, 0o666)
         except FileExistsError:
             continue
+        if fcntl is None:  # pragma: no cover - not POSIX: no lock, no cleaning by others
+            return tmp, fd
+        fcntl.flock(fd, fcntl.LOCK_EX)  # a cleaner may hold it for an instant: wait, then check it kept the file
+        try:
+            same = os.stat(tmp).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            return tmp, fd
+        os.close(fd)
     raise FileExistsError(f"could not create a temporary file next to {str(path)!r}")
+
+
+def _temp_pattern(target: Path) -> re.Pattern:
+    return re.compile(r"\." + re.escape(target.stem) + r"\.[0-9a-f]{12}\.tmp" + re.escape(target.suffix) + r"\Z")
+
+
+def _remove_if_unlocked(path: str, assume_no_writer: bool) -> bool:
+    if fcntl is None:  # pragma: no cover - not POSIX: only a caller that excludes other writers removes
+        if assume_no_writer:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(path)
+                return True
+        return False
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:  # a live writer holds it
+        os.close(fd)
+        return False
+    try:
+        os.unlink(path)
+        return True
+    except FileNotFoundError:
+        return False
+    finally:
+        os.close(fd)
+
+
+def remove_stale_temp_files(target, *, assume_no_writer: bool = False) -> list[Path]:
+    """Remove the temporary files :func:`atomic_path` left beside ``target`` when their writer was killed.
+
+    Only regular files of the writer's exact pattern for this target (``.<stem>.<12 hex digits>.tmp<suffix>``)
+    whose writer's lock is free (no live writer) are removed. Without ``fcntl`` (not POSIX) nothing is removed
+    unless ``assume_no_writer`` (the caller holds a lock that excludes other writers of ``target``). Returns the
+    removed paths; never raises for a folder that cannot be listed.
+    """
+    target = Path(target)
+    pattern = _temp_pattern(target)
+    removed = []
+    try:
+        entries = list(os.scandir(target.parent))
+    except OSError:
+        return removed
+    for e in entries:
+        if pattern.match(e.name) and e.is_file(follow_symlinks=False) and _remove_if_unlocked(e.path,
+                                                                                              assume_no_writer):
+            removed.append(Path(e.path))
+    return removed
 
 
 @contextlib.contextmanager
@@ -64,7 +137,7 @@ def atomic_path(path: str | os.PathLike, *, make_parents: bool = False) -> Itera
     path = Path(path)
     if make_parents:
         path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _create_temp(path)
+    tmp, lock = _create_temp(path)
     try:
         yield tmp
         with open(tmp, "rb+") as f:
@@ -75,6 +148,8 @@ def atomic_path(path: str | os.PathLike, *, make_parents: bool = False) -> Itera
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+    finally:
+        os.close(lock)  # drops the writer's lock
     _fsync_dir(path.parent)
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from refimpl._parsing import locate_bad_row
+from refimpl.files import read_bytes
 from refimpl.motion import TRANSLATION_TOLERANCE, Motion, simplify_translations
 from refimpl.quat import quat_fix
 from refimpl.rotations import quat_from_euler
@@ -303,7 +304,7 @@ def _unique_names(names: list[str], end_flags: list[bool]) -> list[str]:
 
 def _read_text(path) -> str:
     try:
-        raw = Path(path).read_bytes()
+        raw = read_bytes(path)
     except OSError as exc:
         raise ValueError(f"path: cannot read {os.fspath(path)!r}: {exc}") from None
     try:

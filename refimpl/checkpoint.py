@@ -29,18 +29,15 @@ from __future__ import annotations
 import hashlib
 import hmac
 import json
-import math
 import os
-import struct
-import tokenize
 import zipfile
-import zlib
 from typing import Any, Mapping
 
 import numpy as np
 
 from refimpl._parsing import json_loads_strict
 from refimpl.atomic import atomic_path
+from refimpl.npy_files import read_npz
 
 __all__ = [
     "save_checkpoint", "load_checkpoint", "load_state_dict_npz", "check_params",
@@ -52,22 +49,6 @@ _CHECKSUM = "__checksum__"
 _RESERVED = (_META, _CHECKSUM)
 _ALLOWED_KINDS = "biufc"  # bool, signed/unsigned integers, floats, complex
 _BIT_GENERATORS = ("PCG64", "PCG64DXSM", "MT19937", "Philox", "SFC64")
-
-#: Reading bound: the members of an archive may inflate to at most ``_INFLATE_RATIO`` × the file size +
-#: ``_INFLATE_ALLOWANCE`` bytes in total (checked on the sizes the zip directory declares, before anything is
-#: read; zipfile never produces more than a member's declared size). Stored members (what
-#: :func:`save_checkpoint` and ``np.savez`` write) have ratio 1; ``np.savez_compressed`` float weights ~1.1.
-_INFLATE_RATIO = 32
-_INFLATE_ALLOWANCE = 8 * 2**20
-_READ_CHUNK = 2**20
-_ZIP_UNSUPPORTED_FLAGS = 0x1 | 0x20 | 0x40  # encrypted, compressed patched data, strong encryption
-# what NumPy's .npy header parser (ast.literal_eval after a tokenize-based filter) may raise on a bad header
-_NPY_HEADER_ERRORS = (ValueError, SyntaxError, tokenize.TokenError, RecursionError, MemoryError, TypeError,
-                      OverflowError, struct.error)
-# what zipfile / zlib may raise on a damaged archive
-_ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, KeyError, NotImplementedError, RuntimeError,
-               OverflowError, struct.error, ValueError)
-
 
 # --------------------------------------------------------------------------------------------------
 # internals
@@ -109,84 +90,6 @@ def _write_npz_atomic(path: str, entries: Mapping[str, np.ndarray]) -> None:
             for name, a in entries.items():
                 with zf.open(name + ".npy", "w", force_zip64=True) as member:
                     np.lib.format.write_array(member, a, allow_pickle=False)
-
-
-def _read_npy_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, where: str) -> np.ndarray:
-    """One ``.npy`` member: NumPy parses the header (``ast.literal_eval``, never pickle); the size the header
-    declares must equal the member's actual data size before anything is allocated; the data is read in
-    chunks straight into the array (the CRC is checked by zipfile at the end)."""
-    with zf.open(info) as f:
-        try:
-            version = np.lib.format.read_magic(f)
-            if version == (1, 0):
-                shape, fortran_order, dtype = np.lib.format.read_array_header_1_0(f)
-            elif version == (2, 0):
-                shape, fortran_order, dtype = np.lib.format.read_array_header_2_0(f)
-            else:
-                raise ValueError(f"unsupported .npy format version {version}")
-        except _NPY_HEADER_ERRORS as e:
-            raise ValueError(f"{where}: malformed .npy header: {type(e).__name__}: {e}") from e
-        if dtype.kind not in _ALLOWED_KINDS or dtype.hasobject or dtype.subdtype is not None:
-            raise ValueError(f"{where}: dtype {dtype} is not stored by this format (bool, integer, float or "
-                             f"complex only; never pickled objects)")
-        if any(n < 0 for n in shape):
-            raise ValueError(f"{where}: negative size in the declared shape {shape}")
-        declared = math.prod(shape) * dtype.itemsize
-        present = info.file_size - f.tell()
-        if declared != present:
-            raise ValueError(f"{where}: the header declares shape {shape} of {dtype} ({declared} bytes) but the "
-                             f"member holds {present} bytes of data")
-        array = np.empty(math.prod(shape), dtype=dtype)
-        buf = memoryview(array.view(np.uint8)) if array.size else memoryview(b"")
-        pos = 0
-        while pos < declared:
-            n = f.readinto(buf[pos:pos + _READ_CHUNK])
-            if not n:
-                raise ValueError(f"{where}: truncated data ({pos} of {declared} bytes)")
-            pos += n
-    return array.reshape(shape[::-1]).T if fortran_order else array.reshape(shape)
-
-
-def _read_npz(path) -> dict[str, np.ndarray]:
-    """Every member of an ``.npz`` as a dict, with any sign of damage raised as ValueError.
-
-    Memory is bounded by the file size: the total size the zip directory declares must be within
-    ``_INFLATE_RATIO`` × file size + ``_INFLATE_ALLOWANCE`` (a zip bomb is refused before inflating), and each
-    ``.npy`` header's shape must match its member's data size before the array is allocated.
-    """
-    where = os.fspath(path)
-    with open(path, "rb") as fh:  # a missing file or a directory: OSError, as it is
-        size = os.fstat(fh.fileno()).st_size
-        try:
-            with zipfile.ZipFile(fh) as zf:
-                infos = zf.infolist()
-                total = sum(i.file_size for i in infos)
-                limit = _INFLATE_RATIO * size + _INFLATE_ALLOWANCE
-                if total > limit:
-                    raise ValueError(f"{where}: the archive declares {total} bytes of content, more than the "
-                                     f"{limit} allowed for a {size}-byte file ({_INFLATE_RATIO} × its size + "
-                                     f"{_INFLATE_ALLOWANCE} bytes): refusing a possible zip bomb")
-                out = {}
-                for info in infos:
-                    name = info.filename
-                    if not name.endswith(".npy"):
-                        raise ValueError(f"{where}: member {name!r} is not a .npy array")
-                    key = name[:-len(".npy")]
-                    if key in out:
-                        raise ValueError(f"{where}: member {name!r} appears twice")
-                    if info.flag_bits & _ZIP_UNSUPPORTED_FLAGS:
-                        raise ValueError(f"{where}: member {name!r} is encrypted or patched "
-                                         f"(zip flags {info.flag_bits:#x}); not a checkpoint")
-                    if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
-                        raise ValueError(f"{where}: member {name!r} uses unsupported compression "
-                                         f"{info.compress_type}")
-                    out[key] = _read_npy_member(zf, info, f"{where}: member {name!r}")
-        except (*_ZIP_ERRORS, OSError) as e:  # damage inside the file: ValueError
-            if isinstance(e, ValueError) and str(e).startswith(where):
-                raise  # our own message already names the file
-            raise ValueError(f"{where}: unreadable .npz (corrupted, truncated or not an npz): "
-                             f"{type(e).__name__}: {e}") from e
-    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -244,7 +147,7 @@ def load_checkpoint(path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     OSError
         No file at ``path`` (``FileNotFoundError``), a directory, unreadable.
     """
-    entries = _read_npz(path)
+    entries = read_npz(path)
     missing = [k for k in _RESERVED if k not in entries]
     if missing:
         raise ValueError(f"{os.fspath(path)}: not a refimpl checkpoint (missing {missing}); "
@@ -278,7 +181,7 @@ def load_state_dict_npz(path) -> dict[str, np.ndarray]:
     ValueError
         Unreadable/corrupted file, or a member that would need pickle (object arrays).
     """
-    entries = _read_npz(path)
+    entries = read_npz(path)
     if _CHECKSUM in entries or _META in entries:
         return load_checkpoint(path)[0]
     return entries

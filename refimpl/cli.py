@@ -56,9 +56,9 @@ from refimpl import cache_cli, weights_cli
 from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info, cmd_pretrained
 from refimpl.errors import BadInputError, MissingDependency, UsageError, reading
-from refimpl.bounds import bounded_int
+from refimpl.bounds import bounded_float, bounded_int
 from refimpl.threads import AUTO, threads_option
-from refimpl.options import add_data_options, add_export_length_option, beta, check_overrides, nonneg_int, positive_float, positive_int
+from refimpl.options import add_data_options, add_export_length_option, beta, check_overrides, positive_float, positive_int
 from refimpl.registry import DEFAULT_MODEL, MODELS, TASKS, generate_usage, task_of
 from refimpl.pretrained import shipped_name
 from refimpl.run_options import RUN_OPTIONS, reconcile, restore_intervals, run_options
@@ -143,6 +143,7 @@ def cmd_train(args) -> int:
         _reuse_run_options(args, out / "checkpoint.npz")
     spec = MODELS[args.model]
     task = task_of(spec)
+    _refuse_other_tasks_options(args, spec.task, spec.name)
     rep = args.representation or spec.representations[0]
     if rep not in spec.representations:
         raise UsageError(f"--representation {rep!r}: model {spec.name!r} trains on {list(spec.representations)}")
@@ -230,6 +231,7 @@ def cmd_eval(args) -> int:
     model = load_trained(args.checkpoint) if args.checkpoint else None
     _check_model_option(args, model)
     spec = model.spec if model is not None else MODELS[args.model or DEFAULT_MODEL]
+    _refuse_other_tasks_options(args, spec.task, spec.name)  # eval --join of a QuaterNet: exit 2, not ignored
     return task_of(spec).eval_command(args, model)
 
 
@@ -400,7 +402,7 @@ def _add_info_parser(sub) -> None:
     p.add_argument("file")
     p.add_argument("--joints", action="store_true", help="list the joint hierarchy with offsets")
     p.add_argument("--layout", default="cmu", choices=("cmu", "h36m"), help="exp-map layout (default cmu)")
-    p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
+    p.add_argument("--fps", type=bounded_float("fps"), default=None, help="override the frame rate")
     p.set_defaults(func=cmd_info)
 
 
@@ -495,7 +497,7 @@ def _add_generate_parser(sub) -> None:
                                    f"of the exported models in --onnx, else {DEFAULT_MODEL}'s) and write a BVH.",
                        usage=generate_usage().replace("usage: ", "", 1))
     p.add_argument("--source", default=None, help=".bvh or exp-map .txt: the source clip, prefix or seed")
-    p.add_argument("--source-frame", type=nonneg_int, default=None,
+    p.add_argument("--source-frame", type=bounded_int("frame_index"), default=None,
                    help="frame of --source where the task starts (see the usage lines above)")
     p.add_argument("--checkpoint", default=None, help="a `refimpl train` checkpoint (NumPy backend)")
     p.add_argument("--backend", default="numpy", choices=("numpy", "onnx"))
@@ -528,7 +530,7 @@ def _add_render_parser(sub) -> None:
     p.add_argument("--up", default="y", choices=("y", "z"), help="the data's up axis (BVH: y)")
     p.add_argument("--title", default=None)
     p.add_argument("--layout", default="cmu", choices=("cmu", "h36m"), help="exp-map layout")
-    p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate")
+    p.add_argument("--fps", type=bounded_float("fps"), default=None, help="override the frame rate")
     p.set_defaults(func=cmd_render)
 
 

@@ -13,6 +13,7 @@ from typing import Mapping
 import numpy as np
 
 from refimpl.errors import DEPLOY_HINT, BadInputError, MissingDependency, existing_file, reading
+from refimpl.files import read_bytes
 from refimpl.pretrained import resolve_checkpoint
 from refimpl.registry import MODELS, task_of
 from refimpl.services import read_motion
@@ -187,7 +188,7 @@ def _info_onnx(p: Path, args) -> None:
 
     with reading(p):
         try:
-            model = onnx.load(str(p))
+            model = onnx.load_model_from_string(read_bytes(p))  # a regular file, read to its size
         except Exception as exc:  # onnx raises DecodeError and others on garbage
             raise ValueError(f"not a readable ONNX model ({type(exc).__name__}: {exc})") from exc
     g = model.graph

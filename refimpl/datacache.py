@@ -9,9 +9,14 @@ of its inputs, and the next command on unchanged files loads it in seconds.
   loader version or different options give another key; the old entry is simply not found.
 * **Entry**: ``<cache dir>/<name>-<key[:24]>.npz`` holding the arrays, ``__meta__`` (a JSON string: key,
   name, version, the caller's metadata) and ``__checksum__`` (CRC-32 of every array's name, dtype, shape and
-  bytes). Written atomically (:mod:`refimpl.atomic`), read with ``allow_pickle=False``.
-* **Trust**: an entry that cannot be read, whose checksum or key does not match, is ignored (the caller
-  rebuilds and overwrites it); nothing in it is used unless it verifies.
+  bytes). Written atomically (:mod:`refimpl.atomic`); read with the checkpoint reader's bounds
+  (:func:`refimpl.npy_files.read_npz`: a regular file, stored members only, every declared size checked against
+  the file's before anything is allocated; never unpickled).
+* **Trust**: an entry that cannot be read or decoded (damaged zip, a compressed member, a header declaring more
+  than the file holds, ``__meta__`` that is not a JSON object, a ``decode`` that raises), whose checksum or key
+  does not match, is ignored and noted (the caller rebuilds and overwrites it); nothing in it is used unless it
+  verifies. A temporary file left by a writer killed while writing an entry is removed by the next reader
+  (:func:`refimpl.atomic.remove_stale_temp_files`).
 * **Where** (:func:`cache_dir`): ``$REFIMPL_CACHE`` if set (``off``, ``0`` or empty: no cache), else
   ``$XDG_CACHE_HOME/refimpl``, else ``~/.cache/refimpl``. Entries can be deleted at any time.
 
@@ -23,19 +28,22 @@ import hashlib
 import io
 import json
 import os
-import zipfile
 import zlib
 from pathlib import Path
 from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from refimpl.atomic import atomic_write_bytes
+from refimpl._parsing import json_loads_strict
+from refimpl.atomic import atomic_write_bytes, remove_stale_temp_files
+from refimpl.npy_files import read_npz
 
 __all__ = ["cache_dir", "fingerprint", "entry_path", "save_entry", "load_entry", "cached"]
 
 _META = "__meta__"
 _CHECKSUM = "__checksum__"
+#: dtype kinds an entry may hold: numbers, booleans and fixed-width text (never objects).
+_KINDS = "biufcUS"
 
 
 def cache_dir() -> Path | None:
@@ -115,15 +123,24 @@ def load_entry(name: str, key: str, *, folder: Path | None = None) -> tuple[dict
     (unreadable, wrong checksum or key); arrays and meta are empty unless it is a hit.
     """
     path = entry_path(name, key, folder)
-    if path is None or not path.is_file():
+    if path is None:
+        return {}, {}, "miss"
+    remove_stale_temp_files(path)  # of a writer killed while writing this entry (refimpl.atomic)
+    if not os.path.lexists(path):
         return {}, {}, "miss"
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-        head = json.loads(str(arrays.pop(_META)))
-        stored = str(arrays.pop(_CHECKSUM))
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
-        return {}, {}, f"corrupt: {type(exc).__name__}: {exc}"
+        # the checkpoint reader's bounds: a regular file, stored members only, every declared size checked
+        # against the file's before anything is allocated (refimpl.npy_files)
+        arrays = read_npz(path, kinds=_KINDS, allow_compressed=False)
+        meta_raw, stored_raw = arrays.pop(_META), arrays.pop(_CHECKSUM)
+        if meta_raw.ndim or meta_raw.dtype.kind != "U" or stored_raw.ndim or stored_raw.dtype.kind != "U":
+            raise ValueError("__meta__ / __checksum__: expected 0-d text entries")
+        head = json_loads_strict(str(meta_raw))
+        stored = str(stored_raw)
+        if not isinstance(head, dict) or not isinstance(head.get("meta", {}), dict):
+            raise ValueError(f"__meta__: expected a JSON object with an object 'meta', got {type(head).__name__}")
+    except (OSError, ValueError, KeyError, RecursionError, MemoryError) as exc:
+        return {}, {}, f"corrupt: {type(exc).__name__}: {str(exc)[:300]}"
     if head.get("key") != key or head.get("name") != name:
         return {}, {}, "corrupt: the entry belongs to other inputs"
     if _checksum(arrays) != stored:
@@ -137,14 +154,14 @@ def cached(name: str, key: str, build: Callable[[], object], encode: Callable[[o
     """``decode`` of the verified entry of ``(name, key)``; else ``build()``, stored through ``encode``.
 
     ``encode(value) -> (arrays, meta)`` and ``decode(arrays, meta) -> value`` must be inverse. A corrupt entry
-    is reported through ``progress`` and rebuilt; a ``decode`` that raises ``ValueError``/``KeyError`` (an
-    entry of an older layout under the same key) counts as corrupt too.
+    is reported through ``progress`` and rebuilt; a ``decode`` that raises (an entry of an older layout under the
+    same key, a field of the wrong type) counts as corrupt too.
     """
     arrays, meta, status = load_entry(name, key, folder=folder)
     if status == "hit":
         try:
             value = decode(arrays, meta)
-        except (ValueError, KeyError, IndexError, TypeError) as exc:
+        except Exception as exc:  # noqa: BLE001 - any decode failure of a verified entry: ignored, rebuilt
             status = f"corrupt: {type(exc).__name__}: {exc}"
         else:
             if progress is not None:

@@ -10,6 +10,8 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
+from refimpl.files import check_regular
+
 __all__ = ["BadInputError", "UsageError", "MissingDependency", "DEPLOY_HINT", "file_error", "reading",
            "existing_file"]
 
@@ -55,10 +57,18 @@ def reading(path):
 
 
 def existing_file(path) -> Path:
-    """``Path(path)`` when it names an existing file, else :class:`BadInputError`."""
+    """``Path(path)`` when it names a regular file (after symlinks), else :class:`BadInputError` (exit 3).
+
+    Checked with ``os.stat``, before anything is opened: a FIFO, a device (``/dev/zero`` or a symlink to it) or
+    a socket is refused as a folder is (spec/robustness.md §13), since a reader of one could block or never end.
+    """
     p = Path(path)
-    if not p.exists():
-        raise BadInputError(f"{p}: no such file")
-    if p.is_dir():
-        raise BadInputError(f"{p}: is a directory, expected a file")
+    try:
+        check_regular(p)
+    except FileNotFoundError:
+        raise BadInputError(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise BadInputError(f"{p}: is a directory, expected a file") from None
+    except (OSError, ValueError) as exc:
+        raise file_error(p, exc) from None
     return p

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from refimpl._parsing import locate_bad_row
+from refimpl.files import read_bytes
 from refimpl.motion import Motion
 from refimpl.quat import quat_fix
 from refimpl.rotations import quat_from_axis_angle
@@ -79,7 +80,7 @@ def read_expmap(path, layout: str = "cmu", frame_time: float | None = None, name
     width, default_dt, default_root = EXPMAP_LAYOUTS[layout]
     where = os.fspath(path)
     try:
-        text = Path(path).read_bytes().decode("utf-8-sig")
+        text = read_bytes(path).decode("utf-8-sig")
     except OSError as exc:
         raise ValueError(f"path: cannot read {where!r}: {exc}") from None
     except UnicodeDecodeError as exc:

@@ -10,7 +10,7 @@ import dataclasses
 import math
 from typing import Mapping, Sequence
 
-from refimpl.bounds import bounded_int, check_config_sizes
+from refimpl.bounds import bounded_float, bounded_int, check_config_sizes
 from refimpl.errors import UsageError
 
 __all__ = ["number_parser", "positive_int", "nonneg_int", "positive_float", "beta", "add_data_options",
@@ -43,7 +43,7 @@ def add_data_options(p, default="sample") -> None:
                    help="'sample' (the embedded CMU sample, default), a folder like ../shared/data, a folder of "
                         ".bvh / exp-map .txt files (train/ and test/ sub-folders, or split by file), or one file "
                         "(split by time)")
-    p.add_argument("--fps", type=positive_float, default=None,
+    p.add_argument("--fps", type=bounded_float("fps"), default=None,
                    help="true frame rate of the files when the header is wrong (CMU salsa: 60)")
     p.add_argument("--test-fraction", type=float, default=0.2, help="held-out share when splitting (default 0.2)")
     p.add_argument("--stride", type=bounded_int("stride"), default=4, help="frames between window starts (default 4)")

@@ -25,6 +25,7 @@ Shape legend: T frames, J joints, N drawn frames.
 from __future__ import annotations
 
 import csv
+import io
 import os
 import sys
 import time
@@ -34,6 +35,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from refimpl.atomic import atomic_path
+from refimpl.files import read_text
 
 __all__ = ["render_gif", "stderr_progress", "render_loss_curve", "render_error_curves", "read_loss_log",
            "render_path_motion"]
@@ -180,7 +182,7 @@ def read_loss_log(csv_path: str | os.PathLike) -> dict[str, np.ndarray]:
     validation loss) still lines up with the step column.
     """
     path = Path(csv_path)
-    with open(path, newline="") as f:
+    with io.StringIO(read_text(path, encoding="utf-8"), newline="") as f:  # a regular file, read to its size
         reader = csv.reader(f)
         try:
             header = next(reader)

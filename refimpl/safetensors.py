@@ -33,6 +33,7 @@ from typing import Mapping
 import numpy as np
 
 from refimpl.atomic import atomic_path
+from refimpl.files import open_regular
 
 __all__ = ["MAX_HEADER_BYTES", "DTYPES", "read_safetensors", "write_safetensors", "is_safetensors"]
 
@@ -84,7 +85,7 @@ def _parse_header(raw: bytes, buffer_size: int, where: str) -> tuple[list, dict]
         if not isinstance(e, dict) or set(e) != {"dtype", "shape", "data_offsets"}:
             raise ValueError(f"{at}: expected an object with exactly dtype, shape and data_offsets")
         dt, shape, offsets = e["dtype"], e["shape"], e["data_offsets"]
-        if dt not in _ITEMSIZE:
+        if not isinstance(dt, str) or dt not in _ITEMSIZE:  # a JSON list or object is unhashable: not a dtype
             raise ValueError(f"{at}: unsupported dtype {dt!r}; expected one of {sorted(_ITEMSIZE)}")
         if not isinstance(shape, list) or not all(_is_uint(n) for n in shape):
             raise ValueError(f"{at}: shape must be a list of non-negative integers, got {shape!r}")
@@ -129,10 +130,10 @@ def _header_of(f, size: int, where: str) -> tuple[list, dict, int]:
 def is_safetensors(path) -> bool:
     """Whether ``path`` looks like a safetensors file (a plausible header length, then ``{``); no validation."""
     try:
-        with open(path, "rb") as f:
+        with open_regular(path) as f:
             head = f.read(9)
             size = os.fstat(f.fileno()).st_size
-    except OSError:
+    except (OSError, ValueError):
         return False
     if len(head) < 9:
         return False
@@ -163,7 +164,7 @@ def read_safetensors(path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         No file, a directory, unreadable.
     """
     where = os.fspath(path)
-    with open(path, "rb") as f:
+    with open_regular(path) as f:
         size = os.fstat(f.fileno()).st_size
         entries, meta, start = _header_of(f, size, where)
         out = {}

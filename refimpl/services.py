@@ -157,8 +157,29 @@ def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect:
         if want is not None and name != want.spec.name:  # the folder must hold this command's model
             raise BadInputError(f"{onnx_dir}: holds exported {name!r} models, not the {want.spec.name!r} model of "
                                 f"{want.path}")
+        if want is not None:
+            _check_same_network(onnx_dir, want)
         methods[f"{name}_onnx"] = onnx_method(onnx_dir)
     return methods
+
+
+def _check_same_network(onnx_dir, want: TrainedModel) -> None:
+    """The exported models' ``model.config`` must agree with the checkpoint's config on every field both hold
+    (an acRNN folder of another representation has another ``frame_size``): ``BadInputError`` naming the field,
+    when the folder is opened rather than at the first step."""
+    import json
+
+    exported = (onnx_metadata(onnx_dir).get("model") or {}).get("config")
+    if not isinstance(exported, dict):
+        raise BadInputError(f"{onnx_dir}: metadata model.config: expected a JSON object, got "
+                            f"{type(exported).__name__}")
+    ours = json.loads(json.dumps(want.extra, default=str))
+    differ = [k for k in sorted(set(exported) & set(ours)) if json.dumps(exported[k]) != json.dumps(ours[k])]
+    if differ:
+        k = differ[0]
+        raise BadInputError(f"{onnx_dir}: exported from another {want.spec.name} network than {want.path}: config "
+                            f"{k} is {json.dumps(exported[k])[:60]} there, {json.dumps(ours[k])[:60]} in the "
+                            f"checkpoint" + (f" (and {len(differ) - 1} more fields)" if len(differ) > 1 else ""))
 
 
 def evaluate_model(model: TrainedModel | None, test_ds, *, onnx_dir=None, task: str | None = None, **options):

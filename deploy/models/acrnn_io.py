@@ -19,7 +19,7 @@ from refimpl.models.acrnn import ACRNNConfig
 from refimpl.protocols.synthesis import CHECKPOINT_SCHEMA
 
 from deploy.graph import OPSET
-from deploy.models.arguments import count, frames_array
+from deploy.models.arguments import check_graph_inputs, count, frames_array
 from deploy.models.acrnn import export_acrnn_generate, export_acrnn_step
 from deploy.models.entry_io import (checked_params, checkpoint_params, config_from_meta, read_checkpoint,
                                     write_models)
@@ -108,6 +108,8 @@ class Runtime:
         for m, role in ((self.step_model, "step"), (self.generate_model, "generate")):
             if m is not None and m.role != role:
                 raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
+            if m is not None:
+                check_graph_inputs(m, role, {"step": ("frame", "h", "c"), "generate": ("seed", "num_frames")}[role])
         if self.step_model is None and self.generate_model is None:
             raise ValueError("Runtime: expected a step or a generate model")
 

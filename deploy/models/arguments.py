@@ -7,7 +7,9 @@ any of them is converted, so that a wrapper refuses (``ValueError``) what it can
   :data:`deploy.runtime.MAX_INPUT_ELEMENTS` elements) as float32;
 * :func:`count` — a frame count or batch size: an integer (``bool``, ``3.0``, ``"3"`` refused) within
   :data:`refimpl.bounds.BOUNDS` (the same bounds as ``refimpl``'s options);
-* :func:`metadata_int` — an integer read from a model's metadata (a model whose metadata lacks it is refused).
+* :func:`metadata_int` — an integer read from a model's metadata (a model whose metadata lacks it is refused);
+* :func:`check_graph_inputs` — a loaded model of a role has exactly the graph inputs its runtime feeds (a folder
+  holding another graph under the role's file name is refused when opened, not at the first call).
 
 Shape legend: B batch, T frames, F features.
 """
@@ -21,7 +23,7 @@ from refimpl.bounds import check_count
 
 from deploy.runtime import MAX_INPUT_ELEMENTS
 
-__all__ = ["frames_array", "count", "metadata_int"]
+__all__ = ["frames_array", "count", "metadata_int", "check_graph_inputs"]
 
 
 def frames_array(value, name: str, ranks=(3,)) -> np.ndarray:
@@ -65,3 +67,22 @@ def metadata_int(model, key: str, bound: str = "frames") -> int:
     naming the key when it is missing or not an integer in range."""
     meta = getattr(model, "metadata", None) or {}
     return check_count(meta.get(key), f"metadata[{key!r}]", bound)
+
+
+def check_graph_inputs(model, role: str, names) -> None:
+    """``ValueError`` unless the :class:`~deploy.runtime.DeployedModel` ``model`` of ``role`` takes exactly the
+    inputs ``names`` (its runtime feeds those, by name), the first of them frames of the size the metadata states
+    (``representation.size``, when it is an integer): a graph of another layout is refused when it is opened, not at
+    its first run."""
+    got = [n for n, _, _ in model.inputs]
+    if sorted(got) != sorted(names):
+        raise ValueError(f"{role}: expected a graph with inputs {list(names)}, got {got} (another model's graph "
+                         "under this role's file name?)")
+    rep = model.metadata.get("representation")
+    size = rep.get("size") if isinstance(rep, dict) else None
+    shape = next(s for n, s, _ in model.inputs if n == names[0])
+    if isinstance(size, int) and not isinstance(size, bool) and shape and isinstance(shape[-1], int) \
+            and shape[-1] != size:
+        raise ValueError(f"{role}: metadata['representation']['size'] is {size}, but the graph's input "
+                         f"{names[0]!r} takes frames of {shape[-1]} (shape {shape}): metadata and graph of "
+                         "different layouts")

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from refimpl.bounds import bounded_float
+
 __all__ = ["add_export_options", "add_run_options", "apply_join", "export_checkpoint", "run_command"]
 
 
@@ -34,7 +36,8 @@ def add_export_options(group) -> None:
 def add_run_options(group) -> None:
     """QTG's options of ``python -m deploy run``."""
     group.add_argument("--joints", choices=("cmu", "salsa"), default=None, help="qtg: rig of the BVH (default cmu)")
-    group.add_argument("--source-fps", type=float, default=None, help="qtg: override the BVH frame rate")
+    group.add_argument("--source-fps", type=bounded_float("fps"), default=None,
+                       help="qtg: override the BVH frame rate")
     group.add_argument("--join", choices=("none", "inertialize", "inertialize+footlock"), default=None,
                        help="qtg: inertialize: the join option (spec/qtg.md 7.4) in NumPy unless the models were "
                             "exported with it; inertialize+footlock: then pin the planted feet by two-bone IK (7.5), "
@@ -127,8 +130,10 @@ def run_command(runtime, args) -> int:
     """``python -m deploy run DIR IN.bvh OUT.bvh --start S [--join MODE]``: frames ``S … S+T−1`` of the clip
     replaced by a transition generated from frames ``S−2, S−1`` and ``S+T, S+T+1`` (then :func:`apply_join`);
     prints the mean joint-position error."""
+    from refimpl.bounds import check_count, check_number
     from refimpl.bvh import read_bvh_header
     from refimpl.bvh_write import write_bvh
+    from refimpl.errors import existing_file, reading
     from refimpl.motion import Motion
     from refimpl.protocols.transition import (TransitionSource, declared_rate, denormalize_poses,
                                               heading_from_root, load_source, make_windows, normalize_poses,
@@ -139,12 +144,19 @@ def run_command(runtime, args) -> int:
     rt = runtime
     some = rt.rollout_model or rt.step_model
     meta = some.metadata
-    T = int(args.frames or meta["model"].get("transition_length") or meta["model"]["config"]["transition_length"])
+    T = args.frames
+    if T is None:
+        model = meta["model"]  # a JSON object with a name (deploy.runtime checks it on loading)
+        stored = model.get("transition_length") or (model.get("config") or {}).get("transition_length")
+        with reading(args.model_dir):
+            T = check_count(stored, "metadata model.transition_length", "transition_length")
     fps = args.fps or 30.0
     joints = args.joints or "cmu"
-    rate = args.source_fps or declared_rate(read_bvh_header(args.input).frame_time)
-    source = TransitionSource(str(args.input), f"{joints}_bvh", float(rate), Path(args.input).stem)
-    skel, clips = load_source(source, fps=fps, skip_start=0)  # 22 joints, cm, phase 0 at --fps
+    with reading(existing_file(args.input)):  # a damaged or foreign BVH is a bad input file: exit 3
+        rate = args.source_fps or check_number(declared_rate(read_bvh_header(args.input).frame_time),
+                                               "its declared frame rate", "fps")
+        source = TransitionSource(str(args.input), f"{joints}_bvh", float(rate), Path(args.input).stem)
+        skel, clips = load_source(source, fps=fps, skip_start=0)  # 22 joints, cm, phase 0 at --fps
     rot, pos = clips[0]
     s = args.start
     if s < 2 or s + T + 2 > len(rot):

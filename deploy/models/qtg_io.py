@@ -24,6 +24,7 @@ from refimpl.protocols.transition import CHECKPOINT_SCHEMA
 from refimpl.protocols.transition_join import inertialize_joins, join_blend_frames as default_blend
 
 from deploy.graph import OPSET
+from deploy.models.arguments import check_graph_inputs
 from deploy.models.entry_io import checkpoint_params, read_checkpoint, write_models
 from deploy.models.qtg import export_qtg_init, export_qtg_join, export_qtg_rollout, export_qtg_step, join_entry
 from deploy.models.qtg_compact import export_qtg_rollout_compact
@@ -38,6 +39,8 @@ __all__ = ["load_checkpoint", "export_dir", "Runtime", "MAX_TRANSITION_FRAMES", 
 #: bound of ``refimpl``'s ``--transition-length`` too (``refimpl.bounds``).
 MAX_TRANSITION_FRAMES = _BOUND_T
 _STATE_KEYS = ("pose", "latent_prev", "hidden", "target_latent")
+#: The inputs each role's graph takes (the runtime feeds them by name).
+_GRAPH_INPUTS = {"init": ("past", "target"), "step": _STATE_KEYS, "rollout": ("past", "target")}
 
 
 def load_checkpoint(path):
@@ -191,6 +194,8 @@ class Runtime:
                         (self.join_model, "join")):
             if m is not None and m.role != role:
                 raise ValueError(f"{role}: expected a model with metadata role {role!r}, got {m.role!r}")
+            if m is not None:
+                check_graph_inputs(m, role, _GRAPH_INPUTS[role])
 
     @classmethod
     def from_dir(cls, directory, *, intra_op_threads: int = 1) -> "Runtime":

@@ -190,10 +190,12 @@ def _seed_frames(seed_clip, J: int) -> np.ndarray:
 def _read_array(path, ndim: int, what: str, ok=lambda a: True) -> np.ndarray:
     """A finite float ``.npy`` array of rank ``ndim`` beside the models (``ok(a)`` further checks the shape); a
     damaged or pickled file is refused with ``ValueError`` naming it and ``what`` was expected."""
+    from refimpl.npy_files import read_npy
+
     try:
-        a = np.load(path, allow_pickle=False)
-    except Exception as exc:  # noqa: BLE001 - np.load raises ValueError, OSError, EOFError, ... on junk
-        raise ValueError(f"{path}: not a readable .npy array ({type(exc).__name__})") from None
+        a = read_npy(path)  # a regular file; the declared shape checked against its size before allocating
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: not a readable .npy array ({exc})") from None
     if not isinstance(a, np.ndarray) or a.dtype.kind != "f" or a.ndim != ndim or 0 in a.shape or not ok(a) or \
             not np.all(np.isfinite(a)):
         raise ValueError(f"{path}: expected a finite float array {what}, got {getattr(a, 'dtype', '?')} "

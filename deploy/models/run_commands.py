@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from refimpl.bounds import bounded_int
+
 from deploy.models.entry_io import write_npy
 
 __all__ = ["add_prediction_run_options", "run_prediction", "run_synthesis", "run_locomotion", "export_trained"]
@@ -45,12 +47,13 @@ def export_trained(entry, args) -> dict:
 
 def _read_npy(path) -> np.ndarray:
     from refimpl.errors import BadInputError, existing_file
+    from refimpl.npy_files import read_npy
 
     p = existing_file(path)
     try:
-        a = np.load(p, allow_pickle=False)
+        a = read_npy(p, kinds="fiu")  # the declared shape checked against the file's size before allocating
     except (OSError, ValueError) as exc:
-        raise BadInputError(f"{p}: not a readable .npy array ({type(exc).__name__})") from None
+        raise BadInputError(f"{p}: not a readable .npy array of numbers ({exc})") from None
     if not isinstance(a, np.ndarray) or a.dtype.kind not in "fiu":
         raise BadInputError(f"{p}: expected a numeric .npy array")
     return a
@@ -58,7 +61,7 @@ def _read_npy(path) -> np.ndarray:
 
 def add_prediction_run_options(group) -> None:
     """QuaterNet's option of ``python -m deploy run``."""
-    group.add_argument("--prefix", type=int, default=None, help="quaternet, quaternet-cnn: prefix frames (default: "
+    group.add_argument("--prefix", type=bounded_int("frames"), default=None, help="quaternet, quaternet-cnn: prefix frames (default: "
                                                                  "the metadata's prefix_length)")
 
 
@@ -83,7 +86,7 @@ def run_prediction(runtime, args) -> int:
     pr = prediction.make_prediction(prediction.onnx_method(runtime), rotations, s, P, k,
                                     skeleton=prediction.skeleton_of(dataset), frame_time=1.0 / fps,
                                     method_name=f"{meta['model']['name']}_onnx", name=Path(args.output).stem,
-                                    flag="--start")
+                                    option="--start", source=str(args.input))
     if str(args.output).lower().endswith(".npy"):
         write_npy(args.output, pr.motion.rotations[pr.start:pr.stop])
     else:
@@ -119,7 +122,7 @@ def run_synthesis(runtime, args) -> int:
         return out
 
     start = 1 if args.start is None else int(args.start)  # frame 0 of a salsa take is its reference T-pose
-    motion, seeds = synthesis.continue_seed(method, config, args.input, start, n)
+    motion, seeds = synthesis.continue_seed(method, config, args.input, start, n, option="--start")
     if str(args.output).lower().endswith(".npy"):
         write_npy(args.output, frames[0])
         what = f"raw frames ({n}, {frames[0].shape[1]}), metres"
@@ -145,17 +148,21 @@ def run_locomotion(runtime, args) -> int:
     x = _read_npy(args.input).astype(np.float32)
     if not str(args.output).lower().endswith(".npy"):
         raise ValueError(f"output: quaternet-long writes .npy arrays, got {args.output!r}")
+    from refimpl.errors import BadInputError, reading
+
     if runtime.step_model is not None and not (runtime.pace_graph is not None and x.ndim == 3 and x.shape[-1] == 2):
-        if x.ndim != 3:
-            raise ValueError(f"{args.input}: expected frames (B, P + T, F), got shape {x.shape}")
+        if x.ndim != 3 or x.shape[1] < 2:
+            raise BadInputError(f"{args.input}: expected frames (B, P + T, F) with P + T >= 2, got shape {x.shape}")
         P = int(args.start or 1)
         if not 1 <= P < x.shape[1]:
             raise ValueError(f"--start: expected the prefix length P in [1, {x.shape[1] - 1}], got {P}")
-        rot, tr = runtime.rollout(x, P)
+        with reading(args.input):  # frames of another size or non-finite values: the file's fault, exit 3
+            rot, tr = runtime.rollout(x, P)
         y = np.concatenate([rot.reshape(rot.shape[0], rot.shape[1], -1), tr], axis=-1)
         what = f"{y.shape[1]} frames after a {P}-frame prefix, [rotations | offset, height]"
     elif runtime.pace_graph is not None:
-        y = runtime.pace(x)
+        with reading(args.input):
+            y = runtime.pace(x)
         what = "pace outputs [A, omega, cos, sin] per point (before clipping)"
     else:
         raise ValueError(f"{args.model_dir}: no step model for frames (B, P + T, F)")

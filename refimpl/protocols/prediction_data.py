@@ -317,10 +317,11 @@ def stride_of(dataset: str, frame_time: float) -> int:
 
 def _check_checkpoint(cfg: Mapping, config, where: str) -> None:
     """The prediction fields: ``dataset`` ``cmu`` or ``h36m`` (required), ``num_joints`` = the dataset skeleton's,
-    ``frame_time`` finite > 0 and ``fps`` = 1 / ``frame_time`` (0.1 %)."""
+    ``frame_time`` (required: eval, generate and export read it) seconds in [1e-4, 10] and ``fps`` = 1 /
+    ``frame_time`` (0.1 %)."""
     from refimpl.skeletons import cmu_asf_skeleton, h36m_skeleton
 
-    require_fields(cfg, ("dataset",), where, "prediction")
+    require_fields(cfg, ("dataset", "frame_time"), where, "prediction")
     dataset = cfg["dataset"]
     if dataset not in ("cmu", "h36m"):
         raise ValueError(f"{where}: model_config.dataset: expected 'cmu' or 'h36m', got {kind_of(dataset)}")

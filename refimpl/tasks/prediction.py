@@ -274,23 +274,28 @@ class Prediction:
 
 def make_prediction(method: Callable, rotations, frame: int, prefix_length: int, k: int, *, skeleton: Skeleton,
                     frame_time: float, method_name: str = "network", name: str = "prediction",
-                    flag: str = "--source-frame") -> Prediction:
+                    option: str = "--source-frame", source: str = "the clip") -> Prediction:
     """Predict ``k`` frames after frame ``frame`` of ``rotations (F, J, 4)`` from the ``prefix_length`` frames
-    ending there (``method(prefix (1, P, J, 4), k)``); ``flag`` names the option of ``frame`` in the error
+    ending there (``method(prefix (1, P, J, 4), k)``); ``option`` names the option of ``frame`` in the error
     (``python -m deploy run``: ``--start``).
 
     Raises
     ------
     UsageError
-        ``frame`` outside ``[prefix_length − 1, F − 1]``.
+        ``frame`` outside ``[prefix_length − 1, F − 1]`` (``option`` names it in the message).
+    BadInputError
+        A clip shorter than the prefix (``source`` names it).
     """
-    from refimpl.errors import UsageError
+    from refimpl.errors import BadInputError, UsageError
     from refimpl.motion import Motion
 
     rot = np.asarray(rotations, dtype=np.float64)
     F = rot.shape[0]
+    if F < prefix_length:
+        raise BadInputError(f"{source}: too short: {F} frames at the model's rate, a prefix needs "
+                            f"{prefix_length}")
     if not prefix_length - 1 <= frame <= F - 1:
-        raise UsageError(f"{flag} must lie in [{prefix_length - 1}, {F - 1}] (a {prefix_length}-frame "
+        raise UsageError(f"{option} must lie in [{prefix_length - 1}, {F - 1}] (a {prefix_length}-frame "
                          f"prefix ending there, frames at the model's rate), got {frame}")
     prefix = rot[frame - prefix_length + 1:frame + 1]  # (P, J, 4)
     pred = np.asarray(method(prefix[None], int(k)), dtype=np.float64)[0]  # (k, J, 4)
@@ -428,7 +433,8 @@ def generate_command(args, model) -> int:
     k = args.length or 25
     out = args.out or "prediction.bvh"
     pr = make_prediction(next(iter(networks.values())), rotations, args.source_frame, P, k,
-                         skeleton=skeleton_of(dataset), frame_time=frame_time, method_name=name, name=Path(out).stem)
+                         skeleton=skeleton_of(dataset), frame_time=frame_time, method_name=name, name=Path(out).stem,
+                         source=str(args.source))
     write_bvh(out, pr.motion)
     _say(f"wrote {out}: {pr.motion.num_frames} frames at {1.0 / frame_time:g} fps ({dataset} skeleton, root "
          f"at the origin): prefix frames 0..{pr.start - 1}, predicted {pr.start}..{pr.stop - 1} ({name}, "

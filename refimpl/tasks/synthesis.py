@@ -322,8 +322,10 @@ def random_inputs(model, rng: np.random.Generator, batch: int = 2, seed_length: 
     return (mean + std * rng.standard_normal((batch, seed_length, mean.size)),)
 
 
-def continue_seed(method, model_config: Mapping, path, start: int, num_frames: int) -> tuple:
-    """Seed frames ``[start, start + 10)`` of a salsa BVH at 30 fps continued by ``method`` for ``num_frames``.
+def continue_seed(method, model_config: Mapping, path, start: int, num_frames: int, *,
+                  option: str = "--source-frame") -> tuple:
+    """Seed frames ``[start, start + 10)`` of a salsa BVH at 30 fps continued by ``method`` for ``num_frames``
+    (``option``: the command's name of ``start``, for its message; ``python -m deploy run`` calls it ``--start``).
 
     Returns
     -------
@@ -343,8 +345,11 @@ def continue_seed(method, model_config: Mapping, path, start: int, num_frames: i
         raise BadInputError(f"{path}: {exc}") from exc
     if frames.shape[1] != len(model_config["mean"]):
         raise BadInputError(f"{path}: frames of {frames.shape[1]} values, the model reads {len(model_config['mean'])}")
+    if len(frames) < SEED_LENGTH:
+        raise BadInputError(f"{path}: too short: {len(frames)} frames at 30 fps, a seed needs {SEED_LENGTH}")
     if not 0 <= start <= len(frames) - SEED_LENGTH:
-        raise UsageError(f"--source-frame must lie in [0, {len(frames) - SEED_LENGTH}], got {start}")
+        raise UsageError(f"{option} must lie in [0, {len(frames) - SEED_LENGTH}] (the first of {SEED_LENGTH} seed "
+                         f"frames of {len(frames)} at 30 fps), got {start}")
     seed = frames[start:start + SEED_LENGTH]
     gen = np.asarray(method(seed[None], num_frames), dtype=np.float64)[0]           # (N, F)
     allf = np.concatenate([seed, gen])

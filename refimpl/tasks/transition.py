@@ -35,8 +35,8 @@ from refimpl.atomic import atomic_write_text
 from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
-from refimpl.bounds import bounded_int
-from refimpl.options import export_length, nonneg_int, positive_float
+from refimpl.bounds import bounded_float, bounded_int
+from refimpl.options import export_length, nonneg_int
 from refimpl.protocols.transition import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
 from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE_DIR, TransitionSource,
                                           build_transition_datasets, declared_rate, join_pose, load_source,
@@ -119,7 +119,7 @@ def add_generate_options(parser) -> None:
     parser.add_argument("--align", default="auto", choices=("auto", "none", "continue"),
                         help="place the target clip: none = as in its file, continue = after the source (default: "
                              "none for one file, continue for two)")
-    parser.add_argument("--fps", type=positive_float, default=None, help="true frame rate of the input files")
+    parser.add_argument("--fps", type=bounded_float("fps"), default=None, help="true frame rate of the input files")
 
 
 def source_for_file(path, *, fps: float | None = None, label: str | None = None, frames=(0.0, 1.0)):
