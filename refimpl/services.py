@@ -165,7 +165,7 @@ def network_methods(model: TrainedModel | None = None, *, onnx_dir=None, expect:
 
 def _check_same_network(onnx_dir, want: TrainedModel) -> None:
     """The exported models' ``model.config`` must agree with the checkpoint's config on every field both hold
-    (an acRNN folder of another representation has another ``frame_size``): ``BadInputError`` naming the field,
+    (a folder of another pose representation has another ``frame_size``): ``BadInputError`` naming the field,
     when the folder is opened rather than at the first step."""
     import json
 

@@ -169,6 +169,7 @@ def test_bad_walk_invocations(exported, tmp_path, capsys):
         assert deploy_main(argv) == code, (argv, capsys.readouterr().err)
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and word in err and "Traceback" not in err, (argv, err)
+    np.save(tmp_path / "x.npy", np.zeros((1, 4, 8), np.float32))   # frames given: --pace is the wrong option
     more = [(["run", long, "circle", str(tmp_path / "w.txt"), "--pace", pace], 2, "w.txt"),
             (["run", str(no_seed), "circle", str(out), "--pace", pace], 3, "seed"),
             (["run", pace, "circle", str(out)], 3, "step"),

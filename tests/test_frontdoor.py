@@ -247,8 +247,9 @@ def test_ci_runs_the_readmes_two_commands():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     block = readme.split("## The two commands", 1)[1].split("```bash", 1)[1].split("```", 1)[0]
     ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
-    assert 'python -m pip install -e ".[all]" && refimpl demo' in block and "python -m pytest -q" in block
-    for command in ('python -m pip install -e ".[all]"', "refimpl demo", "python -m pytest -q"):
+    assert 'python -m pip install -c constraints.txt -e ".[all]" && refimpl demo' in block
+    assert "python -m pytest -q" in block
+    for command in ('python -m pip install -c constraints.txt -e ".[all]"', "refimpl demo", "python -m pytest -q"):
         assert command in ci, command
 
 

@@ -40,7 +40,8 @@ __all__ = ["load_checkpoint", "export_dir", "Runtime", "MAX_TRANSITION_FRAMES", 
 MAX_TRANSITION_FRAMES = _BOUND_T
 _STATE_KEYS = ("pose", "latent_prev", "hidden", "target_latent")
 #: The inputs each role's graph takes (the runtime feeds them by name).
-_GRAPH_INPUTS = {"init": ("past", "target"), "step": _STATE_KEYS, "rollout": ("past", "target")}
+_GRAPH_INPUTS = {"init": ("past", "target"), "step": _STATE_KEYS, "rollout": ("past", "target"),
+                 "join": ("past", "poses", "target")}
 
 
 def load_checkpoint(path):
