@@ -727,6 +727,23 @@ def campaign(scale: float = 1.0, seed: int = 0, only: set | None = None, log=pri
     return summary(stats, seed, scale, counts, t_all)
 
 
+def family_counts(base: dict, scale: float, only: set | None = None, counts: dict | None = None) -> dict:
+    """Cases per family: ``counts``, else ``base`` × ``scale``; only the families of ``only`` when given."""
+    counts = dict(counts or {k: int(round(v * scale)) for k, v in base.items()})
+    return {k: v for k, v in counts.items() if k in only} if only else counts
+
+
+def run_families(stats: Stats, counts: dict, runners: dict, log=print) -> None:
+    """Run ``runners[family](n)`` for every family of ``counts``, timing each into ``stats.families``."""
+    for fam, n in counts.items():
+        t0 = time.perf_counter()
+        if log:
+            log(f"{fam}: {n} cases ...")
+        runners[fam](n)
+        if fam in stats.families:
+            stats.families[fam]["seconds"] = round(time.perf_counter() - t0, 1)
+
+
 def summary(stats: Stats, seed: int, scale: float, counts: dict, t_all: float) -> dict:
     """The result object of a campaign (totals, per family, examples) from its :class:`Stats`."""
     total = sum(s["cases"] for s in stats.families.values())

@@ -667,9 +667,7 @@ def fam_task_options(stats, n, seed, seeds, tmp, log):
 def campaign(scale: float = 1.0, seed: int = 0, only: set | None = None, log=print,
              counts: dict | None = None) -> dict:
     """Run the families (``counts``: cases per family, default :data:`BASE_CASES` × ``scale``)."""
-    counts = dict(counts or {k: int(round(v * scale)) for k, v in BASE_CASES.items()})
-    if only:
-        counts = {k: v for k, v in counts.items() if k in only}
+    counts = fc.family_counts(BASE_CASES, scale, only, counts)
     stats = fc.Stats()
     t_all = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="fuzz_hostile_files_") as tmp:
@@ -682,13 +680,7 @@ def campaign(scale: float = 1.0, seed: int = 0, only: set | None = None, log=pri
                    "deploy-options": lambda n: fam_deploy_options(stats, n, seed, seeds, tmp, log),
                    "deploy-files": lambda n: fam_deploy_files(stats, n, seed, seeds, tmp, log),
                    "task-options": lambda n: fam_task_options(stats, n, seed, seeds, tmp, log)}
-        for fam, n in counts.items():
-            t0 = time.perf_counter()
-            if log:
-                log(f"{fam}: {n} cases ...")
-            runners[fam](n)
-            if fam in stats.families:
-                stats.families[fam]["seconds"] = round(time.perf_counter() - t0, 1)
+        fc.run_families(stats, counts, runners, log)
     return fc.summary(stats, seed, scale, counts, t_all)
 
 
