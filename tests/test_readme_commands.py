@@ -15,8 +15,12 @@ What changes, declared here (nothing else is touched):
   option are the page's.
 * :data:`NOT_RUN`: the install (this environment is it; ``test_ci_installs_as_the_readme_says`` checks that
   ``.ci/run`` runs the README's line), ``refimpl demo`` (``.ci/run`` runs it as written before the tests), the
-  test suite itself, the C build and run (``tests/test_c_example.py`` builds and runs it with ``ORT_C_DIR``) and
-  the web server, which serves until stopped (``tests/test_web.py`` runs it in headless Chromium).
+  test suite itself, and the C build and run (``tests/test_c_example.py`` builds and runs it with ``ORT_C_DIR``).
+* :data:`SERVERS`: ``python -m deploy web ...`` serves until Ctrl-C: it is started as written, its page fetched
+  from the address it prints and checked to list the folders' models, then stopped with SIGINT (exit 0). Its
+  ``demo_out/onnx`` is ``refimpl demo``'s output: the folder ``REFIMPL_DEMO_OUT`` names (``.ci/run`` sets it to
+  the demo it ran), linked into the scratch folder; without it those commands are skipped. A port the page
+  names that is already taken skips the command.
 * Commands that need ``../shared`` are skipped when it is absent (they are still parsed).
 * ``SLOW``: the README's QTG-on-Bandai-Namco commands read the 830 locomotion files for transition windows,
   which is not cached (60 s on an idle machine, 250 s at load 9): they are parsed, and run only with
@@ -28,6 +32,7 @@ import functools
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 import time
@@ -72,9 +77,13 @@ NOT_RUN = {
                     "benchmarks/results/demo_eval.json); tests/test_demo.py runs demo --quick",
     "cc ": "the C example (shell variables, a C compiler): tests/test_c_example.py builds it with ORT_C_DIR",
     "LD_LIBRARY_PATH=": "the C example: tests/test_c_example.py runs it with ORT_C_DIR",
-    "python -m deploy web": "serves the page until Ctrl-C: tests/test_web.py serves it and drives headless Chromium "
-                            "through it, tests/test_deploy_serve.py checks the server",
 }
+
+#: Commands that serve until Ctrl-C (prefix): run as written, the page fetched from the address they print, then
+#: stopped with SIGINT (exit 0 expected). tests/test_web.py drives headless Chromium through the same server.
+SERVERS = ("python -m deploy web",)
+#: Seconds a server may take to print its address (the first start runs ``npm ci``).
+SERVER_START_S = 300
 
 #: Commands that read the Bandai Namco set for transitions (uncached, > 1 min): run with REFIMPL_README_SLOW=1.
 SLOW = re.compile(r"runs/qtg_bn|--model qtg --data \.\./shared/data/bandai_namco_locomotion")
@@ -214,6 +223,74 @@ def _run(cmd: Command, cwd: Path) -> tuple[int, str]:
     return p.returncode, (p.stdout[-1500:] + p.stderr[-1500:])
 
 
+def _serve(cmd: Command, cwd: Path) -> tuple[int, str]:
+    """Start a :data:`SERVERS` command as written, fetch its page and model list from the address it prints, stop
+    it with SIGINT: ``(exit code, log)``; a page or manifest that does not answer is reported as exit -1."""
+    import json
+    import signal
+    import urllib.request
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    argv = [sys.executable, *cmd.argv[1:]]
+    p = subprocess.Popen(argv, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    log, url, t0 = [], None, time.monotonic()
+    try:
+        while url is None and time.monotonic() - t0 < SERVER_START_S:
+            line = p.stdout.readline()
+            if not line:
+                break                                     # exited before serving
+            log.append(line)
+            m = re.search(r"serving (http://127\.0\.0\.1:\d+/)", line)
+            url = m.group(1) if m else None
+        if url is None:
+            p.kill()
+            return (p.wait(30) or -1), "".join(log)[-1500:] + "\n(no address printed)"
+        with urllib.request.urlopen(url, timeout=30) as r:
+            page = r.read().decode()
+        with urllib.request.urlopen(url + "models/manifest.json", timeout=30) as r:
+            folders = json.loads(r.read())["folders"]
+        named = [a for a in cmd.argv[4:] if not a.startswith("-")]
+        if "<html" not in page.lower() or len(folders) != len(named) or not all(f["files"] for f in folders):
+            p.kill()
+            p.wait(30)
+            return -1, f"page or manifest wrong: {len(folders)} folders for {named}"
+    finally:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    try:
+        rc = p.wait(30)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        return -9, "did not stop on SIGINT within 30 s"
+    return rc, "".join(log)[-1500:] + p.stdout.read()[-1500:]
+
+
+def _server_skip(cmd: Command, work: Path) -> str | None:
+    """Why a :data:`SERVERS` command cannot run here (None: it can): its port taken, no npm for the page's
+    packages, or ``refimpl demo``'s output not available."""
+    import socket
+
+    from deploy.serve import NPM_FILES, WEB_DIR
+
+    argv = list(cmd.argv)
+    port = int(argv[argv.index("--port") + 1]) if "--port" in argv else 8000
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return f"port {port} is taken on this machine"
+    modules = WEB_DIR / "node_modules"
+    have = all((modules / folder / f).is_file() for folder, files in NPM_FILES.values() for f in files)
+    if not have and not shutil.which("npm"):
+        return "the page's npm packages are not installed and there is no npm"
+    if "demo_out/onnx" in argv and not (work / "demo_out" / "onnx").is_dir():
+        demo = os.environ.get("REFIMPL_DEMO_OUT")
+        if not demo or not (Path(demo) / "onnx").is_dir():
+            return "needs `refimpl demo`'s ./demo_out (REFIMPL_DEMO_OUT names it; .ci/run sets it)"
+        (work / "demo_out").symlink_to(Path(demo).resolve())
+    return None
+
+
 def _needs_shared(cmd: Command) -> bool:
     return "../shared" in cmd.text
 
@@ -281,12 +358,16 @@ def test_every_documented_command_runs(page, tmp_path):
         if why is not None:
             skipped.append(f"{cmd.id} {cmd.text[:60]}: {why}")
             continue
+        server = cmd.text.startswith(SERVERS)
+        if server and (why := _server_skip(cmd, work)) is not None:
+            skipped.append(f"{cmd.id} {cmd.text[:60]}: {why}")
+            continue
         _parse(cmd)
         for name, make in PREPARE.items():
             if name in cmd.argv and not (work / name).exists():
                 make(work)
         t0 = time.perf_counter()
-        rc, log = _run(cmd, work)
+        rc, log = (_serve if server else _run)(cmd, work)
         print(f"{cmd.id}: exit {rc} in {time.perf_counter() - t0:.0f} s: {cmd.text[:90]}", flush=True)  # with -s
         ran += 1
         if rc != 0:
