@@ -42,6 +42,7 @@ from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE
                                           build_transition_datasets, declared_rate, join_pose, load_source,
                                           sample_sources, shared_sources, split_pose)
 from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
+from refimpl.protocols.transition_cache import cached_loader
 from refimpl.protocols.transition_join import EXPORT_JOIN_MODES, JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_locomotion import JOINTS as BANDAI_NAMCO_JOINTS, KIND as BANDAI_NAMCO_KIND
 from refimpl.protocols.transition_locomotion import build_datasets as build_bandai_namco, is_bandai_namco_folder
@@ -54,12 +55,12 @@ from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
 from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
 
-__all__ = ["CHECKPOINT_SCHEMA", 
-    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "add_train_options", "add_eval_options", "add_export_options",
-    "add_generate_options", "source_for_file", "resolve_data", "build_datasets", "train_datasets", "num_examples",
-    "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "JoinedOnnxMethod", "onnx_method",
-    "methods", "evaluate", "print_results", "write_results", "clip_for", "random_context", "eval_command",
-    "generate_command", "export_options", "verify_inputs",
+__all__ = [
+    "CHECKPOINT_SCHEMA", "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "add_train_options", "add_eval_options",
+    "add_export_options", "add_generate_options", "source_for_file", "resolve_data", "build_datasets",
+    "train_datasets", "import_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint",
+    "trained_fields", "JoinedOnnxMethod", "onnx_method", "methods", "evaluate", "print_results", "write_results",
+    "clip_for", "random_context", "eval_command", "generate_command", "export_options", "verify_inputs",
 ]
 
 NAME = "transition"
@@ -70,6 +71,11 @@ GENERATE_USAGE = "refimpl generate --source FILE --source-frame S [...]  (a tran
 
 def _say(*parts) -> None:
     print(*parts, flush=True)
+
+
+def _progress(line: str) -> None:
+    """Progress of a long data read (files read, the cache's note), on stderr."""
+    print(line, file=sys.stderr, flush=True)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -238,7 +244,10 @@ def eval_dataset(args, model, T: int):
     sources = [source_for_file(t, fps=args.fps, label=_take_content(t)) for t in takes]   # .bvh / .txt, rig known
     stats = (model.fields["root_mean"], model.fields["root_std"]) if model is not None else (np.zeros(3), np.ones(3))
     try:
-        ds, _ = build_transition_datasets(sources, [], T=T, stride=args.stride, loader=_load_any)
+        loader = _load_any  # Bandai Namco takes only: through the data cache (their entry holds just these takes)
+        if all(s.kind == BANDAI_NAMCO_KIND for s in sources):
+            loader = cached_loader((sources,), load_bandai_namco_source, progress=_progress)
+        ds, _ = build_transition_datasets(sources, [], T=T, stride=args.stride, loader=loader)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"{'--takes' if args.takes else '--data ' + args.data}: {exc}") from exc
     ds = dataclasses.replace(ds, root_mean=np.asarray(stats[0], dtype=np.float64),
@@ -253,8 +262,7 @@ def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.
     spec/qtg.md §8.4)."""
     if data != "sample" and is_bandai_namco_folder(data):
         try:
-            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride,
-                                      progress=lambda line: print(f"  {line}", file=sys.stderr, flush=True))
+            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride, progress=_progress)
         except (OSError, ValueError) as exc:
             raise BadInputError(f"--data {data}: {exc}") from exc
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
@@ -269,6 +277,13 @@ def train_datasets(args):
     """Train and held-out datasets of ``refimpl train``'s options (``--data``, ``--transition-length``, ...)."""
     return build_datasets(args.data, args.transition_length, args.stride, fps=args.fps,
                           test_fraction=args.test_fraction)
+
+
+def import_datasets(args):
+    """:func:`train_datasets` (``refimpl import``): a checkpoint stores the root statistics of every training
+    window, so the whole training side is needed (the Bandai Namco takes come from the data cache after the first
+    command)."""
+    return train_datasets(args)
 
 
 def num_examples(dataset) -> int:
