@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import types
 from pathlib import Path
 
 import numpy as np
@@ -185,3 +186,42 @@ def test_eval_reads_only_the_heldout_entry(takes, tmp_path, monkeypatch, capsys)
     assert "the 2 held-out takes" in capsys.readouterr().out
     assert len(loaded) == 1
     assert len(real(loaded[0], kinds="biufcUS", allow_compressed=False)["clips_per_source"]) == 2
+
+
+# ---- progress of the long steps (issue 35) ----
+
+def test_evaluation_reports_progress_and_keeps_the_methods(monkeypatch, capsys):
+    """A slow evaluation says which method and measure it has reached; the numbers are the same; a method's
+    ``needs_skeleton`` survives the wrapping."""
+    from refimpl.tasks import transition as task
+
+    def f(past, target, T, **kw):
+        return np.repeat(past[:, -1:], T, axis=1)
+
+    g = lambda past, target, T, skeleton=None: f(past, target, T)  # noqa: E731
+    g.needs_skeleton = True
+    clock = task._Clock(every_s=-1.0)
+    wrapped = clock.wrap({"hold": f, "feet": g}, "error")
+    assert wrapped["feet"].needs_skeleton and not wrapped["hold"].needs_skeleton
+    past = np.zeros((2, 2, 7))
+    assert np.array_equal(wrapped["hold"](past, past, 3), f(past, past, 3))
+    assert wrapped["feet"](past, past, 3, skeleton=None).shape == (2, 3, 7)
+    err = capsys.readouterr().err
+    assert "evaluating: hold (error)" in err and "evaluating: feet (error)" in err
+    quiet = task._Clock()                                   # a quick evaluation prints nothing
+    quiet.wrap({"hold": f}, "error")["hold"](past, past, 3)
+    assert capsys.readouterr().err == ""
+
+
+def test_locomotion_reading_reports_progress_by_time(tmp_path, monkeypatch):
+    """The locomotion reader reports every ~5 s (not every 100 files: the held-out 95 said nothing)."""
+    import refimpl.protocols.locomotion as loco
+    from refimpl.tasks.locomotion import resolve_files
+
+    monkeypatch.setenv("REFIMPL_CACHE", "off")
+    ticks = iter(np.arange(0.0, 1000.0, 6.0))
+    monkeypatch.setattr(loco, "time", types.SimpleNamespace(perf_counter=lambda: float(next(ticks))))
+    kind, train, _ = resolve_files("sample")
+    lines = []
+    loco.build_dataset(kind, train[:3], prefix=5, target=5, progress=lines.append)
+    assert lines == [f"  loaded {i}/3 files, {6 * i:.0f} s" for i in (1, 2, 3)]

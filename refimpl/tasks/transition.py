@@ -377,10 +377,39 @@ def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
     the ground truth's numbers); windows of Bandai Namco takes also ``by_style`` and ``by_kind`` in both
     (:func:`refimpl.protocols.transition_locomotion.window_groups`)."""
     groups = _groups(test_ds)
-    results = evaluate_methods(test_ds, methods_by_name, groups=groups)
-    for name, q in evaluate_quality(test_ds, methods_by_name, groups=groups).items():
+    clock = _Clock()
+    results = evaluate_methods(test_ds, clock.wrap(methods_by_name, "error"), groups=groups)
+    for name, q in evaluate_quality(test_ds, clock.wrap(methods_by_name, "joins and skating"),
+                                    groups=groups).items():
         results[name]["quality"] = q
     return results
+
+
+class _Clock:
+    """Progress of a long evaluation on stderr: every ``every_s`` seconds at most, at a method's next batch, which
+    method and measure it has reached (``"  evaluating: qtg (error), 6 s"``); nothing when it is quick."""
+
+    def __init__(self, every_s: float = 5.0):
+        import time
+
+        self._now = time.perf_counter
+        self.t0 = self.last = self._now()
+        self.every_s = every_s
+
+    def wrap(self, methods_by_name: Mapping[str, Callable], measure: str) -> dict:
+        """``methods_by_name`` with each method reporting through the clock (its ``needs_skeleton`` kept)."""
+        return {name: self._wrap(f, name, measure) for name, f in methods_by_name.items()}
+
+    def _wrap(self, f: Callable, name: str, measure: str) -> Callable:
+        def method(past, target, T, **kw):
+            now = self._now()
+            if now - self.last > self.every_s:
+                self.last = now
+                _progress(f"  evaluating: {name} ({measure}), {now - self.t0:.0f} s")
+            return f(past, target, T, **kw)
+
+        method.needs_skeleton = getattr(f, "needs_skeleton", False)
+        return method
 
 
 def _groups(test_ds) -> dict:
