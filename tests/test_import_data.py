@@ -2,6 +2,8 @@
 training file (the longest) instead of the whole Human3.6M / CMU folder, and the checkpoint is the same."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -137,3 +139,45 @@ def test_import_on_the_cmu_folder_parses_one_file(tmp_path, monkeypatch):
     assert main(["--blas-threads", "1", "import", str(tmp_path / "w.npz"), "--model", "quaternet", "--data",
                  str(root), "--set", "hidden_size=8", "--out", str(tmp_path / "c.npz")]) == 0
     assert len(calls) == 1
+
+
+@pytest.mark.parametrize("model", ["qtg", "quaternet-long", "pace", "acrnn", "quaternet", "quaternet-cnn"])
+def test_every_task_imports_the_same_checkpoint_from_its_import_data(model):
+    """import_datasets (no held-out side for QTG and the long-term models) gives the checkpoint train_datasets
+    gives, on the embedded sample."""
+    spec = MODELS[model]
+    layout = "published" if spec.published_names is not None else "refimpl"
+    args = build_parser().parse_args(["import", "w.npz", "--model", model, "--out", "c.npz"])
+    task = task_of(spec)
+    train, test = task.train_datasets(args)
+    settings = spec.published_settings if layout == "published" else ()
+    config = spec.make_config(train, (*settings,))
+    rng = np.random.default_rng(0)
+    state = {n: rng.uniform(-0.3, 0.3, s).astype(np.float32) for n, s in layout_names(spec, config, layout).values()}
+    a1, m1 = import_checkpoint(spec, state, layout, train, test)
+    a2, m2 = import_checkpoint(spec, state, layout, *task.import_datasets(args))
+    assert m1 == m2 and a1.keys() == a2.keys() and all(np.array_equal(a1[k], a2[k]) for k in a1)
+
+
+def test_qtg_import_on_bandai_namco_takes_reads_only_the_training_takes(tmp_path, monkeypatch):
+    import shutil
+
+    from refimpl.protocols import transition_locomotion as tl
+
+    bn = SHARED_DATA / "bandai_namco_locomotion"
+    if not bn.is_dir():
+        pytest.skip("../shared/data/bandai_namco_locomotion is absent")
+    folder = tmp_path / "bn"
+    folder.mkdir()
+    for i in (1, 2, 3):
+        shutil.copy(bn / f"dataset-2_walk_normal_{i:03d}.bvh", folder)
+    monkeypatch.setenv("REFIMPL_CACHE", "off")
+    read = []
+    real = tl.load_bandai_namco
+    monkeypatch.setattr(tl, "load_bandai_namco", lambda path, *a, **k: read.append(path) or real(path, *a, **k))
+    args = build_parser().parse_args(["import", "w.npz", "--model", "qtg", "--out", "c.npz", "--data", str(folder)])
+    train, test = task_of(MODELS["qtg"]).import_datasets(args)
+    assert test is None and sorted(Path(p).name for p in read) == ["dataset-2_walk_normal_002.bvh",
+                                                                    "dataset-2_walk_normal_003.bvh"]
+    full, _ = task_of(MODELS["qtg"]).train_datasets(args)
+    assert np.array_equal(full.root_mean, train.root_mean) and np.array_equal(full.poses, train.poses)

@@ -182,7 +182,7 @@ def cached_loader(sides: Sequence[Sequence], loader: Callable, *, fps: float = 3
     takes). It accepts only those sources, at ``fps``."""
     read_fps = float(fps)
     table = {}
-    for sources in sides:
+    for sources in (side for side in sides if len(side)):   # an empty list: no entry
         for s, value in zip(sources, load_takes(sources, loader, fps=fps, progress=progress, folder=folder)):
             table[(s.path, tuple(s.frames))] = value
 

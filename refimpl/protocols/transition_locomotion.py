@@ -133,16 +133,19 @@ def load_bandai_namco_source(source: TransitionSource, fps: float = 30.0):
     return skel, [(rot[a:b], pos[a:b])]
 
 
-def build_datasets(root, T: int = 30, stride: int = 4, test_stride: int | None = None, progress=None):
+def build_datasets(root, T: int = 30, stride: int = 4, test_stride: int | None = None, progress=None,
+                   train_only: bool = False):
     """Train and test :class:`~refimpl.protocols.transition.TransitionDataset` of the takes in ``root`` (spec/qtg.md §8.4).
 
     Windows of ``2 + T + 2`` poses every ``stride`` frames of every take (``test_stride`` for the held-out takes,
     default ``stride``); root statistics from the training windows. The takes are read through the data cache
     (:mod:`refimpl.protocols.transition_cache`: one entry for the training takes, one for the held-out ones;
     ``REFIMPL_CACHE=off`` reads them every time). ``progress(line)``, when given, hears every ~5 s how many
-    files have been read (``"read 212 of 830 files, 15 s"``) and whether the cache held them.
+    files have been read (``"read 212 of 830 files, 15 s"``) and whether the cache held them. ``train_only``: the
+    held-out takes are not read (the test dataset has no window; ``refimpl import``).
     """
     train_src, test_src = bandai_namco_sources(root)
+    test_src = [] if train_only else test_src
     loader = cached_loader((train_src, test_src), load_bandai_namco_source, progress=progress)
     return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride,
                                      loader=loader)

@@ -127,9 +127,9 @@ def resolve_files(data: str) -> tuple[str, list, list]:
     return "cmu_bvh", [str(p) for p in bvh[:-n_test]], [str(p) for p in bvh[-n_test:]]
 
 
-def train_datasets(args):
+def train_datasets(args, *, held_out: bool = True):
     """Train and held-out :class:`LocomotionDataset` of ``refimpl train``'s options (``--data``,
-    ``--locomotion-*``)."""
+    ``--locomotion-*``); with ``held_out=False`` the held-out one is None (its files are not read)."""
     from refimpl.errors import BadInputError, UsageError
     P, T = int(args.locomotion_prefix), int(args.locomotion_target)
     if P < 1 or T < 2:
@@ -140,15 +140,17 @@ def train_datasets(args):
     chunk = int(getattr(args, "pace_chunk_length", 0) or 0)
     try:
         return (build_dataset(kind, train, prefix=P, target=T, pace_chunk_length=chunk, progress=print),
-                build_dataset(kind, test, prefix=P, target=T, pace_chunk_length=chunk, progress=print))
+                build_dataset(kind, test, prefix=P, target=T, pace_chunk_length=chunk, progress=print)
+                if held_out else None)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
 
 
 def import_datasets(args):
-    """:func:`train_datasets` (``refimpl import``): a checkpoint stores the seed clip chosen over every training
-    sequence, so the whole training side is needed; it comes from the data cache after the first command."""
-    return train_datasets(args)
+    """``(train, None)`` for ``refimpl import``: a checkpoint stores the seed clip chosen over every training
+    sequence, so the training side is read (from the data cache after the first command); the held-out side,
+    which only validates a training run, is not."""
+    return train_datasets(args, held_out=False)
 
 
 def num_examples(dataset: LocomotionDataset) -> int:

@@ -255,20 +255,22 @@ def eval_dataset(args, model, T: int):
     return ds, why or f"the {len(takes)} files of --takes (no training split; normalisation from the checkpoint)"
 
 
-def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.2, test_stride=None):
+def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.2, test_stride=None,
+                   train_only: bool = False):
     """Train and test :class:`~refimpl.protocols.transition.TransitionDataset` of ``2 + T + 2``-pose windows for ``--data``
     (:func:`resolve_data`, :func:`refimpl.protocols.transition.build_transition_datasets`); a folder of Bandai
     Namco locomotion takes: :func:`refimpl.protocols.transition_locomotion.build_datasets` (split by take,
-    spec/qtg.md §8.4)."""
+    spec/qtg.md §8.4). ``train_only``: the held-out files are not read (the test dataset has no window)."""
     if data != "sample" and is_bandai_namco_folder(data):
         try:
-            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride, progress=_progress)
+            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride, progress=_progress,
+                                      train_only=train_only)
         except (OSError, ValueError) as exc:
             raise BadInputError(f"--data {data}: {exc}") from exc
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
     try:
-        return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride,
-                                         loader=_load_any)
+        return build_transition_datasets(train_src, [] if train_only else test_src, T=T, stride=stride,
+                                         test_stride=test_stride, loader=_load_any)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {data}: {exc}") from exc
 
@@ -280,10 +282,12 @@ def train_datasets(args):
 
 
 def import_datasets(args):
-    """:func:`train_datasets` (``refimpl import``): a checkpoint stores the root statistics of every training
-    window, so the whole training side is needed (the Bandai Namco takes come from the data cache after the first
-    command)."""
-    return train_datasets(args)
+    """``(train, None)`` for ``refimpl import``: a checkpoint stores the root statistics of every training window,
+    so the training side is read (the Bandai Namco takes from the data cache after the first command); the
+    held-out side, which only validates a training run, is not."""
+    train, _ = build_datasets(args.data, args.transition_length, args.stride, fps=args.fps,
+                              test_fraction=args.test_fraction, train_only=True)
+    return train, None
 
 
 def num_examples(dataset) -> int:
