@@ -113,6 +113,24 @@ def test_changed_added_or_removed_file_reads_again(tmp_path):
     assert got[0][1][0][0][0, 0, 0] == len("changed content")
 
 
+def test_damaged_entry_is_rebuilt_and_listed_by_refimpl_cache(tmp_path):
+    from refimpl.cache_cli import cache_entries
+
+    read, calls = _fake_reader(np.random.default_rng(4))
+    srcs, cache = _sources(tmp_path), tmp_path / "cache"
+    first = load_takes(srcs, read, folder=cache)
+    (entry,) = cache_entries(cache)
+    assert entry.name.startswith("transition-takes-")
+    entry.write_bytes(entry.read_bytes()[: entry.stat().st_size // 2])
+    calls.clear()
+    notes = []
+    _same(load_takes(srcs, read, folder=cache, progress=notes.append), first)
+    assert len(calls) == 3 and any("cache entry ignored" in n for n in notes)
+    calls.clear()
+    load_takes(srcs, read, folder=cache)
+    assert calls == []                                                          # rewritten whole
+
+
 def test_cached_loader_answers_only_its_sources(tmp_path):
     read, _ = _fake_reader(np.random.default_rng(3))
     train, test = _sources(tmp_path, ("a1", "b2")), _sources(tmp_path, ("t1",))
