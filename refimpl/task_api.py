@@ -52,6 +52,11 @@ class Task(Protocol):
     def train_datasets(self, args) -> tuple:
         """``(train, held-out)`` datasets of ``refimpl train``'s options."""
 
+    def import_datasets(self, args) -> tuple:
+        """``(train, held-out)`` datasets for ``refimpl import``: what an imported checkpoint stores from the data
+        (the same checkpoint as :meth:`train_datasets`' data gives), reading no more than it needs; the held-out
+        one may be None."""
+
     def num_examples(self, dataset) -> int:
         """Training examples of a dataset (the epoch)."""
 

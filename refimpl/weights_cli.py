@@ -53,7 +53,7 @@ def cmd_import(args) -> int:
     p = existing_file(args.weights)
     with reading(p):
         state = read_state_dict(p)
-    train_ds, test_ds = task_of(spec).train_datasets(args)
+    train_ds, test_ds = task_of(spec).import_datasets(args)  # only what the checkpoint needs (spec/import.md §1)
     with reading(p):
         arrays, meta = import_checkpoint(spec, state, args.layout, train_ds, test_ds, overrides=args.set,
                                          dtype=args.dtype, source=p)

@@ -60,6 +60,7 @@ def _toy_task_module() -> types.ModuleType:
     t.add_export_options = lambda parser: None
     t.add_generate_options = lambda parser: None
     t.train_datasets = lambda args: (_toy_data(args.toy_rows, 1), _toy_data(32, 2))
+    t.import_datasets = t.train_datasets
     t.num_examples = lambda ds: len(ds.x)
     t.describe_data = lambda train, test: f"toy rows: {len(train.x)} / {len(test.x)}"
     t.checkpoint_extra = lambda train_ds: {"rows": len(train_ds.x)}

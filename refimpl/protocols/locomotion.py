@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -259,11 +260,14 @@ def build_dataset(kind: str, files: Sequence[str], *, prefix: int = 30, target: 
     (:mod:`refimpl.protocols.locomotion_cache`; ``REFIMPL_CACHE=off`` reads the files every time)."""
     def read():
         seqs, rig = [], None
+        t0 = last = time.perf_counter()
         for i, f in enumerate(files):
             motion, rig = _load_file(kind, f)
             seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
-            if progress is not None and (i + 1) % 100 == 0:
-                progress(f"  loaded {i + 1}/{len(files)} files")
+            now = time.perf_counter()
+            if progress is not None and now - last > 5.0:  # every ~5 s: the 830 files take a minute or more
+                last = now
+                progress(f"  loaded {i + 1}/{len(files)} files, {now - t0:.0f} s")
         if not seqs:
             raise ValueError("files: no sequence loaded")
         return seqs, rig

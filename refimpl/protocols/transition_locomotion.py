@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import re
-import time
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +29,7 @@ import numpy as np
 from refimpl.rigs import heading_from_root, subset_22
 from refimpl.protocols.locomotion_data import BANDAI_NAMCO_RIG, bandai_namco_split, load_bandai_namco
 from refimpl.protocols.transition import TransitionSource, build_transition_datasets, split_pose
+from refimpl.protocols.transition_cache import cached_loader
 from refimpl.protocols.transition_metrics import joint_position_errors, predict_transitions
 
 __all__ = ["KIND", "FOLDER", "JOINTS", "TakeFacts", "take_facts", "find_takes", "is_bandai_namco_folder",
@@ -133,44 +133,31 @@ def load_bandai_namco_source(source: TransitionSource, fps: float = 30.0):
     return skel, [(rot[a:b], pos[a:b])]
 
 
-def build_datasets(root, T: int = 30, stride: int = 4, test_stride: int | None = None, progress=None):
+def build_datasets(root, T: int = 30, stride: int = 4, test_stride: int | None = None, progress=None,
+                   train_only: bool = False):
     """Train and test :class:`~refimpl.protocols.transition.TransitionDataset` of the takes in ``root`` (spec/qtg.md §8.4).
 
     Windows of ``2 + T + 2`` poses every ``stride`` frames of every take (``test_stride`` for the held-out takes,
-    default ``stride``); root statistics from the training windows. ``progress(line)``, when given, hears every
-    ~5 s how many files have been read (``"read 212 of 830 files, 15 s"``: the whole set takes a minute or more).
+    default ``stride``); root statistics from the training windows. The takes are read through the data cache
+    (:mod:`refimpl.protocols.transition_cache`: one entry for the training takes, one for the held-out ones;
+    ``REFIMPL_CACHE=off`` reads them every time). ``progress(line)``, when given, hears every ~5 s how many
+    files have been read (``"read 212 of 830 files, 15 s"``) and whether the cache held them. ``train_only``: the
+    held-out takes are not read (the test dataset has no window; ``refimpl import``).
     """
     train_src, test_src = bandai_namco_sources(root)
-    loader = load_bandai_namco_source
-    if progress is not None:
-        loader = _counting(loader, len(train_src) + len(test_src), progress)
+    test_src = [] if train_only else test_src
+    loader = cached_loader((train_src, test_src), load_bandai_namco_source, progress=progress)
     return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride,
                                      loader=loader)
 
 
-def _counting(loader, total: int, progress, every_s: float = 5.0):
-    """``loader`` that calls ``progress`` with the number of files read at most every ``every_s`` seconds."""
-    t0 = time.perf_counter()
-    state = {"n": 0, "last": t0}
-
-    def load(source, **kw):
-        out = loader(source, **kw)
-        state["n"] += 1
-        now = time.perf_counter()
-        if now - state["last"] > every_s:
-            state["last"] = now
-            progress(f"read {state['n']} of {total} files, {now - t0:.0f} s")
-        return out
-
-    return load
-
-
-def heldout_dataset(root, root_mean, root_std, T: int = 30, stride: int = 4):
-    """Only the held-out windows of :func:`build_datasets` (reads the ~95 held-out takes, not all 830), with the
-    given root statistics (a trained model's): what an evaluation needs. Same windows as ``build_datasets(...)[1]``
-    with ``test_stride = stride``."""
+def heldout_dataset(root, root_mean, root_std, T: int = 30, stride: int = 4, progress=None):
+    """Only the held-out windows of :func:`build_datasets` (reads the ~95 held-out takes, or their cache entry,
+    not all 830), with the given root statistics (a trained model's): what an evaluation needs. Same windows as
+    ``build_datasets(...)[1]`` with ``test_stride = stride``."""
     _, test_src = bandai_namco_sources(root)
-    test, _ = build_transition_datasets(test_src, [], T=T, stride=stride, loader=load_bandai_namco_source)
+    loader = cached_loader((test_src,), load_bandai_namco_source, progress=progress)
+    test, _ = build_transition_datasets(test_src, [], T=T, stride=stride, loader=loader)
     return dataclasses.replace(test, root_mean=np.asarray(root_mean, dtype=np.float64),
                                root_std=np.asarray(root_std, dtype=np.float64))
 

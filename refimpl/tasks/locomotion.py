@@ -30,12 +30,13 @@ from refimpl.tasks.locomotion_generate import (SPEEDS, bone_length_drift, dq_bon
                                               foot_skating, generate_walk, parse_path, parse_speed, read_path_file,
                                               write_outputs)
 
-__all__ = ["CHECKPOINT_SCHEMA", 
-    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SEED_FRAMES", "add_train_options", "add_eval_options",
-    "add_export_options", "add_generate_options", "resolve_files", "train_datasets", "num_examples",
-    "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "skeleton_of", "rig_of",
-    "onnx_method", "methods", "evaluate", "load_eval_data", "eval_command", "walk_options", "walk_from_checkpoints",
-    "describe_walk", "short_walk_warning", "skating_phrase", "generate_command", "export_options", "verify_inputs",
+__all__ = [
+    "CHECKPOINT_SCHEMA", "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SEED_FRAMES", "add_train_options",
+    "add_eval_options", "add_export_options", "add_generate_options", "resolve_files", "train_datasets",
+    "import_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields",
+    "skeleton_of", "rig_of", "onnx_method", "methods", "evaluate", "load_eval_data", "eval_command", "walk_options",
+    "walk_from_checkpoints", "describe_walk", "short_walk_warning", "skating_phrase", "generate_command",
+    "export_options", "verify_inputs",
 ]
 
 NAME = "locomotion"
@@ -126,9 +127,9 @@ def resolve_files(data: str) -> tuple[str, list, list]:
     return "cmu_bvh", [str(p) for p in bvh[:-n_test]], [str(p) for p in bvh[-n_test:]]
 
 
-def train_datasets(args):
+def train_datasets(args, *, held_out: bool = True):
     """Train and held-out :class:`LocomotionDataset` of ``refimpl train``'s options (``--data``,
-    ``--locomotion-*``)."""
+    ``--locomotion-*``); with ``held_out=False`` the held-out one is None (its files are not read)."""
     from refimpl.errors import BadInputError, UsageError
     P, T = int(args.locomotion_prefix), int(args.locomotion_target)
     if P < 1 or T < 2:
@@ -139,9 +140,17 @@ def train_datasets(args):
     chunk = int(getattr(args, "pace_chunk_length", 0) or 0)
     try:
         return (build_dataset(kind, train, prefix=P, target=T, pace_chunk_length=chunk, progress=print),
-                build_dataset(kind, test, prefix=P, target=T, pace_chunk_length=chunk))
+                build_dataset(kind, test, prefix=P, target=T, pace_chunk_length=chunk, progress=print)
+                if held_out else None)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
+
+
+def import_datasets(args):
+    """``(train, None)`` for ``refimpl import``: a checkpoint stores the seed clip chosen over every training
+    sequence, so the training side is read (from the data cache after the first command); the held-out side,
+    which only validates a training run, is not."""
+    return train_datasets(args, held_out=False)
 
 
 def num_examples(dataset: LocomotionDataset) -> int:
@@ -234,7 +243,8 @@ def load_eval_data(data: str, model_config: Mapping, max_files: int = 0) -> Loco
     test = _evenly(test, int(max_files or 0))
     try:
         ds = build_dataset(kind, test, prefix=int(model_config.get("prefix", 30)),
-                           target=int(model_config.get("target", 60)))
+                           target=int(model_config.get("target", 60)),
+                           progress=lambda line: print(line, file=sys.stderr, flush=True))
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {data}: {exc}") from exc
     if model_config.get("rig") not in (None, ds.rig.name):

@@ -28,12 +28,13 @@ from refimpl.registry import require_source
 from refimpl.services import checkpoint_for, network_methods, onnx_frame_rate, onnx_metadata
 from refimpl.skeleton import Skeleton
 
-__all__ = ["CHECKPOINT_SCHEMA", 
-    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SAMPLE_EXPMAP_DIR", "add_train_options", "add_eval_options",
-    "add_export_options", "add_generate_options", "resolve_data", "train_datasets", "num_examples", "describe_data",
-    "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method", "methods", "evaluate", "eval_protocol",
-    "eval_actions", "load_clip", "Prediction", "make_prediction", "render_prediction", "check_prefixes",
-    "eval_command", "generate_command", "export_options", "verify_inputs",
+__all__ = [
+    "CHECKPOINT_SCHEMA", "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SAMPLE_EXPMAP_DIR", "add_train_options",
+    "add_eval_options", "add_export_options", "add_generate_options", "resolve_data", "train_datasets",
+    "import_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields",
+    "onnx_method", "methods", "evaluate", "eval_protocol", "eval_actions", "load_clip", "Prediction",
+    "make_prediction", "render_prediction", "check_prefixes", "eval_command", "generate_command", "export_options",
+    "verify_inputs",
 ]
 
 # ------------------------------------------------------------------------------------------------------------
@@ -82,10 +83,11 @@ def add_generate_options(parser) -> None:
     common)."""
 
 
-def resolve_data(data: str, *, downsample: int = 2) -> PredictionData:
+def resolve_data(data: str, *, downsample: int = 2, longest_training_only: bool = False) -> PredictionData:
     """The data of ``--data``: ``"sample"`` (:data:`SAMPLE_EXPMAP_DIR`), a folder like ``../shared/data``
     (its ``dmgnn_cmu_expmap``), a CMU exp-map folder (``train/``, ``test/``: :func:`load_cmu`) or a Human3.6M
-    folder (``S1`` … ``S11``: :func:`load_h36m`).
+    folder (``S1`` … ``S11``: :func:`load_h36m`). ``longest_training_only``: parse only the training file with the
+    most rows (the loaders' option; what ``refimpl import`` needs).
 
     Raises
     ------
@@ -102,9 +104,9 @@ def resolve_data(data: str, *, downsample: int = 2) -> PredictionData:
         root = root / "dmgnn_cmu_expmap"
     try:
         if (root / "train").is_dir() or (root / "test").is_dir():
-            return load_cmu(root, stride=downsample)
+            return load_cmu(root, stride=downsample, longest_training_only=longest_training_only)
         if any(p.is_dir() and SUBJECT_DIR.match(p.name) for p in root.iterdir()):
-            return load_h36m(root, stride=downsample)
+            return load_h36m(root, stride=downsample, longest_training_only=longest_training_only)
     except ValueError as exc:
         raise BadInputError(f"--data {data}: {exc}") from exc
     raise BadInputError(f"{root}: neither a CMU exp-map folder (train/, test/) nor a Human3.6M folder (S1 ... S11)")
@@ -116,6 +118,20 @@ def train_datasets(args):
     from refimpl.errors import BadInputError
 
     data = resolve_data(args.data, downsample=getattr(args, "downsample", 2))
+    if not data.train:
+        raise BadInputError(f"--data {args.data}: no training sequences")
+    return data, data
+
+
+def import_datasets(args):
+    """``(data, data)`` for ``refimpl import``: what an imported checkpoint stores from the data (the dataset's
+    name, skeleton and joint count, the frame time) and the recipe's check that a training window fits need only
+    the longest training file, so only that one is parsed (:func:`resolve_data` with
+    ``longest_training_only``; the others' names are checked and their rows counted, spec/import.md §1). The
+    checkpoint is the one :func:`train_datasets`' data gives."""
+    from refimpl.errors import BadInputError
+
+    data = resolve_data(args.data, downsample=getattr(args, "downsample", 2), longest_training_only=True)
     if not data.train:
         raise BadInputError(f"--data {args.data}: no training sequences")
     return data, data

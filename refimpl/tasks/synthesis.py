@@ -29,12 +29,12 @@ from refimpl.services import checkpoint_for, network_methods
 from refimpl.skeleton import Skeleton
 from refimpl.tasks.transition_generate import with_end_sites
 
-__all__ = ["CHECKPOINT_SCHEMA", 
-    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "NPSS_REPORTED", "SAMPLE_SALSA", "TrainingSet", "add_train_options",
-    "add_eval_options", "add_export_options", "add_generate_options", "resolve_data", "train_datasets",
-    "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "onnx_method",
-    "methods", "evaluate", "load_eval_data", "print_results", "write_results", "random_inputs", "continue_seed",
-    "eval_command", "generate_command", "export_options", "verify_inputs",
+__all__ = [
+    "CHECKPOINT_SCHEMA", "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "NPSS_REPORTED", "SAMPLE_SALSA", "TrainingSet",
+    "add_train_options", "add_eval_options", "add_export_options", "add_generate_options", "resolve_data",
+    "train_datasets", "import_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint",
+    "trained_fields", "onnx_method", "methods", "evaluate", "load_eval_data", "print_results", "write_results",
+    "random_inputs", "continue_seed", "eval_command", "generate_command", "export_options", "verify_inputs",
 ]
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -179,6 +179,12 @@ def train_datasets(args):
         raise UsageError(f"--window-length {length}: the shortest training take has "
                          f"{min(len(s) for s in data.train)} frames")
     return TrainingSet(data, row, _parse_losses(getattr(args, "losses", None)), length, motions, augment), data
+
+
+def import_datasets(args):
+    """:func:`train_datasets` (``refimpl import``): a checkpoint stores the feature statistics of every training
+    take, so the whole training side is needed (the salsa takes: a few seconds)."""
+    return train_datasets(args)
 
 
 def num_examples(dataset) -> int:

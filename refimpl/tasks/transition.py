@@ -42,6 +42,7 @@ from refimpl.protocols.transition import (CMU_22_JOINTS, SALSA_22_JOINTS, SAMPLE
                                           build_transition_datasets, declared_rate, join_pose, load_source,
                                           sample_sources, shared_sources, split_pose)
 from refimpl.protocols.transition_baselines import METHOD_NAMES, method_registry
+from refimpl.protocols.transition_cache import cached_loader
 from refimpl.protocols.transition_join import EXPORT_JOIN_MODES, JOIN_MODES, check_join, with_join
 from refimpl.protocols.transition_locomotion import JOINTS as BANDAI_NAMCO_JOINTS, KIND as BANDAI_NAMCO_KIND
 from refimpl.protocols.transition_locomotion import build_datasets as build_bandai_namco, is_bandai_namco_folder
@@ -54,12 +55,12 @@ from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
 from refimpl.tasks.transition_generate import make_transition, render_transition, with_end_sites
 
-__all__ = ["CHECKPOINT_SCHEMA", 
-    "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "add_train_options", "add_eval_options", "add_export_options",
-    "add_generate_options", "source_for_file", "resolve_data", "build_datasets", "train_datasets", "num_examples",
-    "describe_data", "checkpoint_extra", "check_checkpoint", "trained_fields", "JoinedOnnxMethod", "onnx_method",
-    "methods", "evaluate", "print_results", "write_results", "clip_for", "random_context", "eval_command",
-    "generate_command", "export_options", "verify_inputs",
+__all__ = [
+    "CHECKPOINT_SCHEMA", "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "add_train_options", "add_eval_options",
+    "add_export_options", "add_generate_options", "source_for_file", "resolve_data", "build_datasets",
+    "train_datasets", "import_datasets", "num_examples", "describe_data", "checkpoint_extra", "check_checkpoint",
+    "trained_fields", "JoinedOnnxMethod", "onnx_method", "methods", "evaluate", "print_results", "write_results",
+    "clip_for", "random_context", "eval_command", "generate_command", "export_options", "verify_inputs",
 ]
 
 NAME = "transition"
@@ -70,6 +71,11 @@ GENERATE_USAGE = "refimpl generate --source FILE --source-frame S [...]  (a tran
 
 def _say(*parts) -> None:
     print(*parts, flush=True)
+
+
+def _progress(line: str) -> None:
+    """Progress of a long data read (files read, the cache's note), on stderr."""
+    print(line, file=sys.stderr, flush=True)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -238,7 +244,10 @@ def eval_dataset(args, model, T: int):
     sources = [source_for_file(t, fps=args.fps, label=_take_content(t)) for t in takes]   # .bvh / .txt, rig known
     stats = (model.fields["root_mean"], model.fields["root_std"]) if model is not None else (np.zeros(3), np.ones(3))
     try:
-        ds, _ = build_transition_datasets(sources, [], T=T, stride=args.stride, loader=_load_any)
+        loader = _load_any  # Bandai Namco takes only: through the data cache (their entry holds just these takes)
+        if all(s.kind == BANDAI_NAMCO_KIND for s in sources):
+            loader = cached_loader((sources,), load_bandai_namco_source, progress=_progress)
+        ds, _ = build_transition_datasets(sources, [], T=T, stride=args.stride, loader=loader)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"{'--takes' if args.takes else '--data ' + args.data}: {exc}") from exc
     ds = dataclasses.replace(ds, root_mean=np.asarray(stats[0], dtype=np.float64),
@@ -246,21 +255,22 @@ def eval_dataset(args, model, T: int):
     return ds, why or f"the {len(takes)} files of --takes (no training split; normalisation from the checkpoint)"
 
 
-def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.2, test_stride=None):
+def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.2, test_stride=None,
+                   train_only: bool = False):
     """Train and test :class:`~refimpl.protocols.transition.TransitionDataset` of ``2 + T + 2``-pose windows for ``--data``
     (:func:`resolve_data`, :func:`refimpl.protocols.transition.build_transition_datasets`); a folder of Bandai
     Namco locomotion takes: :func:`refimpl.protocols.transition_locomotion.build_datasets` (split by take,
-    spec/qtg.md §8.4)."""
+    spec/qtg.md §8.4). ``train_only``: the held-out files are not read (the test dataset has no window)."""
     if data != "sample" and is_bandai_namco_folder(data):
         try:
-            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride,
-                                      progress=lambda line: print(f"  {line}", file=sys.stderr, flush=True))
+            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride, progress=_progress,
+                                      train_only=train_only)
         except (OSError, ValueError) as exc:
             raise BadInputError(f"--data {data}: {exc}") from exc
     train_src, test_src = resolve_data(data, fps=fps, test_fraction=test_fraction)
     try:
-        return build_transition_datasets(train_src, test_src, T=T, stride=stride, test_stride=test_stride,
-                                         loader=_load_any)
+        return build_transition_datasets(train_src, [] if train_only else test_src, T=T, stride=stride,
+                                         test_stride=test_stride, loader=_load_any)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"--data {data}: {exc}") from exc
 
@@ -269,6 +279,15 @@ def train_datasets(args):
     """Train and held-out datasets of ``refimpl train``'s options (``--data``, ``--transition-length``, ...)."""
     return build_datasets(args.data, args.transition_length, args.stride, fps=args.fps,
                           test_fraction=args.test_fraction)
+
+
+def import_datasets(args):
+    """``(train, None)`` for ``refimpl import``: a checkpoint stores the root statistics of every training window,
+    so the training side is read (the Bandai Namco takes from the data cache after the first command); the
+    held-out side, which only validates a training run, is not."""
+    train, _ = build_datasets(args.data, args.transition_length, args.stride, fps=args.fps,
+                              test_fraction=args.test_fraction, train_only=True)
+    return train, None
 
 
 def num_examples(dataset) -> int:
@@ -362,10 +381,39 @@ def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
     the ground truth's numbers); windows of Bandai Namco takes also ``by_style`` and ``by_kind`` in both
     (:func:`refimpl.protocols.transition_locomotion.window_groups`)."""
     groups = _groups(test_ds)
-    results = evaluate_methods(test_ds, methods_by_name, groups=groups)
-    for name, q in evaluate_quality(test_ds, methods_by_name, groups=groups).items():
+    clock = _Clock()
+    results = evaluate_methods(test_ds, clock.wrap(methods_by_name, "error"), groups=groups)
+    for name, q in evaluate_quality(test_ds, clock.wrap(methods_by_name, "joins and skating"),
+                                    groups=groups).items():
         results[name]["quality"] = q
     return results
+
+
+class _Clock:
+    """Progress of a long evaluation on stderr: every ``every_s`` seconds at most, at a method's next batch, which
+    method and measure it has reached (``"  evaluating: qtg (error), 6 s"``); nothing when it is quick."""
+
+    def __init__(self, every_s: float = 5.0):
+        import time
+
+        self._now = time.perf_counter
+        self.t0 = self.last = self._now()
+        self.every_s = every_s
+
+    def wrap(self, methods_by_name: Mapping[str, Callable], measure: str) -> dict:
+        """``methods_by_name`` with each method reporting through the clock (its ``needs_skeleton`` kept)."""
+        return {name: self._wrap(f, name, measure) for name, f in methods_by_name.items()}
+
+    def _wrap(self, f: Callable, name: str, measure: str) -> Callable:
+        def method(past, target, T, **kw):
+            now = self._now()
+            if now - self.last > self.every_s:
+                self.last = now
+                _progress(f"  evaluating: {name} ({measure}), {now - self.t0:.0f} s")
+            return f(past, target, T, **kw)
+
+        method.needs_skeleton = getattr(f, "needs_skeleton", False)
+        return method
 
 
 def _groups(test_ds) -> dict:
