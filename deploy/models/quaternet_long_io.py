@@ -100,7 +100,7 @@ def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, skel
     ``{"name", "rotations" (P, J, 4), "features" (P, 8)}``, the frames ``(P, 4J + 8)`` as ``seed``), a pace
     network ``pace``. Options of other exporters (``mode``, ``T``) are ignored. ``target="portable"``
     (``deploy/portable.py``): the same step at batch 1 in primitive operators, and for a pace network
-    ``pace_step`` (one step of each direction, :func:`deploy.models.quaternet_long.export_pace_step`) with its
+    ``pace_step`` (K points of both directions per call, :func:`deploy.models.quaternet_long.export_pace_step`) with its
     initial states ``pace_h0`` (``.npy``) instead of ``pace``; the host loops in the metadata.
     """
     out = Path(out_dir)
