@@ -232,7 +232,8 @@ def _row(a: dict, b: dict) -> dict:
 
 def pace_chunk_sweep(chunks, threads: int, rounds: int, min_time: float, quick: bool) -> dict:
     """Today's pace graph against the portable one at each K of ``chunks`` (both paths of :data:`PACE_PATHS`),
-    interleaved: ``{"K": {variant: row}}`` plus ``"nodes"`` and ``"bytes"`` of each portable graph."""
+    interleaved: ``{"K": {variant: row}}``, ``"call"`` (one ``pace_step`` call alone, per point: the graph
+    without the host loop's Python and padding) and ``"nodes"``, ``"bytes"`` of each portable graph."""
     from deploy.models.quaternet_long import export_pace, export_pace_step
     from deploy.portable import builder_options
 
@@ -244,10 +245,14 @@ def pace_chunk_sweep(chunks, threads: int, rounds: int, min_time: float, quick: 
     graphs = {}
     for K in chunks:
         graphs[K] = export_pace_step(params, cfg, points=int(K), **builder_options())
-        for k, c in pace_portable_calls(make_session(graphs[K], intra_op_threads=threads), h0, rng).items():
+        sess = make_session(graphs[K], intra_op_threads=threads)
+        for k, c in pace_portable_calls(sess, h0, rng).items():
             fns[(k, K)] = c
+        x = _pace_paths(rng)["point_n1000"][None]
+        fns[("call", K)] = (_carry(sess, {"x_forward": x[:, :K], "h_forward": h0[0:1], "x_backward": x[:, K:2 * K],
+                                          "h_backward": h0[1:2]}), int(K))
     t = time_calls(fns, rounds, min_time)
-    return {str(K): {**{k: _row(t[(k, "default")], t[(k, K)]) for k in PACE_PATHS},
+    return {str(K): {**{k: _row(t[(k, "default")], t[(k, K)]) for k in PACE_PATHS}, "call": t[("call", K)],
                      "nodes": len(graphs[K].graph.node), "bytes": graphs[K].ByteSize()} for K in chunks}
 
 
@@ -294,7 +299,7 @@ def table(result: dict) -> str:
             lines.append(f"{f'pace.{k} K={K}':28s} {r['default']['median_us']:10.1f} [{r['default']['min_us']:6.1f}] "
                          f"{r['portable']['median_us']:10.1f} [{r['portable']['min_us']:6.1f}] "
                          f"{r['ratio_median']:7.2f} {r['ratio_paired']:7.2f}   ({rows['nodes']} nodes, "
-                         f"{rows['bytes']} bytes)")
+                         f"{rows['bytes']} bytes; one call {rows['call']['median_us']:.1f} µs per point)")
     return "\n".join(lines)
 
 

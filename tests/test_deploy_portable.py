@@ -519,7 +519,7 @@ def test_bench_portable_helpers():
     result = bench.bench(rounds=2, min_time=0.001, quick=True, models=("quaternet", "pace"), pace_chunks=(3,))
     assert set(result["rows"]) == {"quaternet.frame", "pace.point", "pace.point_n1000"}
     assert all(r["ratio_median"] > 0 and r["ratio_paired"] > 0 for r in result["rows"].values())
-    assert set(result["pace_chunks"]["3"]) == {"point", "point_n1000", "nodes", "bytes"}
+    assert set(result["pace_chunks"]["3"]) == {"point", "point_n1000", "call", "nodes", "bytes"}
     assert len(result["env"]["load_average_before"]) == 3
     params, cfg, _ = bench.make_model("pace", quick=True)
     from deploy.models.quaternet_long import export_pace, export_pace_step
