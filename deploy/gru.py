@@ -18,6 +18,8 @@ body is the cell above written with ``MatMul``/``Split``/``Sigmoid``/``Tanh`` as
 Quantised step (``gru_step(..., weights="int8" | "int4")``, onnxruntime only): both products of each layer as
 ``com.microsoft.MatMulNBits`` with block-quantised weights (``deploy.quantize``), the cell element-wise, written
 ``h' = n + z ⊙ (h − n)``.
+Paired unrolled form (:func:`gru_pair_unrolled`, the portable pace graph): two one-layer GRUs over a fixed number
+of steps, no ``Scan``, advanced together with block-diagonal weights (9 nodes per step for both).
 
 Shape legend: B batch, T time, I input features, H hidden, L layers, D directions.
 """

@@ -343,7 +343,7 @@ def test_long_term_numerics(exported, portable, monkeypatch):
 
 
 def test_pace_numerics(exported, portable, monkeypatch):
-    """The pace network's host loop (both directions, one point per call) equals today's bidirectional graph
+    """The pace network's host loop (both directions, K points per call) equals today's bidirectional graph
     and NumPy; each call equals the reference evaluator."""
     from deploy.models import runtime_for_dir
     from refimpl.splines import circle_path

@@ -222,7 +222,7 @@ class Runtime:
             return m if m is None or isinstance(m, DeployedModel) else load_model(m, intra_op_threads=intra_op_threads)
 
         self.step_model, self.pace_model = load(step), load(pace_model)
-        #: the portable pace graph (one step of each direction) and its initial states (2, 1, H), or None
+        #: the portable pace graph (K points of both directions per call) and its initial states (2, 1, H), or None
         self.pace_step_model = load(pace_step)
         self.pace_h0 = None if pace_h0 is None else np.asarray(pace_h0)
         if self.pace_step_model is not None and self.pace_h0 is None:
