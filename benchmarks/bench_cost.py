@@ -9,7 +9,8 @@ side in one run with the ratios.
 
 * **Frame** (``bench_portable.frame_calls``): one ``step`` call (QTG, QuaterNet, acRNN, long-term), one
   ``window`` call on the last R frames (the CNN), one path point of the pace network (today: the
-  bidirectional graph over 200 points / 200; portable: ``pace_step`` calls of 16 points / 16). NumPy:
+  bidirectional graph over 200 points in one call / 200; portable: the host loop over the same 200 points,
+  ``ceil(200 / K)`` ``pace_step`` calls of K points with the state carried, the padding included / 200). NumPy:
   ``qtg.step``, ``quaternet.step`` (both QuaterNets), ``quaternet_cnn.step``, ``acrnn.step``, ``pace.forward``
   over 200 points / 200.
 * **Multiply-adds** (:func:`graph_macs`): counted in today's per-frame graph after shape inference at batch 1:

@@ -18,6 +18,8 @@ body is the cell above written with ``MatMul``/``Split``/``Sigmoid``/``Tanh`` as
 Quantised step (``gru_step(..., weights="int8" | "int4")``, onnxruntime only): both products of each layer as
 ``com.microsoft.MatMulNBits`` with block-quantised weights (``deploy.quantize``), the cell element-wise, written
 ``h' = n + z ⊙ (h − n)``.
+Paired unrolled form (:func:`gru_pair_unrolled`, the portable pace graph): two one-layer GRUs over a fixed number
+of steps, no ``Scan``, advanced together with block-diagonal weights (9 nodes per step for both).
 
 Shape legend: B batch, T time, I input features, H hidden, L layers, D directions.
 """
@@ -36,7 +38,7 @@ from deploy.recurrent import (GRU_PERM, check_layer_shapes, concat_layers,
                               split_layers, squeeze0, time_major,
                               unsqueeze0)
 
-__all__ = ["gru", "gru_step", "gru_unrolled", "gru_onnx_weights"]
+__all__ = ["gru", "gru_step", "gru_pair_unrolled", "gru_onnx_weights"]
 
 
 def gru_onnx_weights(params: Mapping[str, np.ndarray], prefix: str, layer: int = 0,
@@ -208,42 +210,95 @@ def gru_step(g: GraphBuilder, x_t: str, h: str, params: Mapping[str, np.ndarray]
     return y, concat_layers(g, hn, f"{name}.h_new")                    # (L, B, H)
 
 
-def gru_unrolled(g: GraphBuilder, x: str, h0: str, params: Mapping[str, np.ndarray], prefix: str, *, name: str,
-                 steps: int, wname: str | None = None) -> tuple[str, str]:
-    """Append one forward GRU layer over a sequence of a fixed length ``steps``, unrolled (no ``Scan``, no ``GRU``
-    node): the input projections of all steps in one ``MatMul`` + ``Add``, then ``steps`` primitive cells.
+def _block_diagonal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``[[a, 0], [0, b]]``."""
+    out = np.zeros((a.shape[0] + b.shape[0], a.shape[1] + b.shape[1]), dtype=np.result_type(a, b))
+    out[:a.shape[0], :a.shape[1]], out[a.shape[0]:, a.shape[1]:] = a, b
+    return out
+
+
+def _pair_weights(params: Mapping[str, np.ndarray], prefixes: tuple[str, str]) -> tuple[list, int]:
+    """Per gate (r, z, n) of two one-layer GRUs ``a``, ``b``: ``(W_x (2I, 2H), W_h (2H, 2H), b_x (2H,),
+    b_h (2H,))``, the matrices block-diagonal, the biases ``[a | b]``; and H."""
+    layers = []
+    for prefix in prefixes:
+        check_layer_shapes(params, prefix, 0, 3, 1)
+        layers.append([np.asarray(a) for a in primitive_layer_weights(params, prefix, 0, False)])
+    H = layers[0][1].shape[1]
+    if layers[1][1].shape[1] != H or layers[0][0].shape[1] != layers[1][0].shape[1]:
+        raise ValueError(f"params: the two GRUs {prefixes} differ in hidden or input size")
+    gates = []
+    for k in range(3):
+        blk = [[a[k * H:(k + 1) * H] for a in layer] for layer in layers]   # per GRU: w_ih, w_hh, b_ih, b_hh
+        gates.append((_block_diagonal(blk[0][0].T, blk[1][0].T), _block_diagonal(blk[0][1].T, blk[1][1].T),
+                      np.concatenate([blk[0][2], blk[1][2]]), np.concatenate([blk[0][3], blk[1][3]])))
+    return gates, H
+
+
+def _pair_cell(g: GraphBuilder, s: str, c: tuple[str, str, str], w_h: list[str], b_hn: str, name: str) -> str:
+    """One step of :func:`gru_pair_unrolled`: 9 nodes, ``s (B, 2H)`` → ``s' (B, 2H)``."""
+    r = g.node("Sigmoid", [g.node("Gemm", [s, w_h[0], c[0]], f"{name}.ar")], f"{name}.r")
+    z = g.node("Sigmoid", [g.node("Gemm", [s, w_h[1], c[1]], f"{name}.az")], f"{name}.z")
+    hn = g.node("Gemm", [s, w_h[2], b_hn], f"{name}.hn")
+    n = g.node("Tanh", [g.node("Add", [c[2], g.node("Mul", [r, hn], f"{name}.rhn")], f"{name}.n_pre")], f"{name}.n")
+    return g.node("Add", [n, g.node("Mul", [z, g.node("Sub", [s, n], f"{name}.s_n")], f"{name}.z_d")], f"{name}.s")
+
+
+def gru_pair_unrolled(g: GraphBuilder, xs: tuple[str, str], hs: tuple[str, str], params: Mapping[str, np.ndarray],
+                      prefixes: tuple[str, str], *, name: str, steps: int) -> tuple[str, str, str]:
+    """Append two independent one-layer GRUs ``a`` and ``b`` (a bidirectional layer's directions, each on its own
+    sequence) over ``steps`` time steps, unrolled (no ``Scan``, no ``GRU`` node) and advanced together.
+
+    The state is ``s = [h_a | h_b]`` ``(B, 2H)`` and the weights are block-diagonal, so one node per stage of the
+    cell serves both GRUs (at a small hidden size the per-node cost of a runtime dominates). Before the loop, one
+    ``Gemm`` per gate over all steps, ``c_r[t] = x[t] W_irᵀ + b_ir + b_hr``, ``c_z[t]`` likewise,
+    ``c_n[t] = x[t] W_inᵀ + b_in`` (``x[t] = [x_a[t] | x_b[t]]``), each ``Split`` into the steps. Per step 9
+    nodes (onnxruntime fuses each ``Gemm`` + ``Sigmoid`` into one kernel)::
+
+        r = σ(Gemm(s, W_hr, c_r[t]));  z = σ(Gemm(s, W_hz, c_z[t]));  n = tanh(c_n[t] + r ⊙ Gemm(s, W_hn, b_hn))
+        s' = n + z ⊙ (s − n)
 
     Parameters
     ----------
-    x : str
-        Input ``(B, K, I)`` with ``K = steps``.
-    h0 : str
-        Initial state ``(1, B, H)``.
-    params, prefix
-        Layer 0 of ``prefix`` (as :func:`gru`).
+    xs : (str, str)
+        The inputs ``(B, K, I)`` of ``a`` and ``b``, ``K = steps``.
+    hs : (str, str)
+        Their initial states ``(1, B, H)``.
+    params, prefixes
+        Layer 0 of ``prefixes[0]`` and of ``prefixes[1]`` (as :func:`gru`; forward weights each).
 
     Returns
     -------
     y : str
-        ``(B, K, H)``: the state after each step.
-    h_n : str
-        ``(1, B, H)``: the last state.
+        ``(K·B, 2H)``: the states ``[h_a | h_b]`` after each step, time-major (row ``t·B + b``).
+    h_a, h_b : str
+        ``(1, B, H)``: the last states.
     """
-    check_layer_shapes(params, prefix, 0, 3, 1)
-    wl = wname or name
-    w_ih, w_hh, b_ih, b_hh = primitive_layer_weights(params, prefix, 0, False)
-    hidden = w_hh.shape[1]
-    xp = input_projection(g, x, w_ih, b_ih, name, wl)                                  # (B, K, 3H)
-    wh, bh = g.weight(f"{wl}.Wh", w_hh.T), g.weight(f"{wl}.bh", b_hh)
-    h = squeeze0(g, h0, f"{name}.h0")                                                # (B, H)
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise ValueError(f"steps: expected a positive integer, got {steps!r}")
+    K = int(steps)
+    gates, H = _pair_weights(params, prefixes)
+    x = g.node("Concat", [g.node("Transpose", [x_], f"{name}.x{i}.tm", perm=[1, 0, 2]) for i, x_ in enumerate(xs)],
+               f"{name}.x", axis=2)                                                     # (K, B, 2I)
+    x = g.node("Reshape", [x, g.ints([-1, gates[0][0].shape[0]])], f"{name}.x.rows")     # (K·B, 2I)
+    c = []
+    for k, gate in enumerate("rzn"):
+        w_x, _, b_x, b_h = gates[k]
+        proj = g.node("Gemm", [x, g.weight(f"{name}.{gate}.Wx", w_x),
+                               g.weight(f"{name}.{gate}.bx", b_x + b_h if gate != "n" else b_x)],
+                      f"{name}.c{gate}")                                                # (K·B, 2H)
+        c.append(g.node("Split", [proj], f"{name}.c{gate}.t", axis=0, outputs=tuple(str(t) for t in range(K)))
+                 if K > 1 else (proj,))                                                 # K × (B, 2H)
+    w_h = [g.weight(f"{name}.{gate}.Wh", gates[k][1]) for k, gate in enumerate("rzn")]
+    b_hn = g.weight(f"{name}.n.bh", gates[2][3])
+    s = squeeze0(g, g.node("Concat", list(hs), f"{name}.h0", axis=2), f"{name}.s0")       # (B, 2H)
     ys = []
-    for k in range(int(steps)):
-        xk = g.node("Gather", [xp, g.constant(f"{name}.t{k}.i", np.array(k, dtype=np.int64))], f"{name}.t{k}.xp",
-                    axis=1)                                                          # (B, 3H)
-        h = _gru_cell(g, xk, h, wh, bh, hidden, f"{name}.t{k}.cell")                # (B, H)
-        ys.append(g.node("Unsqueeze", [h, g.ints([1])], f"{name}.t{k}.y"))           # (B, 1, H)
-    y = ys[0] if len(ys) == 1 else g.node("Concat", ys, f"{name}.y", axis=1)          # (B, K, H)
-    return y, unsqueeze0(g, h, f"{name}.h_n")
+    for t in range(K):
+        s = _pair_cell(g, s, (c[0][t], c[1][t], c[2][t]), w_h, b_hn, f"{name}.t{t}")     # (B, 2H)
+        ys.append(s)
+    y = ys[0] if K == 1 else g.node("Concat", ys, f"{name}.y", axis=0)                   # (K·B, 2H)
+    h_a, h_b = g.node("Split", [s, g.ints([H, H])], f"{name}.h_n", axis=1, outputs=("a", "b"))  # (B, H) each
+    return y, unsqueeze0(g, h_a, f"{name}.h_a"), unsqueeze0(g, h_b, f"{name}.h_b")
 
 
 # --------------------------------------------------------------------------------------- quantised step

@@ -13,7 +13,7 @@ from conftest import load_golden
 from deploy.activations import activation, leaky_relu
 from deploy.conv1d import conv1d_causal
 from deploy.graph import GraphBuilder
-from deploy.gru import gru, gru_onnx_weights, gru_step
+from deploy.gru import gru, gru_onnx_weights, gru_pair_unrolled, gru_step
 from deploy.linear import linear
 from deploy.lstm import lstm, lstm_onnx_weights, lstm_step
 from deploy.recurrent import GRU_PERM, LSTM_PERM, reorder_gate_blocks, tiled_state
@@ -197,6 +197,42 @@ def test_gru_step_matches_numpy(opset, dtype, primitive):
     for outs, who in ((ort_out, "ort"), (ref_out, "reference")):
         assert_close(outs[0], y, **_tol(dtype), name=f"y {who}")
         assert_close(outs[1], h_new, **_tol(dtype), name=f"h_new {who}")
+
+
+@pytest.mark.parametrize("dtype,primitive", [(np.float32, "recurrent"), (np.float64, True)])
+@pytest.mark.parametrize("K", [1, 4])
+def test_gru_pair_unrolled_matches_numpy(dtype, primitive, K):
+    """spec/deploy.md §13: two one-layer GRUs on their own sequences, advanced together in one unrolled graph
+    (block-diagonal weights, state [h_a | h_b]), equal refimpl gru_forward of each (batch 2, time-major y);
+    no Scan, no GRU node."""
+    from deploy.portable import operators
+
+    rng = np.random.default_rng(7)
+    B, I, H = 2, 3, 5
+    params = {}
+    for prefix in ("a", "b"):
+        params.update({k: _f32_exact(v) for k, v in gru_init(rng, I, H, 1, prefix).items()})
+    feeds = {n: _f32_exact(rng.normal(size=s)) for n, s in (("xa", (B, K, I)), ("ha", (1, B, H)),
+                                                          ("xb", (B, K, I)), ("hb", (1, B, H)))}
+    model = _build([("xa", ["B", K, I]), ("ha", [1, "B", H]), ("xb", ["B", K, I]), ("hb", [1, "B", H])],
+                   lambda g, xa, ha, xb, hb: gru_pair_unrolled(g, (xa, xb), (ha, hb), params, ("a", "b"),
+                                                               name="pair", steps=K),
+                   [("y", [K * B, 2 * H]), ("ha_n", [1, "B", H]), ("hb_n", [1, "B", H])], dtype=dtype, opset=15,
+                   primitive=primitive)
+    assert not operators(model) & {"GRU", "Scan", "Loop"}
+    ya, ha_n, _ = gru_forward(feeds["xa"], feeds["ha"], params, "a", num_layers=1)     # (B, K, H), (1, B, H)
+    yb, hb_n, _ = gru_forward(feeds["xb"], feeds["hb"], params, "b", num_layers=1)
+    y = np.concatenate([ya, yb], axis=-1).transpose(1, 0, 2).reshape(K * B, 2 * H)
+    for outs, who in zip(_run_all(model, feeds, dtype), ("ort", "reference")):
+        assert_close(outs[0], y, **_tol(dtype), name=f"y {who}")
+        assert_close(outs[1], ha_n, **_tol(dtype), name=f"h_a {who}")
+        assert_close(outs[2], hb_n, **_tol(dtype), name=f"h_b {who}")
+    with pytest.raises(ValueError, match="steps"):
+        gru_pair_unrolled(GraphBuilder("t"), ("x", "x"), ("h", "h"), params, ("a", "b"), name="p", steps=0)
+    with pytest.raises(ValueError, match="differ"):
+        other = {**params, **{k.replace("a.", "c.", 1): v for k, v in
+                              gru_init(rng, I, H + 1, 1, "a").items()}}
+        gru_pair_unrolled(GraphBuilder("t"), ("x", "x"), ("h", "h"), other, ("a", "c"), name="p", steps=2)
 
 
 def test_tiled_state_keeps_batch_symbolic():

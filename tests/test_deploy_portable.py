@@ -343,7 +343,7 @@ def test_long_term_numerics(exported, portable, monkeypatch):
 
 
 def test_pace_numerics(exported, portable, monkeypatch):
-    """The pace network's host loop (both directions, one point per call) equals today's bidirectional graph
+    """The pace network's host loop (both directions, K points per call) equals today's bidirectional graph
     and NumPy; each call equals the reference evaluator."""
     from deploy.models import runtime_for_dir
     from refimpl.splines import circle_path
@@ -359,6 +359,45 @@ def test_pace_numerics(exported, portable, monkeypatch):
     ref = method(circle_path(6.0), 0.5)
     assert np.abs(np.maximum(got[0, :, 0], 0.1) - ref.track("amplitude")[:, 0]).max() <= TOL
     _check_calls(rec.calls, portable["pace"], today, "quaternet-long")
+
+
+def test_pace_chunk_boundaries(exported, portable, monkeypatch):
+    """Paths of 1, K - 1, K, K + 1 and 3K + 1 points (K points per call, from the metadata): the portable host
+    loop equals today's bidirectional graph and the NumPy network (``refimpl.models.pace.forward``) within 1e-5
+    on real pace inputs (a circle's turning angles, repeated); the four calls of the 3K + 1 path (the last one
+    padded with K - 1 zeros) equal the reference evaluator; a chunk's last point changes none of the outputs
+    before it in either direction (causal: the zero padding cannot change a real output)."""
+    from deploy.models import runtime_for_dir
+    from refimpl.models import pace
+    from refimpl.splines import circle_path
+
+    ck, today = exported["pace"]
+    model, _ = _numpy(ck)
+    params = {k: np.asarray(v, np.float64) for k, v in model.params.items()}
+    rt, rt_today = runtime_for_dir(portable["pace"]), runtime_for_dir(today)
+    K = int(rt.pace_step_model.metadata["points_per_call"])
+    shapes = {i["name"]: i["shape"] for i in rt.pace_step_model.metadata["io"]["inputs"]}
+    assert K > 1 and shapes["x_forward"] == shapes["x_backward"] == [1, K, 2]
+    angle = circle_path(6.0).reparameterize(5.0, 1.0).track("turning_angle")[:, 0]
+    x_all = np.stack([np.resize(angle, 3 * K + 1), np.linspace(0.3, 0.9, 3 * K + 1)], -1)[None].astype(np.float32)
+    for n in (1, K - 1, K, K + 1, 3 * K + 1):
+        x = x_all[:, :n]
+        rec = _Recorder(monkeypatch)
+        got = rt.pace(x)
+        monkeypatch.undo()
+        ref, _ = pace.forward(params, model.config, x.astype(np.float64))
+        assert got.shape == (1, n, 4)
+        assert np.abs(got - rt_today.pace(x)).max() <= TOL, n
+        assert np.abs(got - ref).max() <= TOL, n
+        assert len(rec.calls["pace_step"]) == -(-n // K)
+    assert _check_calls(rec.calls, portable["pace"], today, "quaternet-long") == 4
+    step, h0 = rt.pace_step_model, rt.pace_h0
+    feeds = {"x_forward": x_all[:, :K], "h_forward": h0[0:1], "x_backward": x_all[:, K:2 * K], "h_backward": h0[1:2]}
+    other = {**feeds, "x_forward": feeds["x_forward"].copy(), "x_backward": feeds["x_backward"].copy()}
+    other["x_forward"][:, -1], other["x_backward"][:, -1] = 5.0, -5.0     # the last point of each direction
+    a, b = step.run(feeds), step.run(other)
+    for k in ("y_forward", "y_backward"):
+        assert np.array_equal(a[k][:, :K - 1], b[k][:, :K - 1]) and not np.allclose(a[k][:, -1], b[k][:, -1]), k
 
 
 # ----------------------------------------------------------------------------------------- command line
@@ -441,15 +480,31 @@ def test_consumers_on_portable_graphs(exported, portable):
     seed = frames[None, 1:11]
     ref = np.asarray(method(seed, 8), np.float64)
     assert np.all(np.abs(acrnn.generate_loop(portable["acrnn"], seed, 8) - ref) <= 1e-4 * np.maximum(1, np.abs(ref)))
-    from refimpl.splines import circle_path
+
+
+def test_pace_consumer_on_portable_graph(exported, portable):
+    """The metadata-only pace consumer (tests/consumers/quaternet_long.py: pace_steps, K from the metadata) equals
+    today's consumer and the NumPy pace tracks, on a path of several chunks and on paths of 1, K - 1, K and
+    K + 1 points (the head of a figure-8's inputs)."""
+    from tests.consumers import quaternet_long
+    from refimpl.splines import circle_path, figure_eight_path
 
     _, pace_method = _numpy(exported["pace"][0])
     path = circle_path(6.0)
     sp = path.reparameterize(5.0, 1.0)
+    K = _meta(portable["pace"] / "quaternet-long_pace_step.onnx")["points_per_call"]
+    assert len(sp.track("turning_angle")) > 2 * K                  # several chunks, the last one padded
     got = quaternet_long.pace_steps(portable["pace"], sp.track("turning_angle")[:, 0], 0.5, sp.track("tangent"))
     ref = pace_method(path, 0.5)
     assert np.abs(got["amplitude"] - ref.track("amplitude")[:, 0]).max() <= 1e-5
     assert np.abs(got["facing"] - ref.track("direction")).max() <= 1e-5
+    f8 = figure_eight_path(8.0).reparameterize(5.0, 1.0)
+    angle, tangent = f8.track("turning_angle")[:, 0], f8.track("tangent")
+    for n in (1, K - 1, K, K + 1):
+        got = quaternet_long.pace_steps(portable["pace"], angle[:n], 0.7, tangent[:n])
+        today = quaternet_long.pace(exported["pace"][1], angle[:n], 0.7, tangent[:n])
+        for k in ("amplitude", "frequency", "facing"):
+            assert got[k].shape[0] == n and np.abs(got[k] - today[k]).max() <= 1e-5, (n, k)
 
 
 def test_bench_portable_helpers():
@@ -461,7 +516,17 @@ def test_bench_portable_helpers():
     spec = importlib.util.spec_from_file_location("bench_portable", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    result = bench.bench(rounds=1, min_time=0.001, quick=True, models=("quaternet", "pace"))
-    assert set(result["rows"]) == {"quaternet.frame", "pace.point"}
-    assert all(r["ratio_median"] > 0 for r in result["rows"].values())
+    result = bench.bench(rounds=2, min_time=0.001, quick=True, models=("quaternet", "pace"), pace_chunks=(3,))
+    assert set(result["rows"]) == {"quaternet.frame", "pace.point", "pace.point_n1000"}
+    assert all(r["ratio_median"] > 0 and r["ratio_paired"] > 0 for r in result["rows"].values())
+    assert set(result["pace_chunks"]["3"]) == {"point", "point_n1000", "call", "nodes", "bytes"}
+    assert len(result["env"]["load_average_before"]) == 3
+    params, cfg, _ = bench.make_model("pace", quick=True)
+    from deploy.models.quaternet_long import export_pace, export_pace_step
+    from deploy.portable import builder_options
+    from deploy.session import make_session
+    x = np.random.default_rng(0).normal(size=(11, 2)).astype(np.float32)
+    y = bench.pace_host_loop(make_session(export_pace_step(params, cfg, points=4, **builder_options())),
+                             np.asarray(params["h0"], np.float32).reshape(2, 1, -1), x, 4)
+    assert np.abs(y - make_session(export_pace(params, cfg)).run(None, {"x": x[None]})[0][0]).max() <= TOL
     assert "quaternet.frame" in bench.table(result)

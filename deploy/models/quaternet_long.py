@@ -22,7 +22,7 @@ from refimpl.models.quaternet import QuaterNetConfig, check_params
 
 from deploy.activations import leaky_relu
 from deploy.graph import OPSET, GraphBuilder
-from deploy.gru import gru, gru_step, gru_unrolled
+from deploy.gru import gru, gru_pair_unrolled, gru_step
 from deploy.linear import linear
 from deploy.metadata import EXPORTER_VERSION, build_metadata, io_entries, skeleton_metadata
 from deploy.quat import dq_normalize, quat_normalize
@@ -35,8 +35,10 @@ QUATERNET_PAPER = ("Pavllo, Feichtenhofer, Auli, Grangier: Modeling Human Motion
                    "Networks, IJCV 2019 (long-term locomotion, §3.7)")
 
 
-#: Points per call of the portable pace graph (:func:`export_pace_step`).
-PACE_CHUNK = 16
+#: Points per call of the portable pace graph (:func:`export_pace_step`), chosen by measurement
+#: (``benchmarks/bench_portable.py --pace-chunks``: the time per point flattens once the ``run`` overhead is spread
+#: over a few dozen points; larger K only grows the graph and the padding of short paths).
+PACE_CHUNK = 64
 
 #: Length unit of the long-term networks (QuaterNet's locomotion data; spec/locomotion.md).
 UNITS = "QuaterNet units (1 unit = 5.6444 cm)"
@@ -199,6 +201,10 @@ def export_pace_step(params: Mapping[str, np.ndarray], config: pace.PaceConfig, 
     """The ``pace_step`` model: ``points`` points of each direction of the pace network per call, for a host that
     runs a path chunk by chunk (the portable target, ``deploy/portable.py``; no ``GRU`` node, no ``Scan``).
 
+    Graph: both directions unrolled over the K points and advanced together (:func:`deploy.gru.gru_pair_unrolled`:
+    state ``[h_f | h_b]``, block-diagonal weights, 9 nodes per point for both), then the head of all K points in
+    one ``Gemm``: ``[y_f | y_b] = [h_f | h_b] [[W_fᵀ, 0], [0, W_bᵀ]] + [0 | b]``.
+
     The forward direction reads the path in order, the backward direction the reversed path, each padded at its
     end to a multiple of ``points`` (padding comes after the real points in both orders, so it changes nothing
     before it). The pace output of point ``n`` of ``N`` is ``y_forward[n] + y_backward[N − 1 − n]`` over the
@@ -219,11 +225,19 @@ def export_pace_step(params: Mapping[str, np.ndarray], config: pace.PaceConfig, 
     p = _direction_params(params, H)
     g = GraphBuilder(f"{NAME}_pace_step", dtype=dtype, opset=opset, primitive=primitive)
     ins = {d: (g.input(f"x_{d}", ["B", K, I]), g.input(f"h_{d}", [1, "B", H])) for d in ("forward", "backward")}
-    for d, tag in (("forward", "f"), ("backward", "b")):
-        y, h_new = gru_unrolled(g, ins[d][0], ins[d][1], p, "fwd" if tag == "f" else "bwd", name=f"rnn_{tag}",
-                                steps=K)                                                 # (B, K, H), (1, B, H)
-        g.output(linear(g, y, p, f"head_{tag}", name=f"head_{tag}"), f"y_{d}", ["B", K, G])
-        g.output(h_new, f"h_{d}_next", [1, "B", H])
+    y, h_f, h_b = gru_pair_unrolled(g, (ins["forward"][0], ins["backward"][0]),
+                                    (ins["forward"][1], ins["backward"][1]), p, ("fwd", "bwd"), name="rnn",
+                                    steps=K)                             # (K·B, 2H) [h_f | h_b], 2 × (1, B, H)
+    head = g.weight("head.W", np.block([[p["head_f.weight"].T, np.zeros((H, G))],
+                                        [np.zeros((H, G)), p["head_b.weight"].T]]))    # (2H, 2G)
+    bias = np.concatenate([np.zeros(G), p.get("head_b.bias", np.zeros(G))])
+    o = g.node("Gemm", [y, head, g.weight("head.b", bias)], "head")                  # (K·B, 2G)
+    o = g.node("Transpose", [g.node("Reshape", [o, g.ints([K, -1, 2 * G])], "head.tbg")], "head.btg",
+               perm=[1, 0, 2])                                                       # (B, K, 2G)
+    y_f, y_b = g.node("Split", [o, g.ints([G, G])], "y", axis=2, outputs=("f", "b"))  # (B, K, G) each
+    for d, y_d, h_d in (("forward", y_f, h_f), ("backward", y_b, h_b)):
+        g.output(y_d, f"y_{d}", ["B", K, G])
+        g.output(h_d, f"h_{d}_next", [1, "B", H])
     io = {"inputs": io_entries(("x_forward", ["B", K, I], f"[turning_angle, average_speed] of points c K ... c K + "
                                 f"{K - 1} (call c; zeros past the path's end)"),
                                ("h_forward", [1, "B", H], "forward GRU state (initial_state[0], then h_forward_next)"),

@@ -100,7 +100,7 @@ def export_dir(params, config, out_dir, *, dtype=np.float32, metadata=None, skel
     ``{"name", "rotations" (P, J, 4), "features" (P, 8)}``, the frames ``(P, 4J + 8)`` as ``seed``), a pace
     network ``pace``. Options of other exporters (``mode``, ``T``) are ignored. ``target="portable"``
     (``deploy/portable.py``): the same step at batch 1 in primitive operators, and for a pace network
-    ``pace_step`` (one step of each direction, :func:`deploy.models.quaternet_long.export_pace_step`) with its
+    ``pace_step`` (K points of both directions per call, :func:`deploy.models.quaternet_long.export_pace_step`) with its
     initial states ``pace_h0`` (``.npy``) instead of ``pace``; the host loops in the metadata.
     """
     out = Path(out_dir)
@@ -222,7 +222,7 @@ class Runtime:
             return m if m is None or isinstance(m, DeployedModel) else load_model(m, intra_op_threads=intra_op_threads)
 
         self.step_model, self.pace_model = load(step), load(pace_model)
-        #: the portable pace graph (one step of each direction) and its initial states (2, 1, H), or None
+        #: the portable pace graph (K points of both directions per call) and its initial states (2, 1, H), or None
         self.pace_step_model = load(pace_step)
         self.pace_h0 = None if pace_h0 is None else np.asarray(pace_h0)
         if self.pace_step_model is not None and self.pace_h0 is None:
