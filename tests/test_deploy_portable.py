@@ -31,6 +31,11 @@ from refimpl.cli import EXIT_OK, main as refimpl_main  # noqa: E402
 from tests.test_deploy_every_model import SALSA, WALK_BVH, WALK_TXT, exported  # noqa: E402,F401  (the fixture)
 
 TOL = 1e-5
+#: quaternet-dq's 5-step rollouts: each step decodes and re-normalises dual quaternions and feeds them back, which
+#: amplifies float32 rounding step by step (measured on an AVX-512 machine: portable vs today's graph 5e-7 at the
+#: first predicted frame, 1.9e-5 at the fifth; today's graph vs NumPy float64 2.7e-5 at the fifth); the first
+#: frame is held to TOL.
+DQ_ROLLOUT_TOL = 1e-4
 
 PORTABLE_FILES = {"qtg": {"qtg_init.onnx", "qtg_step.onnx"},
                   "qtg-join": {"qtg_init.onnx", "qtg_step.onnx", "qtg_join.onnx"},
@@ -302,7 +307,9 @@ def test_prediction_numerics(exported, portable, monkeypatch, name):
 
     rt = runtime_for_dir(today)
     rt.predict_model = None                              # today's init + step loop (not its predict graph)
-    assert np.abs(got - _method_of(rt, ck)(x, 5)).max() <= TOL
+    today_got = _method_of(rt, ck)(x, 5)
+    assert np.abs(got[:, 0] - today_got[:, 0]).max() <= TOL                 # one step: the graphs' numerics
+    assert np.abs(got - today_got).max() <= (DQ_ROLLOUT_TOL if name == "quaternet-dq" else TOL)
 
 
 def test_acrnn_numerics(exported, portable, monkeypatch):
@@ -462,7 +469,8 @@ def test_consumers_on_portable_graphs(exported, portable):
     _, method = _numpy(exported["quaternet-dq"][0])
     got = np.concatenate([quaternet_dq.predict_steps(portable["quaternet-dq"], x[b:b + 1], 5) for b in range(len(x))])
     today = quaternet_dq.predict_steps(exported["quaternet-dq"][1], x, 5)
-    assert np.abs(got - today).max() <= TOL and np.abs(got - method(x, 5)).max() <= 5e-3
+    assert np.abs(got[:, 0] - today[:, 0]).max() <= TOL and np.abs(got - today).max() <= DQ_ROLLOUT_TOL
+    assert np.abs(got - method(x, 5)).max() <= 5e-3
     from refimpl.protocols.locomotion import evaluation_windows
     from refimpl.tasks import locomotion
 

@@ -22,9 +22,8 @@ What changes, declared here (nothing else is touched):
   the demo it ran), linked into the scratch folder; without it those commands are skipped. A port the page
   names that is already taken skips the command.
 * Commands that need ``../shared`` are skipped when it is absent (they are still parsed).
-* ``SLOW``: the README's QTG-on-Bandai-Namco commands read the 830 locomotion files for transition windows,
-  which is not cached (60 s on an idle machine, 250 s at load 9): they are parsed, and run only with
-  ``REFIMPL_README_SLOW=1`` (the README says so).
+* Nothing else is skipped: the QTG commands on the Bandai Namco set read its 830 takes once (~30 s idle) and
+  then from the data cache (``refimpl/protocols/transition_cache.py``).
 """
 from __future__ import annotations
 
@@ -85,8 +84,6 @@ SERVERS = ("python -m deploy web",)
 #: Seconds a server may take to print its address (the first start runs ``npm ci``).
 SERVER_START_S = 300
 
-#: Commands that read the Bandai Namco set for transitions (uncached, > 1 min): run with REFIMPL_README_SLOW=1.
-SLOW = re.compile(r"runs/qtg_bn|--model qtg --data \.\./shared/data/bandai_namco_locomotion")
 
 _TINY_QTG = ["--set", "encoder_sizes=16,8", "--set", "gru_hidden=8", "--set", "decoder_sizes=16"]
 #: Inputs a page names without making them: made before the page's first command (refimpl argv lists).
@@ -346,14 +343,11 @@ def test_every_documented_command_runs(page, tmp_path):
     """Run every command of ``page`` in order (budgets of :data:`BUDGETS`); collect every failure."""
     work = _workspace(tmp_path)
     _setup(page, work)
-    slow = os.environ.get("REFIMPL_README_SLOW") == "1"
     failed, ran, skipped = [], 0, []
     for cmd in page_commands(page):
         why = _not_run(cmd)
         if why is None and _needs_shared(cmd) and not SHARED.is_dir():
             why = "needs ../shared"
-        if why is None and SLOW.search(cmd.text) and not slow:
-            why = "reads the Bandai Namco set for transitions (> 1 min): REFIMPL_README_SLOW=1 runs it"
         if why is None and page == "deploy/README.md" and "long/" in cmd.text and not SHARED.is_dir():
             why = "the long-term models train on ../shared"
         if why is not None:
