@@ -115,3 +115,30 @@ def test_clip_segments_keeps_the_path_inside_the_floor_square():
     seg = clip_segments(pts, np.array([-1.0, -1.0]), np.array([1.0, 1.0]))
     assert np.allclose(seg, [[[-1, 0], [1, 0]], [[1, 1], [0.5, 0.5]]])
     assert clip_segments(np.array([[3.0, 3.0], [4.0, 3.0]]), -np.ones(2), np.ones(2)).shape == (0, 2, 2)
+
+
+def test_kernel_titles_floor_and_joint_colours(tmp_path):
+    """refimpl/render_kernel.py's small helpers: a wrapped title and its height, a text shrunk into the figure,
+    the clip's floor and its square, joint colours in the bone rule's shades, palette GIF frames."""
+    from refimpl import render_kernel as K
+
+    text = K.wrap_title("word " * 40, 3.0, 10.0)
+    assert text.count("\n") >= 2 and max(len(line) for line in text.split("\n")) <= 40
+    assert K.title_height("", 10) == 0.0 < K.title_height("a", 10) < K.title_height(text, 10)
+    fig = K.figure(2.0, 1.0, 100)
+    artist = fig.text(0.5, 0.5, "x" * 80, ha="center", fontsize=12)
+    K.fit_text(fig, artist)
+    box = artist.get_window_extent(fig.canvas.get_renderer())
+    assert artist.get_fontsize() < 12 and (box.x0 >= 0 and box.x1 <= fig.bbox.width or artist.get_fontsize() == 5)
+    pos = np.zeros((3, 2, 3))
+    pos[1, 1, 2] = -4.0
+    assert K.clip_floor(pos) == -4.0
+    assert np.allclose(K.floor_square(np.array([1.0, 2.0]), 1.0, -4.0)[:, 2], -4.0)
+    cols = K.joint_colors("tab:blue", 3, np.array([-1, 0, 1]))
+    assert sum(cols[0]) < sum(cols[1]) < sum(cols[2]) and len(set(K.joint_colors("tab:red", 3))) == 1
+    frame = K.grab_frame(fig)
+    assert frame.mode == "P" and frame.size == (200, 100)
+    artist.set_text("y")
+    out = K.save_gif(tmp_path / "x.gif", [frame, K.grab_frame(fig)], 10.0)
+    with Image.open(out) as im:
+        assert im.n_frames == 2
