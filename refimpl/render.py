@@ -43,8 +43,8 @@ from refimpl.files import read_text
 from refimpl.render_kernel import (CONTEXT_COLOR, GHOST_COLOR, GT_COLOR, PRED_COLOR, SIDES_NOTE, bone_colors,
                                    bone_segments, centre_axes, check_highlight, check_numbers, check_parents,
                                    check_positions, check_sides, check_up, clip_floor, clip_segments, figure,
-                                   fit_text, grab_frame, grid_segments, half_extent, joint_colors, save_figure,
-                                   save_gif, setup_axes, title_height, to_plot, wrap_title)
+                                   fit_text, gif_writer, grid_segments, half_extent, joint_colors, save_figure,
+                                   setup_axes, title_height, to_plot, wrap_title)
 
 __all__ = ["render_gif", "stderr_progress", "render_loss_curve", "render_error_curves", "read_loss_log",
            "render_path_motion", "GIF_MIN_HEIGHT"]
@@ -184,18 +184,18 @@ def _gif_panel(fig, box, cols: int, c: int, source, label: str, half: float, flo
 
 
 def _write_gif(path, fig, num_frames: int, update, fps: float, progress) -> Path:
-    """Draw ``num_frames`` frames (``update(k)`` moves the artists of frame ``k``), then write the GIF;
-    ``progress(line)`` every PROGRESS_EVERY seconds."""
+    """Draw ``num_frames`` frames (``update(k)`` moves the artists of frame ``k``) into a GIF, each streamed to
+    the file as it is drawn; ``progress(line)`` every PROGRESS_EVERY seconds."""
     path = Path(path)
-    frames = []
     t0 = t_last = time.perf_counter()
-    for k in range(num_frames):
-        if progress is not None and time.perf_counter() - t_last > PROGRESS_EVERY:
-            t_last = time.perf_counter()
-            progress(f"{path.name}: frame {k} of {num_frames}, {t_last - t0:.0f} s")
-        update(k)
-        frames.append(grab_frame(fig))
-    return save_gif(path, frames, fps)
+    with gif_writer(path, fps) as add:
+        for k in range(num_frames):
+            if progress is not None and time.perf_counter() - t_last > PROGRESS_EVERY:
+                t_last = time.perf_counter()
+                progress(f"{path.name}: frame {k} of {num_frames}, {t_last - t0:.0f} s")
+            update(k)
+            add(fig)
+    return path
 
 
 def stderr_progress(line: str) -> None:

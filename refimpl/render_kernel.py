@@ -14,10 +14,11 @@ Shape legend: T frames, J joints, M path points, K segments, H × W pixels.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import textwrap
 from pathlib import Path
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -57,24 +58,48 @@ def save_figure(fig, path: str | os.PathLike) -> Path:
     return path
 
 
-def grab_frame(fig):
-    """Draw ``fig`` and return it as a palette image (Pillow ``"P"``, 1 byte per pixel: a long GIF's frames are
-    held in memory at a quarter of their RGBA size)."""
-    from PIL import Image
+@contextlib.contextmanager
+def gif_writer(path: str | os.PathLike, fps: float) -> Iterator:
+    """Write a looping GIF at ``fps`` frame by frame (atomically): yields ``add(fig)``, which draws ``fig`` and
+    appends it.
 
-    fig.canvas.draw()
-    rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]  # (H, W, 3) uint8
-    return Image.fromarray(np.ascontiguousarray(rgb)).quantize(256, method=Image.Quantize.FASTOCTREE,
-                                                               dither=Image.Dither.NONE)
+    Each frame is streamed to the file at once — only the rectangle that changed since the previous frame, as a
+    256-colour palette image with its own colour table (Pillow's GIF encoder, ``GifImagePlugin.getheader`` /
+    ``getdata``) — so that memory does not grow with the GIF's length (a 120 s walk has 1,800 frames).
+    """
+    from PIL import GifImagePlugin, Image
+
+    duration = int(1000.0 / fps)
+    state = {"prev": None}
+    with atomic_path(path, make_parents=True) as tmp, open(tmp, "wb") as f:
+        def add(fig) -> None:
+            fig.canvas.draw()
+            rgb = np.ascontiguousarray(np.asarray(fig.canvas.buffer_rgba())[..., :3])  # (H, W, 3) uint8
+            x0, y0, x1, y1 = _changed_box(state["prev"], rgb)
+            im = Image.fromarray(np.ascontiguousarray(rgb[y0:y1, x0:x1])).quantize(
+                256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
+            if state["prev"] is None:
+                f.write(b"".join(GifImagePlugin.getheader(im, None, {"loop": 0, "duration": duration})[0]))
+            f.write(b"".join(GifImagePlugin.getdata(im, offset=(x0, y0), duration=duration,
+                                                    include_color_table=True)))
+            state["prev"] = rgb
+
+        yield add
+        if state["prev"] is None:
+            raise ValueError("a GIF needs at least one frame")
+        f.write(b";")  # the GIF trailer
 
 
-def save_gif(path: str | os.PathLike, frames: Sequence, fps: float) -> Path:
-    """Write the frames of :func:`grab_frame` as a looping GIF at ``fps`` (atomically)."""
-    path = Path(path)
-    with atomic_path(path, make_parents=True) as tmp:
-        frames[0].save(tmp, format="GIF", save_all=True, append_images=list(frames[1:]), loop=0,
-                       duration=int(1000.0 / fps))
-    return path
+def _changed_box(prev, rgb: np.ndarray) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)`` of the pixels of ``rgb (H, W, 3)`` that differ from ``prev`` (all of them for the first
+    frame; one pixel for an unchanged frame, which keeps its place in the timing)."""
+    if prev is None:
+        return 0, 0, rgb.shape[1], rgb.shape[0]
+    changed = np.any(rgb != prev, axis=-1)  # (H, W)
+    rows, cols = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
+    if rows.size == 0:
+        return 0, 0, 1, 1
+    return int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1
 
 
 def wrap_title(title: str | None, width_in: float, fontsize: float) -> str:

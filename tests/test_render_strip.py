@@ -119,7 +119,7 @@ def test_clip_segments_keeps_the_path_inside_the_floor_square():
 
 def test_kernel_titles_floor_and_joint_colours(tmp_path):
     """refimpl/render_kernel.py's small helpers: a wrapped title and its height, a text shrunk into the figure,
-    the clip's floor and its square, joint colours in the bone rule's shades, palette GIF frames."""
+    the clip's floor and its square, joint colours in the bone rule's shades, a GIF streamed frame by frame."""
     from refimpl import render_kernel as K
 
     text = K.wrap_title("word " * 40, 3.0, 10.0)
@@ -136,9 +136,18 @@ def test_kernel_titles_floor_and_joint_colours(tmp_path):
     assert np.allclose(K.floor_square(np.array([1.0, 2.0]), 1.0, -4.0)[:, 2], -4.0)
     cols = K.joint_colors("tab:blue", 3, np.array([-1, 0, 1]))
     assert sum(cols[0]) < sum(cols[1]) < sum(cols[2]) and len(set(K.joint_colors("tab:red", 3))) == 1
-    frame = K.grab_frame(fig)
-    assert frame.mode == "P" and frame.size == (200, 100)
-    artist.set_text("y")
-    out = K.save_gif(tmp_path / "x.gif", [frame, K.grab_frame(fig)], 10.0)
-    with Image.open(out) as im:
-        assert im.n_frames == 2
+    with K.gif_writer(tmp_path / "x.gif", 10.0) as add:
+        add(fig)
+        artist.set_text("y")
+        add(fig)
+        add(fig)  # unchanged: still a frame of its own
+    with Image.open(tmp_path / "x.gif") as im:
+        assert im.n_frames == 3 and im.size == (200, 100) and im.info["loop"] == 0
+        im.seek(1)
+        second = np.asarray(im.convert("RGB"))
+    fig.canvas.draw()
+    assert np.abs(second.astype(int) - np.asarray(fig.canvas.buffer_rgba())[..., :3]).max() < 40
+    with pytest.raises(ValueError, match="at least one frame"):
+        with K.gif_writer(tmp_path / "empty.gif", 10.0):
+            pass
+    assert not (tmp_path / "empty.gif").exists()
