@@ -351,16 +351,18 @@ def cmd_render(args) -> int:
     outs = args.out or [Path(args.file).stem + ".png"]
     sides = limb_sides(motion.skeleton)  # left limbs dark, right limbs light (the skeleton's mirror map)
     labels = (Path(args.file).stem, Path(args.compare).stem if args.compare else "")
+    title = args.title or (Path(args.file).name + (f" (blue) against {Path(args.compare).name} (red)"
+                                                   if args.compare else ""))  # every picture has a title
     step = sel.step or 1
     for out in outs:
         suffix = Path(out).suffix.lower()
         if suffix == ".png":
             render_strip(out, pos, parents, prediction=pred, num_frames=args.num_frames, labels=labels,
-                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=args.title, sides=sides)
+                         up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=title, sides=sides)
         elif suffix == ".gif":
             render_gif(out, pos, parents, prediction=pred, fps=motion.fps / step, stride=args.stride, labels=labels,
                        progress=stderr_progress,
-                       up=args.up, frame_numbers=idx, title=args.title, sides=sides)
+                       up=args.up, frame_numbers=idx, title=title, sides=sides)
         else:
             raise UsageError(f"--out {out}: expected a .png or .gif file name")
         _say(f"wrote {out} ({len(idx)} frames of {args.file})")

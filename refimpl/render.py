@@ -1,11 +1,13 @@
-"""Pictures of skeletal motion: animated GIFs, loss curves and per-frame error curves (frame strips:
-``refimpl/render_strip.py``), and the drawing helpers both modules share (kernel tier, at the end).
+"""Pictures of skeletal motion: animated GIFs, a character walking a path, loss curves and per-frame error
+curves (frame strips: ``refimpl/render_strip.py``; the drawing helpers all of them share:
+``refimpl/render_kernel.py``).
 
-matplotlib is an optional dependency (the ``render`` extra, ``pip install 'refimpl[render]'``). It is imported
-lazily, inside the functions, so that ``import refimpl.render`` always works; a missing matplotlib raises
-``ImportError`` with the install hint. Figures are built with the object-oriented API on the Agg canvas
-(``matplotlib.figure.Figure`` + ``FigureCanvasAgg``): nothing here touches ``pyplot`` or changes the global
-backend, so rendering is headless and safe inside a notebook or a test run.
+matplotlib is an optional dependency (the ``render`` extra, ``pip install 'refimpl[render]'``; the GIF frames are
+written with Pillow, which matplotlib depends on). It is imported lazily, inside the functions, so that
+``import refimpl.render`` always works; a missing matplotlib raises ``ImportError`` with the install hint.
+Figures are built with the object-oriented API on the Agg canvas (``matplotlib.figure.Figure`` +
+``FigureCanvasAgg``): nothing here touches ``pyplot`` or changes the global backend, so rendering is headless and
+safe inside a notebook or a test run.
 
 Conventions
 -----------
@@ -16,11 +18,14 @@ Conventions
   the up axis vertical, with an equal aspect ratio on all three axes and an orthographic camera.
 * Ground truth is drawn in blue, the prediction in red; frames outside ``highlight`` (the context frames of a
   transition) are drawn in green, as in the QTG paper's Figure 1. With ``sides`` left limbs are drawn in a
-  darker and right limbs in a lighter shade of that colour.
-* The floor grid is fixed in the world (:func:`grid_segments`), so that travel and sliding feet are visible.
+  darker and right limbs in a lighter shade of that colour (the same rule for every model).
+* The floor is FIXED for the whole clip: one height (the ground truth's lowest joint over all its frames), one
+  square of one size around the character, its grid lines fixed in the world, so that travel, sliding feet and a
+  foot off the floor are visible.
+* Every picture has a title when one is given, wrapped and shrunk to fit the picture (never clipped).
 * Every file is written atomically (temporary file in the same folder, fsync, ``os.replace``).
 
-Shape legend: T frames, J joints, N drawn frames.
+Shape legend: T frames, J joints, N drawn frames, M path points.
 """
 from __future__ import annotations
 
@@ -34,18 +39,21 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from refimpl.atomic import atomic_path
 from refimpl.files import read_text
+from refimpl.render_kernel import (CONTEXT_COLOR, GHOST_COLOR, GT_COLOR, PRED_COLOR, SIDES_NOTE, bone_colors,
+                                   bone_segments, centre_axes, check_highlight, check_numbers, check_parents,
+                                   check_positions, check_sides, check_up, clip_floor, clip_segments, figure,
+                                   fit_text, gif_writer, grid_segments, half_extent, joint_colors, save_figure,
+                                   setup_axes, title_height, to_plot, wrap_title)
 
 __all__ = ["render_gif", "stderr_progress", "render_loss_curve", "render_error_curves", "read_loss_log",
-           "render_path_motion"]
+           "render_path_motion", "GIF_MIN_HEIGHT"]
 
-GT_COLOR = "tab:blue"
-PRED_COLOR = "tab:red"
-CONTEXT_COLOR = "tab:green"
-GHOST_COLOR = "0.75"
-_INSTALL_HINT = "rendering needs matplotlib: pip install 'refimpl[render]' (or pip install matplotlib)"
-
+#: Height in pixels a GIF has at least (its default panel size and resolution): a foot contact can be judged.
+GIF_MIN_HEIGHT = 400
+#: Seconds of drawing between two progress lines.
+PROGRESS_EVERY = 5.0
+_TITLE_SIZE = 10.0
 
 # ----------------------------------------------------------------------------------------------------------
 # public pictures (the frame strip is in refimpl/render_strip.py)
@@ -64,13 +72,16 @@ def _finish_plot(fig, ax, title, path) -> Path:
 def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, fps: float = 30.0,
                stride: int = 1, highlight: tuple[int, int] | None = None,
                labels: tuple[str, str] = ("ground truth", "prediction"), title: str | None = None,
-               up: str = "y", frame_numbers=None, panel_size: float = 2.6, dpi: float = 80, sides=None,
+               up: str = "y", frame_numbers=None, panel_size: float = 4.4, dpi: float = 100, sides=None,
                progress=None) -> Path:
-    """Animate a motion (and, side by side, a prediction) and save it as a GIF with Pillow.
+    """Animate a motion (and, side by side, a prediction) and save it as a GIF.
 
-    The camera follows the ground-truth root horizontally, with one fixed scale (equal aspect, orthographic).
-    With ``prediction`` the left panel shows the ground truth (blue) and the right panel the prediction (red)
-    over a grey ghost of the ground truth; frames outside ``highlight`` are drawn in green.
+    The camera follows the ground-truth root horizontally, with one fixed scale (equal aspect, orthographic) and
+    one fixed floor (height and square, :func:`refimpl.render_kernel.clip_floor`) for the whole clip. With
+    ``prediction`` the left panel shows the ground truth (blue) and the right panel the prediction (red) over a
+    grey ghost of the ground truth; frames outside ``highlight`` are drawn in green. The GIF is at least
+    :data:`GIF_MIN_HEIGHT` pixels tall (the resolution is raised for a small ``panel_size``) and its title is
+    wrapped and shrunk to fit.
 
     Parameters
     ----------
@@ -88,22 +99,16 @@ def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, 
     stride : int
         Draw every ``stride``-th frame.
     highlight, labels, title, up, frame_numbers, panel_size, dpi, sides
-        As in :func:`refimpl.render_strip.render_strip`.
+        As in :func:`refimpl.render_strip.render_strip` (``panel_size`` in inches, ``dpi`` pixels per inch).
     progress : callable, optional
         ``progress(line)`` every ~5 s of drawing (``"walk.gif: frame 120 of 300, 11 s"``; the commands pass
-        :func:`stderr_progress`: a long GIF takes a minute).
+        :func:`stderr_progress`).
 
     Returns
     -------
     Path
         The written file.
     """
-    try:
-        from matplotlib.animation import PillowWriter
-    except ImportError as exc:  # pragma: no cover
-        raise ImportError(_INSTALL_HINT) from exc
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection
-
     par = check_parents(parents)
     gt = check_positions(positions, "positions", par)
     pred = None if prediction is None else check_positions(prediction, "prediction", par)
@@ -118,55 +123,78 @@ def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, 
     start, stop = check_highlight(highlight, gt.shape[0])
     numbers = check_numbers(frame_numbers, gt.shape[0])
     idx = np.arange(0, gt.shape[0], int(stride))  # (N,)
-
     gt_p = to_plot(gt, up)
     pred_p = None if pred is None else to_plot(pred, up)
-    drawn = [gt_p] + ([] if pred_p is None else [pred_p])
-    half = half_extent(drawn)
-    floor = min(float(q[..., 2].min()) for q in drawn)
-    mid = floor + half * 0.9
-
+    half = half_extent([gt_p] + ([] if pred_p is None else [pred_p]))
+    floor = clip_floor(gt_p)  # one floor for the whole clip
     cols = 1 if pred is None else 2
-    fig = figure(panel_size * cols, panel_size + 0.3, dpi)
-    panels = []  # (axes, floor grid, [(collection, source positions, main colour or None for a ghost)])
-    sources = [(gt_p, GT_COLOR, [])] if pred_p is None else [(gt_p, GT_COLOR, []), (pred_p, PRED_COLOR, [gt_p])]
-    for c, (src, color, ghosts) in enumerate(sources):
-        ax = fig.add_subplot(1, cols, c + 1, projection="3d")
-        grid = setup_axes(ax, half, floor)
-        fig.text((c + 0.5) / cols, 0.93 if title else 0.97, labels[c], ha="center", va="top", fontsize=8,
-                 color=color)
-        layers = []
-        for g in ghosts:
-            coll = Line3DCollection(bone_segments(g[0], par), colors=GHOST_COLOR, linewidths=1.2)
-            ax.add_collection3d(coll)
-            layers.append((coll, g, None))
-        coll = Line3DCollection(bone_segments(src[0], par), colors=bone_colors(color, par, sides), linewidths=1.8)
-        ax.add_collection3d(coll)
-        layers.append((coll, src, color))
-        panels.append((ax, grid, layers))
-    caption = fig.text(0.5, 0.01, "", ha="center", fontsize=7)
-    if title:
-        fig.suptitle(title, fontsize=8)
-    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.04, top=0.9, wspace=0.0)
+    fig, box = _gif_figure(cols, panel_size, dpi, title)
+    sources = [(gt_p, GT_COLOR, [])] + ([] if pred_p is None else [(pred_p, PRED_COLOR, [gt_p])])
+    panels = [_gif_panel(fig, box, cols, c, s, labels[c], half, floor, par, sides) for c, s in enumerate(sources)]
+    caption = fig.text(0.02, 0.5 * box["bottom"], "", va="center", fontsize=8)
+    if sides is not None:
+        fig.text(0.98, 0.5 * box["bottom"], SIDES_NOTE, ha="right", va="center", fontsize=7, color="0.3")
 
+    def update(k: int) -> None:
+        t = idx[k]
+        context = highlight is not None and not (start <= t < stop)
+        for ax, floor_artists, layers in panels:
+            centre_axes(ax, floor_artists, gt_p[t, 0, :2], half, floor, floor + half * 0.9)
+            for coll, src, color in layers:
+                coll.set_segments(bone_segments(src[t], par))
+                if color is not None:
+                    coll.set_color(bone_colors(CONTEXT_COLOR if context else color, par, sides))
+        caption.set_text(f"frame {numbers[t]}" + (" (context)" if context else ""))
+
+    return _write_gif(path, fig, len(idx), update, max(1.0, fps / int(stride)), progress)
+
+
+def _gif_figure(cols: int, panel_size: float, dpi: float, title: str | None):
+    """A GIF's figure: ``cols`` square panels under the (wrapped, fitted) title and a row of labels, over a
+    caption row; ``(fig, {"top", "bottom", "label"})`` as figure fractions. At least GIF_MIN_HEIGHT pixels."""
+    text = wrap_title(title, panel_size * cols, _TITLE_SIZE)
+    head = title_height(text, _TITLE_SIZE) + 0.3  # the title, then the panels' labels
+    foot = 0.3                                     # the caption (frame number)
+    height = panel_size + head + foot
+    fig = figure(panel_size * cols, height, max(float(dpi), GIF_MIN_HEIGHT / height))
+    if text:
+        fit_text(fig, fig.text(0.5, 1.0 - 0.05 / height, text, ha="center", va="top", fontsize=_TITLE_SIZE))
+    box = {"top": 1.0 - head / height, "bottom": foot / height, "label": 1.0 - (head - 0.28) / height}
+    fig.subplots_adjust(left=0.0, right=1.0, bottom=box["bottom"], top=box["top"], wspace=0.0)
+    return fig, box
+
+
+def _gif_panel(fig, box, cols: int, c: int, source, label: str, half: float, floor: float, par, sides):
+    """One GIF panel: 3-D axes with the floor, its label, a ghost per ``ghosts`` and the pose's bones."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    src, color, ghosts = source
+    ax = fig.add_subplot(1, cols, c + 1, projection="3d")
+    floor_artists = setup_axes(ax, half, floor)
+    fig.text((c + 0.5) / cols, box["label"], label, ha="center", va="top", fontsize=9, color=color)
+    layers = []
+    for g in ghosts:
+        coll = Line3DCollection(bone_segments(g[0], par), colors=GHOST_COLOR, linewidths=1.4)
+        ax.add_collection3d(coll)
+        layers.append((coll, g, None))
+    coll = Line3DCollection(bone_segments(src[0], par), colors=bone_colors(color, par, sides), linewidths=2.2)
+    ax.add_collection3d(coll)
+    layers.append((coll, src, color))
+    return ax, floor_artists, layers
+
+
+def _write_gif(path, fig, num_frames: int, update, fps: float, progress) -> Path:
+    """Draw ``num_frames`` frames (``update(k)`` moves the artists of frame ``k``) into a GIF, each streamed to
+    the file as it is drawn; ``progress(line)`` every PROGRESS_EVERY seconds."""
     path = Path(path)
-    writer = PillowWriter(fps=max(1.0, fps / int(stride)))
-    with atomic_path(path, make_parents=True) as tmp:
-        with writer.saving(fig, str(tmp), dpi):
-            t0 = t_last = time.perf_counter()
-            for k, t in enumerate(idx):  # one draw per frame: move the artists, then grab
-                if progress is not None and time.perf_counter() - t_last > 5.0:
-                    t_last = time.perf_counter()
-                    progress(f"{path.name}: frame {k} of {len(idx)}, {t_last - t0:.0f} s")
-                context = highlight is not None and not (start <= t < stop)
-                for ax, grid, layers in panels:
-                    centre_axes(ax, grid, gt_p[t, 0, :2], half, floor, mid)
-                    for coll, src, color in layers:
-                        coll.set_segments(bone_segments(src[t], par))
-                        if color is not None:
-                            coll.set_color(bone_colors(CONTEXT_COLOR if context else color, par, sides))
-                caption.set_text(f"frame {numbers[t]}" + (" (context)" if context else ""))
-                writer.grab_frame(facecolor="white")
+    t0 = t_last = time.perf_counter()
+    with gif_writer(path, fps) as add:
+        for k in range(num_frames):
+            if progress is not None and time.perf_counter() - t_last > PROGRESS_EVERY:
+                t_last = time.perf_counter()
+                progress(f"{path.name}: frame {k} of {num_frames}, {t_last - t0:.0f} s")
+            update(k)
+            add(fig)
     return path
 
 
@@ -305,11 +333,15 @@ def render_error_curves(path: str | os.PathLike, curves: Mapping[str, np.ndarray
 
 def render_path_motion(path: str | os.PathLike, positions, parents, path_points, *, closed: bool = False,
                        fps: float = 30.0, stride: int = 2, num_frames: int = 8, title: str | None = None,
-                       panel_size: float = 3.2, dpi: float = 80) -> Path:
+                       panel_size: float = 4.4, dpi: float = 100, sides=None, progress=None) -> Path:
     """Draw a character following a ground path: a ``.png`` (left: the poses at ``num_frames`` evenly spaced
-    frames in 3-D with the path on the floor; right: the map — path in grey, root track in red, start marked)
-    or an animated ``.gif`` (left: the character followed by the camera, the path on the floor; right: the map
-    with the current position).
+    frames in 3-D over the floor, the path ON the floor; right: the map — path in grey, root track in red, start
+    marked) or an animated ``.gif`` (left: the character followed by the camera over a fixed floor square, the
+    part of the path inside that square drawn on it; right: the map with the root track up to the frame shown
+    and the current position).
+
+    The floor is the clip's lowest joint height (all frames, the up axis Y of the positions), the same in every
+    frame; the path lies at that height.
 
     Parameters
     ----------
@@ -323,9 +355,11 @@ def render_path_motion(path: str | os.PathLike, positions, parents, path_points,
     closed : bool
         Draw the closing segment.
     fps, stride : GIF playback rate and frame step.
+    num_frames : poses of the PNG.
+    title, panel_size, dpi, sides : as in :func:`render_gif`.
+    progress : callable, optional
+        As in :func:`render_gif` (GIF only).
     """
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection
-
     par = check_parents(parents)
     pos = check_positions(positions, "positions", par)
     pts = np.asarray(path_points, dtype=np.float64)
@@ -334,235 +368,85 @@ def render_path_motion(path: str | os.PathLike, positions, parents, path_points,
     suffix = Path(path).suffix.lower()
     if suffix not in (".png", ".gif"):
         raise ValueError(f"path: expected a .png or .gif file name, got {path}")
+    sides = check_sides(sides, len(par))
     if closed:
         pts = np.concatenate([pts, pts[:1]])
-    pp = to_plot(pos, "y")                                                 # (T, J, 3), Z up
-    floor = float(pp[..., 2].min())
-    path3 = np.stack([pts[:, 0], -pts[:, 1], np.full(len(pts), floor)], axis=-1)  # (M, 3)
-    fig = figure(2 * panel_size, panel_size + 0.3, dpi)
-    ax = fig.add_subplot(1, 2, 1, projection="3d")
-    ax2 = fig.add_subplot(1, 2, 2)
-    ax2.plot(pts[:, 0], pts[:, 1], color="0.6", lw=1.5, label="path")
-    ax2.plot(pos[:, 0, 0], pos[:, 0, 2], color=PRED_COLOR, lw=1.0, label="root")
-    ax2.plot(pos[0, 0, 0], pos[0, 0, 2], "o", color=CONTEXT_COLOR, ms=4, label="start")
-    ax2.set_aspect("equal")
-    ax2.invert_yaxis()  # the map seen from above with x right and z down, as the 3-D view's floor
-    ax2.set_xlabel("x")
-    ax2.set_ylabel("z")
-    ax2.legend(fontsize=6, loc="upper right")
-    ax2.tick_params(labelsize=6)
-    if title:
-        fig.suptitle(title, fontsize=8)
+    walk = {"pos": pos, "pp": to_plot(pos, "y"), "par": par, "sides": sides,
+            "path_xy": np.stack([pts[:, 0], -pts[:, 1]], axis=-1), "pts": pts}  # the path in plot (x, y)
+    walk["floor"] = clip_floor(walk["pp"])
+    fig, box = _gif_figure(2, panel_size, dpi, title)
+    ax2 = fig.add_axes((0.58, box["bottom"] + 0.08, 0.39, box["top"] - box["bottom"] - 0.1))
+    _draw_map(ax2, pts, pos)
     if suffix == ".png":
-        ax.set_proj_type("ortho")
-        ax.view_init(elev=25.0, azim=-60.0)
-        ax.set_axis_off()
-        lo = np.minimum(path3.min(0), pp.reshape(-1, 3).min(0))
-        hi = np.maximum(path3.max(0), pp.reshape(-1, 3).max(0))
-        centre, half = 0.5 * (lo + hi), 0.55 * float(np.max(hi - lo))
-        ax.set_xlim(centre[0] - half, centre[0] + half)
-        ax.set_ylim(centre[1] - half, centre[1] + half)
-        ax.set_zlim(floor, floor + 2 * half)
-        ax.set_box_aspect((1.0, 1.0, 1.0), zoom=1.2)
-        ax.plot(path3[:, 0], path3[:, 1], path3[:, 2], color="0.6", lw=1.2)
-        for k, t in enumerate(np.linspace(0, len(pp) - 1, max(1, int(num_frames))).round().astype(int)):
-            ax.add_collection3d(Line3DCollection(bone_segments(pp[t], par), colors=PRED_COLOR, linewidths=1.2))
-            ax2.plot(pos[t, 0, 0], pos[t, 0, 2], ".", color="k", ms=3)
-        fig.subplots_adjust(left=0.0, right=0.98, bottom=0.12, top=0.9, wspace=0.15)
-        return save_figure(fig, path)
-
-    try:
-        from matplotlib.animation import PillowWriter
-    except ImportError as exc:  # pragma: no cover
-        raise ImportError(_INSTALL_HINT) from exc
-    half = half_extent([pp])
-    grid = setup_axes(ax, half, floor)
-    ax.plot(path3[:, 0], path3[:, 1], path3[:, 2], color="0.6", lw=1.5)
-    bones = Line3DCollection(bone_segments(pp[0], par), colors=PRED_COLOR, linewidths=1.8)
-    ax.add_collection3d(bones)
-    (dot,) = ax2.plot([pos[0, 0, 0]], [pos[0, 0, 2]], "o", color=PRED_COLOR, ms=5)
-    caption = fig.text(0.25, 0.01, "", ha="center", fontsize=7)
-    fig.subplots_adjust(left=0.0, right=0.98, bottom=0.12, top=0.9, wspace=0.15)
-    idx = np.arange(0, pp.shape[0], max(1, int(stride)))
-    writer = PillowWriter(fps=max(1.0, fps / max(1, int(stride))))
-    path = Path(path)
-    with atomic_path(path, make_parents=True) as tmp:
-        with writer.saving(fig, str(tmp), dpi):
-            for t in idx:
-                centre_axes(ax, grid, pp[t, 0, :2], half, floor, floor + half * 0.9)
-                bones.set_segments(bone_segments(pp[t], par))
-                dot.set_data([pos[t, 0, 0]], [pos[t, 0, 2]])
-                caption.set_text(f"frame {t} ({t / fps:.1f} s)")
-                writer.grab_frame(facecolor="white")
-    return path
+        return _path_png(path, fig, walk, num_frames, ax2)
+    return _path_gif(path, fig, box, walk, ax2, fps, stride, progress)
 
 
-# ----------------------------------------------------------------------------------------------------------
-# Kernel tier: unchecked helpers shared with refimpl/render_strip.py (public names, not in __all__)
+def _draw_map(ax2, pts: np.ndarray, pos: np.ndarray) -> None:
+    """The map seen from above (x right, z down, as the 3-D view's floor): path, start."""
+    ax2.plot(pts[:, 0], pts[:, 1], color="0.6", lw=1.5, label="path")
+    ax2.plot(pos[0, 0, 0], pos[0, 0, 2], "o", color=CONTEXT_COLOR, ms=4, label="start")
+    ax2.set_aspect("equal", adjustable="datalim")
+    ax2.invert_yaxis()
+    ax2.set_xlabel("x", fontsize=8)
+    ax2.set_ylabel("z", fontsize=8)
+    ax2.tick_params(labelsize=7)
 
 
-def figure(width: float, height: float, dpi: float):
-    """A new Agg-backed ``Figure`` (no pyplot, no global backend change)."""
-    try:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-    except ImportError as exc:  # pragma: no cover - exercised only without matplotlib
-        raise ImportError(_INSTALL_HINT) from exc
-    fig = Figure(figsize=(width, height), dpi=dpi)
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def save_figure(fig, path: str | os.PathLike) -> Path:
-    """Save ``fig`` as PNG to ``path`` atomically."""
-    path = Path(path)
-    with atomic_path(path, make_parents=True) as tmp:
-        fig.savefig(tmp, format="png", facecolor="white")
-    return path
-
-
-def check_positions(positions, name: str, parents=None) -> np.ndarray:
-    """Validate a ``(T, J, 3)`` finite position array (and, given ``parents``, its joint count)."""
-    p = np.asarray(positions, dtype=np.float64)
-    if p.ndim != 3 or p.shape[-1] != 3 or p.shape[0] < 1 or p.shape[1] < 1:
-        raise ValueError(f"{name} must have shape (T, J, 3) with T, J >= 1, got {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise ValueError(f"{name} contains NaN or inf")
-    if parents is not None and p.shape[1] != len(parents):
-        raise ValueError(f"{name} has {p.shape[1]} joints but parents has {len(parents)} entries")
-    return p
-
-
-def check_parents(parents) -> np.ndarray:
-    """Validate a parent index array ``(J,)``: ``-1`` or an earlier-or-any valid joint index."""
-    par = np.asarray(parents)
-    if par.ndim != 1 or par.size < 1 or not np.issubdtype(par.dtype, np.integer):
-        raise ValueError(f"parents must be a 1-D integer array (J,), got shape {par.shape} dtype {par.dtype}")
-    if np.any(par < -1) or np.any(par >= par.size) or np.any(par == np.arange(par.size)):
-        raise ValueError(f"parents must hold -1 or another joint's index in [0, {par.size}), got {par.tolist()}")
-    return par.astype(np.int64)
-
-
-def check_sides(sides, num_joints: int):
-    """Validate ``sides`` (None or ``(J,)`` of −1 / 0 / +1: left / centre / right joints)."""
-    if sides is None:
-        return None
-    s = np.asarray(sides)
-    if s.shape != (num_joints,) or not np.issubdtype(s.dtype, np.integer) or np.any(np.abs(s) > 1):
-        raise ValueError(f"sides must be {num_joints} integers in {{-1, 0, 1}} (left, centre, right), got {s.tolist()}")
-    return s.astype(np.int64)
-
-
-def check_up(up: str) -> str:
-    if up not in ("y", "z"):
-        raise ValueError(f"up must be 'y' or 'z', got {up!r}")
-    return up
-
-
-def to_plot(p: np.ndarray, up: str) -> np.ndarray:
-    """Data coordinates ``(..., 3)`` → matplotlib 3-D coordinates (Z vertical), a proper rotation.
-
-    Y-up data ``(x, y, z)`` becomes ``(x, -z, y)``: right-handed is kept (x̂ × (−ẑ) = ŷ).
-    """
-    if up == "z":
-        return p
-    return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)  # (..., 3)
-
-
-def bone_segments(p: np.ndarray, parents: np.ndarray) -> np.ndarray:
-    """Bones of one pose as segments ``(J_bones, 2, 3)`` from each non-root joint to its parent."""
-    child = np.flatnonzero(parents >= 0)
-    return np.stack([p[parents[child]], p[child]], axis=1)  # (J_bones, 2, 3)
-
-
-def half_extent(plot_positions: Sequence[np.ndarray]) -> float:
-    """Half side of the cube that holds every drawn pose centred on its root's horizontal position."""
-    ext = 0.0
-    for q in plot_positions:  # (T, J, 3) each
-        rel = q[..., :2] - q[:, :1, :2]  # (T, J, 2) horizontal offsets from the root
-        ext = max(ext, float(np.max(np.abs(rel))), 0.5 * float(np.ptp(q[..., 2], axis=1).max()))
-    return 1.1 * ext if ext > 0 else 1.0
-
-
-def grid_segments(centre: np.ndarray, half: float, floor: float) -> np.ndarray:
-    """Floor grid lines FIXED IN THE WORLD (at multiples of a round spacing, about ``half / 2``) that cross the
-    square of side ``2 half`` around ``centre``, as segments ``(M, 2, 3)``: the character travels and its feet
-    slide over a grid that stays put."""
-    step = _round_step(half / 2.0)
-    x0, x1, y0, y1 = centre[0] - half, centre[0] + half, centre[1] - half, centre[1] + half
-    xs = np.arange(np.ceil(x0 / step), np.floor(x1 / step) + 1) * step
-    ys = np.arange(np.ceil(y0 / step), np.floor(y1 / step) + 1) * step
-    along_y = [[(x, y0, floor), (x, y1, floor)] for x in xs]
-    along_x = [[(x0, y, floor), (x1, y, floor)] for y in ys]
-    return np.asarray(along_y + along_x, dtype=np.float64).reshape(-1, 2, 3)
-
-
-def _round_step(x: float) -> float:
-    """The largest 1, 2 or 5 times a power of ten that is <= ``x`` (> 0)."""
-    e = 10.0 ** np.floor(np.log10(x))
-    return float(max(m * e for m in (1.0, 2.0, 5.0) if m * e <= x * (1 + 1e-12)))
-
-
-def bone_colors(color, parents: np.ndarray, sides=None) -> list:
-    """Colour of every bone of :func:`bone_segments`: ``color`` for the centre, darker for left limbs and lighter
-    for right limbs (``sides (J,)``: −1 left, +1 right, 0 centre, the side of the bone's child joint)."""
-    from matplotlib.colors import to_rgb
-
-    child = np.flatnonzero(parents >= 0)
-    base = np.asarray(to_rgb(color))
-    if sides is None:
-        return [tuple(base)] * len(child)
-    shade = {-1: 0.55 * base, 0: base, 1: base + 0.55 * (1.0 - base)}
-    return [tuple(shade[int(np.sign(sides[j]))]) for j in child]
-
-
-def setup_axes(ax, half: float, floor: float):
-    """Orthographic, equal-aspect 3-D axes without decoration, plus a floor grid; returns the grid collection."""
+def _path_png(path, fig, walk: dict, num_frames: int, ax2) -> Path:
+    """The PNG: poses at evenly spaced frames over one floor that holds the whole path, the full root track."""
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
-    ax.set_proj_type("ortho")
-    ax.view_init(elev=12.0, azim=-60.0)
-    ax.set_box_aspect((1.0, 1.0, 1.0), zoom=1.35)
-    ax.computed_zorder = False  # draw in call order: the prediction over the ground-truth ghost
-    ax.set_axis_off()
-    grid = Line3DCollection(grid_segments(np.zeros(2), half, floor), colors="0.72", linewidths=0.6)
-    ax.add_collection3d(grid)
-    return grid
+    pp, par, floor, pos = walk["pp"], walk["par"], walk["floor"], walk["pos"]
+    ax = fig.add_axes((0.0, 0.0, 0.55, fig.subplotpars.top), projection="3d")
+    flat = np.concatenate([walk["path_xy"], pp[..., :2].reshape(-1, 2)])  # (M + T·J, 2)
+    centre = 0.5 * (flat.min(0) + flat.max(0))
+    half = 0.55 * float(np.max(flat.max(0) - flat.min(0)))
+    floor_artists = setup_axes(ax, half, floor, elev=25.0, zoom=1.0)
+    centre_axes(ax, floor_artists, centre, half, floor, floor + half * 0.5)
+    ax.add_collection3d(Line3DCollection(_floor_path(walk, centre, half), colors="0.45", linewidths=1.4))
+    for t in np.linspace(0, len(pp) - 1, max(1, int(num_frames))).round().astype(int):
+        ax.add_collection3d(Line3DCollection(bone_segments(pp[t], par), linewidths=1.2,
+                                             colors=bone_colors(PRED_COLOR, par, walk["sides"])))
+        ax2.plot(pos[t, 0, 0], pos[t, 0, 2], ".", color="k", ms=3)
+    ax2.plot(pos[:, 0, 0], pos[:, 0, 2], color=PRED_COLOR, lw=1.0, label="root")
+    ax2.legend(fontsize=7, loc="lower right")
+    return save_figure(fig, path)
 
 
-def centre_axes(ax, grid, centre: np.ndarray, half: float, floor: float, vertical_mid: float) -> None:
-    """Centre the camera box (side ``2 half``) on ``centre`` (horizontal) and move the floor grid with it."""
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
-    ax.set_zlim(vertical_mid - half, vertical_mid + half)
-    grid.set_segments(grid_segments(centre, half, floor))
+def _floor_path(walk: dict, centre: np.ndarray, half: float) -> np.ndarray:
+    """The path's segments inside the floor square around ``centre``, ON the floor: ``(K, 2, 3)``."""
+    seg = clip_segments(walk["path_xy"], centre - half, centre + half)  # (K, 2, 2)
+    return np.concatenate([seg, np.full(seg.shape[:2] + (1,), walk["floor"])], axis=-1)
 
 
-def pick_frames(num_total: int, frames, num_frames: int) -> np.ndarray:
-    if frames is None:
-        if num_frames < 1:
-            raise ValueError(f"num_frames must be >= 1, got {num_frames}")
-        return np.unique(np.linspace(0, num_total - 1, min(num_frames, num_total)).round().astype(np.int64))
-    idx = np.asarray(frames, dtype=np.int64).reshape(-1)
-    if idx.size == 0 or np.any(idx < 0) or np.any(idx >= num_total):
-        raise ValueError(f"frames must be indices in [0, {num_total}), got {idx.tolist()}")
-    return idx
+def _path_gif(path, fig, box, walk: dict, ax2, fps: float, stride: int, progress) -> Path:
+    """The GIF: the character over a floor square that follows it, the map with the root track so far."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
+    pp, par, floor, pos, sides = walk["pp"], walk["par"], walk["floor"], walk["pos"], walk["sides"]
+    ax = fig.add_axes((0.0, box["bottom"], 0.5, box["top"] - box["bottom"]), projection="3d")
+    half = half_extent([pp])
+    floor_artists = setup_axes(ax, half, floor)
+    road = Line3DCollection(_floor_path(walk, pp[0, 0, :2], half), colors="0.45", linewidths=2.0)
+    ax.add_collection3d(road)
+    bones = Line3DCollection(bone_segments(pp[0], par), colors=bone_colors(PRED_COLOR, par, sides), linewidths=2.2)
+    ax.add_collection3d(bones)
+    (trace,) = ax2.plot(pos[:1, 0, 0], pos[:1, 0, 2], color=PRED_COLOR, lw=1.0, label="root so far")
+    (dot,) = ax2.plot(pos[:1, 0, 0], pos[:1, 0, 2], "o", color=PRED_COLOR, ms=5)
+    ax2.legend(fontsize=7, loc="upper right")
+    caption = fig.text(0.02, 0.5 * box["bottom"], "", va="center", fontsize=8)
+    if sides is not None:
+        fig.text(0.98, 0.5 * box["bottom"], SIDES_NOTE, ha="right", va="center", fontsize=7, color="0.3")
+    idx = np.arange(0, pp.shape[0], max(1, int(stride)))
 
-def check_highlight(highlight, num_total: int):
-    if highlight is None:
-        return 0, num_total
-    start, stop = (int(v) for v in highlight)
-    if not 0 <= start <= stop <= num_total:
-        raise ValueError(f"highlight must be (start, stop) with 0 <= start <= stop <= {num_total}, got {highlight}")
-    return start, stop
+    def update(k: int) -> None:
+        t = idx[k]
+        centre_axes(ax, floor_artists, pp[t, 0, :2], half, floor, floor + half * 0.9)
+        road.set_segments(_floor_path(walk, pp[t, 0, :2], half))
+        bones.set_segments(bone_segments(pp[t], par))
+        trace.set_data(pos[:t + 1, 0, 0], pos[:t + 1, 0, 2])
+        dot.set_data([pos[t, 0, 0]], [pos[t, 0, 2]])
+        caption.set_text(f"frame {t} ({t / fps:.1f} s)")
 
-
-def check_numbers(frame_numbers, num_total: int) -> np.ndarray:
-    if frame_numbers is None:
-        return np.arange(num_total)
-    numbers = np.asarray(frame_numbers).reshape(-1)
-    if numbers.shape != (num_total,) or not np.issubdtype(numbers.dtype, np.integer):
-        raise ValueError(f"frame_numbers must be {num_total} integers, got shape {numbers.shape} "
-                         f"dtype {numbers.dtype}")
-    return numbers
+    return _write_gif(path, fig, len(idx), update, max(1.0, fps / max(1, int(stride))), progress)

@@ -23,7 +23,7 @@ LAYERS = {
           "refimpl.safetensors", "refimpl.train", "refimpl.train_files"],
     5: ["refimpl.models", "refimpl.models.*"],
     6: ["refimpl.rigs", "refimpl.protocols", "refimpl.protocols.*"],
-    7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_strip", "refimpl.tasks",
+    7: ["refimpl.errors", "refimpl.options", "refimpl.render", "refimpl.render_kernel", "refimpl.render_strip", "refimpl.tasks",
         "refimpl.tasks.*", "refimpl.recipes", "refimpl.recipes.*", "refimpl.registry", "refimpl.services",
         "refimpl.allocator", "refimpl.weights", "refimpl.task_api", "refimpl.recipe_api", "refimpl.run_options",
         "refimpl.threads", "refimpl.pretrained"],

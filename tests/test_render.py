@@ -166,3 +166,99 @@ def test_sample_bvh_renders_a_person(tmp_path):
     assert ink.sum() > 100
     height, width = rows.max() - rows.min(), cols.max() - cols.min()
     assert height > 1.5 * width, "a standing walker should be taller than wide"
+
+
+# ----------------------------------------------------------------------------------------------------------
+# issue 35: GIFs tall enough, titles not clipped, one fixed floor, the walk's path on the floor
+
+FLOOR = 0.93 * 255  # refimpl.render_kernel.FLOOR_COLOR, the floor square's fill
+ROAD = 0.45 * 255   # the ground path's grey in the walk's 3-D view
+
+
+def _gif_frames(path) -> list[np.ndarray]:
+    with Image.open(path) as im:
+        out = []
+        for k in range(im.n_frames):
+            im.seek(k)
+            out.append(np.asarray(im.convert("RGB"), dtype=np.float64))
+    return out
+
+
+def _grey(img: np.ndarray, level: float, tol: float = 6.0) -> np.ndarray:
+    return np.all(np.abs(img - level) < tol, axis=-1)
+
+
+def test_gif_is_tall_enough_and_its_title_is_not_clipped(tmp_path):
+    """§8: at least GIF_MIN_HEIGHT px tall even for a small panel, a long title wrapped inside the picture
+    (old: 2.6-inch panels at 80 dpi, 232 px tall, the title cut at both sides)."""
+    from refimpl.render import GIF_MIN_HEIGHT
+
+    title = "a long title that names the model, the source file, the frames and the colours of the context"
+    out = render_gif(tmp_path / "t.gif", _walk(6), _PARENTS, title=title, panel_size=2.0, dpi=80)
+    img = _gif_frames(out)[0]
+    h, w, _ = img.shape
+    assert h >= GIF_MIN_HEIGHT
+    ink = np.all(img < 120, axis=-1)  # black text
+    band = ink[: h // 8]
+    assert band.sum() > 100                        # the title is there, in the top rows
+    assert not band[:2].any() and not band[:, :2].any() and not band[:, -2:].any()  # and touches no edge
+
+
+def test_gif_floor_rows_are_identical_across_frames(tmp_path):
+    """§8: one floor height and square for the whole clip: the floor's rows are the same in every frame while
+    the character walks across the world-fixed grid."""
+    frames = _gif_frames(render_gif(tmp_path / "f.gif", _walk(12), _PARENTS, prediction=_walk(12, shift=0.5)))
+    rows = []
+    for img in frames:
+        r = np.flatnonzero(_grey(img, FLOOR).sum(axis=1) > 3)
+        rows.append((r.min(), r.max()))
+    assert len(set(rows)) == 1 and rows[0][1] - rows[0][0] > 20, rows
+
+
+def test_strip_floor_is_the_whole_clips(tmp_path):
+    """§8: the floor height is the clip's lowest joint over ALL its frames, not only the frames drawn (old:
+    the drawn frames' lowest joint, so a strip of frame 5 alone put the floor under frame 5's feet)."""
+    a = _walk(12)
+    b = a.copy()
+    b[0, :, 1] -= 8.0  # frame 0 is lower: the floor of the clip is lower (the box's size is unchanged)
+    img_a = _load_png(render_strip(tmp_path / "a.png", a, _PARENTS, frames=[5]))
+    img_b = _load_png(render_strip(tmp_path / "b.png", b, _PARENTS, frames=[5]))
+    fa, fb = (np.flatnonzero(_grey(i, FLOOR).sum(axis=1) > 3) for i in (img_a, img_b))
+    assert (fa.min(), fa.max()) == (fb.min(), fb.max())  # the floor is drawn at the same place ...
+    blue = [np.flatnonzero(np.all(np.abs(i - [31, 119, 180]) < 40, axis=-1)[:, i.shape[1] // 10:].any(axis=1))
+            for i in (img_a, img_b)]
+    assert blue[1].max() < blue[0].max() - 3  # ... and frame 5's feet stand above it (old: the same picture)
+
+
+def _straight_walk(num_frames: int = 30):
+    """The stick figure walking along +x at height 0 (Y up), and a path from x = −100 to 200 along it."""
+    pos = _walk(num_frames)
+    pos[..., 1] -= pos[..., 1].min()
+    return pos, np.array([[-100.0, 0.0], [200.0, 0.0]])
+
+
+def test_walk_gif_path_lies_on_the_floor(tmp_path):
+    """§8: the walk's 3-D view draws the part of the path inside the floor square, ON it (old: the whole path,
+    unclipped, so that it ran above the floor to the panel's edges)."""
+    from refimpl.render import render_path_motion
+
+    pos, path = _straight_walk()
+    frames = _gif_frames(render_path_motion(tmp_path / "w.gif", pos, _PARENTS, path, stride=3))
+    for img in frames:
+        view = img[:, : img.shape[1] // 2]   # the 3-D view (the map is on the right)
+        floor_rows = np.flatnonzero(_grey(view, FLOOR).sum(axis=1) > 3)
+        road_rows = np.flatnonzero(_grey(view, ROAD, 14.0).sum(axis=1) > 0)
+        assert road_rows.size > 5
+        assert floor_rows.min() - 2 <= road_rows.min() and road_rows.max() <= floor_rows.max() + 2
+
+
+def test_walk_gif_map_shows_the_root_trace_so_far(tmp_path):
+    """§8: the map at frame k holds the root's trace of frames 0 … k only (old: the whole trace from frame 0)."""
+    from refimpl.render import render_path_motion
+
+    pos, path = _straight_walk()
+    frames = _gif_frames(render_path_motion(tmp_path / "w.gif", pos, _PARENTS, path, stride=3))
+    red = np.array([214, 39, 40])
+    counts = [int(np.all(np.abs(img[:, img.shape[1] // 2:] - red) < 40, axis=-1).sum()) for img in frames]
+    # frame 0: the legend's line and the dot only; then the trace grows (old: all of it from frame 0)
+    assert counts[-1] > counts[0] + 40 and counts[0] < 0.7 * counts[-1], counts

@@ -338,8 +338,9 @@ def _scaled(motion: Motion, scale: float) -> Motion:
 
 def write_outputs(walk: GeneratedWalk, *, bvh=None, gif=None, png=None, controls=None, title=None,
                   gif_stride: int = 2) -> list:
-    """Write the BVH (centimetres, End Sites added below leaves), the pictures (the path drawn under the
-    character) and the per-frame controls JSON."""
+    """Write the BVH (centimetres, End Sites added below leaves), the pictures (the path drawn ON the floor
+    under the character, left and right limbs in two shades, progress on stderr) and the per-frame controls
+    JSON."""
     from refimpl.bvh_write import write_bvh
     from refimpl.tasks.transition_generate import with_end_sites
 
@@ -349,12 +350,14 @@ def write_outputs(walk: GeneratedWalk, *, bvh=None, gif=None, png=None, controls
         write_bvh(bvh, with_end_sites(cm))
         written.append(Path(bvh))
     if gif or png:
-        from refimpl.render import render_path_motion
+        from refimpl.render import render_path_motion, stderr_progress
+        from refimpl.render_strip import limb_sides
         pos = cm.positions()
         path_pts = walk.path.points * QUATERNET_UNIT_CM
         for out in filter(None, (png, gif)):
             written.append(render_path_motion(out, pos, np.asarray(cm.skeleton.parents), path_pts,
-                                              closed=walk.path.closed, fps=FPS, stride=gif_stride, title=title))
+                                              closed=walk.path.closed, fps=FPS, stride=gif_stride, title=title,
+                                              sides=limb_sides(cm.skeleton), progress=stderr_progress))
     if controls:
         doc = {"fps": FPS, "units": "QuaterNet units (1 = 5.6444 cm) per frame",
                "columns": ["phase_cos", "phase_sin", "direction_x", "direction_z", "facing_x", "facing_z"],

@@ -329,9 +329,10 @@ def make_prediction(method: Callable, rotations, frame: int, prefix_length: int,
 def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: int = 10) -> list:
     """Draw a :class:`Prediction` (against its ground truth when it has one): the last ``context`` prefix frames
     and the predicted ones, as a PNG strip and / or a GIF, numbered as in the BVH the prediction is written to,
-    with a title (default: the method and the predicted frames)."""
+    with a title (default: the method and the predicted frames), left and right limbs in two shades
+    (:func:`refimpl.render_strip.limb_sides`, the rule of every model's pictures) over the clip's one floor."""
     from refimpl.render import render_gif, stderr_progress
-    from refimpl.render_strip import render_strip
+    from refimpl.render_strip import limb_sides, render_strip
 
     a = max(0, pr.start - context)
     parents = np.asarray(pr.motion.skeleton.parents)
@@ -341,18 +342,19 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
     numbers = np.arange(a, a + pred.shape[0])  # the panels carry the BVH's frame numbers
     title = title or f"{pr.method}: frames {pr.start}-{pr.stop - 1} predicted"
     labels = ("ground truth", pr.method) if pr.truth is not None else (pr.method, "")
+    sides = limb_sides(pr.motion.skeleton)
     written = []
     if png:
         n = pred.shape[0]
         frames = sorted(set([0, hl[0] - 1] + list(range(hl[0], hl[1], max(1, (hl[1] - hl[0]) // 6))) + [n - 1]))
         written.append(render_strip(png, gt, parents, prediction=pred if pr.truth is not None else None,
                                     frames=frames, highlight=hl, labels=labels, title=title,
-                                    frame_time=pr.motion.frame_time, frame_numbers=numbers))
+                                    frame_time=pr.motion.frame_time, frame_numbers=numbers, sides=sides))
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred if pr.truth is not None else None,
                                   progress=stderr_progress,
                                   fps=pr.motion.fps, highlight=hl, labels=labels, title=title,
-                                  frame_numbers=numbers))
+                                  frame_numbers=numbers, sides=sides))
     return written
 
 

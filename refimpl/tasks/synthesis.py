@@ -415,19 +415,21 @@ def generate_command(args, model) -> int:
          "centimetres (the take's units)")
     if args.png or args.gif:
         from refimpl.render import render_gif, stderr_progress
-        from refimpl.render_strip import render_strip
+        from refimpl.render_strip import limb_sides, render_strip
 
         pos = motion.positions()
         parents = np.asarray(motion.skeleton.parents)
         labels = (f"acrnn {model.extra.get('row')}", "")
+        sides = limb_sides(motion.skeleton)  # the one left / right rule of every model's pictures
+        title = (f"acrnn {model.extra.get('row')}: {seed_frames} seed frames of {Path(args.source).name} "
+                 f"(green) + {n} generated")
         if args.png:
             render_strip(args.png, pos, parents, highlight=(seed_frames, motion.num_frames), labels=labels,
-                         frame_time=motion.frame_time)
+                         frame_time=motion.frame_time, title=title, sides=sides)
             _say(f"wrote {args.png}")
         if args.gif:
             render_gif(args.gif, pos, parents, fps=motion.fps, highlight=(seed_frames, motion.num_frames),
-                       progress=stderr_progress,
-                       labels=labels)
+                       progress=stderr_progress, labels=labels, title=title, sides=sides)
             _say(f"wrote {args.gif}")
     return 0
 

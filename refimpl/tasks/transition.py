@@ -621,7 +621,9 @@ def generate_command(args, model) -> int:
     elif args.truth:
         raise UsageError("--truth needs --target-frame = --source-frame + T + 1 in the same file (and --align none)")
     if args.png or args.gif:
-        render_transition(tr, png=args.png, gif=args.gif)
+        title = (f"{tr.method}: {Path(args.source).name} frame {args.source_frame} -> {Path(target_path).name} "
+                 f"frame {target_frame}, {T} frames generated; green = context")
+        render_transition(tr, png=args.png, gif=args.gif, title=title)
     return 0
 
 

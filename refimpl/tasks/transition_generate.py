@@ -172,7 +172,8 @@ def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
     The strip shows the frames on both sides of each join (:func:`refimpl.render_strip.join_frames`: last past,
     first generated, a middle one, last generated, first target), left and right limbs in two shades
     (:func:`refimpl.render_strip.limb_sides`), the feet's floor tracks
-    (:func:`refimpl.protocols.transition_quality.foot_joints`) and a floor grid fixed in the world (spec/cli.md).
+    (:func:`refimpl.protocols.transition_quality.foot_joints`) and one floor for the whole clip, its grid fixed
+    in the world (spec/cli.md §8), under a title (default: the method and the generated frames).
     """
     from refimpl.render import render_gif, stderr_progress
     from refimpl.render_strip import join_frames, limb_sides, render_strip
@@ -183,6 +184,7 @@ def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
     pred = tr.motion.positions() if tr.truth is not None else None
     labels = ("ground truth", tr.method) if pred is not None else (tr.method, "")
     sides = limb_sides(skel)
+    title = title or f"{tr.method}: frames {tr.start}-{tr.stop - 1} generated; green = context"
     written = []
     if png:
         frames = join_frames(tr.start, tr.stop, tr.motion.num_frames)
