@@ -8,7 +8,7 @@ use these, and ``deploy`` through them).
 * :func:`shape_text` — an expected shape as the messages print it, ``(..., *, 3)``.
 
 Every refusal is one ``ValueError`` line that starts with the argument's name: ``"q: expected shape (..., 4), got
-(3,)"``, ``"x: expected a float32 or float64 array, got dtype int64"``, ``"pred: contains NaN or inf"``.
+(3,)"``, ``"x: expected a float32 or float64 array, got dtype int64"``, ``"pred: expected finite values, got NaN or inf"``.
 
 Shape legend: ``...`` any number (zero or more) of leading axes, ``*`` (``None`` in a shape) any size of one axis.
 """
@@ -57,10 +57,10 @@ def check_finite(a: np.ndarray, name: str) -> np.ndarray:
     Raises
     ------
     ValueError
-        ``"<name>: contains NaN or inf"`` when an entry is not finite.
+        ``"<name>: expected finite values, got NaN or inf"`` when an entry is not finite.
     """
     if not np.isfinite(a).all():
-        raise ValueError(f"{name}: contains NaN or inf")
+        raise ValueError(f"{name}: expected finite values, got NaN or inf")
     return a
 
 
