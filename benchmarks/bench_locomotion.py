@@ -6,7 +6,7 @@ in one run, float32, batch 1, one thread:
 
 * ``numpy step``: :func:`refimpl.models.quaternet.step`;
 * ``ort step``: the exported step model (``deploy.models.quaternet_long.export_pose_step``) in onnxruntime;
-* ``numpy generate``: :func:`refimpl.tasks.locomotion_generate.generate_walk` per frame (step + host loop),
+* ``numpy generate``: :func:`refimpl.models.quaternet_long_walk.generate_walk` per frame (step + host loop),
   with the paper-size pace network run once over the path beforehand (its time per path is reported apart).
 
 Sizes: the paper's (H = 1000, 2 layers) and our trained size (H = 256), for the Bandai Namco rig (J = 21).
@@ -37,7 +37,8 @@ from refimpl.atomic import atomic_write_text  # noqa: E402
 from refimpl.models import pace, quaternet  # noqa: E402
 from refimpl.skeleton import Skeleton  # noqa: E402
 from refimpl.splines import circle_path  # noqa: E402
-from refimpl.tasks.locomotion_generate import generate_walk  # noqa: E402
+from refimpl.models.quaternet_long_walk import generate_walk  # noqa: E402
+from refimpl.protocols.locomotion_data import FPS  # noqa: E402
 
 J = 21
 
@@ -86,7 +87,8 @@ def main(argv=None) -> int:
         feats = np.zeros((30, 8))
         feats[:, 7] = 1.0
         n_gen = 60
-        variants["numpy generate"] = lambda: generate_walk(params, net, pp, pc, sk, seed, feats, path, 0.5, n_gen)
+        variants["numpy generate"] = lambda: generate_walk(params, net, pp, pc, sk, seed, feats, path, 0.5, n_gen,
+                                                                   fps=FPS)
         times = {k: [] for k in variants}
         for _ in range(args.rounds):  # interleaved
             for k, fn in variants.items():

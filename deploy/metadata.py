@@ -29,7 +29,6 @@ Shape legend in ``io``: symbolic dimension names (``"B"`` batch) or integers.
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Mapping
 
 import numpy as np
@@ -82,13 +81,6 @@ def normalization_metadata(normalization, in_graph: bool) -> dict | None:
                          "axis; " + ("the graph applies both: feed raw values, read raw values" if in_graph else
                                      "the graph does not: normalise the inputs and de-normalise the outputs "
                                      "yourself"))}
-
-
-def _finite_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"{text} overflows a float")
-    return value
 
 
 def read_metadata(model: onnx.ModelProto | str | bytes) -> dict[str, Any]:

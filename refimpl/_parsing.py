@@ -9,6 +9,8 @@ import json
 import math
 from typing import Any
 
+from refimpl.arrays import finite_float
+
 __all__: list[str] = []
 
 
@@ -16,18 +18,15 @@ def _refuse_constant(name: str):
     raise ValueError(f"{name} is not JSON (RFC 8259 has no NaN or Infinity)")
 
 
-def _finite_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"{text[:40]} overflows a float (JSON here has no NaN/inf)")
-    return value
+def _json_number(text: str) -> float:
+    return finite_float(text, "JSON number")  # a number that overflows a float (1e999)
 
 
 def json_loads_strict(text: str | bytes) -> Any:
     """``json.loads`` that refuses ``NaN``/``Infinity``/overflowing numbers and turns a too-deep document's
     ``RecursionError`` into ``ValueError``; it parses data only, nothing is ever executed."""
     try:
-        return json.loads(text, parse_constant=_refuse_constant, parse_float=_finite_float)
+        return json.loads(text, parse_constant=_refuse_constant, parse_float=_json_number)
     except RecursionError as e:
         raise ValueError("JSON nested too deeply") from e
 

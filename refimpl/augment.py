@@ -8,7 +8,11 @@ to the whole window in world space. On local rotations this is one product on th
 cancelled by the hip-velocity features, so it is not reproduced). Every representation is then computed from the
 turned window, so the augmentation is the same for positions, rotations and dual quaternions.
 
-Shape legend: T frames, J joints, B windows.
+QuaterNet's long-term locomotion features (spec/locomotion.md §3) turn with the motion: :func:`rotate_controls`
+rotates their direction and facing controls about +Y (the pose batches' augmentation, and the seed clip of the
+walk turned to the path's first facing).
+
+Shape legend: T frames, J joints, B windows; locomotion features (..., 8).
 """
 from __future__ import annotations
 
@@ -19,7 +23,7 @@ import numpy as np
 from refimpl.mirroring import rotate_about_up
 from refimpl.motion import Motion
 
-__all__ = ["rotate_heading", "random_heading_windows"]
+__all__ = ["rotate_heading", "random_heading_windows", "rotate_controls"]
 
 
 def rotate_heading(motion: Motion, angle: float, up: str = "y") -> Motion:
@@ -68,3 +72,21 @@ def random_heading_windows(rng: np.random.Generator, motions: Sequence[Motion], 
                        m.frame_time, m.name)
         windows.append(rotate_heading(piece, angles[b], up))
     return windows, angles
+
+
+def rotate_controls(features: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Rotate the direction and facing controls about +Y: the ``(x, z)`` pairs (4, 5) and (6, 7) map as
+    ``(x, z) → (x cos a + z sin a, -x sin a + z cos a)``; offset, height and phase are unchanged.
+
+    Parameters
+    ----------
+    features : (..., 8)
+    angles : broadcastable to ``features.shape[:-1]``
+    """
+    f = np.array(features, dtype=np.float64)
+    c, s = np.cos(angles), np.sin(angles)
+    for i in (4, 6):
+        x, z = f[..., i].copy(), f[..., i + 1].copy()
+        f[..., i] = x * c + z * s
+        f[..., i + 1] = -x * s + z * c
+    return f

@@ -15,7 +15,8 @@ import numpy as np
 from refimpl.dualquat import (dq_conj_kernel, dq_from_quat_translation_kernel, dq_mul_kernel, dq_from_quat_translation,
                               dq_mul, translation_from_dq)
 from refimpl.quat import finite_output
-from refimpl.skeleton import as_float_array, check_last_axes, depth_levels, validate_parents
+from refimpl.arrays import float_array
+from refimpl.skeleton import check_last_axes, depth_levels, validate_parents
 
 __all__ = ["current_dq_from_local", "local_from_current_dq", "positions_from_current_dq", "offsets_from_current_dq"]
 
@@ -43,9 +44,9 @@ def current_dq_from_local(rotations, offsets, parents) -> np.ndarray:
     position relative to the root.
     """
     par = validate_parents(parents)
-    rot = as_float_array(rotations, "rotations")
+    rot = float_array(rotations, "rotations")
     check_last_axes(rot, "rotations", (par.size, 4), f"(..., {par.size}, 4)")
-    off = as_float_array(offsets, "offsets")
+    off = float_array(offsets, "offsets")
     check_last_axes(off, "offsets", (par.size, 3), f"({par.size}, 3) or (..., {par.size}, 3)")
     dtype = np.result_type(rot.dtype, off.dtype)
     return _current_dq_from_local(depth_levels(par), rot.astype(dtype, copy=False), off.astype(dtype, copy=False))
@@ -95,7 +96,7 @@ def local_from_current_dq(dqs, parents) -> tuple[np.ndarray, np.ndarray]:
         Local offsets (the root's is its own translation, 0 for data built by :func:`current_dq_from_local`).
     """
     par = validate_parents(parents)
-    dq = as_float_array(dqs, "dqs")
+    dq = float_array(dqs, "dqs")
     check_last_axes(dq, "dqs", (par.size, 8), f"(..., {par.size}, 8)")
     local = _local_dq_from_current(par, dq)
     return local[..., :4].copy(), translation_from_dq(local)
@@ -121,7 +122,7 @@ def positions_from_current_dq(dqs) -> np.ndarray:
     -------
     ndarray, shape (..., J, 3)
     """
-    dq = as_float_array(dqs, "dqs")
+    dq = float_array(dqs, "dqs")
     check_last_axes(dq, "dqs", (8,), "(..., 8)")
     return translation_from_dq(dq)
 

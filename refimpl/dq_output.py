@@ -31,7 +31,7 @@ from refimpl.losses import (WEIGHTS_ACRNN_DQ, dq_offset_loss_backward, dq_offset
                             dq_pos_loss_forward, dq_reg_loss_backward, dq_reg_loss_forward, local_quat_loss_backward,
                             local_quat_loss_forward, quat_loss_backward, quat_loss_forward)
 from refimpl.nn.kinematics_layers import check_parents
-from refimpl.nn.quat_layers import as_float_array
+from refimpl.arrays import float_array
 from refimpl.nn.quat_layers import dq_normalize_backward, dq_normalize_forward
 
 __all__ = ["DQ_TERM_NAMES", "DQ_TERMS", "dq_output_loss_forward", "dq_output_loss_backward"]
@@ -94,8 +94,8 @@ def check_inputs(raw, target, parents):
     valid ``parents``. Returns ``(x, t, par)``: the float arrays and the parents as an index array."""
     if raw.ndim < 2 or raw.shape[-1] != 8 or raw.shape != target.shape:
         raise ValueError(f"raw, target: expected equal shapes (..., J, 8), got {raw.shape} and {target.shape}")
-    x = as_float_array(raw, "raw", 8, min_ndim=2)
-    t = as_float_array(target, "target", 8, min_ndim=2)
+    x = float_array(raw, "raw", last=8, min_ndim=2)
+    t = float_array(target, "target", last=8, min_ndim=2)
     return x, t, check_parents(parents, x.shape[-2])
 
 

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import (as_float, atan_ratio, hemisphere_sign, prescaled, quat_conj_kernel, quat_mul_kernel,
+from refimpl.arrays import float_array
+from refimpl.quat import (atan_ratio, hemisphere_sign, prescaled, quat_conj_kernel, quat_mul_kernel,
                           quat_norm_kernel, quat_rotate_kernel, sin_over_x, check_scalar, finite_output, zeros_of)
 from refimpl.rotations import check_rotation_matrix, matrix_from_quat_kernel, quat_from_matrix_kernel
 
@@ -73,8 +74,8 @@ def dq_mul(a, b) -> np.ndarray:
     -------
     ndarray, (..., 8)
     """
-    a = as_float(a, "a", (8,))
-    b = as_float(b, "b", (8,))
+    a = float_array(a, "a", (..., 8))
+    b = float_array(b, "b", (..., 8))
     return dq_mul_kernel(a, b)
 
 
@@ -93,14 +94,14 @@ def dq_conj(a) -> np.ndarray:
 
     This is the paper's "conjugate" (§3.1) and acRNN/PoseRepresentation's ``dqinv``.
     """
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     return dq_conj_kernel(a)
 
 
 @finite_output
 def dq_conj_dual(a) -> np.ndarray:
     """Dual-number conjugate ``(q_r, −q_d)`` (spec/math.md §5.3)."""
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     return a * np.array(_SIGN_DUAL, dtype=a.dtype)
 
 
@@ -110,7 +111,7 @@ def dq_conj_combined(a) -> np.ndarray:
 
     This is acRNN/PoseRepresentation's ``dqconj``.
     """
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     return a * np.array(_SIGN_COMBINED, dtype=a.dtype)
 
 
@@ -125,7 +126,7 @@ def dq_inv(a) -> np.ndarray:
     ValueError
         If some real part is zero.
     """
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     r, d = _split(a)
     rs, e = prescaled(r, "a", "real part")  # r = 2^e rs where needed: no under/overflow of |r|²
     rs_inv = quat_conj_kernel(rs) / np.sum(rs * rs, axis=-1, keepdims=True)
@@ -148,7 +149,7 @@ def dq_norm(a):
     ValueError
         If some real part is zero (the dual part is undefined).
     """
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     r, d = _split(a)
     rs, e = prescaled(r, "a", "real part")  # r = 2^e rs where needed, exact
     ns = quat_norm_kernel(rs)
@@ -172,7 +173,7 @@ def dq_is_unit(a, atol_norm: float | None = None, atol_dot: float | None = None)
     -------
     ndarray of bool, (...)
     """
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     default = 1e-6 if a.dtype.itemsize >= 8 else 1e-4
     atol_norm = default if atol_norm is None else check_scalar(atol_norm, "atol_norm")
     atol_dot = default if atol_dot is None else check_scalar(atol_dot, "atol_dot")
@@ -200,7 +201,7 @@ def dq_normalize(a) -> np.ndarray:
     ValueError
         If some real part is exactly zero (no rigid transform; no identity is substituted).
     """
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     return _dq_normalize(_dq_prescaled(a, "a"))
 
 
@@ -227,8 +228,8 @@ def dq_from_quat_translation(q, t) -> np.ndarray:
     -------
     ndarray, (..., 8)
     """
-    q = as_float(q, "q", (4,))
-    t = as_float(t, "t", (3,))
+    q = float_array(q, "q", (..., 4))
+    t = float_array(t, "t", (..., 3))
     lead = np.broadcast_shapes(q.shape[:-1], t.shape[:-1])
     q = np.broadcast_to(q, lead + (4,))
     t = np.broadcast_to(t, lead + (3,))
@@ -256,7 +257,7 @@ def translation_from_dq(a) -> np.ndarray:
     ValueError
         If some real part is zero.
     """
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     return _translation_from_dq(_dq_prescaled(a, "a"))
 
 
@@ -270,7 +271,7 @@ def quat_translation_from_dq(a):
         Unit rotation quaternion (sign as stored).
     t : ndarray, (..., 3)
     """
-    a = _dq_prescaled(as_float(a, "a", (8,)), "a")
+    a = _dq_prescaled(float_array(a, "a", (..., 8)), "a")
     return a[..., :4] / quat_norm_kernel(a[..., :4])[..., None], _translation_from_dq(a)
 
 
@@ -286,7 +287,7 @@ def dq_from_matrix(m) -> np.ndarray:
         If ``m`` is not ``(..., 4, 4)``, its rotation block is not a rotation (see ``quat_from_matrix``) or its
         last row is not ``(0, 0, 0, 1)`` (tolerance 1e-6 for float64, 1e-3 for float32).
     """
-    m = as_float(m, "m", (4, 4))
+    m = float_array(m, "m", (..., 4, 4))
     tol = 1e-6 if m.dtype.itemsize >= 8 else 1e-3
     if np.any(np.abs(m[..., 3, :] - np.array([0, 0, 0, 1], dtype=m.dtype)) > tol):
         raise ValueError(f"m: last row of a homogeneous transform must be (0, 0, 0, 1); got shape {m.shape} "
@@ -302,7 +303,7 @@ def matrix_from_dq(a) -> np.ndarray:
 
     ``R`` is the rotation of ``q_r/|q_r|`` and ``t = translation_from_dq(a)``.
     """
-    a = _dq_prescaled(as_float(a, "a", (8,)), "a")
+    a = _dq_prescaled(float_array(a, "a", (..., 8)), "a")
     out = np.zeros(a.shape[:-1] + (4, 4), dtype=a.dtype)
     out[..., :3, :3] = matrix_from_quat_kernel(a[..., :4])
     out[..., :3, 3] = _translation_from_dq(a)
@@ -334,8 +335,8 @@ def dq_transform_point(a, p) -> np.ndarray:
     -------
     ndarray, (..., 3)
     """
-    a = as_float(a, "a", (8,))
-    p = as_float(p, "p", (3,))
+    a = float_array(a, "a", (..., 8))
+    p = float_array(p, "p", (..., 3))
     lead = np.broadcast_shapes(a.shape[:-1], p.shape[:-1])
     a = np.broadcast_to(a, lead + (8,))
     p = np.broadcast_to(p, lead + (3,))
@@ -374,7 +375,7 @@ def dq_fix(a) -> np.ndarray:
     ----------
     a : array_like, (T, ..., 8)
     """
-    a = as_float(a, "a", (8,))
+    a = float_array(a, "a", (..., 8))
     if a.ndim < 2:
         raise ValueError(f"a: expected shape (T, ..., 8) with a time axis, got {a.shape}")
     return _dq_fix(a)
@@ -437,9 +438,9 @@ def dq_sclerp(a, b, t) -> np.ndarray:
     -------
     ndarray, (..., 8)
     """
-    a = as_float(a, "a", (8,))
-    b = as_float(b, "b", (8,))
-    t = as_float(t, "t", ()).astype(np.result_type(a, b), copy=False)  # t does not change the dtype
+    a = float_array(a, "a", (..., 8))
+    b = float_array(b, "b", (..., 8))
+    t = float_array(t, "t", (..., )).astype(np.result_type(a, b), copy=False)  # t does not change the dtype
     b = hemisphere_sign(a[..., :4], b[..., :4]) * b
     a, b = np.broadcast_arrays(a, b)
     rel = dq_mul_kernel(dq_conj_kernel(a), b)  # (..., 8)
@@ -483,8 +484,8 @@ def dq_blend(weights, dqs) -> np.ndarray:
     ValueError
         On shape mismatch, or when the blended real part is zero (e.g. weights summing to 0).
     """
-    dqs = as_float(dqs, "dqs", (8,))
-    weights = as_float(weights, "weights", ()).astype(dqs.dtype, copy=False)  # the DQs set the dtype
+    dqs = float_array(dqs, "dqs", (..., 8))
+    weights = float_array(weights, "weights", (..., )).astype(dqs.dtype, copy=False)  # the DQs set the dtype
     if dqs.ndim < 2 or weights.ndim < 1 or weights.shape[-1] != dqs.shape[-2]:
         raise ValueError(f"weights, dqs: expected shapes (..., K) and (..., K, 8), got {weights.shape} and {dqs.shape}")
     lead = np.broadcast_shapes(weights.shape[:-1], dqs.shape[:-2])

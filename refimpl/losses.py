@@ -39,7 +39,8 @@ import numpy as np
 from refimpl.nn.kinematics_layers import (check_parents, forward_kinematics_backward,
                                           forward_kinematics_forward, offsets_from_dq_backward, offsets_from_dq_forward,
                                           positions_from_dq_backward, positions_from_dq_forward)
-from refimpl.nn.quat_layers import (as_float_array, normalize, normalize_backward, quat_mul_backward_kernel,
+from refimpl.arrays import float_array
+from refimpl.nn.quat_layers import (normalize, normalize_backward, quat_mul_backward_kernel,
                                     euler_from_quat_backward, euler_from_quat_forward)
 from refimpl.quat import quat_conj_kernel, quat_mul_kernel
 
@@ -85,8 +86,8 @@ def _nonempty(x: np.ndarray, name: str) -> np.ndarray:
 
 def _pair(pred, target, last=None, min_ndim: int = 0):
     """Validate a (pred, target) pair of equal shapes."""
-    p = _nonempty(as_float_array(pred, "pred", last, min_ndim=min_ndim), "pred")
-    t = as_float_array(target, "target", last, min_ndim=min_ndim)
+    p = _nonempty(float_array(pred, "pred", last=last, min_ndim=min_ndim), "pred")
+    t = float_array(target, "target", last=last, min_ndim=min_ndim)
     if p.shape != t.shape:
         raise ValueError(f"target: expected shape {p.shape} (the shape of pred), got {t.shape}")
     return p, t
@@ -411,7 +412,7 @@ def dq_reg_loss_forward(raw):
     value : float
     cache : tuple
     """
-    x = _nonempty(as_float_array(raw, "raw", (4, 8)), "raw")
+    x = _nonempty(float_array(raw, "raw", last=(4, 8)), "raw")
     if _max_abs(x) <= _pow2_limit(x.dtype, 8):  # the usual case: 4th powers (and the gradient) cannot overflow
         terms, a, b = _dq_reg_terms(x, 1)
         return _mean_abs(terms), (x, None, a, b)
@@ -460,7 +461,7 @@ def quat_norm_loss_forward(raw):
     value : float
     cache : tuple
     """
-    x = _nonempty(as_float_array(raw, "raw", 4), "raw")
+    x = _nonempty(float_array(raw, "raw", last=4), "raw")
     if _max_abs(x) <= _pow2_limit(x.dtype, 8):  # the usual case, as in dq_reg_loss_forward
         terms, a, _ = _dq_reg_terms(x, 1)
         return _mean_abs(terms), (x, None, a)
@@ -505,8 +506,8 @@ def euler_l1_loss_forward(pred, target, order: str = "zyx", eps: float = QUATERN
     value : float
     cache : tuple
     """
-    p = _nonempty(as_float_array(pred, "pred", 4), "pred")
-    t = as_float_array(target, "target", (3, 4))
+    p = _nonempty(float_array(pred, "pred", last=4), "pred")
+    t = float_array(target, "target", last=(3, 4))
     if t.shape[:-1] != p.shape[:-1]:
         raise ValueError(f"target: expected shape {p.shape[:-1] + (4,)} or {p.shape[:-1] + (3,)}, got {t.shape}")
     e, ecache = euler_from_quat_forward(p, order, eps)
@@ -556,15 +557,15 @@ def fk_position_loss_forward(pred_rotations, pred_translations, target_positions
     value : float
     cache : tuple
     """
-    rot = _nonempty(as_float_array(pred_rotations, "pred_rotations", 4, min_ndim=2), "pred_rotations")
-    tr = as_float_array(pred_translations, "pred_translations", 2)
+    rot = _nonempty(float_array(pred_rotations, "pred_rotations", last=4, min_ndim=2), "pred_rotations")
+    tr = float_array(pred_translations, "pred_translations", last=2)
     lead = rot.shape[:-2]
     if tr.shape != lead + (2,):
         raise ValueError(f"pred_translations: expected shape {lead + (2,)}, got {tr.shape}")
-    tpos = as_float_array(target_positions, "target_positions", 3, min_ndim=2)
+    tpos = float_array(target_positions, "target_positions", last=3, min_ndim=2)
     if tpos.shape != rot.shape[:-1] + (3,):
         raise ValueError(f"target_positions: expected shape {rot.shape[:-1] + (3,)}, got {tpos.shape}")
-    ttr = as_float_array(target_translations, "target_translations", 2)
+    ttr = float_array(target_translations, "target_translations", last=2)
     if ttr.shape != tr.shape:
         raise ValueError(f"target_translations: expected shape {tr.shape}, got {ttr.shape}")
     if up_axis not in (0, 1, 2):

@@ -12,7 +12,8 @@ import numpy as np
 
 from refimpl.quat import check_scalar, finite_output, quat_mul, quat_rotate
 from refimpl.rotations import quat_from_axis_angle
-from refimpl.skeleton import Skeleton, as_float_array, check_last_axes
+from refimpl.arrays import float_array
+from refimpl.skeleton import Skeleton, check_last_axes
 
 __all__ = ["mirror", "rotate_about_up", "random_rotate_about_up"]
 
@@ -100,14 +101,14 @@ def rotate_about_up(rotations, root_positions, angle, up="y"):
     root_positions : ndarray, shape (..., 3)
     """
     a = _axis_index(up)
-    rot = as_float_array(rotations, "rotations")
+    rot = float_array(rotations, "rotations")
     check_last_axes(rot, "rotations", (4,), "(..., J, 4)")
     if rot.ndim < 2 or rot.shape[-2] == 0:
         raise ValueError(f"rotations: expected shape (..., J, 4) with J >= 1 joints, got {rot.shape}")
-    pos = as_float_array(root_positions, "root_positions")
+    pos = float_array(root_positions, "root_positions")
     if pos.shape != rot.shape[:-2] + (3,):
         raise ValueError(f"root_positions: expected shape {rot.shape[:-2] + (3,)}, got {pos.shape}")
-    ang = as_float_array(angle, "angle")
+    ang = float_array(angle, "angle")
     try:
         ang = np.broadcast_to(ang, pos.shape[:-1])
     except ValueError:

@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from refimpl.arrays import check_finite, float_array
 from refimpl.quat import quat_mul, quat_rotate
 from refimpl.skeleton import Skeleton, check_unit
 
@@ -169,13 +170,11 @@ class Motion:
 
 
 def _as_stored(x, name: str) -> np.ndarray:
-    """A read-only float copy of ``x`` (float32 kept, other numeric types → float64), checked finite."""
-    arr = np.asarray(x)
-    if arr.dtype.kind not in "fiub":
-        raise ValueError(f"{name}: expected a real numeric array, got dtype {arr.dtype}")
-    arr = np.array(arr, dtype=arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64, copy=True)
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: contains NaN or infinite values")
+    """A read-only float copy of ``x`` (float32 kept, other numeric types → float64), checked finite
+    (:func:`refimpl.arrays.float_array`)."""
+    arr = float_array(x, name, finite=False)
+    arr = check_finite(np.array(arr, dtype=arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64,
+                                copy=True), name)
     arr.flags.writeable = False
     return arr
 

@@ -24,6 +24,8 @@ import numbers
 
 import numpy as np
 
+from refimpl.arrays import float_array
+
 __all__ = [
     "quat_identity", "quat_mul", "quat_conj", "quat_inv", "quat_norm", "quat_normalize", "quat_rotate",
     "quat_dot", "quat_angle", "quat_exp", "quat_log", "quat_slerp", "quat_canonical", "quat_fix",
@@ -36,33 +38,11 @@ __all__ = [
 # validation helpers (shared with refimpl.rotations, refimpl.dualquat)
 # ----------------------------------------------------------------------------------------------------------------
 
-def as_float(x, name: str, tail: tuple, finite: bool = True) -> np.ndarray:
-    """Return ``x`` as a floating ndarray whose trailing axes are ``tail``; raise ValueError otherwise.
-
-    Integer and boolean arrays become float64; floating arrays keep their dtype; anything else is rejected.
-    """
-    try:
-        a = np.asarray(x)
-    except (TypeError, OverflowError, ValueError) as exc:  # ragged nesting, objects refusing conversion
-        raise ValueError(f"{name}: expected a real numeric array, got {type(x).__name__} ({exc})") from None
-    if a.dtype.kind in "biu":
-        a = a.astype(np.float64)
-    elif a.dtype.kind != "f":
-        raise ValueError(f"{name}: expected a real floating array, got dtype {a.dtype}")
-    n = len(tail)
-    if a.ndim < n or tuple(a.shape[a.ndim - n:]) != tuple(tail):
-        want = "(..., " + ", ".join(str(t) for t in tail) + ")"
-        raise ValueError(f"{name}: expected shape {want}, got {a.shape}")
-    if finite and not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: contains NaN or inf (shape {a.shape})")
-    return a
-
-
 def finite_output(fn):
     """Public-boundary guard (spec/math.md §6, spec/robustness.md §8): run ``fn`` with NumPy's floating-point
     warnings silenced and raise ``ValueError`` if a floating result is not finite.
 
-    Inputs are checked finite by :func:`as_float`, so a non-finite result can only come from a result (or an
+    Inputs are checked finite by :func:`refimpl.arrays.float_array`, so a non-finite result can only come from a result (or an
     intermediate of it) beyond the float range: e.g. ``quat_mul`` of components near ``1e308``, ``quat_exp`` with
     ``w > 709``, ``dq_inv`` of a real part near ``1e-310``. One vectorised ``isfinite`` pass over the output.
     """
@@ -220,8 +200,8 @@ def quat_mul(q, r) -> np.ndarray:
         ``w = w1w2 − x1x2 − y1y2 − z1z2``, ``x = w1x2 + x1w2 + y1z2 − z1y2``,
         ``y = w1y2 − x1z2 + y1w2 + z1x2``, ``z = w1z2 + x1y2 − y1x2 + z1w2``.
     """
-    q = as_float(q, "q", (4,))
-    r = as_float(r, "r", (4,))
+    q = float_array(q, "q", (..., 4))
+    r = float_array(r, "r", (..., 4))
     try:
         return quat_mul_kernel(q, r)
     except ValueError:
@@ -235,7 +215,7 @@ def quat_conj_kernel(q: np.ndarray) -> np.ndarray:
 @finite_output
 def quat_conj(q) -> np.ndarray:
     """Conjugate ``q* = (w, −x, −y, −z)`` (spec/math.md §1.3). Equals the inverse for a unit quaternion."""
-    return quat_conj_kernel(as_float(q, "q", (4,)))
+    return quat_conj_kernel(float_array(q, "q", (..., 4)))
 
 
 def quat_norm_kernel(q: np.ndarray) -> np.ndarray:
@@ -249,7 +229,7 @@ def quat_norm(q) -> np.ndarray:
     Computed as ``2^e |q 2^-e|`` (exact power-of-two scaling by the largest component), so it is accurate for
     tiny and huge quaternions; ``inf`` only when ``|q|`` exceeds the float range.
     """
-    qs, e = prescaled(as_float(q, "q", (4,)))
+    qs, e = prescaled(float_array(q, "q", (..., 4)))
     n = quat_norm_kernel(qs)
     return n if e is None else np.ldexp(n, e)
 
@@ -263,7 +243,7 @@ def quat_inv(q) -> np.ndarray:
     ValueError
         If some quaternion is exactly zero.
     """
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     scale = np.max(np.abs(q), axis=-1, keepdims=True)  # (..., 1); scaling avoids under/overflow of |q|²
     check_nonzero(scale[..., 0], "q")
     qs = q / scale
@@ -288,7 +268,7 @@ def quat_normalize(q, eps: float = 0.0) -> np.ndarray:
     ValueError
         If some ``|q| <= eps`` (the direction of a zero quaternion is undefined; no identity is substituted).
     """
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     eps = check_scalar(eps, "eps")
     scale = np.max(np.abs(q), axis=-1, keepdims=True)  # (..., 1)
     bad = scale[..., 0] == 0
@@ -326,8 +306,8 @@ def quat_rotate(q, v) -> np.ndarray:
     -------
     ndarray, (..., 3)
     """
-    q = as_float(q, "q", (4,))
-    v = as_float(v, "v", (3,))
+    q = float_array(q, "q", (..., 4))
+    v = float_array(v, "v", (..., 3))
     lead = np.broadcast_shapes(q.shape[:-1], v.shape[:-1])
     return quat_rotate_kernel(np.broadcast_to(q, lead + (4,)), np.broadcast_to(v, lead + (3,)))
 
@@ -335,8 +315,8 @@ def quat_rotate(q, v) -> np.ndarray:
 @finite_output
 def quat_dot(q, r) -> np.ndarray:
     """Four-dimensional dot product ``⟨q, r⟩ = w1w2 + x1x2 + y1y2 + z1z2``, shape ``(...)`` (spec/math.md §1.6)."""
-    q = as_float(q, "q", (4,))
-    r = as_float(r, "r", (4,))
+    q = float_array(q, "q", (..., 4))
+    r = float_array(r, "r", (..., 4))
     return np.sum(q * r, axis=-1)
 
 
@@ -351,9 +331,9 @@ def quat_angle(q, r=None) -> np.ndarray:
     -------
     ndarray, (...)
     """
-    q, _ = prescaled(as_float(q, "q", (4,)))  # exact rescaling where needed: no under/overflow below
+    q, _ = prescaled(float_array(q, "q", (..., 4)))  # exact rescaling where needed: no under/overflow below
     if r is not None:
-        r, _ = prescaled(as_float(r, "r", (4,)))
+        r, _ = prescaled(float_array(r, "r", (..., 4)))
         q = quat_mul_kernel(quat_conj_kernel(q), r)
     return 2 * np.arctan2(np.sqrt(np.sum(q[..., 1:] ** 2, axis=-1)), np.abs(q[..., 0]))
 
@@ -385,7 +365,7 @@ def quat_exp(q) -> np.ndarray:
     -------
     ndarray, (..., 4)
     """
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     u = q[..., 1:]
     us, e = prescaled(u)  # u = 2^e us where |u|² could under/overflow: exact
     a = quat_norm_kernel(us) if e is None else np.ldexp(quat_norm_kernel(us), e)  # (...) |u|, finite (<= 2 max|u_i|)
@@ -423,7 +403,7 @@ def quat_log(q) -> np.ndarray:
     ValueError
         If some quaternion is zero (``log 0`` is undefined).
     """
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     q, e = prescaled(q, "q")  # input = 2^e q: log|input| = log|q| + e log 2
     log_n = np.log(quat_norm_kernel(q))
     if e is not None:
@@ -444,7 +424,7 @@ def quat_canonical(q) -> np.ndarray:
 
     So ``w >= 0``; when ``w = 0`` the sign is fixed by x, then y, then z. Unique for every non-zero ``q``.
     """
-    return quat_canonical_kernel(as_float(q, "q", (4,)))
+    return quat_canonical_kernel(float_array(q, "q", (..., 4)))
 
 
 def quat_canonical_kernel(q: np.ndarray) -> np.ndarray:
@@ -487,7 +467,7 @@ def quat_fix(q) -> np.ndarray:
     q : array_like, (T, ..., 4)
         T >= 1 frames; any further axes (e.g. joints) are independent tracks.
     """
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     if q.ndim < 2:
         raise ValueError(f"q: expected shape (T, ..., 4) with a time axis, got {q.shape}")
     return _quat_fix(q)
@@ -528,9 +508,9 @@ def quat_slerp(q0, q1, t) -> np.ndarray:
     -------
     ndarray, (..., 4)
     """
-    q0 = as_float(q0, "q0", (4,))
-    q1 = as_float(q1, "q1", (4,))
-    t = as_float(t, "t", ()).astype(np.result_type(q0, q1), copy=False)  # t does not change the dtype
+    q0 = float_array(q0, "q0", (..., 4))
+    q1 = float_array(q1, "q1", (..., 4))
+    t = float_array(t, "t", (..., )).astype(np.result_type(q0, q1), copy=False)  # t does not change the dtype
     q1 = hemisphere_sign(q0, q1) * q1
     omega = 2 * np.arctan2(quat_norm_kernel(q0 - q1), quat_norm_kernel(q0 + q1))  # (...)
     omega, t = np.broadcast_arrays(omega, t)
@@ -546,17 +526,17 @@ def quat_slerp(q0, q1, t) -> np.ndarray:
 @finite_output
 def quat_xyzw_from_wxyz(q) -> np.ndarray:
     """``(w, x, y, z) → (x, y, z, w)`` (scalar-last, as scipy and ROS) (spec/conventions.md)."""
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
 @finite_output
 def quat_wxyz_from_xyzw(q) -> np.ndarray:
     """``(x, y, z, w) → (w, x, y, z)`` (spec/conventions.md)."""
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
 
 
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
-# as_float, atan_ratio, check_nonzero, check_scalar, finite_output, hemisphere_sign, prescaled, quat_canonical_kernel,
+# atan_ratio, check_nonzero, check_scalar, finite_output, hemisphere_sign, prescaled, quat_canonical_kernel,
 # quat_conj_kernel, quat_mul_kernel, quat_norm_kernel, quat_rotate_kernel, sin_over_x, zeros_of.

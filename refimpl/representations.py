@@ -43,7 +43,8 @@ from refimpl.dualquat import dq_fix, dq_normalize, translation_from_dq
 from refimpl.quat import quat_fix, quat_normalize
 from refimpl.rotations import (axis_angle_from_quat, euler_from_quat, matrix_from_ortho6d, matrix_from_quat,
                                ortho6d_from_matrix, quat_from_axis_angle, quat_from_euler, quat_from_matrix)
-from refimpl.skeleton import Skeleton, as_float_array
+from refimpl.arrays import float_array
+from refimpl.skeleton import Skeleton
 from refimpl.current_dq import current_dq_from_local, local_from_current_dq
 
 __all__ = ["Representation", "REPRESENTATIONS", "encode", "decode", "frame_size", "positions_from_frames",
@@ -158,7 +159,7 @@ def _encode_joints(name: str, skel: Skeleton, rot: np.ndarray, order: str) -> np
 
 
 def _split_frames(rep: Representation, skel: Skeleton, frames) -> tuple[np.ndarray, np.ndarray]:
-    x = as_float_array(frames, "frames")
+    x = float_array(frames, "frames")
     stored = rep.joints_stored(skel.num_joints)
     size = 3 + rep.dim * stored
     if x.ndim < 1 or x.shape[-1] != size:
@@ -253,7 +254,7 @@ def fix_antipodal_frames(name: str, frames) -> np.ndarray:
     ndarray, same shape and dtype.
     """
     rep = _lookup(name)
-    x = as_float_array(frames, "frames")
+    x = float_array(frames, "frames")
     if x.ndim < 2 or x.shape[-1] < 3 + rep.dim or (x.shape[-1] - 3) % rep.dim:
         raise ValueError(f"frames: expected shape (T, ..., 3 + {rep.dim}·J) for {name!r}, got {x.shape}")
     num_joints = (x.shape[-1] - 3) // rep.dim

@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.skeleton import Skeleton, remove_joints
 
 __all__ = ["CMU_22_JOINTS", "SALSA_22_JOINTS", "CMU_UNIT_CM", "SALSA_UNIT_CM", "RIGS", "subset_22",
@@ -97,7 +97,7 @@ def heading_from_root(root_rotations, up: str = "y") -> np.ndarray:
     ndarray (..., 4)
         Unit rotations about ``up``; the identity where the twist is undefined (``w = y = 0``).
     """
-    q = check_float_array(root_rotations, "root_rotations", (..., 4))
+    q = float_array(root_rotations, "root_rotations", (..., 4), cast=False)
     a = {"x": 1, "y": 2, "z": 3}.get(up)
     if a is None:
         raise ValueError(f"up: expected 'x', 'y' or 'z', got {up!r}")

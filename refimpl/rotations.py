@@ -18,7 +18,8 @@ import math
 
 import numpy as np
 
-from refimpl.quat import (as_float, atan_ratio, check_nonzero, finite_output, prescaled, quat_canonical_kernel,
+from refimpl.arrays import float_array
+from refimpl.quat import (atan_ratio, check_nonzero, finite_output, prescaled, quat_canonical_kernel,
                           quat_mul_kernel, quat_norm_kernel, sin_over_x)
 
 __all__ = [
@@ -70,7 +71,7 @@ def quat_from_axis_angle(v) -> np.ndarray:
     -------
     ndarray, (..., 4)
     """
-    v = as_float(v, "v", (3,))
+    v = float_array(v, "v", (..., 3))
     vs, e = prescaled(v)  # v = 2^e vs where θ² could under/overflow: exact
     if e is None:
         half = 0.5 * np.sqrt(np.sum(v * v, axis=-1))  # (...) θ/2
@@ -96,7 +97,7 @@ def axis_angle_from_quat(q) -> np.ndarray:
     ValueError
         If some quaternion is zero.
     """
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     q, _ = prescaled(q, "q")
     q = quat_canonical_kernel(q)
     u = q[..., 1:]
@@ -134,7 +135,7 @@ def quat_from_euler(angles, order: str) -> np.ndarray:
     ndarray, (..., 4)
     """
     o = _parse_order(order)
-    a = as_float(angles, "angles", (3,))
+    a = float_array(angles, "angles", (..., 3))
     q = quat_elementary_kernel(_AXIS_INDEX[o[0]], a[..., 0])
     q = quat_mul_kernel(q, quat_elementary_kernel(_AXIS_INDEX[o[1]], a[..., 1]))
     return quat_mul_kernel(q, quat_elementary_kernel(_AXIS_INDEX[o[2]], a[..., 2]))
@@ -195,7 +196,7 @@ def euler_from_quat(q, order: str) -> np.ndarray:
         For a bad order or a zero quaternion.
     """
     o = _parse_order(order)
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     q, _ = prescaled(q, "q")
     return _euler_from_quat(q, o)
 
@@ -243,7 +244,7 @@ def matrix_from_quat(q) -> np.ndarray:
     ValueError
         If some quaternion is zero.
     """
-    q = as_float(q, "q", (4,))
+    q = float_array(q, "q", (..., 4))
     q, _ = prescaled(q, "q")
     return matrix_from_quat_kernel(q)
 
@@ -330,7 +331,7 @@ def quat_from_matrix(m) -> np.ndarray:
         If ``m`` is not ``(..., 3, 3)``, not finite, not orthonormal (``max |MᵀM − I|`` above 1e-6 for float64,
         1e-3 for float32) or has det <= 0.
     """
-    m = as_float(m, "m", (3, 3))
+    m = float_array(m, "m", (..., 3, 3))
     check_rotation_matrix(m, "m")
     return quat_from_matrix_kernel(m)
 
@@ -346,7 +347,7 @@ def ortho6d_from_matrix(m) -> np.ndarray:
     -------
     ndarray, (..., 6)
     """
-    m = as_float(m, "m", (3, 3))
+    m = float_array(m, "m", (..., 3, 3))
     return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
 
 
@@ -362,7 +363,7 @@ def matrix_from_ortho6d(x) -> np.ndarray:
     ValueError
         If ``a1`` is zero or ``a2`` is parallel to ``a1`` (relative residual ``<= eps``).
     """
-    x = as_float(x, "x", (6,))
+    x = float_array(x, "x", (..., 6))
     a1, a2 = x[..., :3], x[..., 3:]
     a1, _ = prescaled(a1)  # exact rescaling of each column where needed (the result is invariant to it):
     a2, _ = prescaled(a2)  # no under/overflow of the norms

@@ -29,6 +29,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from refimpl.arrays import float_array
 from refimpl.quat import finite_output, quat_mul_kernel, quat_rotate_kernel, quat_mul, quat_rotate
 from refimpl.rotations import matrix_from_quat
 
@@ -68,20 +69,6 @@ def validate_parents(parents, name: str = "parents") -> np.ndarray:
         k = int(bad[0])
         raise ValueError(f"{name}: parents must precede their children (0 <= parents[j] < j); "
                          f"got parents[{k}] = {arr[k]}")
-    return arr
-
-
-def as_float_array(x, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(x)
-    except (TypeError, OverflowError, ValueError) as exc:  # ragged nesting, objects refusing conversion
-        raise ValueError(f"{name}: expected a real numeric array, got {type(x).__name__} ({exc})") from None
-    if arr.dtype.kind not in "fiub":
-        raise ValueError(f"{name}: expected a real numeric array, got dtype {arr.dtype}")
-    if arr.dtype.kind != "f":
-        arr = arr.astype(np.float64)
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: contains NaN or infinite values")
     return arr
 
 
@@ -209,7 +196,7 @@ class Skeleton:
                  joints_left: Sequence[int] | None = None, joints_right: Sequence[int] | None = None):
         par = validate_parents(parents)
         num = par.size
-        off = as_float_array(offsets, "offsets").astype(np.float64)
+        off = float_array(offsets, "offsets").astype(np.float64)
         if off.shape != (num, 3):
             raise ValueError(f"offsets: expected shape ({num}, 3) for {num} joints, got {off.shape}")
         if names is None:
@@ -299,13 +286,13 @@ class Skeleton:
 
     # -- kinematics ----------------------------------------------------------------------------------------
     def _check_motion(self, rotations, root_positions=None, unit: bool = False):
-        rot = as_float_array(rotations, "rotations")
+        rot = float_array(rotations, "rotations")
         check_last_axes(rot, "rotations", (self.num_joints, 4), f"(..., {self.num_joints}, 4)")
         if unit:
             check_unit(rot, "rotations")
         if root_positions is None:
             return rot, None
-        pos = as_float_array(root_positions, "root_positions")
+        pos = float_array(root_positions, "root_positions")
         if pos.shape != rot.shape[:-2] + (3,):
             raise ValueError(f"root_positions: expected shape {rot.shape[:-2] + (3,)} to match rotations "
                              f"{rot.shape}, got {pos.shape}")
@@ -359,7 +346,7 @@ class Skeleton:
         """``offsets`` (J, 3) or the checked per-frame ``translations`` (..., J, 3), in ``rot``'s dtype."""
         if translations is None:
             return self._offsets.astype(rot.dtype)
-        tr = as_float_array(translations, "translations")
+        tr = float_array(translations, "translations")
         if tr.shape != rot.shape[:-1] + (3,):
             raise ValueError(f"translations: expected shape {rot.shape[:-1] + (3,)} to match rotations "
                              f"{rot.shape}, got {tr.shape}")
@@ -506,4 +493,4 @@ def remove_joints(skeleton: Skeleton, rotations, joints: Iterable[int | str], of
 
 
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
-# as_float_array, check_last_axes, check_unit, depth_levels, validate_parents.
+# check_last_axes, check_unit, depth_levels, validate_parents.

@@ -121,7 +121,8 @@ def test_walked_path_consumer(exported):
     from refimpl.models import pace
     from refimpl.services import load_trained
     from refimpl.splines import circle_path
-    from refimpl.tasks import locomotion_generate as G
+    from refimpl.models import quaternet_long_walk as W
+    from refimpl.protocols.locomotion_data import FPS
     from refimpl.tasks.locomotion import skeleton_of
     from tests.consumers import quaternet_long
 
@@ -130,9 +131,10 @@ def test_walked_path_consumer(exported):
     rot, feats = np.asarray(seed["rotations"]), np.asarray(seed["features"])
     path = circle_path(6.0)
     net = pose.config.network()
-    w = G.generate_walk(pose.params, net, pm.params, pm.config, skeleton_of(pose.extra), rot, feats, path, 0.5, 20)
+    w = W.generate_walk(pose.params, net, pm.params, pm.config, skeleton_of(pose.extra), rot, feats, path, 0.5, 20,
+                        fps=FPS)
     tracks = pace.predict(pm.params, pm.config, path, 0.5)
-    rot_a, feats_a = G.align_seed(rot, feats, tracks.interpolate(0.0, "direction"))
+    rot_a, feats_a = W.align_seed(rot, feats, tracks.interpolate(0.0, "direction"))
     frames = np.concatenate([rot_a.reshape(len(rot_a), -1), feats_a], axis=1)          # (P, 4J + 8)
     got = quaternet_long.walk(exported["quaternet-long"][1], frames, w.controls)
     R = 4 * net.num_joints

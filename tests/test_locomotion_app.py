@@ -24,6 +24,8 @@ from refimpl.skeleton import Skeleton
 from refimpl.splines import circle_path, line_with_turn_path
 from refimpl.tasks import locomotion as L
 from refimpl.tasks import locomotion_generate as G
+from refimpl.models import quaternet_long_walk as W
+from refimpl.protocols.locomotion_data import FPS
 from refimpl.testing import TOL_FD
 
 SMALL = ["--data", "sample", "--set", "hidden_size=8", "--locomotion-prefix", "6", "--locomotion-target", "8",
@@ -134,7 +136,7 @@ def test_generation_on_a_circle_stays_on_it():
     centre is r within the chord error of the 5-points-per-unit spline."""
     net, params, pc, pp, sk, seed_rot, feats = _random_networks()
     r = 10.0
-    walk = G.generate_walk(params, net, pp, pc, sk, seed_rot, feats, circle_path(r), 0.5, 300)
+    walk = W.generate_walk(params, net, pp, pc, sk, seed_rot, feats, circle_path(r), 0.5, 300, fps=FPS)
     assert walk.motion.num_frames == 300  # a closed path never ends
     root = walk.motion.root_positions
     radius = np.hypot(root[:, 0], root[:, 2])
@@ -145,7 +147,7 @@ def test_generation_on_a_circle_stays_on_it():
     R = 4 * 4  # 4 joints x 4 rotation outputs, then offset and height
     fixed = dict(params, **{k: params[k].copy() for k in ("fc.weight", "fc.bias")})
     fixed["fc.weight"][R + 1], fixed["fc.bias"][R + 1] = 0.0, 0.37
-    flat = G.generate_walk(fixed, net, pp, pc, sk, seed_rot, feats, circle_path(r), 0.5, 30)
+    flat = W.generate_walk(fixed, net, pp, pc, sk, seed_rot, feats, circle_path(r), 0.5, 30, fps=FPS)
     np.testing.assert_allclose(flat.motion.root_positions[:, 1], 0.37, rtol=1e-6)
     assert np.max(np.abs(np.hypot(flat.motion.root_positions[:, 0], flat.motion.root_positions[:, 2]) - r)) < 0.01
     assert G.bone_length_drift(walk.motion) < 1e-9
@@ -154,7 +156,7 @@ def test_generation_on_a_circle_stays_on_it():
 def test_generation_follows_an_open_path_and_stops_at_its_end():
     net, params, pc, pp, sk, seed_rot, feats = _random_networks(seed=1)
     path = line_with_turn_path(8.0, 90.0, 4.0, 8.0)
-    walk = G.generate_walk(params, net, pp, pc, sk, seed_rot, feats, path, 0.5, 10_000)
+    walk = W.generate_walk(params, net, pp, pc, sk, seed_rot, feats, path, 0.5, 10_000, fps=FPS)
     assert walk.motion.num_frames < 10_000 and np.all(walk.distance < walk.path.length)
     xz = walk.motion.root_positions[:, [0, 2]]
     pts = path.points
@@ -172,14 +174,14 @@ def test_controls_carry_the_pace_network_output():
     independently here), and the seed clip is turned to the pace facing at s = 0."""
     net, params, pc, pp, sk, seed_rot, feats = _random_networks(seed=2)
     path = circle_path(6.0)
-    walk = G.generate_walk(params, net, pp, pc, sk, seed_rot, feats, path, 0.8, 60)
+    walk = W.generate_walk(params, net, pp, pc, sk, seed_rot, feats, path, 0.8, 60, fps=FPS)
     tracks = pace.predict(pp, pc, path, 0.8)
     face = tracks.interpolate(walk.travelled, "direction")
     assert np.allclose(walk.controls[:, 4:6], face, atol=1e-12)
     amp = tracks.interpolate(walk.travelled, "amplitude")[:, 0]
     assert np.allclose(np.hypot(walk.controls[:, 0], walk.controls[:, 1]), amp, atol=1e-12)
     assert np.allclose(np.diff(walk.travelled), amp[:-1], atol=1e-9)
-    rot, f2 = G.align_seed(seed_rot, feats, face[0])
+    rot, f2 = W.align_seed(seed_rot, feats, face[0])
     assert np.allclose(f2[-1, 6:8], tracks.interpolate(0.0, "direction"), atol=1e-9)
 
 
@@ -277,7 +279,7 @@ def test_generated_bvh_opens_in_blender_with_the_same_motion(tmp_path):
     seed_rot = np.tile(np.array([1.0, 0, 0, 0]), (5, 6, 1))
     feats = np.zeros((5, 8))
     feats[:, 7] = 1.0
-    walk = G.generate_walk(params, net, pp, pc, sk, seed_rot, feats, circle_path(8.0), 0.5, 40)
+    walk = W.generate_walk(params, net, pp, pc, sk, seed_rot, feats, circle_path(8.0), 0.5, 40, fps=FPS)
     bvh = tmp_path / "w.bvh"
     G.write_outputs(walk, bvh=bvh)
     script = tmp_path / "check.py"
@@ -340,7 +342,7 @@ def test_render_path_motion_gif_and_errors(tmp_path):
     pytest.importorskip("matplotlib")
     from refimpl.render import render_path_motion
     net, params, pc, pp, sk, seed_rot, feats = _random_networks(seed=5)
-    walk = G.generate_walk(params, net, pp, pc, sk, seed_rot, feats, circle_path(5.0), 0.5, 8)
+    walk = W.generate_walk(params, net, pp, pc, sk, seed_rot, feats, circle_path(5.0), 0.5, 8, fps=FPS)
     pos = walk.motion.positions()
     out = render_path_motion(tmp_path / "w.gif", pos, sk.parents, walk.path.points, closed=True, stride=2)
     assert out.stat().st_size > 1000 and out.read_bytes()[:3] == b"GIF"

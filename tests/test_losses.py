@@ -91,7 +91,7 @@ def test_mse_mae_edge_cases():
     assert v == pytest.approx(1e300) and np.all(np.isfinite(L.mse_loss_backward(1.0, c)))
     with pytest.raises(ValueError, match="target"):
         L.mse_loss_forward(np.ones(3), np.ones(4))
-    with pytest.raises(ValueError, match="pred: contains NaN"):
+    with pytest.raises(ValueError, match="pred: expected finite values, got NaN"):
         L.mae_loss_forward(np.array([np.nan]), np.ones(1))
 
 

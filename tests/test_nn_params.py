@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from refimpl.nn.params import (check_float_array, check_same_dtype, count_parameters, fan_in_bound, get_param,
+from refimpl.arrays import float_array
+from refimpl.nn.params import (check_same_dtype, count_parameters, fan_in_bound, get_param,
                                init_normal, init_uniform, merge_grads, param_name, subdict)
 
 
@@ -79,28 +80,28 @@ def test_fan_in_bound_rejects_nonpositive():
         fan_in_bound(0)
 
 
-def test_check_float_array_shapes_dtypes_and_finiteness():
+def test_float_array_without_cast_shapes_dtypes_and_finiteness():
     """spec/architecture.md: public boundaries raise ValueError naming the argument, expected and actual shape."""
     x = np.zeros((2, 3, 4))
-    assert check_float_array(x, "x", (None, 3, 4)) is x
-    assert check_float_array(x, "x", (..., 4)) is x
-    assert check_float_array(np.zeros(4, np.float32), "x", (..., 4)).dtype == np.float32
+    assert float_array(x, "x", (None, 3, 4), cast=False) is x
+    assert float_array(x, "x", (..., 4), cast=False) is x
+    assert float_array(np.zeros(4, np.float32), "x", (..., 4), cast=False).dtype == np.float32
     with pytest.raises(ValueError, match=r"x: expected shape \(\*, 5, 4\), got \(2, 3, 4\)"):
-        check_float_array(x, "x", (None, 5, 4))
+        float_array(x, "x", (None, 5, 4), cast=False)
     with pytest.raises(ValueError, match=r"expected shape \(\.\.\., 5\)"):
-        check_float_array(x, "x", (..., 5))
+        float_array(x, "x", (..., 5), cast=False)
     with pytest.raises(ValueError, match="float32 or float64"):
-        check_float_array(np.zeros((2, 3), int), "h0", (2, 3))
+        float_array(np.zeros((2, 3), int), "h0", (2, 3), cast=False)
     bad = x.copy()
     bad[0, 0, 0] = np.nan
     with pytest.raises(ValueError, match="x: expected finite"):
-        check_float_array(bad, "x", (None, 3, 4))
-    check_float_array(bad, "x", (None, 3, 4), finite=False)
+        float_array(bad, "x", (None, 3, 4), cast=False)
+    float_array(bad, "x", (None, 3, 4), finite=False, cast=False)
     with pytest.raises(ValueError, match=r"^x: expected shape \(\*, 5, 4\), got \(2, 3, 4\); I = 5 from here$"):
-        check_float_array(x, "x", (None, 5, 4), context="I = 5 from here")
-    assert check_float_array(np.float64(np.inf), "x", (), finite=False).shape == ()
+        float_array(x, "x", (None, 5, 4), context="I = 5 from here", cast=False)
+    assert float_array(np.float64(np.inf), "x", (), finite=False, cast=False).shape == ()
     with pytest.raises(ValueError, match="x: expected finite"):
-        check_float_array(np.float64(np.inf), "x", ())
+        float_array(np.float64(np.inf), "x", (), cast=False)
 
 
 def test_get_param_and_check_same_dtype():

@@ -3,7 +3,7 @@
 * :func:`export_pose_step` — one step of the long-term pose network (``refimpl.models.quaternet.step`` with
   controls and translations, absolute rotations): ``x (B, 4J + 2 + 6)``, ``state (L, B, H)`` →
   ``y (B, 4J + 2)`` (unit quaternions per joint, then offset and height), ``state_next (L, B, H)``.
-  A generation loop feeds ``[y | controls]`` back (``refimpl.tasks.locomotion_generate``).
+  A generation loop feeds ``[y | controls]`` back (``refimpl.models.quaternet_long_walk``).
 * :func:`export_pace` — the bidirectional pace network over a whole path: ``x (B, N, 2)``
   ``[turning_angle, average_speed]`` → ``y (B, N, 4)`` ``[A, ω, cos Δ, sin Δ]`` (raw; the clipping and facing of
   ``refimpl.models.pace.predict`` stay in the host).

@@ -1,7 +1,7 @@
 """``python -m deploy run`` of QuaterNet long-term along a path (spec/deploy.md §8, §12): the exported step graph
 (``quaternet-long_step.onnx`` + ``quaternet-long_h0.npy`` + ``quaternet-long_seed.npy``) and pace graph
 (``quaternet-long_pace.onnx``, in the same folder or ``--pace DIR``) in onnxruntime, walked by the same loop as
-``refimpl generate --model quaternet-long`` (:func:`refimpl.tasks.locomotion_generate.walk_path`, the pace
+``refimpl generate --model quaternet-long`` (:func:`refimpl.models.quaternet_long_walk.walk_path`, the pace
 tracks by :func:`refimpl.models.pace.predict_with`)::
 
     python -m deploy run long/ circle:r=3 walk.bvh --pace pace/ --speed walk --seconds 10
@@ -111,7 +111,7 @@ def _step_parts(runtime, model_dir):
 def walk_exported(runtime, pace_runtime, path, speed: float, frames: int, model_dir=""):
     """The walk of ``refimpl generate --model quaternet-long`` with the exported graphs: the pace tracks from
     ``pace_runtime.pace`` (:func:`refimpl.models.pace.predict_with`), the loop of
-    :func:`~refimpl.tasks.locomotion_generate.walk_path` with ``runtime.step`` from the learned ``h0``.
+    :func:`~refimpl.models.quaternet_long_walk.walk_path` with ``runtime.step`` from the learned ``h0``.
 
     Parameters
     ----------
@@ -121,10 +121,11 @@ def walk_exported(runtime, pace_runtime, path, speed: float, frames: int, model_
 
     Returns
     -------
-    refimpl.tasks.locomotion_generate.GeneratedWalk
+    refimpl.models.quaternet_long_walk.GeneratedWalk
     """
     from refimpl.models import pace
-    from refimpl.tasks.locomotion_generate import walk_path
+    from refimpl.models.quaternet_long_walk import walk_path
+    from refimpl.protocols.locomotion_data import FPS
 
     skeleton, seed, dual, dq_scale = _step_parts(runtime, model_dir)
     J, P = skeleton.num_joints, seed.shape[0]
@@ -132,7 +133,7 @@ def walk_exported(runtime, pace_runtime, path, speed: float, frames: int, model_
     tracks = pace.predict_with(pace_runtime.pace, path, speed, points_per_unit=points, dtype=np.float32)
     return walk_path(lambda x, h: runtime.step(x, h), runtime.initial_state(1), tracks, skeleton,
                      seed[:, :4 * J].reshape(P, J, 4).astype(np.float64), seed[:, 4 * J:].astype(np.float64),
-                     frames, dual=dual, dq_scale=dq_scale, dtype=np.float32)
+                     frames, dual=dual, dq_scale=dq_scale, dtype=np.float32, fps=FPS)
 
 
 def run_walk(runtime, args) -> int:

@@ -42,7 +42,7 @@ from refimpl.losses import (euclidean_loss_backward, euclidean_loss_forward,
 from refimpl.nn.kinematics_layers import forward_kinematics_backward, forward_kinematics_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
 from refimpl.nn.lstm import lstm_init, lstm_step_backward, lstm_step_forward
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.nn.quat_layers import quat_normalize_backward, quat_normalize_forward
 from refimpl.representations import REPRESENTATIONS, frame_size
 from refimpl.schedules import ACRNN_CONDITION_LENGTH, ACRNN_GROUND_TRUTH_LENGTH, auto_conditioning_mask
@@ -202,7 +202,7 @@ def step(params: Mapping[str, np.ndarray], config: ACRNNConfig, x_t, state):
 def _check_sequence(params, config, frames, mask):
     """Checks of :func:`sequence_forward`'s arguments: ``(frames (B, T + 1, F), mask (T,) bool, dtype)``."""
     dt = _check_params(params, config)
-    x = check_float_array(frames, "frames", (None, None, config.frame_size))
+    x = float_array(frames, "frames", (None, None, config.frame_size), cast=False)
     if x.dtype != dt:
         raise ValueError(f"frames: expected dtype {dt} (the parameters'), got {x.dtype}")
     T = x.shape[1] - 1
@@ -260,7 +260,7 @@ def sequence_backward(dpred, cache) -> dict[str, np.ndarray]:
     """
     caches, mask = cache["caches"], cache["mask"]
     T = len(caches)
-    dpred = check_float_array(dpred, "dpred", (None, T, None))
+    dpred = float_array(dpred, "dpred", (None, T, None), cast=False)
     grads: dict[str, np.ndarray] = {}
     dstate = None
     carry = None  # gradient of y_t from step t+1's input (own-output steps)
@@ -294,7 +294,7 @@ def generate(params: Mapping[str, np.ndarray], config: ACRNNConfig, seed, num_fr
         Standardised frames ``S … S + N − 1``: the first is the prediction after the last seed frame.
     """
     dt = _check_params(params, config)
-    s = check_float_array(seed, "seed", (None, None, config.frame_size))
+    s = float_array(seed, "seed", (None, None, config.frame_size), cast=False)
     if s.shape[1] < 1 or s.dtype != dt:
         raise ValueError(f"seed: expected (B, S >= 1, {config.frame_size}) of dtype {dt}, got {s.shape} {s.dtype}")
     if isinstance(num_frames, bool) or not isinstance(num_frames, (int, np.integer)) or num_frames < 1:
@@ -408,8 +408,8 @@ def loss_forward(pred, target, spec: LossSpec):
         Unweighted value of each term.
     cache : tuple
     """
-    p = check_float_array(pred, "pred", (None, None, spec.mean.size))
-    t = check_float_array(target, "target", p.shape)
+    p = float_array(pred, "pred", (None, None, spec.mean.size), cast=False)
+    t = float_array(target, "target", p.shape, cast=False)
     w = dict(spec.weights)
     parts, caches = {}, {}
     if "mse" in w:

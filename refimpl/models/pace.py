@@ -42,7 +42,8 @@ from refimpl.models._shared import check_param_dict
 from refimpl.losses import mae_loss_backward, mae_loss_forward
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init, gru_step_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
-from refimpl.nn.params import check_float_array, init_normal
+from refimpl.arrays import float_array
+from refimpl.nn.params import init_normal
 
 __all__ = [
     "PaceConfig", "init_params", "count_parameters", "param_shapes", "published_names", "forward", "backward",
@@ -163,7 +164,7 @@ def forward(params: Mapping[str, np.ndarray], config: PaceConfig, x: np.ndarray)
         For :func:`backward`.
     """
     dt = _check_params(params, config)
-    x = check_float_array(x, "x", (None, None, config.input_size))
+    x = float_array(x, "x", (None, None, config.input_size), cast=False)
     if x.dtype != dt:
         raise ValueError(f"x: expected dtype {dt} (the parameters'), got {x.dtype}")
     batch, n, _ = x.shape

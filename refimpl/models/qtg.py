@@ -49,7 +49,8 @@ from refimpl.models._shared import check_param_dict
 from refimpl.nn.gru import gru_init, gru_step_backward, gru_step_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
 from refimpl.nn.mlp import mlp_backward, mlp_forward
-from refimpl.nn.params import accumulate_grads, check_float_array
+from refimpl.arrays import float_array
+from refimpl.nn.params import accumulate_grads
 
 __all__ = [
     "QTGConfig", "QTGState", "init_params", "count_parameters", "param_shapes",
@@ -256,8 +257,8 @@ def check_params(params: Mapping[str, np.ndarray], config: QTGConfig) -> np.dtyp
 
 def check_context(past, target, config: QTGConfig, dtype) -> tuple[np.ndarray, np.ndarray]:
     P = config.pose_size
-    past = check_float_array(past, "past", (None, 2, P))
-    target = check_float_array(target, "target", (None, 2, P))
+    past = float_array(past, "past", (None, 2, P), cast=False)
+    target = float_array(target, "target", (None, 2, P), cast=False)
     if past.shape[0] != target.shape[0]:
         raise ValueError(f"target: expected batch size {past.shape[0]} like past, got shape {target.shape}")
     for name, a in (("past", past), ("target", target)):
@@ -307,7 +308,7 @@ def encode(params: Mapping[str, np.ndarray], poses, config: QTGConfig = QTGConfi
     ndarray (..., Z)
     """
     dtype = check_params(params, config)
-    poses = check_float_array(poses, "poses", (..., config.pose_size))
+    poses = float_array(poses, "poses", (..., config.pose_size), cast=False)
     if poses.dtype != dtype:
         raise ValueError(f"poses: expected dtype {dtype} (the parameters' dtype), got {poses.dtype}")
     return _encoder_forward(poses, params, config)[0]
@@ -368,11 +369,11 @@ def step(params: Mapping[str, np.ndarray], state: QTGState, target_latent,
         raise ValueError(f"state: expected a QTGState (latent_prev, pose, hidden), got {type(state).__name__}")
     Z, P, H, L = config.latent_size, config.pose_size, config.gru_hidden, config.gru_layers
     lat, pose, hid = state
-    pose = check_float_array(pose, "state.pose", (None, P))
+    pose = float_array(pose, "state.pose", (None, P), cast=False)
     B = pose.shape[0]
-    lat = check_float_array(lat, "state.latent_prev", (B, Z))
-    hid = check_float_array(hid, "state.hidden", (L, B, H))
-    tl = check_float_array(target_latent, "target_latent", (B, 2, Z))
+    lat = float_array(lat, "state.latent_prev", (B, Z), cast=False)
+    hid = float_array(hid, "state.hidden", (L, B, H), cast=False)
+    tl = float_array(target_latent, "target_latent", (B, 2, Z), cast=False)
     for name, a in (("state.latent_prev", lat), ("state.pose", pose), ("state.hidden", hid), ("target_latent", tl)):
         if a.dtype != dtype:
             raise ValueError(f"{name}: expected dtype {dtype} (the parameters' dtype), got {a.dtype}")

@@ -30,7 +30,7 @@ from refimpl.models.qtg import QTGConfig, check_context, check_length, check_par
 from refimpl.nn.gru import cell_forward, cell_update, input_gates
 from refimpl.nn.gru_fast import backward_factors, cell_backward_gates
 from refimpl.nn.linear import matmul_wt
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 
 __all__ = ["rollout_forward", "rollout_backward"]
 
@@ -395,7 +395,7 @@ def rollout_backward(dposes, cache, *, input_grads: bool = False):
     """
     shape, w, rec, config = cache["shape"], cache["weights"], cache["record"], cache["config"]
     dtype = rec.gru_x.dtype
-    dposes = check_float_array(dposes, "dposes", shape)
+    dposes = float_array(dposes, "dposes", shape, cast=False)
     if dposes.dtype != dtype:
         raise ValueError(f"dposes: expected dtype {dtype} (the parameters' dtype), got {dposes.dtype}")
     B, T, P = shape

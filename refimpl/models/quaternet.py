@@ -42,7 +42,8 @@ from refimpl.models._shared import check_param_dict
 from refimpl.nn.activations import leaky_relu_backward, leaky_relu_forward
 from refimpl.nn.gru import gru_backward, gru_forward, gru_init, gru_step_backward, gru_step_forward
 from refimpl.nn.linear import linear_backward, linear_forward, linear_init
-from refimpl.nn.params import accumulate_grads, check_float_array, init_normal
+from refimpl.arrays import float_array
+from refimpl.nn.params import accumulate_grads, init_normal
 from refimpl.nn.quat_layers import (dq_normalize_backward, dq_normalize_forward, dq_velocity_backward,
                                     dq_velocity_forward, qmul_velocity_backward, qmul_velocity_forward,
                                     quat_normalize_backward, quat_normalize_forward)
@@ -258,7 +259,7 @@ def check_params(params: Mapping[str, np.ndarray], config: QuaterNetConfig = Qua
 def check_frames(x, name: str, config: QuaterNetConfig, dtype, batch=None, ndim: int = 3) -> np.ndarray:
     F = config.input_size
     shape = (batch, None, F) if ndim == 3 else (batch, F)
-    x = check_float_array(x, name, shape, context=f"F = DJ + O + C = {F} from the config")
+    x = float_array(x, name, shape, context=f"F = DJ + O + C = {F} from the config", cast=False)
     if x.dtype != dtype:
         raise ValueError(f"{name}: expected dtype {dtype} (the parameters' dtype), got {x.dtype}")
     return x
@@ -431,9 +432,9 @@ def step(params: Mapping[str, np.ndarray], state, x,
     dtype = check_params(params, config)
     x = check_frames(x, "x", config, dtype, ndim=2)
     B = x.shape[0]
-    state = check_float_array(state, "state", (config.num_layers, B, config.hidden_size),
-                              context=f"L = {config.num_layers}, H = {config.hidden_size} from the config, "
-                                      f"B = {B} from x")
+    state = float_array(state, "state", (config.num_layers, B, config.hidden_size),
+                        context=f"L = {config.num_layers}, H = {config.hidden_size} from the config, "
+                                f"B = {B} from x", cast=False)
     if state.dtype != dtype:
         raise ValueError(f"state: expected dtype {dtype} (the parameters' dtype), got {state.dtype}")
     y, _, h_new, _ = frame_forward(params, x, state, config)
@@ -469,7 +470,7 @@ def predict(params: Mapping[str, np.ndarray], prefix, k: int, config: QuaterNetC
     if C > 0:
         if controls is None:
             raise ValueError(f"controls: required (shape ({B}, {k - 1}, {C})) when the config has controls")
-        controls = check_float_array(controls, "controls", (B, k - 1, C))
+        controls = float_array(controls, "controls", (B, k - 1, C), cast=False)
         if controls.dtype != dtype:
             raise ValueError(f"controls: expected dtype {dtype} (the parameters' dtype), got {controls.dtype}")
     elif controls is not None and np.size(controls) > 0:

@@ -40,7 +40,7 @@ from refimpl.models._shared import check_param_dict
 from refimpl.nn.activations import (leaky_relu_backward, leaky_relu_forward, relu_backward, relu_forward,
                                     tanh_backward, tanh_forward)
 from refimpl.nn.conv1d import conv1d_causal_backward, conv1d_causal_forward, conv1d_init
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.nn.quat_layers import (qmul_velocity_backward, qmul_velocity_forward, quat_normalize_backward,
                                     quat_normalize_forward)
 
@@ -196,7 +196,7 @@ def check_params(params: Mapping[str, np.ndarray], config: QuaterNetCNNConfig = 
 
 def _check_frames(x, name: str, config: QuaterNetCNNConfig, dtype, batch=None) -> np.ndarray:
     R = config.rotation_size
-    x = check_float_array(x, name, (batch, None, R), context=f"4J = {R} from the config")
+    x = float_array(x, name, (batch, None, R), context=f"4J = {R} from the config", cast=False)
     if x.shape[1] < 1:
         raise ValueError(f"{name}: expected at least one frame (B, T >= 1, 4J), got {x.shape}")
     if x.dtype != dtype:
@@ -317,9 +317,9 @@ def backward(dy, dpre, cache, input_grads: bool = False):
     ``dy (B, T, 4J)`` cotangent of ``y``; ``dpre (B, T, 4J)`` of ``pre`` or None (zero)."""
     B, T = cache["shape"]
     R = cache["config"].rotation_size
-    dy = check_float_array(dy, "dy", (B, T, R))
+    dy = float_array(dy, "dy", (B, T, R), cast=False)
     if dpre is not None:
-        dpre = check_float_array(dpre, "dpre", (B, T, R))
+        dpre = float_array(dpre, "dpre", (B, T, R), cast=False)
     grads, dx = _backward_core(dy, dpre, cache)
     return (grads, dx) if input_grads else grads
 
@@ -397,7 +397,7 @@ def stream_step(params: Mapping[str, np.ndarray], state, x, config: QuaterNetCNN
     """
     dtype = check_params(params, config)
     R = config.rotation_size
-    x = check_float_array(x, "x", (None, R), context=f"4J = {R} from the config")
+    x = float_array(x, "x", (None, R), context=f"4J = {R} from the config", cast=False)
     if x.dtype != dtype:
         raise ValueError(f"x: expected dtype {dtype} (the parameters' dtype), got {x.dtype}")
     B, n = x.shape[0], config.num_layers
@@ -406,7 +406,7 @@ def stream_step(params: Mapping[str, np.ndarray], state, x, config: QuaterNetCNN
     new_state, acts = [], []
     a = x
     for k, ((c_in, _), taps, d) in enumerate(zip(config.layer_channels, config.kernel_sizes, config.dilations)):
-        buf = check_float_array(state[k], f"state[{k}]", (B, (taps - 1) * d, c_in))
+        buf = float_array(state[k], f"state[{k}]", (B, (taps - 1) * d, c_in), cast=False)
         full = np.concatenate([buf, a[:, None]], axis=1)  # (B, (K-1) d + 1, C_in), oldest first
         w = params[f"convs.{k}.weight"]  # (C_out, C_in, K)
         z = params[f"convs.{k}.bias"] + sum(full[:, j * d] @ w[:, :, j].T for j in range(taps))  # (B, C_out)
@@ -488,9 +488,9 @@ def backward_scheduled(dy, dpre, cache, input_grads: bool = False):
     P, T, m = cache["scheduled"]
     B = cache["shape"][0]
     R = cache["config"].rotation_size
-    dy = check_float_array(dy, "dy", (B, T, R))
+    dy = float_array(dy, "dy", (B, T, R), cast=False)
     if dpre is not None:
-        dpre = check_float_array(dpre, "dpre", (B, T, R))
+        dpre = float_array(dpre, "dpre", (B, T, R), cast=False)
     L = P + T - 1
     dy_full = np.zeros((B, L, R), dtype=cache["dtype"])
     dy_full[:, P - 1:] = dy

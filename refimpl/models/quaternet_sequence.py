@@ -23,7 +23,7 @@ from refimpl.models.quaternet import (QuaterNetConfig, check_frames, check_mask,
                                       frame_forward, head_backward, head_forward, init_state, input_backward,
                                       input_forward, run_backward, run_forward, step)
 from refimpl.nn.gru import gru_backward, gru_forward
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 
 __all__ = ["forward", "backward"]
 
@@ -122,9 +122,9 @@ def backward(dy, dpre, cache, input_grads: bool = False):
     config: QuaterNetConfig = cache["config"]
     B, P, T = cache["shape"]
     G, R = config.output_size, config.rotation_size
-    dy = check_float_array(dy, "dy", (B, T, G))
+    dy = float_array(dy, "dy", (B, T, G), cast=False)
     if dpre is not None:
-        dpre = check_float_array(dpre, "dpre", (B, T, R))
+        dpre = float_array(dpre, "dpre", (B, T, R), cast=False)
     dtype = cache["dtype"]
     grads: dict = {}
     dfuture = np.zeros((B, T, config.input_size), dtype=dtype)

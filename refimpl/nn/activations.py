@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 
 __all__ = [
     "leaky_relu_forward", "leaky_relu_backward", "relu_forward", "relu_backward",
@@ -67,7 +67,7 @@ def leaky_relu_forward(x: np.ndarray, slope: float = 0.01):
     y : ndarray, same shape and dtype as ``x``
     cache : tuple (mask, slope)
     """
-    x = check_float_array(x, "x", (...,))
+    x = float_array(x, "x", (...,), cast=False)
     mask = x > 0
     y = np.where(mask, x, x * x.dtype.type(slope))
     return y, (mask, slope)
@@ -75,7 +75,7 @@ def leaky_relu_forward(x: np.ndarray, slope: float = 0.01):
 
 def _check_dy(dy, shape: tuple) -> np.ndarray:
     """The upstream gradient of an activation: a finite float array of the forward output's ``shape``."""
-    return check_float_array(dy, "dy", shape)
+    return float_array(dy, "dy", shape, cast=False)
 
 
 def leaky_relu_backward(dy: np.ndarray, cache) -> np.ndarray:
@@ -87,7 +87,7 @@ def leaky_relu_backward(dy: np.ndarray, cache) -> np.ndarray:
 
 def relu_forward(x: np.ndarray):
     """Rectifier ``y = max(x, 0)``; returns ``y, cache`` (cache: the mask ``x > 0``)."""
-    x = check_float_array(x, "x", (...,))
+    x = float_array(x, "x", (...,), cast=False)
     mask = x > 0
     return np.where(mask, x, x.dtype.type(0)), mask
 
@@ -100,7 +100,7 @@ def relu_backward(dy: np.ndarray, cache) -> np.ndarray:
 
 def tanh_forward(x: np.ndarray):
     """``y = tanh(x)``; returns ``y, cache`` (cache: ``y``)."""
-    x = check_float_array(x, "x", (...,))
+    x = float_array(x, "x", (...,), cast=False)
     y = np.tanh(x)
     return y, y
 
@@ -114,7 +114,7 @@ def tanh_backward(dy: np.ndarray, cache) -> np.ndarray:
 
 def sigmoid_forward(x: np.ndarray):
     """``y = 1 / (1 + exp(-x))``; returns ``y, cache`` (cache: ``y``)."""
-    x = check_float_array(x, "x", (...,))
+    x = float_array(x, "x", (...,), cast=False)
     y = sigmoid(x, out=np.empty_like(x))  # an array out: also a 0-d x gives a 0-d array, not a scalar
     return y, y
 

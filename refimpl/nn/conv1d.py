@@ -27,7 +27,8 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
+from refimpl.arrays import float_array
+from refimpl.nn.params import check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["conv1d_causal_forward", "conv1d_causal_backward", "conv1d_init"]
 
@@ -74,7 +75,7 @@ def conv1d_causal_forward(x: np.ndarray, params: Mapping[str, np.ndarray], prefi
     w = get_param(params, prefix, "weight", (None, None, None))  # (C_out, C_in, K)
     c_out, c_in, taps = w.shape
     b = get_param(params, prefix, "bias", (c_out,))
-    x = check_float_array(x, "x", (None, None, c_in))
+    x = float_array(x, "x", (None, None, c_in), cast=False)
     check_same_dtype(x, "x", {param_name(prefix, "weight"): w, param_name(prefix, "bias"): b})
     batch, t_len, _ = x.shape
     pad = (taps - 1) * dilation
@@ -114,7 +115,7 @@ def conv1d_causal_backward(dy: np.ndarray, cache):
         When ``dy`` is not a float array of ``y``'s shape, or holds NaN/inf.
     """
     xcol, wcol, (batch, t_len, c_in, c_out, taps, dilation), prefix = cache
-    dy = check_float_array(dy, "dy", (batch, t_len, c_out))
+    dy = float_array(dy, "dy", (batch, t_len, c_out), cast=False)
     dy2 = dy.reshape(batch * t_len, c_out)  # (B*T, C_out)
     dwcol = xcol.T @ dy2  # (K*C_in, C_out)
     dxcol = (dy2 @ wcol.T).reshape(batch, t_len, taps * c_in)  # (B, T, K*C_in)

@@ -44,7 +44,8 @@ import numpy as np
 
 from refimpl.nn.activations import sigmoid
 from refimpl.nn.linear import matmul_wt
-from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
+from refimpl.arrays import float_array
+from refimpl.nn.params import check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["gru_forward", "gru_backward", "gru_step_forward", "gru_step_backward", "gru_init"]
 
@@ -291,13 +292,13 @@ def gru_forward(x: np.ndarray, h0: np.ndarray, params: Mapping[str, np.ndarray],
     _check_layers(num_layers)
     d_count = 2 if bidirectional else 1
     weights, in_size, hid = _all_weights(params, prefix, num_layers, d_count)
-    x = check_float_array(x, "x", (None, None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    x = float_array(x, "x", (None, None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"), cast=False)
     batch, t_len, _ = x.shape
     if t_len < 1:
         raise ValueError(f"x: expected at least one time step (B, T >= 1, I), got {x.shape}")
     h_note = _size_note(prefix, "H", hid, "weight_hh_l0")
-    h0 = check_float_array(h0, "h0", (num_layers * d_count, batch, hid),
-                           context=f"L*D = {num_layers * d_count}, B = {batch} from x, {h_note}")
+    h0 = float_array(h0, "h0", (num_layers * d_count, batch, hid),
+                     context=f"L*D = {num_layers * d_count}, B = {batch} from x, {h_note}", cast=False)
     check_same_dtype(x, "x", {"h0": h0})
     _check_params_dtype(x, "x", weights, prefix)
 
@@ -357,10 +358,10 @@ def gru_backward(dy: np.ndarray | None, dh_n: np.ndarray | None, cache):
     if dy is None:
         dys = np.zeros((t_len, batch, d_count * hid), dtype=dtype)
     else:
-        dy = check_float_array(dy, "dy", (batch, t_len, d_count * hid))
+        dy = float_array(dy, "dy", (batch, t_len, d_count * hid), cast=False)
         dys = dy.transpose(1, 0, 2)  # (T, B, D*H) view
     if dh_n is not None:
-        dh_n = check_float_array(dh_n, "dh_n", (num_layers * d_count, batch, hid))
+        dh_n = float_array(dh_n, "dh_n", (num_layers * d_count, batch, hid), cast=False)
     dh0 = np.empty((num_layers * d_count, batch, hid), dtype=dtype)
     grads = {}
     for k in range(num_layers - 1, -1, -1):
@@ -423,10 +424,11 @@ def gru_step_forward(x_t: np.ndarray, h: np.ndarray, params: Mapping[str, np.nda
     """
     _check_layers(num_layers)
     weights, in_size, hid = _all_weights(params, prefix, num_layers, 1)
-    x_t = check_float_array(x_t, "x_t", (None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    x_t = float_array(x_t, "x_t", (None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"), cast=False)
     batch = x_t.shape[0]
     h_note = _size_note(prefix, "H", hid, "weight_hh_l0")
-    h = check_float_array(h, "h", (num_layers, batch, hid), context=f"L = {num_layers}, B = {batch} from x_t, {h_note}")
+    h = float_array(h, "h", (num_layers, batch, hid), context=f"L = {num_layers}, B = {batch} from x_t, {h_note}",
+                    cast=False)
     check_same_dtype(x_t, "x_t", {"h": h})
     _check_params_dtype(x_t, "x_t", weights, prefix)
     x_t, h = x_t.copy(), h.copy()  # the cache must not alias the caller's (possibly reused) buffers
@@ -475,9 +477,9 @@ def gru_step_backward(dy: np.ndarray | None, dh_new: np.ndarray | None, cache, a
     batch, in_size, hid = cache["shape"]
     dtype = layers[0][2].dtype
     if dy is not None:
-        dy = check_float_array(dy, "dy", (batch, hid))
+        dy = float_array(dy, "dy", (batch, hid), cast=False)
     if dh_new is not None:
-        dh_new = check_float_array(dh_new, "dh_new", (num_layers, batch, hid))
+        dh_new = float_array(dh_new, "dh_new", (num_layers, batch, hid), cast=False)
     grads = {} if accumulate_into is None else accumulate_into
     dh_prev = np.empty((num_layers, batch, hid), dtype=dtype)
     tmp = np.empty((batch, hid), dtype=dtype)

@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.nn.quat_layers import as_float_array, check_grad, unbroadcast
+from refimpl.arrays import float_array
+from refimpl.nn.quat_layers import check_grad, unbroadcast
 from refimpl.quat import quat_conj_kernel, quat_mul_kernel
 
 __all__ = [
@@ -167,7 +168,7 @@ def _translation_backward(g: np.ndarray, dq: np.ndarray) -> np.ndarray:
 
 def _check_joint_array(x, name: str, last: int) -> np.ndarray:
     """A per-joint array ``(..., J, last)`` (at least 2 axes), validated."""
-    return as_float_array(x, name, last, min_ndim=2)
+    return float_array(x, name, last=last, min_ndim=2)
 
 
 def forward_kinematics_forward(rotations, root_positions, offsets, parents):
@@ -199,10 +200,10 @@ def forward_kinematics_forward(rotations, root_positions, offsets, parents):
     """
     rot = _check_joint_array(rotations, "rotations", 4)
     lead, num_joints = rot.shape[:-2], rot.shape[-2]
-    root = as_float_array(root_positions, "root_positions", 3)
+    root = float_array(root_positions, "root_positions", last=3)
     if root.shape != lead + (3,):
         raise ValueError(f"root_positions: expected shape {lead + (3,)}, got {root.shape}")
-    off = as_float_array(offsets, "offsets", 3)
+    off = float_array(offsets, "offsets", last=3)
     try:
         ok = off.ndim <= rot.ndim and np.broadcast_shapes(off.shape, lead + (num_joints, 3)) == lead + (num_joints, 3)
     except ValueError:
@@ -308,8 +309,8 @@ def dq_from_quat_translation_forward(rotations, translations):
     dq : ndarray, shape (..., 8)
     cache : tuple
     """
-    q = as_float_array(rotations, "rotations", 4)
-    t = as_float_array(translations, "translations", 3)
+    q = float_array(rotations, "rotations", last=4)
+    t = float_array(translations, "translations", last=3)
     if t.shape[:-1] != q.shape[:-1]:
         raise ValueError(f"translations: expected shape {q.shape[:-1] + (3,)}, got {t.shape}")
     dtype = np.result_type(q, t)
@@ -468,7 +469,7 @@ def positions_from_dq_forward(dqs):
     positions : ndarray, shape (..., 3)
     cache : ndarray
     """
-    dq = as_float_array(dqs, "dqs", 8)
+    dq = float_array(dqs, "dqs", last=8)
     return _translation(dq), dq
 
 

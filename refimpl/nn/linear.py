@@ -16,7 +16,8 @@ from typing import Mapping
 
 import numpy as np
 
-from refimpl.nn.params import (check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform,
+from refimpl.arrays import float_array
+from refimpl.nn.params import (check_same_dtype, fan_in_bound, get_param, init_uniform,
                                param_name)
 
 __all__ = ["linear_forward", "linear_backward", "linear_init"]
@@ -64,7 +65,7 @@ def linear_forward(x: np.ndarray, params: Mapping[str, np.ndarray], prefix: str,
     """
     w = get_param(params, prefix, "weight", (None, None))  # (O, I)
     out_f, in_f = w.shape
-    x = check_float_array(x, "x", (..., in_f))
+    x = float_array(x, "x", (..., in_f), cast=False)
     b = get_param(params, prefix, "bias", (out_f,)) if bias else None
     check_same_dtype(x, "x", {param_name(prefix, "weight"): w, param_name(prefix, "bias"): b})
     lead = x.shape[:-1]
@@ -100,7 +101,7 @@ def linear_backward(dy: np.ndarray, cache):
     """
     x2, w, lead, prefix, bias = cache
     out_f, in_f = w.shape
-    dy = check_float_array(dy, "dy", (*lead, out_f))
+    dy = float_array(dy, "dy", (*lead, out_f), cast=False)
     dy2 = dy.reshape(-1, out_f)  # (N, O)
     dx = (dy2 @ w).reshape(*lead, in_f)  # (..., I)
     grads = {param_name(prefix, "weight"): dy2.T @ x2}  # (O, I)

@@ -47,7 +47,8 @@ import numpy as np
 
 from refimpl.nn.activations import sigmoid
 from refimpl.nn.linear import matmul_wt
-from refimpl.nn.params import check_float_array, check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
+from refimpl.arrays import float_array
+from refimpl.nn.params import check_same_dtype, fan_in_bound, get_param, init_uniform, param_name
 
 __all__ = ["lstm_forward", "lstm_backward", "lstm_step_forward", "lstm_step_backward", "lstm_init"]
 
@@ -98,8 +99,8 @@ def _check_state(state, name, entries, shape, x, x_name, prefix, weights):
                          f"got {type(state).__name__}")
     context = f"L = {shape[0]}, B = {shape[1]} from {x_name}, " + _size_note(prefix, "H", shape[2], "weight_hh_l0")
     names = [f"{name}[{j}] ({e})" for j, e in enumerate(entries)]
-    h = check_float_array(state[0], names[0], shape, context=context)
-    c = check_float_array(state[1], names[1], shape, context=context)
+    h = float_array(state[0], names[0], shape, context=context, cast=False)
+    c = float_array(state[1], names[1], shape, context=context, cast=False)
     check_same_dtype(x, x_name, {names[0]: h, names[1]: c})
     dt = weights[0][1].dtype
     if dt != x.dtype:
@@ -275,7 +276,7 @@ def lstm_forward(x: np.ndarray, state: tuple, params: Mapping[str, np.ndarray], 
     """
     _check_layers(num_layers)
     weights, in_size, hid = _all_weights(params, prefix, num_layers)
-    x = check_float_array(x, "x", (None, None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    x = float_array(x, "x", (None, None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"), cast=False)
     batch, t_len, _ = x.shape
     if t_len < 1:
         raise ValueError(f"x: expected at least one time step (B, T >= 1, I), got {x.shape}")
@@ -335,16 +336,16 @@ def lstm_backward(dy: np.ndarray | None, dstate_n, cache):
     batch, t_len, in_size, hid = cache["shape"]
     dt = layers[0][0].dtype
     if dy is not None:
-        dy = check_float_array(dy, "dy", (batch, t_len, hid))
+        dy = float_array(dy, "dy", (batch, t_len, hid), cast=False)
     dh_n = dc_n = None
     if dstate_n is not None:
         if not (isinstance(dstate_n, (tuple, list)) and len(dstate_n) == 2):
             raise ValueError("dstate_n: expected None or a tuple (dh_n, dc_n)")
         dh_n, dc_n = dstate_n
         if dh_n is not None:
-            dh_n = check_float_array(dh_n, "dstate_n[0] (dh_n)", (num_layers, batch, hid))
+            dh_n = float_array(dh_n, "dstate_n[0] (dh_n)", (num_layers, batch, hid), cast=False)
         if dc_n is not None:
-            dc_n = check_float_array(dc_n, "dstate_n[1] (dc_n)", (num_layers, batch, hid))
+            dc_n = float_array(dc_n, "dstate_n[1] (dc_n)", (num_layers, batch, hid), cast=False)
     dys = np.zeros((0, batch, hid), dtype=dt) if dy is None else dy.transpose(1, 0, 2)  # (T, B, H) view
     dh0 = np.empty((num_layers, batch, hid), dtype=dt)
     dc0 = np.empty((num_layers, batch, hid), dtype=dt)
@@ -410,7 +411,7 @@ def lstm_step_forward(x_t: np.ndarray, state: tuple, params: Mapping[str, np.nda
     """
     _check_layers(num_layers)
     weights, in_size, hid = _all_weights(params, prefix, num_layers)
-    x_t = check_float_array(x_t, "x_t", (None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"))
+    x_t = float_array(x_t, "x_t", (None, in_size), context=_size_note(prefix, "I", in_size, "weight_ih_l0"), cast=False)
     batch = x_t.shape[0]
     h, c = _check_state(state, "state", ("h", "c"), (num_layers, batch, hid), x_t, "x_t", prefix, weights)
     x_t, h, c = x_t.copy(), h.copy(), c.copy()  # the cache must not alias the caller's buffers
@@ -458,16 +459,16 @@ def lstm_step_backward(dy: np.ndarray | None, dstate_new, cache, accumulate_into
     batch, in_size, hid = cache["shape"]
     dt = layers[0][3].dtype
     if dy is not None:
-        dy = check_float_array(dy, "dy", (batch, hid))
+        dy = float_array(dy, "dy", (batch, hid), cast=False)
     dh_new = dc_new = None
     if dstate_new is not None:
         if not (isinstance(dstate_new, (tuple, list)) and len(dstate_new) == 2):
             raise ValueError("dstate_new: expected None or a tuple (dh_new, dc_new)")
         dh_new, dc_new = dstate_new
         if dh_new is not None:
-            dh_new = check_float_array(dh_new, "dstate_new[0] (dh_new)", (num_layers, batch, hid))
+            dh_new = float_array(dh_new, "dstate_new[0] (dh_new)", (num_layers, batch, hid), cast=False)
         if dc_new is not None:
-            dc_new = check_float_array(dc_new, "dstate_new[1] (dc_new)", (num_layers, batch, hid))
+            dc_new = float_array(dc_new, "dstate_new[1] (dc_new)", (num_layers, batch, hid), cast=False)
     grads = {} if accumulate_into is None else accumulate_into
     dh_prev = np.empty((num_layers, batch, hid), dtype=dt)
     dc_prev = np.empty((num_layers, batch, hid), dtype=dt)

@@ -12,8 +12,9 @@ Conventions (spec/architecture.md "Parameters and checkpoints", spec/layers.md Â
   1/sqrt(fan_in))`` (``kaiming_uniform_(a=sqrt(5))`` reduces to that bound); ``nn.GRU``/``nn.LSTM`` draw every
   parameter from ``U(-1/sqrt(H), 1/sqrt(H))``.
 
-The ``check_*``/``get_param`` helpers are the public-boundary validation shared by all layers in ``refimpl.nn``:
-they raise ``ValueError`` naming the argument, the expected and the actual shape/dtype/value.
+``check_same_dtype``/``get_param`` are the parameters' public-boundary validation shared by all layers in
+``refimpl.nn``: they raise ``ValueError`` naming the argument, the expected and the actual shape/dtype/value (the
+arrays' own checks are :func:`refimpl.arrays.float_array`).
 """
 from __future__ import annotations
 
@@ -21,14 +22,13 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from refimpl.arrays import float_array, shape_text
+
 __all__ = [
     "param_name", "subdict", "merge_grads", "accumulate_grads", "count_parameters",
     "init_uniform", "init_normal", "fan_in_bound",
-    "check_float_array", "check_same_dtype", "get_param",
+    "check_same_dtype", "get_param",
 ]
-
-_FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
-
 
 def param_name(prefix: str, name: str) -> str:
     """Full parameter name: ``prefix + "." + name``, or ``name`` when ``prefix`` is empty.
@@ -108,49 +108,6 @@ def init_normal(rng: np.random.Generator, shape: tuple[int, ...], std: float, me
     return rng.normal(mean, std, size=shape).astype(dtype, copy=False)
 
 
-def _shape_str(shape) -> str:
-    return "(" + ", ".join("..." if s is Ellipsis else ("*" if s is None else str(s)) for s in shape) + ")"
-
-
-def check_float_array(x, name: str, shape: tuple, finite: bool = True, context: str = "") -> np.ndarray:
-    """Validate an array argument at a public boundary and return it as an ndarray.
-
-    Parameters
-    ----------
-    x : array-like
-        The argument.
-    name : str
-        Its name, used in the error message.
-    shape : tuple
-        Expected shape; ``None`` matches any size on that axis, a leading ``...`` matches any number
-        (zero or more) of leading axes.
-    finite : bool
-        Also require every entry to be finite.
-    context : str
-        Appended to a shape error after ``"; "``: where the expected sizes come from (e.g.
-        ``"I = 4 from params['rnn.weight_ih_l0']"``).
-
-    Raises
-    ------
-    ValueError
-        When ``x`` is not float32/float64, has the wrong shape, or (with ``finite``) holds NaN/inf.
-    """
-    a = np.asarray(x)
-    if a.dtype not in _FLOAT_DTYPES:
-        raise ValueError(f"{name}: expected a float32 or float64 array, got dtype {a.dtype}")
-    if shape and shape[0] is Ellipsis:
-        tail = shape[1:]
-        ok = a.ndim >= len(tail) and all(s is None or s == d for s, d in zip(tail, a.shape[a.ndim - len(tail):]))
-    else:
-        ok = a.ndim == len(shape) and all(s is None or s == d for s, d in zip(shape, a.shape))
-    if not ok:
-        note = f"; {context}" if context else ""
-        raise ValueError(f"{name}: expected shape {_shape_str(shape)}, got {a.shape}{note}")
-    if finite and not np.isfinite(a).all():
-        raise ValueError(f"{name}: expected finite values, got NaN or inf")
-    return a
-
-
 def check_same_dtype(reference: np.ndarray, reference_name: str, arrays: Mapping[str, np.ndarray | None]) -> None:
     """Raise ``ValueError`` unless every array in ``arrays`` (name -> array; ``None`` entries are skipped) has the
     dtype of ``reference`` (no silent upcast)."""
@@ -170,8 +127,8 @@ def get_param(params: Mapping[str, np.ndarray], prefix: str, name: str, shape: t
     """
     full = param_name(prefix, name)
     if full not in params:
-        raise ValueError(f"params: missing parameter {full!r} (expected shape {_shape_str(shape)})")
-    a = check_float_array(params[full], f"params[{full!r}]", shape, finite=False)
+        raise ValueError(f"params: missing parameter {full!r} (expected shape {shape_text(shape)})")
+    a = float_array(params[full], f"params[{full!r}]", shape, finite=False, cast=False)
     if dtype is not None and a.dtype != np.dtype(dtype):
         raise ValueError(f"params[{full!r}]: expected dtype {np.dtype(dtype)}, got {a.dtype}")
     return a

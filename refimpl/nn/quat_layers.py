@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from refimpl.arrays import float_array
 from refimpl.quat import quat_conj_kernel, quat_mul_kernel  # conjugate, Hamilton product (broadcasting, keep float32)
 from refimpl.rotations import quat_elementary_kernel
 
@@ -46,26 +47,6 @@ EULER_ORDERS = ("xyz", "yzx", "zxy", "xzy", "yxz", "zyx")
 
 # --------------------------------------------------------------------------------------------------
 # validation (public boundaries only)
-
-def as_float_array(x, name: str, last: int | tuple[int, ...] | None = None, min_ndim: int = 1) -> np.ndarray:
-    """Return ``x`` as a floating ndarray (integers become float64); raise ValueError on bad shape or non-finite."""
-    a = np.asarray(x)
-    if a.dtype == object or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
-        raise ValueError(f"{name}: expected a real floating array, got dtype {a.dtype}")
-    if not np.issubdtype(a.dtype, np.floating):
-        a = a.astype(np.float64)
-    lasts = () if last is None else (last,) if isinstance(last, int) else last
-    ndim = max(min_ndim, 1 if lasts else 0)  # a last-axis rule needs a last axis
-    if a.ndim < ndim or (lasts and a.shape[-1] not in lasts):
-        want = " or ".join(f"(..., {n})" for n in lasts)
-        if a.ndim >= ndim:
-            raise ValueError(f"{name}: expected shape {want}, got {a.shape}")
-        expected = f"shape {want} (at least {ndim} dimension(s))" if lasts else f"at least {ndim} dimension(s)"
-        raise ValueError(f"{name}: expected {expected}, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: contains NaN or inf")
-    return a
-
 
 def _check_eps(eps: float, name: str = "eps") -> float:
     eps = float(eps)
@@ -148,7 +129,7 @@ def quat_normalize_forward(q, eps: float = 1e-12):
         Unit quaternions (``q / eps`` when ``|q| < eps``; the zero quaternion maps to zero).
     cache : tuple
     """
-    q = as_float_array(q, "q", 4)
+    q = float_array(q, "q", last=4)
     eps = _check_eps(eps)
     y, n = normalize(q, eps)  # (..., 4), (..., 1)
     return y, (y, n, eps)
@@ -188,8 +169,8 @@ def quat_mul_forward(a, b):
     y : ndarray, shape broadcast(a, b)
     cache : tuple
     """
-    a = as_float_array(a, "a", 4)
-    b = as_float_array(b, "b", 4)
+    a = float_array(a, "a", last=4)
+    b = float_array(b, "b", last=4)
     try:
         np.broadcast_shapes(a.shape, b.shape)
     except ValueError:
@@ -235,8 +216,8 @@ def qmul_velocity_forward(delta, q_in, eps: float = 1e-12):
         Unit quaternions.
     cache : tuple
     """
-    delta = as_float_array(delta, "delta", 4)
-    q_in = as_float_array(q_in, "q_in", 4)
+    delta = float_array(delta, "delta", last=4)
+    q_in = float_array(q_in, "q_in", last=4)
     if delta.shape != q_in.shape:
         raise ValueError(f"q_in: expected shape {delta.shape} (the shape of delta), got {q_in.shape}")
     eps = _check_eps(eps)
@@ -285,7 +266,7 @@ def dq_normalize_forward(dq, eps: float = 1e-12):
     y : ndarray, shape (..., 8)
     cache : tuple
     """
-    dq = as_float_array(dq, "dq", 8)
+    dq = float_array(dq, "dq", last=8)
     eps = _check_eps(eps)
     r, d = dq[..., :4], dq[..., 4:]
     n = _norm_last(r)  # (..., 1)
@@ -360,8 +341,8 @@ def dq_velocity_forward(delta, d_in, eps: float = 1e-12):
         Unit dual quaternions.
     cache : tuple
     """
-    delta = as_float_array(delta, "delta", 8)
-    d_in = as_float_array(d_in, "d_in", 8)
+    delta = float_array(delta, "delta", last=8)
+    d_in = float_array(d_in, "d_in", last=8)
     if delta.shape != d_in.shape:
         raise ValueError(f"d_in: expected shape {delta.shape} (the shape of delta), got {d_in.shape}")
     y, nc = dq_normalize_forward(_dq_mul_parts(delta, d_in), eps)
@@ -462,7 +443,7 @@ def euler_from_quat_forward(q, order: str = "zyx", eps: float = 0.0):
         Radians, always ordered ``(x, y, z)`` whatever the order.
     cache : tuple
     """
-    q = as_float_array(q, "q", 4)
+    q = float_array(q, "q", last=4)
     if order not in _EULER_TABLE:
         raise ValueError(f"order: expected one of {EULER_ORDERS}, got {order!r}")
     eps = float(eps)
@@ -526,7 +507,7 @@ def euler_to_quat_forward(angles, order: str):
     Returns q (..., 4) and the cache for :func:`euler_to_quat_backward`."""
     if order not in EULER_ORDERS:
         raise ValueError(f"order: expected one of {EULER_ORDERS}, got {order!r}")
-    angles = as_float_array(angles, "angles", 3)
+    angles = float_array(angles, "angles", last=3)
     e = [quat_elementary_kernel(_AXIS[order[i]], angles[..., i]) for i in range(3)]
     ab, c1 = quat_mul_forward(e[0], e[1])
     q, c2 = quat_mul_forward(ab, e[2])
@@ -553,7 +534,7 @@ _SMALL_ANGLE = 1e-4
 def axis_angle_to_quat_forward(v):
     """``q = (cos θ/2, sin(θ/2)/θ · v)``, θ = ‖v‖ (:func:`refimpl.rotations.quat_from_axis_angle`); below θ = 1e-4
     the series ``sin(θ/2)/θ ≈ ½ − θ²/48``. v : (..., 3); returns q (..., 4) and the cache."""
-    v = as_float_array(v, "v", 3)
+    v = float_array(v, "v", last=3)
     th = np.linalg.norm(v, axis=-1)
     small = th < _SMALL_ANGLE
     ts = np.where(small, 1.0, th)
@@ -574,4 +555,4 @@ def axis_angle_to_quat_backward(dq, cache) -> np.ndarray:
 
 
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
-# as_float_array, check_grad, normalize, normalize_backward, quat_mul_backward_kernel, unbroadcast.
+# check_grad, normalize, normalize_backward, quat_mul_backward_kernel, unbroadcast.

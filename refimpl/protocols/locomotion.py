@@ -19,6 +19,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.augment import rotate_controls
 from refimpl.motion import Motion
 from refimpl.protocols.locomotion_cache import load_pace_data, load_sequences, sequences_key
 from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, QUATERNET_UNIT_CM, LocomotionRig,
@@ -29,7 +30,7 @@ from refimpl.skeleton import Skeleton
 from refimpl.splines import Spline
 
 __all__ = [
-    "PoseBatch", "rotate_controls", "pose_batch", "sequence_spline", "pace_training_data", "pace_batch",
+    "PoseBatch", "pose_batch", "sequence_spline", "pace_training_data", "pace_batch",
     "LocomotionDataset", "build_dataset", "evaluation_windows", "zero_velocity",
     "position_errors", "evaluate", "format_results",
 ]
@@ -61,24 +62,6 @@ class PoseBatch:
     angles: np.ndarray
     names: tuple
     starts: np.ndarray
-
-
-def rotate_controls(features: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """Rotate the direction and facing controls about +Y: the ``(x, z)`` pairs (4, 5) and (6, 7) map as
-    ``(x, z) → (x cos a + z sin a, -x sin a + z cos a)``; offset, height and phase are unchanged.
-
-    Parameters
-    ----------
-    features : (..., 8)
-    angles : broadcastable to ``features.shape[:-1]``
-    """
-    f = np.array(features, dtype=np.float64)
-    c, s = np.cos(angles), np.sin(angles)
-    for i in (4, 6):
-        x, z = f[..., i].copy(), f[..., i + 1].copy()
-        f[..., i] = x * c + z * s
-        f[..., i + 1] = -x * s + z * c
-    return f
 
 
 def pose_batch(sequences: Sequence[LocomotionSequence], rng: np.random.Generator, batch_size: int = 40,

@@ -40,7 +40,7 @@ from refimpl.bvh import read_bvh
 from refimpl.dq_output import DQ_TERMS
 from refimpl.losses import WEIGHT_ACRNN_QUAT_FK
 from refimpl.motion import Motion
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.preprocess import downsample, feature_statistics
 from refimpl.representations import REPRESENTATIONS, decode, encode, fix_antipodal_frames, positions_from_frames
 from refimpl.skeleton import Skeleton, remove_joints
@@ -439,8 +439,8 @@ def mean_joint_error(pred, gt) -> float:
     pred, gt : ndarray (..., J, 3)
         Positions (root zeroed, :func:`root_zeroed_positions`).
     """
-    pred = check_float_array(pred, "pred", (..., 3))
-    gt = check_float_array(gt, "gt", pred.shape)
+    pred = float_array(pred, "pred", (..., 3), cast=False)
+    gt = float_array(gt, "gt", pred.shape, cast=False)
     return float(np.mean(np.sqrt(np.sum((pred - gt) ** 2, axis=-1))))
 
 
@@ -502,7 +502,7 @@ def mean_acceleration(positions) -> float:
     ----------
     positions : ndarray (N, T, J, 3), T >= 3
     """
-    x = check_float_array(positions, "positions", (None, None, None, 3))
+    x = float_array(positions, "positions", (None, None, None, 3), cast=False)
     if x.shape[1] < 3:
         raise ValueError(f"positions: expected at least 3 frames, got shape {x.shape}")
     a = x[:, 2:] - 2.0 * x[:, 1:-1] + x[:, :-2]                            # (N, T-2, J, 3)

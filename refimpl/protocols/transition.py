@@ -32,7 +32,7 @@ import numpy as np
 
 from refimpl.bvh import read_bvh
 from refimpl.expmap import read_expmap
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.preprocess import denormalize_features, normalize_features
 from refimpl.quat import quat_conj, quat_fix, quat_mul, quat_rotate
 from refimpl.rigs import (CMU_22_JOINTS, CMU_UNIT_CM, SALSA_22_JOINTS, SALSA_UNIT_CM, heading_from_root,
@@ -82,8 +82,8 @@ def join_pose(root, quats) -> np.ndarray:
 
 
 def _check_stats(mean, std):
-    mean = check_float_array(np.asarray(mean, dtype=np.float64), "root_mean", (3,))
-    std = check_float_array(np.asarray(std, dtype=np.float64), "root_std", (3,))
+    mean = float_array(np.asarray(mean, dtype=np.float64), "root_mean", (3,), cast=False)
+    std = float_array(np.asarray(std, dtype=np.float64), "root_std", (3,), cast=False)
     if np.any(std <= 0):
         raise ValueError(f"root_std: expected positive values, got {std}")
     return mean, std
@@ -111,7 +111,7 @@ def normalize_poses(poses, root_mean, root_std) -> np.ndarray:
     poses : ndarray (..., P)
     root_mean, root_std : array_like (3,)
     """
-    poses = check_float_array(poses, "poses", (..., None))
+    poses = float_array(poses, "poses", (..., None), cast=False)
     split_pose(poses)
     mean, std = pose_statistics(root_mean, root_std, poses.shape[-1])
     return normalize_features(poses, mean, std)
@@ -120,7 +120,7 @@ def normalize_poses(poses, root_mean, root_std) -> np.ndarray:
 def denormalize_poses(poses, root_mean, root_std) -> np.ndarray:
     """Inverse of :func:`normalize_poses`: ``r = r_n · std + mean`` (a copy;
     :func:`refimpl.preprocess.denormalize_features`)."""
-    poses = check_float_array(poses, "poses", (..., None))
+    poses = float_array(poses, "poses", (..., None), cast=False)
     split_pose(poses)
     mean, std = pose_statistics(root_mean, root_std, poses.shape[-1])
     return denormalize_features(poses, mean, std)
@@ -154,8 +154,8 @@ def make_windows(rotations, root_positions, length: int = 34, stride: int = 1, u
     -------
     ndarray (N, length, 3 + 4 J), float64; ``N = max(0, (F − length) // stride + 1)``.
     """
-    rot = check_float_array(rotations, "rotations", (None, None, 4)).astype(np.float64)
-    pos = check_float_array(root_positions, "root_positions", (rot.shape[0], 3)).astype(np.float64)
+    rot = float_array(rotations, "rotations", (None, None, 4), cast=False).astype(np.float64)
+    pos = float_array(root_positions, "root_positions", (rot.shape[0], 3), cast=False).astype(np.float64)
     if not isinstance(length, (int, np.integer)) or length < 1:
         raise ValueError(f"length: expected a positive integer, got {length!r}")
     if not isinstance(stride, (int, np.integer)) or stride < 1:
@@ -315,7 +315,7 @@ class TransitionDataset:
     future: int = 2
 
     def __post_init__(self):
-        p = check_float_array(self.poses, "poses", (None, None, None))
+        p = float_array(self.poses, "poses", (None, None, None), cast=False)
         n, w, _ = p.shape
         split_pose(p)
         if w <= self.past + self.future:

@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.protocols.transition import join_pose, split_pose
 from refimpl.quat import quat_conj, quat_mul, quat_slerp
 from refimpl.rotations import quat_from_axis_angle
@@ -120,11 +120,11 @@ def _unit_quats(q, name):
 
 def check_context(past, target):
     """Validate a transition's context: ``past (B, 2, P)`` and ``target (B, 2, P)`` with ``P = 3 + 4 J``."""
-    past = check_float_array(past, "past", (None, 2, None))
+    past = float_array(past, "past", (None, 2, None), cast=False)
     P = past.shape[-1]
     if (P - 3) % 4 != 0 or P < 7:
         raise ValueError(f"past: expected pose size 3 + 4 J, got {P}")
-    target = check_float_array(target, "target", (past.shape[0], 2, P))
+    target = float_array(target, "target", (past.shape[0], 2, P), cast=False)
     return past, target
 
 

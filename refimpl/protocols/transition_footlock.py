@@ -45,7 +45,7 @@ import dataclasses
 
 import numpy as np
 
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.protocols.transition import join_pose, split_pose
 from refimpl.protocols.transition_baselines import check_context, check_length
 from refimpl.protocols.transition_quality import foot_joints
@@ -262,7 +262,7 @@ def lock_feet(poses, skeleton: Skeleton, start: int, stop: int, dt: float = 1.0 
     ndarray (B, F, P), float64
         Changed frames carry unit quaternions; all other frames are ``poses``' values.
     """
-    seq = check_float_array(poses, "poses", (None, None, None)).astype(np.float64)
+    seq = float_array(poses, "poses", (None, None, None), cast=False).astype(np.float64)
     root, q = split_pose(seq)
     if q.shape[-2] != skeleton.num_joints:
         raise ValueError(f"poses: expected 3 + 4·{skeleton.num_joints} values, got {seq.shape[-1]}")
@@ -332,7 +332,7 @@ def footlock(past, poses, target, skeleton: Skeleton, dt: float = 1.0 / 30.0, **
     ndarray (B, T, P), float64
     """
     past, target = check_context(past, target)
-    poses = check_float_array(poses, "poses", (past.shape[0], None, past.shape[2]))
+    poses = float_array(poses, "poses", (past.shape[0], None, past.shape[2]), cast=False)
     T = check_length(poses.shape[1])
     seq = np.concatenate([past, poses, target], axis=1)
     return lock_feet(seq, skeleton, 2, T + 2, dt, **options)[:, 2:T + 2]

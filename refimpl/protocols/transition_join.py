@@ -35,7 +35,7 @@ import numpy as np
 
 from refimpl.protocols.transition_footlock import FootLocked
 from refimpl.protocols.transition_baselines import check_context, check_length, quintic_inertialization
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.quat import quat_conj, quat_mul
 from refimpl.rotations import quat_from_axis_angle
 from refimpl.protocols.transition import join_pose, split_pose
@@ -98,8 +98,8 @@ def carry_offset(prev, frames, dt: float, blend_time: float) -> np.ndarray:
         Frame ``k`` (1-based) is ``G_k`` moved by the offset's value at ``t = (k − 1) dt``; frame 1 is the
         continuation ``p_0 + (p_0 − p_{-1})`` (unit quaternions).
     """
-    prev = check_float_array(prev, "prev", (None, 2, None)).astype(np.float64)
-    frames = check_float_array(frames, "frames", (prev.shape[0], None, prev.shape[2])).astype(np.float64)
+    prev = float_array(prev, "prev", (None, 2, None), cast=False).astype(np.float64)
+    frames = float_array(frames, "frames", (prev.shape[0], None, prev.shape[2]), cast=False).astype(np.float64)
     if frames.shape[1] < 1:
         raise ValueError("frames: expected at least one frame")
     r_m1, q_m1 = split_pose(prev[:, 0])  # (B, 3), (B, J, 4)
@@ -154,7 +154,7 @@ def inertialize_joins(past, poses, target, dt: float = 1.0 / 30.0, blend_frames:
     ndarray (B, T, P), float64, unit quaternions
     """
     past, target = check_context(past, target)
-    poses = check_float_array(poses, "poses", (past.shape[0], None, past.shape[2]))
+    poses = float_array(poses, "poses", (past.shape[0], None, past.shape[2]), cast=False)
     T = check_length(poses.shape[1])
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt: expected a positive frame time, got {dt!r}")

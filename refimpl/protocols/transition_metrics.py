@@ -21,7 +21,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.protocols.transition import TransitionDataset, split_pose
 from refimpl.skeleton import Skeleton
 
@@ -41,7 +41,7 @@ def positions_from_poses(poses, skeleton: Skeleton) -> np.ndarray:
     -------
     ndarray (..., J, 3)
     """
-    poses = check_float_array(poses, "poses", (..., None))
+    poses = float_array(poses, "poses", (..., None), cast=False)
     root, quats = split_pose(poses)
     if quats.shape[-2] != skeleton.num_joints:
         raise ValueError(f"poses: expected 3 + 4·{skeleton.num_joints} values for the skeleton's "
@@ -70,8 +70,8 @@ def joint_position_errors(pred, gt, skeletons, skeleton_index) -> tuple[np.ndarr
     abs_coord : ndarray (N, T, J)
         Mean over x, y, z of ``|FK(pred) − FK(gt)|``.
     """
-    pred = check_float_array(pred, "pred", (None, None, None))
-    gt = check_float_array(gt, "gt", pred.shape)
+    pred = float_array(pred, "pred", (None, None, None), cast=False)
+    gt = float_array(gt, "gt", pred.shape, cast=False)
     idx = np.asarray(skeleton_index)
     if idx.shape != (pred.shape[0],):
         raise ValueError(f"skeleton_index: expected shape ({pred.shape[0]},), got {idx.shape}")

@@ -30,7 +30,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from refimpl.protocols.transition_metrics import check_groups, positions_from_poses, predict_transitions
-from refimpl.nn.params import check_float_array
+from refimpl.arrays import float_array
 from refimpl.protocols.transition import TransitionDataset
 
 __all__ = ["CONTACT_HEIGHT_CM", "FOOT_WORDS", "foot_joints", "step_displacement", "join_displacement",
@@ -61,7 +61,7 @@ def foot_joints(skeleton) -> tuple[int, ...]:
 
 
 def _positions(positions, name="positions") -> np.ndarray:
-    return check_float_array(positions, name, (None, None, None, 3)).astype(np.float64, copy=False)
+    return float_array(positions, name, (None, None, None, 3), cast=False).astype(np.float64, copy=False)
 
 
 def step_displacement(positions) -> np.ndarray:
@@ -139,7 +139,7 @@ def foot_contacts(positions, feet, floor, *, height: float = CONTACT_HEIGHT_CM, 
     """
     x = _positions(positions)
     feet = list(feet)
-    floor = check_float_array(floor, "floor", (x.shape[0], len(feet)))
+    floor = float_array(floor, "floor", (x.shape[0], len(feet)), cast=False)
     if not (np.isfinite(height) and height > 0):
         raise ValueError(f"height: expected a positive threshold, got {height!r}")
     low = x[:, :, feet, up] - floor[:, None] < height  # (N, F, K)

@@ -1,8 +1,8 @@
 """The locomotion task of the application (QuaterNet long-term: the pose and pace networks): ``refimpl train``'s
 options and data resolution, checkpoint facts (rig, skeleton, seed clip), methods, ``eval``'s data
 (spec/locomotion.md §8, spec/architecture.md §tasks). The data is in :mod:`refimpl.protocols.locomotion_data`,
-the windows, pace data, datasets and protocol in :mod:`refimpl.protocols.locomotion`; generation along a path in
-:mod:`refimpl.tasks.locomotion_generate`.
+the windows, pace data, datasets and protocol in :mod:`refimpl.protocols.locomotion`; generation along a path's options, files and
+metrics in :mod:`refimpl.tasks.locomotion_generate` (the walk itself is :mod:`refimpl.models.quaternet_long_walk`).
 
 Shape legend: B batch, P prefix, T target frames, F = 4 J + 8 values per input frame, J joints.
 """
@@ -20,6 +20,7 @@ from refimpl.options import export_length
 from refimpl.atomic import atomic_write_text
 from refimpl.bounds import bounded_float, check_number
 from refimpl.errors import UsageError, existing_file, reading
+from refimpl.models.quaternet_long_walk import generate_walk
 from refimpl.protocols.locomotion import LocomotionDataset, build_dataset, evaluate, format_results, zero_velocity
 from refimpl.protocols.locomotion_data import CHECKPOINT_SCHEMA  # the task's checkpoint schema (task interface)
 from refimpl.protocols.locomotion_data import skeleton_of
@@ -27,8 +28,7 @@ from refimpl.protocols.locomotion_data import (BANDAI_NAMCO_RIG, CMU_RIG, FPS, Q
                                                bandai_namco_split, cmu_split)
 from refimpl.services import load_trained, network_methods
 from refimpl.tasks.locomotion_generate import (SPEEDS, bone_length_drift, dq_bone_length_drift, facing_of,
-                                              foot_skating, generate_walk, parse_path, parse_speed, read_path_file,
-                                              write_outputs)
+                                              foot_skating, parse_path, parse_speed, read_path_file, write_outputs)
 
 __all__ = [
     "CHECKPOINT_SCHEMA", "NAME", "EVAL_SUMMARY", "GENERATE_USAGE", "SEED_FRAMES", "add_train_options",
@@ -305,7 +305,7 @@ def walk_options(path_text: str, speed_text: str, seconds) -> tuple:
 
 
 def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: str, seconds: float):
-    """:func:`~refimpl.tasks.locomotion_generate.generate_walk` from two loaded
+    """:func:`~refimpl.models.quaternet_long_walk.generate_walk` from two loaded
     :class:`~refimpl.registry.TrainedModel` (``quaternet-long`` and ``pace``)."""
     if pose_model.spec.name != "quaternet-long":
         raise UsageError(f"--checkpoint: expected a quaternet-long checkpoint, got {pose_model.spec.name!r}")
@@ -318,7 +318,7 @@ def walk_from_checkpoints(pose_model, pace_model, path_text: str, speed_text: st
     seed = pose_model.extra["seed_clip"]
     return generate_walk(pose_model.params, pose_model.config.network(), pace_model.params, pace_model.config,
                          skeleton_of(pose_model.extra), np.asarray(seed["rotations"]), np.asarray(seed["features"]),
-                         path, speed, frames, dq_scale=getattr(pose_model.config, "dq_scale", 1.0))
+                         path, speed, frames, dq_scale=getattr(pose_model.config, "dq_scale", 1.0), fps=FPS)
 
 
 def describe_walk(walk) -> str:
