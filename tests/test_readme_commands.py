@@ -272,6 +272,7 @@ def _server_skip(cmd: Command, work: Path) -> str | None:
     argv = list(cmd.argv)
     port = int(argv[argv.index("--port") + 1]) if "--port" in argv else 8000
     with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as http.server does (a stopped server's TIME_WAIT)
         try:
             s.bind(("127.0.0.1", port))
         except OSError:
