@@ -25,8 +25,8 @@ from refimpl.arrays import float_array
 from refimpl.protocols.transition import TransitionDataset, split_pose
 from refimpl.skeleton import Skeleton
 
-__all__ = ["positions_from_poses", "joint_position_errors", "evaluate_methods", "check_groups", "predict_transitions",
-           "format_table"]
+__all__ = ["positions_from_poses", "joint_position_errors", "evaluate_methods", "prediction_errors", "check_groups",
+           "predict_transitions", "format_table"]
 
 
 def positions_from_poses(poses, skeleton: Skeleton) -> np.ndarray:
@@ -88,7 +88,8 @@ def joint_position_errors(pred, gt, skeletons, skeleton_index) -> tuple[np.ndarr
 
 def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable], batch_size: int = 1024,
                      labels: bool = True, groups: Mapping[str, np.ndarray] | None = None) -> dict:
-    """Run every method on every window of ``dataset`` and measure it (spec/qtg.md §9).
+    """Run every method on every window of ``dataset`` and measure it (spec/qtg.md §9): each method's
+    :func:`predict_transitions`, then their :func:`prediction_errors`.
 
     Parameters
     ----------
@@ -105,25 +106,47 @@ def evaluate_methods(dataset: TransitionDataset, methods: Mapping[str, Callable]
 
     Returns
     -------
-    dict name -> {"mean_cm": float, "per_frame_cm": ndarray (T,), "abs_coord_cm": float,
-                  "by_label": {label: mean_cm}, "by_<group>": {label: mean_cm}, "num_windows": N}
+    dict name -> :func:`prediction_errors`' dict
+    """
+    _check_dataset(dataset)
+    groups = check_groups(groups, dataset.num_windows)
+    return {name: prediction_errors(dataset, predict_transitions(dataset, f, name, batch_size), labels=labels,
+                                    groups=groups)
+            for name, f in methods.items()}
+
+
+def prediction_errors(dataset: TransitionDataset, pred, labels: bool = True,
+                      groups: Mapping[str, np.ndarray] | None = None) -> dict:
+    """The paper's measure (spec/qtg.md §9) of one method's transitions of every window of ``dataset``.
+
+    Parameters
+    ----------
+    dataset : TransitionDataset
+    pred : ndarray (N, T, P)
+        The method's un-normalised poses, e.g. :func:`predict_transitions`.
+    labels : bool
+        Also break the mean down by source label (walk, run, jump, salsa).
+    groups : mapping grouping name -> ndarray (N,) of str, optional
+        More breakdowns (:func:`evaluate_methods`): ``by_<name>``.
+
+    Returns
+    -------
+    dict {"mean_cm": float, "per_frame_cm": ndarray (T,), "abs_coord_cm": float,
+          "by_label": {label: mean_cm}, "by_<group>": {label: mean_cm}, "num_windows": N}
     """
     _check_dataset(dataset)
     gt = dataset.context()[1]
-    label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
+    pred = check_float_array(pred, "pred", gt.shape)
     groups = check_groups(groups, dataset.num_windows)
-    out = {}
-    for name, f in methods.items():
-        pred = predict_transitions(dataset, f, name, batch_size)
-        dist, absc = joint_position_errors(pred, gt, dataset.skeletons, dataset.skeleton_index)
-        res = {"mean_cm": float(dist.mean()), "per_frame_cm": dist.mean(axis=(0, 2)),
-               "abs_coord_cm": float(absc.mean()), "num_windows": int(dataset.num_windows)}
-        if labels:
-            res["by_label"] = {lab: float(dist[label_of == lab].mean()) for lab in sorted(set(label_of))}
-        for g, v in groups.items():
-            res[f"by_{g}"] = {lab: float(dist[v == lab].mean()) for lab in sorted(set(v.tolist()))}
-        out[name] = res
-    return out
+    dist, absc = joint_position_errors(pred, gt, dataset.skeletons, dataset.skeleton_index)
+    res = {"mean_cm": float(dist.mean()), "per_frame_cm": dist.mean(axis=(0, 2)),
+           "abs_coord_cm": float(absc.mean()), "num_windows": int(dataset.num_windows)}
+    if labels:
+        label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
+        res["by_label"] = {lab: float(dist[label_of == lab].mean()) for lab in sorted(set(label_of))}
+    for g, v in groups.items():
+        res[f"by_{g}"] = {lab: float(dist[v == lab].mean()) for lab in sorted(set(v.tolist()))}
+    return res
 
 
 def check_groups(groups: Mapping[str, np.ndarray] | None, num_windows: int) -> dict:

@@ -34,8 +34,8 @@ from refimpl.arrays import float_array
 from refimpl.protocols.transition import TransitionDataset
 
 __all__ = ["CONTACT_HEIGHT_CM", "FOOT_WORDS", "foot_joints", "step_displacement", "join_displacement",
-           "contact_floor", "foot_contacts", "skate_speed", "window_quality", "evaluate_quality", "format_groups",
-           "format_quality"]
+           "contact_floor", "foot_contacts", "skate_speed", "window_quality", "evaluate_quality", "prediction_quality",
+           "format_groups", "format_quality"]
 
 #: A foot joint is in contact when it is within this height (cm) of its floor (its lowest height over the
 #: ground-truth window). Why 2 cm: spec/qtg.md §9.1 (on the sample's held-out windows it marks 51 % of the walks'
@@ -250,8 +250,8 @@ def _summarise(a: dict, sel=None) -> dict:
 def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable], batch_size: int = 1024,
                      height: float = CONTACT_HEIGHT_CM, labels: bool = True,
                      groups: Mapping[str, np.ndarray] | None = None) -> dict:
-    """:func:`window_quality` of every method on all windows of ``dataset`` (windows of every skeleton pooled:
-    means over windows, the median step and the skating over all of them) and, with ``labels``, per source label.
+    """:func:`prediction_quality` of every method's :func:`~refimpl.protocols.transition_metrics.predict_transitions`
+    on all windows of ``dataset``.
 
     Parameters
     ----------
@@ -262,42 +262,70 @@ def evaluate_quality(dataset: TransitionDataset, methods: Mapping[str, Callable]
     height : float
         Contact threshold (cm).
     labels : bool
+        Also ``by_label`` (:func:`prediction_quality`).
+    groups : mapping grouping name -> ndarray (N,) of str, optional
+        More breakdowns (:func:`refimpl.protocols.transition_metrics.evaluate_methods`): ``by_<name>``.
+
+    Returns
+    -------
+    dict name -> :func:`prediction_quality`'s dict
+    """
+    groups = check_groups(groups, dataset.num_windows) if isinstance(dataset, TransitionDataset) else {}
+    return {name: prediction_quality(dataset, predict_transitions(dataset, f, name, batch_size),  # validates dataset
+                                     height=height, labels=labels, groups=groups)
+            for name, f in methods.items()}
+
+
+def prediction_quality(dataset: TransitionDataset, pred, height: float = CONTACT_HEIGHT_CM, labels: bool = True,
+                       groups: Mapping[str, np.ndarray] | None = None) -> dict:
+    """:func:`window_quality` of one method's transitions of all windows of ``dataset`` (windows of every skeleton
+    pooled: means over windows, the median step and the skating over all of them) and, with ``labels``, per source
+    label.
+
+    Parameters
+    ----------
+    dataset : TransitionDataset
+    pred : ndarray (N, T, P)
+        The method's un-normalised poses, e.g. :func:`refimpl.protocols.transition_metrics.predict_transitions`.
+    height : float
+        Contact threshold (cm).
+    labels : bool
         Also ``by_label``: ``{label: window_quality's dict}`` (walk, run, ... or a locomotion set's styles).
     groups : mapping grouping name -> ndarray (N,) of str, optional
         More breakdowns (:func:`refimpl.protocols.transition_metrics.evaluate_methods`): ``by_<name>``.
 
     Returns
     -------
-    dict name -> :func:`window_quality`'s dict, plus ``contact_rule`` (threshold, floor, foot joints),
-    ``by_label`` and ``by_<group>``.
+    dict
+        :func:`window_quality`'s dict, plus ``contact_rule`` (threshold, floor, foot joints), ``by_label`` and
+        ``by_<group>``.
     """
-    groups = check_groups(groups, dataset.num_windows) if isinstance(dataset, TransitionDataset) else {}
-    past, _, target = dataset.context() if isinstance(dataset, TransitionDataset) else (None, None, None)
-    out = {}
-    for name, f in methods.items():
-        pred = predict_transitions(dataset, f, name, batch_size)  # validates dataset and output
-        whole = np.concatenate([past, pred, target], axis=1)  # (N, W, P)
-        arrays: dict = {}
-        for k in np.unique(dataset.skeleton_index):
-            sel = np.flatnonzero(dataset.skeleton_index == k)
-            skel = dataset.skeletons[int(k)]
-            part = _window_arrays(positions_from_poses(whole[sel], skel),
-                                  positions_from_poses(dataset.poses[sel], skel), foot_joints(skel),
-                                  1.0 / dataset.fps, dataset.past, dataset.future, height, 1)
-            for key, v in part.items():
-                arrays.setdefault(key, np.zeros((dataset.num_windows,) + v.shape[1:], v.dtype))[sel] = v
-        res = _summarise(arrays)
-        res["contact_rule"] = {
-            "height_cm": float(height), "floor": "each foot joint's lowest height over the ground-truth window",
-            "foot_joints": sorted({dataset.skeletons[int(k)].names[j] for k in np.unique(dataset.skeleton_index)
-                                   for j in foot_joints(dataset.skeletons[int(k)])})}
-        if labels:
-            label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
-            res["by_label"] = {lab: _summarise(arrays, label_of == lab) for lab in sorted(set(label_of))}
-        for g, v in groups.items():
-            res[f"by_{g}"] = {lab: _summarise(arrays, v == lab) for lab in sorted(set(v.tolist()))}
-        out[name] = res
-    return out
+    if not isinstance(dataset, TransitionDataset) or dataset.num_windows == 0:
+        raise ValueError("dataset: no windows to evaluate" if isinstance(dataset, TransitionDataset) else
+                         f"dataset: expected a TransitionDataset, got {type(dataset).__name__}")
+    past, gt, target = dataset.context()
+    pred = check_float_array(pred, "pred", gt.shape)
+    groups = check_groups(groups, dataset.num_windows)
+    whole = np.concatenate([past, pred, target], axis=1)  # (N, W, P)
+    arrays: dict = {}
+    for k in np.unique(dataset.skeleton_index):
+        sel = np.flatnonzero(dataset.skeleton_index == k)
+        skel = dataset.skeletons[int(k)]
+        part = _window_arrays(positions_from_poses(whole[sel], skel), positions_from_poses(dataset.poses[sel], skel),
+                              foot_joints(skel), 1.0 / dataset.fps, dataset.past, dataset.future, height, 1)
+        for key, v in part.items():
+            arrays.setdefault(key, np.zeros((dataset.num_windows,) + v.shape[1:], v.dtype))[sel] = v
+    res = _summarise(arrays)
+    res["contact_rule"] = {
+        "height_cm": float(height), "floor": "each foot joint's lowest height over the ground-truth window",
+        "foot_joints": sorted({dataset.skeletons[int(k)].names[j] for k in np.unique(dataset.skeleton_index)
+                               for j in foot_joints(dataset.skeletons[int(k)])})}
+    if labels:
+        label_of = np.array([dataset.sources[i].label for i in dataset.source_index])
+        res["by_label"] = {lab: _summarise(arrays, label_of == lab) for lab in sorted(set(label_of))}
+    for g, v in groups.items():
+        res[f"by_{g}"] = {lab: _summarise(arrays, v == lab) for lab in sorted(set(v.tolist()))}
+    return res
 
 
 def _ratio(a: float, m: float) -> float:

@@ -9,7 +9,8 @@ The task interface (:class:`refimpl.task_api.Task`) for this task, and nothing a
   :func:`trained_fields`: ``root_mean``, ``root_std``, ``transition_length``);
 * baselines and protocol: :func:`methods` (the networks' methods, then inertialisation and interpolation from
   :mod:`refimpl.protocols.transition_baselines`), :func:`evaluate`
-  (:func:`refimpl.protocols.transition_metrics.evaluate_methods`, the paper's metric), :func:`print_results` /
+  (each method's predictions once, measured by :func:`refimpl.protocols.transition_metrics.prediction_errors`,
+  the paper's metric, and :func:`refimpl.protocols.transition_quality.prediction_quality`), :func:`print_results` /
   :func:`write_results` (table, per-frame curve, CSV, JSON);
 * commands: :func:`eval_command`, :func:`generate_command` (a transition between two clips,
   :mod:`refimpl.tasks.transition_generate`), :func:`export_options`, :func:`verify_inputs`
@@ -48,8 +49,8 @@ from refimpl.protocols.transition_locomotion import JOINTS as BANDAI_NAMCO_JOINT
 from refimpl.protocols.transition_locomotion import build_datasets as build_bandai_namco, is_bandai_namco_folder
 from refimpl.protocols.transition_locomotion import find_takes, scored_takes, take_facts, window_groups
 from refimpl.protocols.transition_locomotion import load_bandai_namco_source
-from refimpl.protocols.transition_metrics import evaluate_methods, format_table
-from refimpl.protocols.transition_quality import evaluate_quality, format_groups, format_quality
+from refimpl.protocols.transition_metrics import format_table, predict_transitions, prediction_errors
+from refimpl.protocols.transition_quality import format_groups, format_quality, prediction_quality
 from refimpl.rotations import quat_from_axis_angle
 from refimpl.registry import generate_usage, require_source
 from refimpl.services import checkpoint_for, evaluate_model, network_methods, onnx_frame_rate
@@ -375,23 +376,28 @@ def methods(networks: Mapping[str, Callable] | None = None, *, fps: float = 30.0
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
-    """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.evaluate_methods`) and,
+    """The paper's protocol on ``test_ds`` (:func:`refimpl.protocols.transition_metrics.prediction_errors`) and,
     under each method's ``"quality"``, the animator's measures
-    (:func:`refimpl.protocols.transition_quality.evaluate_quality`: joins, foot skating, first and last frame, with
-    the ground truth's numbers); windows of Bandai Namco takes also ``by_style`` and ``by_kind`` in both
-    (:func:`refimpl.protocols.transition_locomotion.window_groups`)."""
+    (:func:`refimpl.protocols.transition_quality.prediction_quality`: joins, foot skating, first and last frame,
+    with the ground truth's numbers), both of the same predictions: each method runs once over the windows
+    (:func:`refimpl.protocols.transition_metrics.predict_transitions`); windows of Bandai Namco takes also
+    ``by_style`` and ``by_kind`` in both (:func:`refimpl.protocols.transition_locomotion.window_groups`)."""
     groups = _groups(test_ds)
     clock = _Clock()
-    results = evaluate_methods(test_ds, clock.wrap(methods_by_name, "error"), groups=groups)
-    for name, q in evaluate_quality(test_ds, clock.wrap(methods_by_name, "joins and skating"),
-                                    groups=groups).items():
-        results[name]["quality"] = q
+    results = {}
+    for name, f in clock.wrap(methods_by_name, "predictions").items():
+        pred = predict_transitions(test_ds, f, name)  # (N, T, P)
+        clock.reached(name, "error")
+        results[name] = prediction_errors(test_ds, pred, groups=groups)
+        clock.reached(name, "joins and skating")
+        results[name]["quality"] = prediction_quality(test_ds, pred, groups=groups)
     return results
 
 
 class _Clock:
-    """Progress of a long evaluation on stderr: every ``every_s`` seconds at most, at a method's next batch, which
-    method and measure it has reached (``"  evaluating: qtg (error), 6 s"``); nothing when it is quick."""
+    """Progress of a long evaluation on stderr: every ``every_s`` seconds at most, at a method's next batch or
+    measure, which method and stage it has reached (``"  evaluating: qtg (error), 6 s"``); nothing when it is
+    quick."""
 
     def __init__(self, every_s: float = 5.0):
         import time
@@ -400,16 +406,20 @@ class _Clock:
         self.t0 = self.last = self._now()
         self.every_s = every_s
 
-    def wrap(self, methods_by_name: Mapping[str, Callable], measure: str) -> dict:
-        """``methods_by_name`` with each method reporting through the clock (its ``needs_skeleton`` kept)."""
-        return {name: self._wrap(f, name, measure) for name, f in methods_by_name.items()}
+    def reached(self, name: str, stage: str) -> None:
+        """Report ``name (stage)`` when ``every_s`` seconds have passed since the last report."""
+        now = self._now()
+        if now - self.last > self.every_s:
+            self.last = now
+            _progress(f"  evaluating: {name} ({stage}), {now - self.t0:.0f} s")
 
-    def _wrap(self, f: Callable, name: str, measure: str) -> Callable:
+    def wrap(self, methods_by_name: Mapping[str, Callable], stage: str) -> dict:
+        """``methods_by_name`` with each method reporting through the clock (its ``needs_skeleton`` kept)."""
+        return {name: self._wrap(f, name, stage) for name, f in methods_by_name.items()}
+
+    def _wrap(self, f: Callable, name: str, stage: str) -> Callable:
         def method(past, target, T, **kw):
-            now = self._now()
-            if now - self.last > self.every_s:
-                self.last = now
-                _progress(f"  evaluating: {name} ({measure}), {now - self.t0:.0f} s")
+            self.reached(name, stage)
             return f(past, target, T, **kw)
 
         method.needs_skeleton = getattr(f, "needs_skeleton", False)
