@@ -56,6 +56,7 @@ import onnxruntime as ort  # noqa: E402
 from deploy.models import exporter  # noqa: E402
 from deploy.session import make_session  # noqa: E402
 from refimpl.atomic import atomic_write_text  # noqa: E402
+from refimpl.npy_files import read_npy  # noqa: E402
 from refimpl.versions import with_versions  # noqa: E402
 
 #: Model -> (exporter key, file prefix).
@@ -129,7 +130,7 @@ def frame_calls(name: str, folder, target: str, threads: int = 1) -> dict[str, t
     if name == "pace":
         if target == "default":
             return pace_default_calls(_session(d / f"{prefix}_pace.onnx", threads), rng)
-        h0 = np.load(d / f"{prefix}_pace_h0.npy")
+        h0 = read_npy(d / f"{prefix}_pace_h0.npy")
         return pace_portable_calls(_session(d / f"{prefix}_pace_step.onnx", threads), h0, rng)
     role = "window" if name == "quaternet-cnn" else "step"
     path = d / f"{prefix}_{role}.onnx"

@@ -227,12 +227,12 @@ class _Clock:
 
 
 def test_reading_the_locomotion_files_reports_progress():
-    from refimpl.protocols.transition_locomotion import _counting
+    from refimpl.protocols.transition_cache import _read_all
 
     lines = []
-    load = _counting(lambda src, **kw: (src, kw), 3, lines.append, every_s=-1.0)
-    assert [load(i, fps=30) for i in range(3)] == [(i, {"fps": 30}) for i in range(3)]
-    assert lines[0].startswith("read 1 of 3 files") and lines[-1].startswith("read 3 of 3 files")
+    got = _read_all(range(3), lambda src, **kw: (src, kw), 30, lines.append, every_s=-1.0)
+    assert got == [(i, {"fps": 30}) for i in range(3)]
+    assert lines[0].strip().startswith("read 1 of 3 files") and lines[-1].strip().startswith("read 3 of 3 files")
 
 
 def test_a_gif_reports_progress(tmp_path, monkeypatch):

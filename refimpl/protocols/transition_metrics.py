@@ -136,7 +136,7 @@ def prediction_errors(dataset: TransitionDataset, pred, labels: bool = True,
     """
     _check_dataset(dataset)
     gt = dataset.context()[1]
-    pred = check_float_array(pred, "pred", gt.shape)
+    pred = float_array(pred, "pred", gt.shape, cast=False)
     groups = check_groups(groups, dataset.num_windows)
     dist, absc = joint_position_errors(pred, gt, dataset.skeletons, dataset.skeleton_index)
     res = {"mean_cm": float(dist.mean()), "per_frame_cm": dist.mean(axis=(0, 2)),

@@ -304,7 +304,7 @@ def prediction_quality(dataset: TransitionDataset, pred, height: float = CONTACT
         raise ValueError("dataset: no windows to evaluate" if isinstance(dataset, TransitionDataset) else
                          f"dataset: expected a TransitionDataset, got {type(dataset).__name__}")
     past, gt, target = dataset.context()
-    pred = check_float_array(pred, "pred", gt.shape)
+    pred = float_array(pred, "pred", gt.shape, cast=False)
     groups = check_groups(groups, dataset.num_windows)
     whole = np.concatenate([past, pred, target], axis=1)  # (N, W, P)
     arrays: dict = {}
