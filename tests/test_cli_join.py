@@ -76,9 +76,9 @@ def test_export_and_generate_with_join(capsys, ckpt, tmp_path):
 
 def test_results_json_is_strict():
     """Skating without a single contact is NaN in Python and null in the JSON file (strict JSON, spec/cli.md §5)."""
-    from refimpl.tasks.transition import _results_json
+    from refimpl.tasks.transition_report import results_json
 
-    text = _results_json({"m": {"quality": {"skate_cm_s": float("nan"), "by_label": {"walk": {"skate_cm_s": 3.0}}},
+    text = results_json({"m": {"quality": {"skate_cm_s": float("nan"), "by_label": {"walk": {"skate_cm_s": 3.0}}},
                                 "per_frame_cm": np.array([1.0, np.nan])}})
     assert json.loads(text)["m"] == {"quality": {"skate_cm_s": None, "by_label": {"walk": {"skate_cm_s": 3.0}}},
                                      "per_frame_cm": [1.0, None]}

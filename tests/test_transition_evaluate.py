@@ -92,7 +92,7 @@ def test_the_measures_of_given_predictions_check_them(sample_test):
 
 
 def test_the_clock_reports_a_stage_reached(capsys):
-    from refimpl.tasks.transition import _Clock
+    from refimpl.tasks.transition_report import _Clock
 
     _Clock(every_s=-1.0).reached("qtg", "error")
     assert "evaluating: qtg (error)" in capsys.readouterr().err
