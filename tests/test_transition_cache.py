@@ -211,7 +211,7 @@ def test_eval_reads_only_the_heldout_entry(takes, tmp_path, monkeypatch, capsys)
 def test_evaluation_reports_progress_and_keeps_the_methods(monkeypatch, capsys):
     """A slow evaluation says which method and measure it has reached; the numbers are the same; a method's
     ``needs_skeleton`` survives the wrapping."""
-    from refimpl.tasks import transition as task
+    from refimpl.tasks import transition_report as task
 
     def f(past, target, T, **kw):
         return np.repeat(past[:, -1:], T, axis=1)
