@@ -5,6 +5,8 @@ use these, and ``deploy`` through them).
   last axis may take, or a fewest number of axes), finite unless told otherwise;
 * :func:`check_finite` — refuse NaN and inf;
 * :func:`finite_float` — a scalar as a finite Python float (also the strict JSON readers' number hook);
+* :func:`real_number` — a numeric argument (tolerance, step size, rate) as a finite float in an interval;
+* :func:`gradient_array` — the upstream gradient of a backward pass: finite, real, exactly the output's shape;
 * :func:`shape_text` — an expected shape as the messages print it, ``(..., *, 3)``.
 
 Every refusal is one ``ValueError`` line that starts with the argument's name: ``"q: expected shape (..., 4), got
@@ -15,10 +17,11 @@ Shape legend: ``...`` any number (zero or more) of leading axes, ``*`` (``None``
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
-__all__ = ["float_array", "check_finite", "finite_float", "shape_text"]
+__all__ = ["float_array", "check_finite", "finite_float", "real_number", "gradient_array", "shape_text"]
 
 _FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
@@ -91,6 +94,84 @@ def finite_float(x, name: str) -> float:
     if not math.isfinite(v):
         raise ValueError(f"{name}: expected a finite number, got {x!r:.60}")
     return v
+
+
+def real_number(x, name: str, low: float = -math.inf, high: float = math.inf, *, low_open: bool = False,
+                high_open: bool = False) -> float:
+    """A numeric argument (a tolerance, a step size, a rate) as a finite Python float in an interval.
+
+    Parameters
+    ----------
+    x : int, float, NumPy integer or floating scalar, or a 0-d real array
+        Not a bool, not a text.
+    name : str
+        The argument's name, first word of the message.
+    low, high : float
+        The interval's ends (default: the whole real line).
+    low_open, high_open : bool
+        Whether an end is excluded.
+
+    Returns
+    -------
+    float
+        ``x`` as a Python float, inside the interval.
+
+    Raises
+    ------
+    ValueError
+        ``"<name>: expected a real number, got str '1'"`` for another type; ``"<name>: expected a finite number
+        >= 0.0, got nan"`` (the interval as ``>= a``, ``> a``, ``in [a, b)``, ...) for NaN, inf or a value outside.
+    """
+    if isinstance(x, np.ndarray) and x.ndim == 0 and x.dtype.kind in "iuf":
+        x = x.item()
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (numbers.Real, np.integer, np.floating)):
+        raise ValueError(f"{name}: expected a real number, got {type(x).__name__} {x!r:.60}")
+    v = float(x)
+    inside = (v > low if low_open else v >= low) and (v < high if high_open else v <= high)
+    if not (math.isfinite(v) and inside):
+        raise ValueError(f"{name}: expected a finite number{_interval_text(low, high, low_open, high_open)}, got {v!r}")
+    return v
+
+
+def _interval_text(low: float, high: float, low_open: bool, high_open: bool) -> str:
+    if math.isinf(high) and math.isinf(low):
+        return ""
+    if math.isinf(high):
+        return f" {'>' if low_open else '>='} {low}"
+    if math.isinf(low):
+        return f" {'<' if high_open else '<='} {high}"
+    return f" in {'(' if low_open else '['}{low}, {high}{')' if high_open else ']'}"
+
+
+def gradient_array(dy, shape: tuple, name: str = "dy") -> np.ndarray:
+    """The upstream gradient of a backward pass: a finite real array of exactly the forward output's shape.
+
+    Parameters
+    ----------
+    dy : array-like
+        The gradient with respect to the forward output; integer and bool arrays are taken as they are (the
+        kernels promote them), nothing is copied.
+    shape : tuple of int
+        The forward output's shape.
+    name : str
+        The argument's name, first word of the message.
+
+    Returns
+    -------
+    ndarray — ``np.asarray(dy)``.
+
+    Raises
+    ------
+    ValueError
+        ``"<name>: expected shape (2, 4), got (4,)"``, ``"<name>: expected a real floating array, got dtype
+        complex128"``, ``"<name>: expected finite values, got NaN or inf"``.
+    """
+    a = np.asarray(dy)
+    if a.shape != tuple(shape):
+        raise ValueError(f"{name}: expected shape {tuple(shape)}, got {a.shape}")
+    if a.dtype.kind not in "biuf":
+        raise ValueError(f"{name}: expected a real floating array, got dtype {a.dtype}")
+    return check_finite(a, name)
 
 
 def float_array(x, name: str, shape: tuple | None = None, *, last: int | tuple[int, ...] | None = None,

@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.arrays import float_array
+from refimpl.arrays import float_array, real_number
 from refimpl.quat import (atan_ratio, hemisphere_sign, prescaled, quat_conj_kernel, quat_mul_kernel,
-                          quat_norm_kernel, quat_rotate_kernel, sin_over_x, check_scalar, finite_output, zeros_of)
+                          quat_norm_kernel, quat_rotate_kernel, sin_over_x, finite_output, zeros_of)
 from refimpl.rotations import check_rotation_matrix, matrix_from_quat_kernel, quat_from_matrix_kernel
 
 __all__ = [
@@ -175,8 +175,8 @@ def dq_is_unit(a, atol_norm: float | None = None, atol_dot: float | None = None)
     """
     a = float_array(a, "a", (..., 8))
     default = 1e-6 if a.dtype.itemsize >= 8 else 1e-4
-    atol_norm = default if atol_norm is None else check_scalar(atol_norm, "atol_norm")
-    atol_dot = default if atol_dot is None else check_scalar(atol_dot, "atol_dot")
+    atol_norm = default if atol_norm is None else real_number(atol_norm, "atol_norm", 0.0)
+    atol_dot = default if atol_dot is None else real_number(atol_dot, "atol_dot", 0.0)
     r, d = _split(a)
     return (np.abs(quat_norm_kernel(r) - 1) <= atol_norm) & (np.abs(np.sum(r * d, axis=-1)) <= atol_dot)
 

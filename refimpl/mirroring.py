@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.quat import check_scalar, finite_output, quat_mul, quat_rotate
+from refimpl.arrays import real_number
+from refimpl.quat import finite_output, quat_mul, quat_rotate
 from refimpl.rotations import quat_from_axis_angle
 from refimpl.arrays import float_array
 from refimpl.skeleton import Skeleton, check_last_axes
@@ -143,7 +144,7 @@ def random_rotate_about_up(rotations, root_positions, rng: np.random.Generator, 
     """
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
-    low, high = check_scalar(low, "low", -np.inf), check_scalar(high, "high", -np.inf)
+    low, high = real_number(low, "low"), real_number(high, "high")
     if not (high >= low and np.isfinite(high - low)):
         raise ValueError(f"low, high: expected low <= high with a finite difference, got {low!r}, {high!r}")
     angle = float(rng.uniform(low, high))

@@ -31,6 +31,8 @@ from typing import Mapping, MutableMapping
 
 import numpy as np
 
+from refimpl.arrays import real_number
+
 __all__ = [
     "QUATERNET_ADAM", "QUATERNET_LR_DECAY", "QUATERNET_CLIP_NORM", "ACRNN_ADAM", "QTG_ADAM",
     "adam_init", "adam_step", "clip_grad_norm", "exponential_lr",
@@ -84,16 +86,6 @@ def _check_finite_squares(grads: Mapping[str, np.ndarray]) -> None:
             sq = np.dot(flat, flat)
         if not np.isfinite(sq):
             raise ValueError(f"grads[{k!r}]: contains NaN/inf or values whose square overflows {g.dtype}")
-
-
-def _check_scalar(x, name: str, lo: float, hi: float = math.inf, lo_open: bool = False,
-                  hi_open: bool = False) -> float:
-    v = float(x)
-    ok = math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
-    if not ok:
-        rng = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
-        raise ValueError(f"{name}: expected a finite value in {rng}, got {x!r}")
-    return v
 
 
 # --------------------------------------------------------------------------------------------------
@@ -197,13 +189,13 @@ def adam_step(params: MutableMapping[str, np.ndarray], grads: Mapping[str, np.nd
             if not isinstance(a, np.ndarray) or a.shape != p.shape or a.dtype != p.dtype:
                 got = "missing" if a is None else f"shape {getattr(a, 'shape', None)} dtype {getattr(a, 'dtype', None)}"
                 raise ValueError(f"state[{slot + '.' + k!r}]: expected shape {p.shape} dtype {p.dtype}, got {got}")
-    lr = _check_scalar(lr, "lr", 0.0)
+    lr = real_number(lr, "lr", 0.0)
     if len(betas) != 2:
         raise ValueError(f"betas: expected two values (beta1, beta2), got {betas!r}")
-    b1 = _check_scalar(betas[0], "betas[0]", 0.0, 1.0, hi_open=True)
-    b2 = _check_scalar(betas[1], "betas[1]", 0.0, 1.0, hi_open=True)
-    eps = _check_scalar(eps, "eps", 0.0)
-    weight_decay = _check_scalar(weight_decay, "weight_decay", 0.0)
+    b1 = real_number(betas[0], "betas[0]", 0.0, 1.0, high_open=True)
+    b2 = real_number(betas[1], "betas[1]", 0.0, 1.0, high_open=True)
+    eps = real_number(eps, "eps", 0.0)
+    weight_decay = real_number(weight_decay, "weight_decay", 0.0)
     if threads is None:
         big = sum(p.size for p in params.values()) >= _THREAD_MIN_SIZE
         threads = 2 if big and (os.cpu_count() or 1) >= 2 else 1
@@ -311,7 +303,7 @@ def clip_grad_norm(grads: MutableMapping[str, np.ndarray], max_norm: float) -> f
         When a gradient contains NaN or inf (PyTorch's ``error_if_nonfinite=True``), naming the array.
     """
     _check_param_dict(grads, "grads")
-    max_norm = _check_scalar(max_norm, "max_norm", 0.0)
+    max_norm = real_number(max_norm, "max_norm", 0.0)
     norms = []
     for k, g in grads.items():
         n = _tensor_norm(g)
@@ -339,8 +331,8 @@ def exponential_lr(lr0: float, gamma: float, epoch: int) -> float:
     epoch : int
         Number of completed epochs (>= 0).
     """
-    lr0 = _check_scalar(lr0, "lr0", 0.0)
-    gamma = _check_scalar(gamma, "gamma", 0.0, 1.0)
+    lr0 = real_number(lr0, "lr0", 0.0)
+    gamma = real_number(gamma, "gamma", 0.0, 1.0)
     if isinstance(epoch, bool) or not isinstance(epoch, (int, np.integer)) or epoch < 0:
         raise ValueError(f"epoch: expected an integer >= 0, got {epoch!r}")
     return lr0 * gamma ** int(epoch)

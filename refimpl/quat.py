@@ -24,7 +24,7 @@ import numbers
 
 import numpy as np
 
-from refimpl.arrays import float_array
+from refimpl.arrays import float_array, real_number
 
 __all__ = [
     "quat_identity", "quat_mul", "quat_conj", "quat_inv", "quat_norm", "quat_normalize", "quat_rotate",
@@ -57,16 +57,6 @@ def finite_output(fn):
                                  f"too small; output shape {o.shape})")
         return out
     return guarded
-
-
-def check_scalar(x, name: str, low: float = 0.0) -> float:
-    """``x`` as a Python float; ValueError unless it is a real, finite number ``>= low`` (bool refused)."""
-    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (numbers.Real, np.integer, np.floating)):
-        raise ValueError(f"{name}: expected a real number, got {type(x).__name__} {x!r:.60}")
-    v = float(x)
-    if not math.isfinite(v) or v < low:
-        raise ValueError(f"{name}: expected a finite number >= {low}, got {v!r}")
-    return v
 
 
 def check_nonzero(norm: np.ndarray, name: str, what: str = "quaternion") -> None:
@@ -269,7 +259,7 @@ def quat_normalize(q, eps: float = 0.0) -> np.ndarray:
         If some ``|q| <= eps`` (the direction of a zero quaternion is undefined; no identity is substituted).
     """
     q = float_array(q, "q", (..., 4))
-    eps = check_scalar(eps, "eps")
+    eps = real_number(eps, "eps", 0.0)
     scale = np.max(np.abs(q), axis=-1, keepdims=True)  # (..., 1)
     bad = scale[..., 0] == 0
     if eps > 0:
@@ -538,5 +528,5 @@ def quat_wxyz_from_xyzw(q) -> np.ndarray:
 
 
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
-# atan_ratio, check_nonzero, check_scalar, finite_output, hemisphere_sign, prescaled, quat_canonical_kernel,
+# atan_ratio, check_nonzero, finite_output, hemisphere_sign, prescaled, quat_canonical_kernel,
 # quat_conj_kernel, quat_mul_kernel, quat_norm_kernel, quat_rotate_kernel, sin_over_x, zeros_of.

@@ -1,10 +1,11 @@
-"""refimpl.arrays: the one home of the array checks (float_array, check_finite, finite_float, shape_text)."""
+"""refimpl.arrays: the one home of the array checks (float_array, check_finite, finite_float, real_number,
+gradient_array, shape_text)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from refimpl.arrays import check_finite, finite_float, float_array, shape_text
+from refimpl.arrays import check_finite, finite_float, float_array, gradient_array, real_number, shape_text
 
 
 def test_shape_text():
@@ -93,3 +94,37 @@ def test_float_array_finite_unless_told():
     assert float_array(a, "x", finite=False) is a
     with pytest.raises(ValueError, match=r"^x: expected finite values, got NaN or inf$"):
         float_array(np.array([np.nan], np.float32), "x", (1,), cast=False)
+
+
+def test_real_number_intervals_and_types():
+    assert real_number(3, "n") == 3.0 and type(real_number(np.float32(0.5), "n")) is float
+    assert real_number(np.array(2.0), "n") == 2.0                        # a 0-d real array
+    assert real_number(0.0, "eps", 0.0) == 0.0
+    assert real_number(0.999, "b", 0.0, 1.0, high_open=True) == 0.999
+    cases = [(lambda: real_number(0.0, "eps", 0.0, low_open=True), r"^eps: expected a finite number > 0.0, got 0.0$"),
+             (lambda: real_number(-1e-9, "tol", 0.0), r"^tol: expected a finite number >= 0.0, got -1e-09$"),
+             (lambda: real_number(1.0, "b", 0.0, 1.0, high_open=True), r"^b: expected a finite number in \[0.0, 1.0\), got 1.0$"),
+             (lambda: real_number(2.0, "h", high=1.0), r"^h: expected a finite number <= 1.0, got 2.0$"),
+             (lambda: real_number(float("nan"), "x"), r"^x: expected a finite number, got nan$"),
+             (lambda: real_number(np.inf, "x", 0.0), r"^x: expected a finite number >= 0.0, got inf$"),
+             (lambda: real_number(True, "x"), r"^x: expected a real number, got bool True$"),
+             (lambda: real_number("1", "x"), r"^x: expected a real number, got str '1'$"),
+             (lambda: real_number(np.array([1.0]), "x"), r"^x: expected a real number, got ndarray"),
+             (lambda: real_number(1 + 2j, "x"), r"^x: expected a real number, got complex")]
+    for call, message in cases:
+        with pytest.raises(ValueError, match=message):
+            call()
+
+
+def test_gradient_array_shape_dtype_finite():
+    g = np.ones((2, 4))
+    assert gradient_array(g, (2, 4)) is g                                 # no copy
+    assert gradient_array(np.ones((2, 4), np.int64), (2, 4)).dtype == np.int64
+    with pytest.raises(ValueError, match=r"^dy: expected shape \(2, 4\), got \(4,\)$"):
+        gradient_array(np.ones(4), (2, 4))
+    with pytest.raises(ValueError, match=r"^dq: expected a real floating array, got dtype complex128$"):
+        gradient_array(np.ones((2, 4), complex), (2, 4), "dq")
+    bad = g.copy()
+    bad[1, 3] = np.nan
+    with pytest.raises(ValueError, match=r"^dy: expected finite values, got NaN or inf$"):
+        gradient_array(bad, (2, 4))

@@ -30,7 +30,8 @@ from __future__ import annotations
 import numpy as np
 
 from refimpl.arrays import float_array
-from refimpl.nn.quat_layers import check_grad, unbroadcast
+from refimpl.arrays import gradient_array
+from refimpl.nn.quat_layers import unbroadcast
 from refimpl.quat import quat_conj_kernel, quat_mul_kernel
 
 __all__ = [
@@ -272,7 +273,7 @@ def forward_kinematics_backward(dpositions, cache):
     doffsets : ndarray, shape of ``offsets`` (the root row is 0)
     """
     rot, qw, offb, off_shape, schedule = cache
-    g = check_grad(dpositions, rot.shape[:-1] + (3,), "dpositions")
+    g = gradient_array(dpositions, rot.shape[:-1] + (3,), "dpositions")
     dpos = np.array(g, dtype=np.result_type(rot, g))  # (..., J, 3), accumulates children
     dqw = np.zeros(rot.shape, dtype=dpos.dtype)  # (..., J, 4)
     drot = np.zeros(rot.shape, dtype=dpos.dtype)
@@ -330,7 +331,7 @@ def dq_from_quat_translation_backward(ddq, cache):
     dtranslations : ndarray, shape (..., 3)
     """
     q, t4 = cache
-    g = check_grad(ddq, q.shape[:-1] + (8,), "ddq")
+    g = gradient_array(ddq, q.shape[:-1] + (8,), "ddq")
     gr, gd = g[..., :4], g[..., 4:]
     dq = gr + 0.5 * quat_mul_kernel(quat_conj_kernel(t4), gd)
     dt = 0.5 * quat_mul_kernel(gd, quat_conj_kernel(q))[..., 1:]
@@ -384,7 +385,7 @@ def current_dq_from_local_backward(dcurrent, cache):
     dlocal : ndarray, shape (..., J, 8)
     """
     loc, cur, schedule = cache
-    g = check_grad(dcurrent, loc.shape, "dcurrent")
+    g = gradient_array(dcurrent, loc.shape, "dcurrent")
     dcur = np.array(g, dtype=np.result_type(loc, g))
     dloc = np.zeros_like(dcur)
     for joints, pars in reversed(schedule):
@@ -439,7 +440,7 @@ def local_dq_from_current_backward(dlocal, cache):
     dcurrent : ndarray, shape (..., J, 8)
     """
     cur, inv_par, par, groups = cache
-    g = check_grad(dlocal, cur.shape, "dlocal")
+    g = gradient_array(dlocal, cur.shape, "dlocal")
     dcur = np.zeros(cur.shape, dtype=np.result_type(cur, g))
     dinv, dchild = _dq_mul_backward(g[..., 1:, :], inv_par, cur[..., 1:, :])  # (..., J-1, 8) each
     dcur[..., 1:, :] = dchild
@@ -482,7 +483,7 @@ def positions_from_dq_backward(dpositions, cache):
     ddqs : ndarray, shape (..., 8)
     """
     dq = cache
-    g = check_grad(dpositions, dq.shape[:-1] + (3,), "dpositions")
+    g = gradient_array(dpositions, dq.shape[:-1] + (3,), "dpositions")
     return _translation_backward(g, dq)
 
 
@@ -517,7 +518,7 @@ def offsets_from_dq_backward(doffsets, cache):
     dcurrent : ndarray, shape (..., J, 8)
     """
     loc, lcache = cache
-    g = np.array(check_grad(doffsets, loc.shape[:-1] + (3,), "doffsets"))
+    g = np.array(gradient_array(doffsets, loc.shape[:-1] + (3,), "doffsets"))
     g[..., 0, :] = 0.0
     return local_dq_from_current_backward(_translation_backward(g, loc), lcache)
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from refimpl.arrays import float_array
+from refimpl.arrays import float_array, gradient_array, real_number
 from refimpl.quat import quat_conj_kernel, quat_mul_kernel  # conjugate, Hamilton product (broadcasting, keep float32)
 from refimpl.rotations import quat_elementary_kernel
 
@@ -47,25 +47,6 @@ EULER_ORDERS = ("xyz", "yzx", "zxy", "xzy", "yxz", "zyx")
 
 # --------------------------------------------------------------------------------------------------
 # validation (public boundaries only)
-
-def _check_eps(eps: float, name: str = "eps") -> float:
-    eps = float(eps)
-    if not (np.isfinite(eps) and eps > 0.0):
-        raise ValueError(f"{name}: expected a finite value > 0, got {eps!r}")
-    return eps
-
-
-def check_grad(dy, like_shape: tuple, name: str = "dy") -> np.ndarray:
-    """The upstream gradient of a layer: a finite real array of the forward output's shape."""
-    a = np.asarray(dy)
-    if a.shape != tuple(like_shape):
-        raise ValueError(f"{name}: expected shape {tuple(like_shape)}, got {a.shape}")
-    if a.dtype.kind not in "biuf":
-        raise ValueError(f"{name}: expected a real floating array, got dtype {a.dtype}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: contains NaN or inf (shape {a.shape})")
-    return a
-
 
 # --------------------------------------------------------------------------------------------------
 # internal kernels (no checks)
@@ -130,7 +111,7 @@ def quat_normalize_forward(q, eps: float = 1e-12):
     cache : tuple
     """
     q = float_array(q, "q", last=4)
-    eps = _check_eps(eps)
+    eps = real_number(eps, "eps", 0.0, low_open=True)
     y, n = normalize(q, eps)  # (..., 4), (..., 1)
     return y, (y, n, eps)
 
@@ -146,7 +127,7 @@ def quat_normalize_backward(dy, cache):
     dq : ndarray, shape (..., 4)
     """
     y, n, eps = cache
-    dy = check_grad(dy, y.shape)
+    dy = gradient_array(dy, y.shape)
     return normalize_backward(dy, y, n, eps)
 
 
@@ -190,7 +171,7 @@ def quat_mul_backward(dy, cache):
     db : ndarray, shape of ``b``
     """
     a, b = cache
-    dy = check_grad(dy, np.broadcast_shapes(a.shape, b.shape))
+    dy = gradient_array(dy, np.broadcast_shapes(a.shape, b.shape))
     return quat_mul_backward_kernel(dy, a, b)
 
 
@@ -220,7 +201,7 @@ def qmul_velocity_forward(delta, q_in, eps: float = 1e-12):
     q_in = float_array(q_in, "q_in", last=4)
     if delta.shape != q_in.shape:
         raise ValueError(f"q_in: expected shape {delta.shape} (the shape of delta), got {q_in.shape}")
-    eps = _check_eps(eps)
+    eps = real_number(eps, "eps", 0.0, low_open=True)
     p = quat_mul_kernel(delta, q_in)  # (..., 4)
     y, n = normalize(p, eps)
     return y, (delta, q_in, y, n, eps)
@@ -235,7 +216,7 @@ def qmul_velocity_backward(dy, cache):
     dq_in : ndarray, shape (..., 4)
     """
     delta, q_in, y, n, eps = cache
-    dy = check_grad(dy, y.shape)
+    dy = gradient_array(dy, y.shape)
     dp = normalize_backward(dy, y, n, eps)
     return quat_mul_backward_kernel(dp, delta, q_in)
 
@@ -267,7 +248,7 @@ def dq_normalize_forward(dq, eps: float = 1e-12):
     cache : tuple
     """
     dq = float_array(dq, "dq", last=8)
-    eps = _check_eps(eps)
+    eps = real_number(eps, "eps", 0.0, low_open=True)
     r, d = dq[..., :4], dq[..., 4:]
     n = _norm_last(r)  # (..., 1)
     nc = np.maximum(n, eps)
@@ -294,7 +275,7 @@ def dq_normalize_backward(dy, cache):
     ddq : ndarray, shape (..., 8)
     """
     d, rh, dh, a, n, eps = cache
-    dy = check_grad(dy, rh.shape[:-1] + (8,))
+    dy = gradient_array(dy, rh.shape[:-1] + (8,))
     gr, gd = dy[..., :4], dy[..., 4:]
     big = n >= eps
     nc = np.maximum(n, eps)
@@ -464,7 +445,7 @@ def euler_from_quat_backward(dangles, cache):
     dq : ndarray, shape (..., 4)
     """
     q, order, eps = cache
-    g = check_grad(dangles, q.shape[:-1] + (3,), "dangles")
+    g = gradient_array(dangles, q.shape[:-1] + (3,), "dangles")
     dq = np.zeros(q.shape, dtype=np.result_type(q, g))
     for axis, entry in enumerate(_EULER_TABLE[order]):
         ga = g[..., axis]
@@ -518,7 +499,7 @@ def euler_to_quat_backward(dq, cache) -> np.ndarray:
     """Gradient of :func:`euler_to_quat_forward` w.r.t. the angles (..., 3): ``dq/da_i`` of the elementary
     quaternion is ``½ (−sin a/2, cos a/2 e_axis)``."""
     angles, order, c1, c2 = cache
-    dq = check_grad(dq, angles.shape[:-1] + (4,), "dq")
+    dq = gradient_array(dq, angles.shape[:-1] + (4,), "dq")
     dab, de2 = quat_mul_backward(dq, c2)
     de0, de1 = quat_mul_backward(dab, c1)
     out = np.empty_like(angles)
@@ -547,7 +528,7 @@ def axis_angle_to_quat_backward(dq, cache) -> np.ndarray:
     """Gradient of :func:`axis_angle_to_quat_forward`: ``dw/dv = −½ sin(θ/2) v/θ`` (→ −v/4 at 0),
     ``d(s v)/dv = s I + v (s'(θ)/θ) vᵀ`` with ``s'(θ)/θ = (½ θ cos θ/2 − sin θ/2)/θ³`` (→ −1/24 at 0)."""
     v, th, ts, small, s = cache
-    dq = check_grad(dq, v.shape[:-1] + (4,), "dq")
+    dq = gradient_array(dq, v.shape[:-1] + (4,), "dq")
     hw = np.where(small, 0.25 - th * th / 96.0, np.sin(ts / 2) / (2 * ts))       # ½ sin(θ/2)/θ
     ds = np.where(small, -1.0 / 24.0, (0.5 * ts * np.cos(ts / 2) - np.sin(ts / 2)) / ts ** 3)
     dxyz = dq[..., 1:]
@@ -555,4 +536,4 @@ def axis_angle_to_quat_backward(dq, cache) -> np.ndarray:
 
 
 # Kernel tier (spec/architecture.md; unchecked, not in __all__, imported by other modules under these names):
-# check_grad, normalize, normalize_backward, quat_mul_backward_kernel, unbroadcast.
+# normalize, normalize_backward, quat_mul_backward_kernel, unbroadcast.
