@@ -52,6 +52,7 @@ from typing import Sequence
 
 import numpy as np
 
+from refimpl.progress import stderr_line
 from refimpl import cache_cli, weights_cli
 from refimpl.allocator import retain_freed_memory
 from refimpl.cli_info import cmd_info, cmd_pretrained
@@ -79,9 +80,6 @@ DEFAULT_EPOCHS = 10  # `train` without --steps / --epochs
 def _say(*parts) -> None:
     print(*parts, flush=True)
 
-
-def _progress_line(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -193,7 +191,7 @@ def _train_locked(args, spec, task, rep, out, ckpt) -> int:
                          lr=lr, betas=betas, clip_norm=args.clip_norm, seed=args.seed,
                          dtype=np.dtype(args.dtype).type, resume=args.resume,
                          checkpoint_every=args.checkpoint_every, validate_every=args.validate_every,
-                         progress_every=args.progress_every, progress=_progress_line,
+                         progress_every=args.progress_every, progress=stderr_line,
                          run_options=run_options(args, _resumable(args)), on_step=_thread_poll(args))
     last = float(np.mean(result.losses[-20:])) if result.losses else float("nan")
     _say(f"{'interrupted' if result.interrupted else 'done'}: step {result.step}, epoch {result.epoch}, "
@@ -333,7 +331,7 @@ def _parse_slice(text: str | None, n: int) -> slice:
 
 def cmd_render(args) -> int:
     """``refimpl render``."""
-    from refimpl.render import render_gif, stderr_progress
+    from refimpl.render import render_gif
     from refimpl.render_strip import limb_sides, render_strip
 
     motion = read_motion(args.file, fps=args.fps, layout=args.layout)
@@ -361,7 +359,7 @@ def cmd_render(args) -> int:
                          up=args.up, frame_time=motion.frame_time, frame_numbers=idx, title=title, sides=sides)
         elif suffix == ".gif":
             render_gif(out, pos, parents, prediction=pred, fps=motion.fps / step, stride=args.stride, labels=labels,
-                       progress=stderr_progress,
+                       progress=stderr_line,
                        up=args.up, frame_numbers=idx, title=title, sides=sides)
         else:
             raise UsageError(f"--out {out}: expected a .png or .gif file name")

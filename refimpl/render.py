@@ -32,27 +32,25 @@ from __future__ import annotations
 import csv
 import io
 import os
-import sys
-import time
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from refimpl.files import read_text
+from refimpl.progress import Throttle
 from refimpl.render_kernel import (CONTEXT_COLOR, GHOST_COLOR, GT_COLOR, PRED_COLOR, SIDES_NOTE, bone_colors,
                                    bone_segments, centre_axes, check_highlight, check_numbers, check_parents,
                                    check_positions, check_sides, check_up, clip_floor, clip_segments, figure,
-                                   fit_text, gif_writer, grid_segments, half_extent, joint_colors, save_figure,
+                                   fit_text, gif_writer, half_extent, save_figure,
                                    setup_axes, title_height, to_plot, wrap_title)
 
-__all__ = ["render_gif", "stderr_progress", "render_loss_curve", "render_error_curves", "read_loss_log",
+__all__ = ["render_gif", "render_loss_curve", "render_error_curves", "read_loss_log",
            "render_path_motion", "GIF_MIN_HEIGHT"]
 
 #: Height in pixels a GIF has at least (its default panel size and resolution): a foot contact can be judged.
 GIF_MIN_HEIGHT = 400
 #: Seconds of drawing between two progress lines.
-PROGRESS_EVERY = 5.0
 _TITLE_SIZE = 10.0
 
 # ----------------------------------------------------------------------------------------------------------
@@ -102,7 +100,7 @@ def render_gif(path: str | os.PathLike, positions, parents, *, prediction=None, 
         As in :func:`refimpl.render_strip.render_strip` (``panel_size`` in inches, ``dpi`` pixels per inch).
     progress : callable, optional
         ``progress(line)`` every ~5 s of drawing (``"walk.gif: frame 120 of 300, 11 s"``; the commands pass
-        :func:`stderr_progress`).
+        :func:`refimpl.progress.stderr_line`).
 
     Returns
     -------
@@ -185,22 +183,16 @@ def _gif_panel(fig, box, cols: int, c: int, source, label: str, half: float, flo
 
 def _write_gif(path, fig, num_frames: int, update, fps: float, progress) -> Path:
     """Draw ``num_frames`` frames (``update(k)`` moves the artists of frame ``k``) into a GIF, each streamed to
-    the file as it is drawn; ``progress(line)`` every PROGRESS_EVERY seconds."""
+    the file as it is drawn; ``progress(line)`` every ~5 s (:class:`refimpl.progress.Throttle`)."""
     path = Path(path)
-    t0 = t_last = time.perf_counter()
+    tick = Throttle()
     with gif_writer(path, fps) as add:
         for k in range(num_frames):
-            if progress is not None and time.perf_counter() - t_last > PROGRESS_EVERY:
-                t_last = time.perf_counter()
-                progress(f"{path.name}: frame {k} of {num_frames}, {t_last - t0:.0f} s")
+            if progress is not None and tick.due():
+                progress(f"{path.name}: frame {k} of {num_frames}, {tick.elapsed:.0f} s")
             update(k)
             add(fig)
     return path
-
-
-def stderr_progress(line: str) -> None:
-    """Print a progress line to stderr at once (the ``progress`` of the commands' pictures)."""
-    print(line, file=sys.stderr, flush=True)
 
 
 def read_loss_log(csv_path: str | os.PathLike) -> dict[str, np.ndarray]:

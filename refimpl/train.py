@@ -44,7 +44,6 @@ import dataclasses
 import math
 import re
 import signal
-import sys
 import threading
 import time
 from pathlib import Path
@@ -52,6 +51,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from refimpl.progress import stderr_line
 from refimpl.checkpoint import rng_from_json, rng_state_to_json
 from refimpl.checkpoint_schema import MAX_PARAM_ABS, validate_training_state
 from refimpl.optim import adam_init, adam_step, clip_grad_norm, exponential_lr
@@ -60,7 +60,7 @@ from refimpl.train_files import (TRAIN_FORMAT, CsvLog, load_state, output_lock, 
 
 __all__ = [
     "ModelAdapter", "OptimConfig", "TrainConfig", "TrainContext", "StepInfo", "TrainResult", "TrainingDiverged",
-    "train", "format_duration", "default_progress",
+    "train", "format_duration",
 ]
 
 _LOG_FIELDS = ("step", "epoch", "loss", "grad_norm", "lr", "elapsed_s")
@@ -272,10 +272,6 @@ class _DeferSigint:
         return False
 
 
-def default_progress(line: str) -> None:
-    """The default ``progress`` of :func:`train`: print the line to stderr."""
-    print(line, file=sys.stderr, flush=True)
-
 
 # ----------------------------------------------------------------------------------------------------------------
 # the loop
@@ -283,7 +279,7 @@ def default_progress(line: str) -> None:
 
 def train(adapter: ModelAdapter, optim: OptimConfig, config: TrainConfig, *, resume: bool = True,
           callback: Callable[[StepInfo], None] | None = None,
-          progress: Callable[[str], None] | None = default_progress) -> TrainResult:
+          progress: Callable[[str], None] | None = stderr_line) -> TrainResult:
     """Train ``adapter``'s model with Adam (spec/qtg.md §10).
 
     Parameters

@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Modules not listed (new ones) must be added here: the test fails until they are.
 LAYERS = {
     0: ["refimpl", "refimpl._parsing", "refimpl.arrays", "refimpl.atomic", "refimpl.datacache", "refimpl.testing", "refimpl.gradcheck",
-        "refimpl.bounds", "refimpl.versions", "refimpl.files", "refimpl.npy_files"],
+        "refimpl.bounds", "refimpl.versions", "refimpl.files", "refimpl.npy_files", "refimpl.progress"],
     1: ["refimpl.quat", "refimpl.rotations", "refimpl.dualquat"],
     2: ["refimpl.skeleton", "refimpl.current_dq", "refimpl.mirroring", "refimpl.bone_ik"],
     3: ["refimpl.motion", "refimpl.bvh", "refimpl.bvh_write", "refimpl.expmap", "refimpl.skeletons",

@@ -237,9 +237,10 @@ def test_reading_the_locomotion_files_reports_progress():
 
 def test_a_gif_reports_progress(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
+    import refimpl.progress
     import refimpl.render as render
 
-    monkeypatch.setattr(render, "time", _Clock())
+    monkeypatch.setattr(refimpl.progress, "time", _Clock())
     pos = np.zeros((4, 2, 3))
     pos[:, 1, 1] = 1.0
     lines = []
@@ -248,10 +249,10 @@ def test_a_gif_reports_progress(tmp_path, monkeypatch):
 
 
 def test_the_acrnn_evaluation_reports_progress(monkeypatch):
-    import refimpl.protocols.synthesis as P
+    import refimpl.progress
     from refimpl.tasks import synthesis
 
-    monkeypatch.setattr(P, "time", _Clock())
+    monkeypatch.setattr(refimpl.progress, "time", _Clock())
     monkeypatch.setattr(synthesis, "evaluate_generator",
                         lambda gen, data, max_seeds, progress: (progress("64/128 seeds, 6 s"), {"num_seeds": 128})[1])
     lines = []

@@ -233,12 +233,13 @@ def test_evaluation_reports_progress_and_keeps_the_methods(monkeypatch, capsys):
 
 def test_locomotion_reading_reports_progress_by_time(tmp_path, monkeypatch):
     """The locomotion reader reports every ~5 s (not every 100 files: the held-out 95 said nothing)."""
+    import refimpl.progress
     import refimpl.protocols.locomotion as loco
     from refimpl.tasks.locomotion import resolve_files
 
     monkeypatch.setenv("REFIMPL_CACHE", "off")
     ticks = iter(np.arange(0.0, 1000.0, 6.0))
-    monkeypatch.setattr(loco, "time", types.SimpleNamespace(perf_counter=lambda: float(next(ticks))))
+    monkeypatch.setattr(refimpl.progress, "time", types.SimpleNamespace(perf_counter=lambda: float(next(ticks))))
     kind, train, _ = resolve_files("sample")
     lines = []
     loco.build_dataset(kind, train[:3], prefix=5, target=5, progress=lines.append)

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.progress import Throttle
 from refimpl.augment import rotate_controls
 from refimpl.motion import Motion
 from refimpl.protocols.locomotion_cache import load_pace_data, load_sequences, sequences_key
@@ -243,14 +243,12 @@ def build_dataset(kind: str, files: Sequence[str], *, prefix: int = 30, target: 
     (:mod:`refimpl.protocols.locomotion_cache`; ``REFIMPL_CACHE=off`` reads the files every time)."""
     def read():
         seqs, rig = [], None
-        t0 = last = time.perf_counter()
+        tick = Throttle()                                    # the 830 files take a minute or more
         for i, f in enumerate(files):
             motion, rig = _load_file(kind, f)
             seqs.extend(build_sequences(motion, rig, mirror=mirror, source=Path(f).stem))
-            now = time.perf_counter()
-            if progress is not None and now - last > 5.0:  # every ~5 s: the 830 files take a minute or more
-                last = now
-                progress(f"  loaded {i + 1}/{len(files)} files, {now - t0:.0f} s")
+            if progress is not None and tick.due():
+                progress(f"  loaded {i + 1}/{len(files)} files, {tick.elapsed:.0f} s")
         if not seqs:
             raise ValueError("files: no sequence loaded")
         return seqs, rig

@@ -31,10 +31,10 @@ import math
 from pathlib import Path
 from typing import Mapping, Sequence
 
-import time
 
 import numpy as np
 
+from refimpl.progress import Throttle
 from refimpl.bone_ik import rotations_from_positions
 from refimpl.bvh import read_bvh
 from refimpl.dq_output import DQ_TERMS
@@ -371,7 +371,7 @@ def evaluate_generator(generate_fn, data: SynthesisData, horizons_ms: Sequence[f
     if len(seeds) == 0:
         raise ValueError(f"data: the test takes {lengths} are too short for {SEED_LENGTH} + {longest} frames")
     preds, gts = [], []
-    t0 = t_last = time.perf_counter()
+    tick = Throttle()
     for b in range(0, len(seeds), batch_size):
         rows = seeds[b:b + batch_size]
         seed = np.stack([data.standardise(data.test[i][s:s + SEED_LENGTH]) for i, s in rows])
@@ -379,9 +379,8 @@ def evaluate_generator(generate_fn, data: SynthesisData, horizons_ms: Sequence[f
         gt = np.stack([data.test[i][s + SEED_LENGTH:s + SEED_LENGTH + longest] for i, s in rows])
         preds.append(root_zeroed_positions(data.representation, data.skeleton, gen))
         gts.append(root_zeroed_positions(data.representation, data.skeleton, gt))
-        if progress is not None and time.perf_counter() - t_last > 5.0:
-            t_last = time.perf_counter()
-            progress(f"{min(b + batch_size, len(seeds))}/{len(seeds)} seeds, {t_last - t0:.0f} s")
+        if progress is not None and tick.due():
+            progress(f"{min(b + batch_size, len(seeds))}/{len(seeds)} seeds, {tick.elapsed:.0f} s")
     pred, gt = np.concatenate(preds), np.concatenate(gts)                                  # (K, N, J, 3)
     out = {"horizons": {}, "num_seeds": int(len(seeds))}
     for ms, n in needs.items():

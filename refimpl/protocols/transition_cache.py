@@ -22,12 +22,12 @@ from __future__ import annotations
 import hashlib
 import inspect
 import sys
-import time
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
+from refimpl.progress import PROGRESS_EVERY_S, Throttle
 from refimpl import bvh, motion, quat, rigs, rotations, skeleton
 from refimpl.datacache import cached, fingerprint
 from refimpl.protocols import locomotion_data
@@ -139,16 +139,14 @@ def decode_takes(arrays: dict, meta: dict) -> list[tuple]:
     return [(skels[int(k)], clips[c0:c1]) for k, c0, c1 in zip(arrays["skeleton_index"], c_end - counts, c_end)]
 
 
-def _read_all(sources: Sequence, loader: Callable, fps: float, progress, every_s: float = 5.0) -> list:
+def _read_all(sources: Sequence, loader: Callable, fps: float, progress, every_s: float = PROGRESS_EVERY_S) -> list:
     """``loader(s, fps=fps)`` of each source, telling ``progress`` every ``every_s`` seconds how far it got."""
-    t0 = last = time.perf_counter()
+    tick = Throttle(every_s)
     out = []
     for n, s in enumerate(sources, 1):
         out.append(loader(s, fps=fps))
-        now = time.perf_counter()
-        if progress is not None and now - last > every_s:
-            last = now
-            progress(f"  read {n} of {len(sources)} files, {now - t0:.0f} s")
+        if progress is not None and tick.due():
+            progress(f"  read {n} of {len(sources)} files, {tick.elapsed:.0f} s")
     return out
 
 

@@ -21,13 +21,14 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.progress import stderr_line
 from refimpl.options import config_with_overrides, parse_overrides  # noqa: F401 (re-exported)
 from refimpl.losses import mae_loss_backward, mae_loss_forward
 from refimpl.models.qtg import QTGConfig, init_params
 from refimpl.models.qtg_fast import rollout_backward, rollout_forward
 from refimpl.models.qtg_fast_inference import prepare_inference, rollout_inference
 from refimpl.optim import QTG_ADAM
-from refimpl.train import ModelAdapter, OptimConfig, StepInfo, TrainConfig, TrainResult, default_progress, train
+from refimpl.train import ModelAdapter, OptimConfig, StepInfo, TrainConfig, TrainResult, train
 from refimpl.protocols.transition import denormalize_poses, join_pose, normalize_poses, pose_statistics, split_pose
 from refimpl.protocols.transition_join import inertialize_joins
 
@@ -129,7 +130,7 @@ def make_adapter(train_ds, val_ds, config: QTGConfig, dtype, extra: Mapping) -> 
 def train_qtg(train_data, steps: int, *, config=None, optim: OptimConfig = PAPER_OPTIM, batch_size: int = PAPER_BATCH,
               seed: int = 0, dtype=np.float32, checkpoint_path: str | None = None, checkpoint_every: int = 1000,
               log_path: str | None = None, validation_data=None, validate_every: int | None = None,
-              progress: Callable[[str], None] | None = default_progress, resume: bool = True,
+              progress: Callable[[str], None] | None = stderr_line, resume: bool = True,
               callback: Callable[[StepInfo], None] | None = None) -> TrainResult:
     """Train QTG on a :class:`refimpl.protocols.transition.TransitionDataset` (paper: MAE, Adam 1e-4, β = (0.5, 0.9),
     batch 32).

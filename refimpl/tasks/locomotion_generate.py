@@ -181,14 +181,15 @@ def write_outputs(walk: GeneratedWalk, *, bvh=None, gif=None, png=None, controls
         write_bvh(bvh, with_end_sites(cm))
         written.append(Path(bvh))
     if gif or png:
-        from refimpl.render import render_path_motion, stderr_progress
+        from refimpl.progress import stderr_line
+        from refimpl.render import render_path_motion
         from refimpl.render_strip import limb_sides
         pos = cm.positions()
         path_pts = walk.path.points * QUATERNET_UNIT_CM
         for out in filter(None, (png, gif)):
             written.append(render_path_motion(out, pos, np.asarray(cm.skeleton.parents), path_pts,
                                               closed=walk.path.closed, fps=FPS, stride=gif_stride, title=title,
-                                              sides=limb_sides(cm.skeleton), progress=stderr_progress))
+                                              sides=limb_sides(cm.skeleton), progress=stderr_line))
     if controls:
         doc = {"fps": FPS, "units": "QuaterNet units (1 = 5.6444 cm) per frame",
                "columns": ["phase_cos", "phase_sin", "direction_x", "direction_z", "facing_x", "facing_z"],

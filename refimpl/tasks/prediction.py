@@ -8,12 +8,12 @@ Shape legend: B batch, P prefix frames, K predicted frames, F frames of a file, 
 from __future__ import annotations
 
 import dataclasses
-import sys
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from refimpl.progress import stderr_line
 from refimpl.options import export_length
 from refimpl.errors import BadInputError, UsageError
 from refimpl.expmap import read_expmap
@@ -331,7 +331,8 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
     and the predicted ones, as a PNG strip and / or a GIF, numbered as in the BVH the prediction is written to,
     with a title (default: the method and the predicted frames), left and right limbs in two shades
     (:func:`refimpl.render_strip.limb_sides`, the rule of every model's pictures) over the clip's one floor."""
-    from refimpl.render import render_gif, stderr_progress
+    from refimpl.progress import stderr_line
+    from refimpl.render import render_gif
     from refimpl.render_strip import limb_sides, render_strip
 
     a = max(0, pr.start - context)
@@ -352,7 +353,7 @@ def render_prediction(pr: Prediction, png=None, gif=None, title=None, context: i
                                     frame_time=pr.motion.frame_time, frame_numbers=numbers, sides=sides))
     if gif:
         written.append(render_gif(gif, gt, parents, prediction=pred if pr.truth is not None else None,
-                                  progress=stderr_progress,
+                                  progress=stderr_line,
                                   fps=pr.motion.fps, highlight=hl, labels=labels, title=title,
                                   frame_numbers=numbers, sides=sides))
     return written
@@ -381,9 +382,6 @@ def _say(*parts) -> None:
     print(*parts, flush=True)
 
 
-def _progress_line(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
-
 
 def eval_command(args, model) -> int:
     """``refimpl eval`` on the prediction task: the network(s) and the baselines, the paper's table, JSON, PNG."""
@@ -400,7 +398,7 @@ def eval_command(args, model) -> int:
         raise UsageError(str(exc)) from None
     networks = network_methods(model, onnx_dir=args.onnx) if (model is not None or args.onnx) else {}
     try:
-        results = evaluate_all(data, methods(networks), protocol, progress=_progress_line, actions=actions)
+        results = evaluate_all(data, methods(networks), protocol, progress=stderr_line, actions=actions)
     except ValueError as exc:
         raise BadInputError(f"--data {args.data}: {exc}") from exc
     if model is not None:

@@ -414,7 +414,8 @@ def generate_command(args, model) -> int:
          f"30 fps) + {n} generated frames ({model.extra.get('row')}, {args.backend}), {motion.num_joints} joints, "
          "centimetres (the take's units)")
     if args.png or args.gif:
-        from refimpl.render import render_gif, stderr_progress
+        from refimpl.progress import stderr_line
+        from refimpl.render import render_gif
         from refimpl.render_strip import limb_sides, render_strip
 
         pos = motion.positions()
@@ -429,7 +430,7 @@ def generate_command(args, model) -> int:
             _say(f"wrote {args.png}")
         if args.gif:
             render_gif(args.gif, pos, parents, fps=motion.fps, highlight=(seed_frames, motion.num_frames),
-                       progress=stderr_progress, labels=labels, title=title, sides=sides)
+                       progress=stderr_line, labels=labels, title=title, sides=sides)
             _say(f"wrote {args.gif}")
     return 0
 

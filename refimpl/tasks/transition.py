@@ -24,12 +24,12 @@ Shape legend: N windows, T transition frames, F frames of a clip, J joints, P po
 from __future__ import annotations
 
 import dataclasses
-import sys
 from pathlib import Path
 from typing import Callable, Mapping
 
 import numpy as np
 
+from refimpl.progress import stderr_line
 from refimpl.bvh import read_bvh_header
 from refimpl.errors import BadInputError, UsageError, existing_file, file_error, reading
 from refimpl.expmap import EXPMAP_LAYOUTS
@@ -69,10 +69,6 @@ GENERATE_USAGE = "refimpl generate --source FILE --source-frame S [...]  (a tran
 def _say(*parts) -> None:
     print(*parts, flush=True)
 
-
-def _progress(line: str) -> None:
-    """Progress of a long data read (files read, the cache's note), on stderr."""
-    print(line, file=sys.stderr, flush=True)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -243,7 +239,7 @@ def eval_dataset(args, model, T: int):
     try:
         loader = _load_any  # Bandai Namco takes only: through the data cache (their entry holds just these takes)
         if all(s.kind == BANDAI_NAMCO_KIND for s in sources):
-            loader = cached_loader((sources,), load_bandai_namco_source, progress=_progress)
+            loader = cached_loader((sources,), load_bandai_namco_source, progress=stderr_line)
         ds, _ = build_transition_datasets(sources, [], T=T, stride=args.stride, loader=loader)
     except (OSError, ValueError) as exc:
         raise BadInputError(f"{'--takes' if args.takes else '--data ' + args.data}: {exc}") from exc
@@ -260,7 +256,7 @@ def build_datasets(data: str, T: int, stride: int, *, fps=None, test_fraction=0.
     spec/qtg.md §8.4). ``train_only``: the held-out files are not read (the test dataset has no window)."""
     if data != "sample" and is_bandai_namco_folder(data):
         try:
-            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride, progress=_progress,
+            return build_bandai_namco(data, T=T, stride=stride, test_stride=test_stride, progress=stderr_line,
                                       train_only=train_only)
         except (OSError, ValueError) as exc:
             raise BadInputError(f"--data {data}: {exc}") from exc

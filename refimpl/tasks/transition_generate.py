@@ -175,7 +175,8 @@ def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
     (:func:`refimpl.protocols.transition_quality.foot_joints`) and one floor for the whole clip, its grid fixed
     in the world (spec/cli.md §8), under a title (default: the method and the generated frames).
     """
-    from refimpl.render import render_gif, stderr_progress
+    from refimpl.progress import stderr_line
+    from refimpl.render import render_gif
     from refimpl.render_strip import join_frames, limb_sides, render_strip
 
     skel = tr.motion.skeleton
@@ -193,7 +194,7 @@ def render_transition(tr: Transition, png=None, gif=None, title=None) -> list:
                                     feet=_feet(skel)))
         _say(f"wrote {png}")
     if gif:
-        written.append(render_gif(gif, gt, parents, prediction=pred, fps=tr.motion.fps, progress=stderr_progress,
+        written.append(render_gif(gif, gt, parents, prediction=pred, fps=tr.motion.fps, progress=stderr_line,
                                   highlight=(tr.start, tr.stop), labels=labels, title=title, sides=sides))
         _say(f"wrote {gif}")
     return written

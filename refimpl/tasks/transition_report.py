@@ -14,12 +14,12 @@ Shape legend: N windows, T transition frames, P pose size (3 + 4 J).
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import Callable, Mapping
 
 import numpy as np
 
+from refimpl.progress import PROGRESS_EVERY_S, Throttle, stderr_line
 from refimpl.atomic import atomic_write_text
 from refimpl.protocols.transition_locomotion import KIND as BANDAI_NAMCO_KIND, window_groups
 from refimpl.protocols.transition_metrics import format_table, predict_transitions, prediction_errors
@@ -30,10 +30,6 @@ __all__ = ["evaluate", "print_results", "write_results", "results_json"]
 
 def _say(*parts) -> None:
     print(*parts, flush=True)
-
-
-def _progress(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 def evaluate(test_ds, methods_by_name: Mapping[str, Callable]) -> dict:
@@ -60,19 +56,13 @@ class _Clock:
     measure, which method and stage it has reached (``"  evaluating: qtg (error), 6 s"``); nothing when it is
     quick."""
 
-    def __init__(self, every_s: float = 5.0):
-        import time
-
-        self._now = time.perf_counter
-        self.t0 = self.last = self._now()
-        self.every_s = every_s
+    def __init__(self, every_s: float = PROGRESS_EVERY_S):
+        self._tick = Throttle(every_s)
 
     def reached(self, name: str, stage: str) -> None:
         """Report ``name (stage)`` when ``every_s`` seconds have passed since the last report."""
-        now = self._now()
-        if now - self.last > self.every_s:
-            self.last = now
-            _progress(f"  evaluating: {name} ({stage}), {now - self.t0:.0f} s")
+        if self._tick.due():
+            stderr_line(f"  evaluating: {name} ({stage}), {self._tick.elapsed:.0f} s")
 
     def wrap(self, methods_by_name: Mapping[str, Callable], stage: str) -> dict:
         """``methods_by_name`` with each method reporting through the clock (its ``needs_skeleton`` kept)."""
