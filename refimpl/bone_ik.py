@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from refimpl.arrays import float_array
 from refimpl.quat import quat_conj_kernel, quat_mul_kernel, quat_rotate_kernel
 from refimpl.rotations import quat_from_matrix_kernel
 from refimpl.skeleton import Skeleton
@@ -83,12 +84,8 @@ def rotations_from_positions(skeleton: Skeleton, positions) -> tuple[np.ndarray,
     """
     if not isinstance(skeleton, Skeleton):
         raise ValueError(f"skeleton: expected a Skeleton, got {type(skeleton).__name__}")
-    p = np.asarray(positions, dtype=np.float64)
     J = skeleton.num_joints
-    if p.ndim < 2 or p.shape[-2:] != (J, 3):
-        raise ValueError(f"positions: expected shape (..., {J}, 3), got {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise ValueError("positions: expected finite values")
+    p = float_array(positions, "positions", (..., J, 3)).astype(np.float64, copy=False)    # (..., J, 3)
     offsets = np.asarray(skeleton.offsets, dtype=np.float64)             # (J, 3)
     parents = list(skeleton.parents)
     children = [[c for c in range(J) if parents[c] == j and np.linalg.norm(offsets[c]) > _MIN_LENGTH]

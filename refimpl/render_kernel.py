@@ -22,6 +22,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from refimpl.arrays import float_array
 from refimpl.atomic import atomic_path
 
 GT_COLOR = "tab:blue"
@@ -132,11 +133,9 @@ def fit_text(fig, artist, min_size: float = 5.0) -> None:
 
 def check_positions(positions, name: str, parents=None) -> np.ndarray:
     """Validate a ``(T, J, 3)`` finite position array (and, given ``parents``, its joint count)."""
-    p = np.asarray(positions, dtype=np.float64)
-    if p.ndim != 3 or p.shape[-1] != 3 or p.shape[0] < 1 or p.shape[1] < 1:
-        raise ValueError(f"{name} must have shape (T, J, 3) with T, J >= 1, got {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise ValueError(f"{name} contains NaN or inf")
+    p = float_array(positions, name, (None, None, 3)).astype(np.float64, copy=False)    # (T, J, 3)
+    if p.shape[0] < 1 or p.shape[1] < 1:
+        raise ValueError(f"{name}: expected shape (T, J, 3) with T, J >= 1, got {p.shape}")
     if parents is not None and p.shape[1] != len(parents):
         raise ValueError(f"{name} has {p.shape[1]} joints but parents has {len(parents)} entries")
     return p

@@ -77,7 +77,7 @@ def test_strip_z_up_differs_from_y_up(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    (dict(positions=np.zeros((4, 6, 2))), "positions must have shape"),
+    (dict(positions=np.zeros((4, 6, 2))), "positions: expected shape"),
     (dict(positions=np.full((4, 6, 3), np.nan)), "NaN"),
     (dict(parents=np.array([-1, 0, 1])), "joints but parents"),
     (dict(parents=np.array([-1, 0, 1, 0, 0, 9])), "parents must hold"),
