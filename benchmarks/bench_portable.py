@@ -304,6 +304,10 @@ def table(result: dict) -> str:
     return "\n".join(lines)
 
 
+#: The largest K of ``--pace-chunks`` (a graph of 9 K nodes; K = 128 is 1,428 nodes, 139 KB).
+MAX_PACE_CHUNK = 1024
+
+
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--threads", type=int, default=1)
@@ -315,6 +319,8 @@ def main(argv=None) -> dict:
                    "these K (points per call)")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_portable.json"))
     a = p.parse_args(argv)
+    if any(not 1 <= K <= MAX_PACE_CHUNK for K in a.pace_chunks):
+        p.error(f"--pace-chunks: expected points per call in [1, {MAX_PACE_CHUNK}], got {a.pace_chunks}")
     result = bench(a.threads, a.rounds, a.min_time, a.quick, tuple(a.models), tuple(a.pace_chunks))
     print(table(result))
     atomic_write_text(Path(a.out), json.dumps(with_versions(result), indent=1, sort_keys=True) + "\n")

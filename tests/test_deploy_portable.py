@@ -529,6 +529,10 @@ def test_bench_portable_helpers():
     assert all(r["ratio_median"] > 0 and r["ratio_paired"] > 0 for r in result["rows"].values())
     assert set(result["pace_chunks"]["3"]) == {"point", "point_n1000", "call", "nodes", "bytes"}
     assert len(result["env"]["load_average_before"]) == 3
+    for bad in ("0", "4096"):                          # refused before anything is exported or timed
+        with pytest.raises(SystemExit) as e:
+            bench.main(["--pace-chunks", bad, "--out", "/nonexistent/x.json"])
+        assert e.value.code == 2
     params, cfg, _ = bench.make_model("pace", quick=True)
     from deploy.models.quaternet_long import export_pace, export_pace_step
     from deploy.portable import builder_options
