@@ -101,6 +101,8 @@ def main() -> int:
     ap.add_argument("--rows", type=int, default=400, help="rows per synthetic H3.6M file (min; up to 1.5x)")
     ap.add_argument("--skip-qtg", action="store_true")
     a = ap.parse_args()
+    if not 200 <= a.rows <= 100_000:  # a 50 + 10-frame window at half the 50 Hz rate needs 120 rows; 210 files written
+        ap.error(f"--rows: expected 200 ... 100000 rows per file, got {a.rows}")
     res = {}
     with tempfile.TemporaryDirectory(prefix="qtg-data-cache-") as tmp:
         tmp = Path(tmp)
